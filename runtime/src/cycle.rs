@@ -1,0 +1,266 @@
+//! The periodic cycle: absolute deadlines, the CS9 overrun rule, cycle statistics.
+//!
+//! Deadlines sit on a grid `k * period + phase` of `CLOCK_MONOTONIC`, shared by every process
+//! of a machine, so processes with related periods keep a fixed order within a period (the
+//! phases of the configuration) and never drift against each other. The wait is one
+//! `clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`, as cyclictest's: the timer counts from
+//! the deadline, not from the end of the work, so it covers all of the cycle's work
+//! (seed 003's second fix).
+//!
+//! Overruns (seed 000 §4.2): when a cycle's work ends after the next deadline, that late cycle
+//! has completed normally, the next period is skipped (as many as were missed), the overrun
+//! flag is set for the next cycle and the overrun is counted.
+//!
+//! A task may ask for one extra wake-up before the next grid deadline
+//! ([`CycleClock::request_wake_at`]); trajgen uses it to read its next command at exactly
+//! `t = T1 - t_acc` and to end a motion at its exact end time.
+
+use crate::time::now_ns;
+use shm_schema::CycleStatsV1;
+
+/// One wake-up of the cycle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Wake {
+    /// The deadline the cycle slept until (ns).
+    pub planned_ns: u64,
+    /// When it actually ran (ns).
+    pub actual_ns: u64,
+    /// The previous cycle overran (CS9 overrun flag).
+    pub overrun_flag: bool,
+    /// A grid deadline (false for a requested extra wake-up).
+    pub on_grid: bool,
+}
+
+impl Wake {
+    /// Wake-up latency, actual minus planned (ns).
+    pub fn latency_ns(&self) -> u64 {
+        self.actual_ns.saturating_sub(self.planned_ns)
+    }
+}
+
+/// Why a wait returned without a wake-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WaitError {
+    /// A signal interrupted the sleep (check [`crate::signals::stop_requested`]).
+    Interrupted,
+    /// `clock_nanosleep` failed with this errno.
+    Os(i32),
+}
+
+/// Periodic absolute-deadline clock of one process.
+#[derive(Debug)]
+pub struct CycleClock {
+    period_ns: u64,
+    phase_ns: u64,
+    next_ns: u64,
+    extra_ns: Option<u64>,
+    overrun_pending: bool,
+    stats: CycleStatsV1,
+}
+
+impl CycleClock {
+    /// A clock whose first deadline is the first grid point at least one period after `now`.
+    ///
+    /// # Panics
+    /// If `period_ns` is 0 (the configuration is validated long before this).
+    pub fn new(period_ns: u64, phase_ns: u64, now: u64) -> Self {
+        assert!(period_ns > 0, "cycle period must be positive");
+        let phase_ns = phase_ns % period_ns;
+        let mut clock = Self {
+            period_ns,
+            phase_ns,
+            next_ns: 0,
+            extra_ns: None,
+            overrun_pending: false,
+            stats: CycleStatsV1 { period_ns, ..CycleStatsV1::default() },
+        };
+        clock.next_ns = clock.grid_after(now + period_ns);
+        clock
+    }
+
+    /// First grid deadline strictly after `t`.
+    fn grid_after(&self, t: u64) -> u64 {
+        let base = t.saturating_sub(self.phase_ns);
+        (base / self.period_ns + 1) * self.period_ns + self.phase_ns
+    }
+
+    /// Cycle period (ns).
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    /// The next grid deadline (ns).
+    pub fn next_deadline_ns(&self) -> u64 {
+        self.next_ns
+    }
+
+    /// Statistics so far.
+    pub fn stats(&self) -> &CycleStatsV1 {
+        &self.stats
+    }
+
+    /// Asks for one extra wake-up at `t` if it falls before the next grid deadline (and after
+    /// now). Cleared when it has happened.
+    ///
+    /// # Real-time
+    /// No allocation, no system call.
+    pub fn request_wake_at(&mut self, t: u64) {
+        if t < self.next_ns {
+            self.extra_ns = Some(self.extra_ns.map_or(t, |e| e.min(t)));
+        }
+    }
+
+    /// The deadline the next [`Self::wait`] sleeps until, and whether it is on the grid.
+    pub fn upcoming(&self) -> (u64, bool) {
+        match self.extra_ns {
+            Some(e) if e < self.next_ns => (e, false),
+            _ => (self.next_ns, true),
+        }
+    }
+
+    /// Blocks until the next deadline.
+    ///
+    /// # Real-time
+    /// The cycle's one blocking wait: one `clock_nanosleep`, one vDSO clock read.
+    pub fn wait(&mut self) -> Result<Wake, WaitError> {
+        let (deadline, on_grid) = self.upcoming();
+        let ts = libc::timespec {
+            tv_sec: (deadline / 1_000_000_000) as libc::time_t,
+            tv_nsec: (deadline % 1_000_000_000) as libc::c_long,
+        };
+        // SAFETY: valid timespec; no remaining-time output with TIMER_ABSTIME.
+        let rc = unsafe {
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &ts,
+                std::ptr::null_mut(),
+            )
+        };
+        match rc {
+            0 => Ok(self.woke(deadline, on_grid, now_ns())),
+            libc::EINTR => Err(WaitError::Interrupted),
+            e => Err(WaitError::Os(e)),
+        }
+    }
+
+    /// Records a wake-up at `actual` for `deadline` (the bookkeeping half of [`Self::wait`]).
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn woke(&mut self, deadline: u64, on_grid: bool, actual: u64) -> Wake {
+        let wake = Wake {
+            planned_ns: deadline,
+            actual_ns: actual,
+            overrun_flag: self.overrun_pending,
+            on_grid,
+        };
+        self.overrun_pending = false;
+        if on_grid {
+            self.next_ns = deadline + self.period_ns;
+        }
+        if self.extra_ns.is_some_and(|e| e <= deadline) {
+            self.extra_ns = None;
+        }
+        let s = &mut self.stats;
+        s.cycles += 1;
+        s.wakeup_latency_ns = wake.latency_ns();
+        s.max_wakeup_latency_ns = s.max_wakeup_latency_ns.max(s.wakeup_latency_ns);
+        s.overrun_flag = wake.overrun_flag as u32;
+        wake
+    }
+
+    /// Ends the cycle that started with `wake`, its work finished at `end` (ns): records the
+    /// execution time and applies the overrun rule.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn finish(&mut self, wake: &Wake, end: u64) {
+        let s = &mut self.stats;
+        s.exec_ns = end.saturating_sub(wake.actual_ns);
+        s.max_exec_ns = s.max_exec_ns.max(s.exec_ns);
+        if end > self.next_ns {
+            // The late cycle completed; skip every period it ran into (CS9: the next cycle
+            // is cancelled) and flag it for the next cycle.
+            let resume = self.grid_after(end);
+            self.stats.overruns += 1;
+            self.stats.skipped += (resume - self.next_ns) / self.period_ns;
+            self.next_ns = resume;
+            self.overrun_pending = true;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: u64 = 1_000_000;
+
+    #[test]
+    fn first_deadline_is_on_the_grid_with_phase() {
+        let c = CycleClock::new(P, 250_000, 10 * P + 10);
+        assert_eq!(c.next_deadline_ns(), 11 * P + 250_000);
+    }
+
+    #[test]
+    fn on_time_cycles_follow_the_grid() {
+        let mut c = CycleClock::new(P, 0, 0);
+        let d = c.next_deadline_ns();
+        let w = c.woke(d, true, d + 20_000);
+        assert_eq!(w.latency_ns(), 20_000);
+        c.finish(&w, d + 100_000);
+        assert_eq!(c.next_deadline_ns(), d + P);
+        assert_eq!(c.stats().overruns, 0);
+        assert_eq!(c.stats().exec_ns, 80_000);
+        assert!(!c.woke(d + P, true, d + P).overrun_flag);
+    }
+
+    #[test]
+    fn an_overrun_completes_skips_the_next_period_and_sets_the_flag() {
+        let mut c = CycleClock::new(P, 0, 0);
+        let d = c.next_deadline_ns();
+        let w = c.woke(d, true, d);
+        // Work ran 1.5 periods: deadline d+P was missed, d+2P is the next one.
+        c.finish(&w, d + P + P / 2);
+        assert_eq!(c.stats().overruns, 1);
+        assert_eq!(c.stats().skipped, 1);
+        assert_eq!(c.next_deadline_ns(), d + 2 * P);
+        let w2 = c.woke(d + 2 * P, true, d + 2 * P);
+        assert!(w2.overrun_flag);
+        assert_eq!(c.stats().overrun_flag, 1);
+        c.finish(&w2, d + 2 * P + 10);
+        assert!(!c.woke(d + 3 * P, true, d + 3 * P).overrun_flag);
+    }
+
+    #[test]
+    fn a_long_stall_skips_every_missed_period() {
+        let mut c = CycleClock::new(P, 0, 0);
+        let d = c.next_deadline_ns();
+        let w = c.woke(d, true, d);
+        c.finish(&w, d + 4 * P + 1);
+        assert_eq!(c.stats().skipped, 4);
+        assert_eq!(c.next_deadline_ns(), d + 5 * P);
+    }
+
+    #[test]
+    fn extra_wake_ups_come_before_the_grid_and_do_not_shift_it() {
+        let mut c = CycleClock::new(P, 0, 0);
+        let d = c.next_deadline_ns();
+        c.request_wake_at(d - 300_000);
+        c.request_wake_at(d - 200_000); // the earlier one wins
+        assert_eq!(c.upcoming(), (d - 300_000, false));
+        let w = c.woke(d - 300_000, false, d - 299_000);
+        c.finish(&w, d - 290_000);
+        assert_eq!(c.upcoming(), (d, true));
+        c.request_wake_at(d + 5); // after the next grid deadline: ignored
+        assert_eq!(c.upcoming(), (d, true));
+    }
+
+    #[test]
+    fn real_wait_sleeps_until_the_deadline() {
+        let mut c = CycleClock::new(P, 0, now_ns());
+        let w = c.wait().expect("sleep");
+        assert!(w.actual_ns >= w.planned_ns);
+    }
+}

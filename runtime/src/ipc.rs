@@ -1,0 +1,236 @@
+//! iceoryx2 nodes and typed ports for the services of `shm-schema`.
+//!
+//! Every port is opened with the service's [`shm_schema::names::Qos`], so any process may
+//! create a service first. Every iceoryx2 resource of an instance is isolated by the
+//! configuration of [`config_for`]: its own shared-memory file prefix and its own root folder.
+//!
+//! # Allocation
+//! Measured with a counting allocator (see `tests/ipc_alloc.rs` in this crate): in steady
+//! state `receive` allocates nothing, a publish (`loan_uninit` + `send`) allocates once inside
+//! iceoryx2. The set-up of [`crate::rt`] keeps that allocation on locked, prefaulted heap that
+//! malloc never returns to the kernel.
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+use shm_schema::{InstanceName, ServiceId};
+use std::fmt::Debug;
+
+/// The iceoryx2 service flavour of every port: inter-process, single-threaded.
+pub type Ipc = ipc::Service;
+
+/// A failure to set up a node or port, naming what.
+#[derive(Debug)]
+pub struct IpcError {
+    /// What was being set up (a service name, a node).
+    pub what: String,
+    /// The iceoryx2 error.
+    pub reason: String,
+}
+
+impl std::fmt::Display for IpcError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.what, self.reason)
+    }
+}
+
+impl std::error::Error for IpcError {}
+
+fn err(what: impl Into<String>, reason: impl Debug) -> IpcError {
+    IpcError { what: what.into(), reason: format!("{reason:?}") }
+}
+
+/// The iceoryx2 configuration of `instance`: file prefix `iox2_<instance>_`, root folder
+/// `/tmp/iceoryx2/<instance>/`. Built in code, so no `iceoryx2.toml` is looked up.
+pub fn config_for(instance: &InstanceName) -> Result<Config, IpcError> {
+    let mut cfg = Config::default();
+    let prefix = instance.shm_prefix();
+    cfg.global.prefix =
+        FileName::new(prefix.as_str().as_bytes()).map_err(|e| err("iceoryx2 file prefix", e))?;
+    let root = instance.root_dir();
+    cfg.global.set_root_path(
+        &Path::new(root.as_str().as_bytes()).map_err(|e| err("iceoryx2 root path", e))?,
+    );
+    Ok(cfg)
+}
+
+/// Quiets iceoryx2's own log to warnings (it logs through `tracing`).
+pub fn quiet_iceoryx2_log() {
+    set_log_level(LogLevel::Warn);
+}
+
+/// Creates the node of one process of `instance`. Signal handling is left to
+/// [`crate::signals`].
+pub fn node(instance: &InstanceName, name: &str) -> Result<Node<Ipc>, IpcError> {
+    let cfg = config_for(instance)?;
+    let node_name = NodeName::new(name).map_err(|e| err(format!("node name {name:?}"), e))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(&cfg)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Ipc>()
+        .map_err(|e| err(format!("iceoryx2 node {name:?} of instance {instance}"), e))
+}
+
+fn open<T>(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+) -> Result<PubSubFactory<Ipc, T, ()>, IpcError>
+where
+    T: Debug + ZeroCopySend + Copy + 'static,
+{
+    let name = instance.service(id);
+    let service_name =
+        ServiceName::new(name.as_str()).map_err(|e| err(format!("service name {name}"), e))?;
+    let q = id.qos();
+    node.service_builder(&service_name)
+        .publish_subscribe::<T>()
+        .max_publishers(q.max_publishers)
+        .max_subscribers(q.max_subscribers)
+        .history_size(q.history)
+        .subscriber_max_buffer_size(q.subscriber_max_buffer)
+        .max_nodes(q.max_nodes)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| err(format!("service {name}"), e))
+}
+
+/// A typed publisher of one service.
+pub struct Pub<T: Debug + ZeroCopySend + Copy + 'static> {
+    port: Publisher<Ipc, T, ()>,
+    _service: PubSubFactory<Ipc, T, ()>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Pub<T> {
+    /// Opens (or creates) `id` and a publisher on it.
+    pub fn new(node: &Node<Ipc>, instance: &InstanceName, id: ServiceId) -> Result<Self, IpcError> {
+        let service = open::<T>(node, instance, id)?;
+        let port = service
+            .publisher_builder()
+            .max_loaned_samples(2)
+            .create()
+            .map_err(|e| err(format!("publisher on {}", instance.service(id)), e))?;
+        Ok(Self { port, _service: service })
+    }
+
+    /// Publishes a copy of `value` straight into shared memory. False if iceoryx2 refused.
+    ///
+    /// # Real-time
+    /// IPC call: one loan and one send; iceoryx2 allocates once per loan (see the module
+    /// documentation).
+    #[inline]
+    pub fn send(&self, value: &T) -> bool {
+        match self.port.loan_uninit() {
+            Ok(sample) => sample.write_payload(*value).send().is_ok(),
+            Err(_) => false,
+        }
+    }
+
+    /// Delivers history to subscribers that connected since the last send.
+    pub fn update_connections(&self) {
+        let _ = self.port.update_connections();
+    }
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Debug for Pub<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Pub")
+    }
+}
+
+/// A typed subscriber of one service.
+pub struct Sub<T: Debug + ZeroCopySend + Copy + 'static> {
+    port: Subscriber<Ipc, T, ()>,
+    _service: PubSubFactory<Ipc, T, ()>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
+    /// Opens (or creates) `id` and a subscriber on it keeping up to `buffer` unread samples
+    /// (older ones are dropped when it is full).
+    pub fn new(
+        node: &Node<Ipc>,
+        instance: &InstanceName,
+        id: ServiceId,
+        buffer: usize,
+    ) -> Result<Self, IpcError> {
+        let service = open::<T>(node, instance, id)?;
+        let port = service
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .create()
+            .map_err(|e| err(format!("subscriber on {}", instance.service(id)), e))?;
+        Ok(Self { port, _service: service })
+    }
+
+    /// Takes every unread sample and returns the newest.
+    ///
+    /// # Real-time
+    /// IPC calls only; no allocation.
+    #[inline]
+    pub fn latest(&self) -> Option<T> {
+        let mut last = None;
+        while let Ok(Some(sample)) = self.port.receive() {
+            last = Some(*sample.payload());
+        }
+        last
+    }
+
+    /// Takes the oldest unread sample.
+    ///
+    /// # Real-time
+    /// IPC call; no allocation.
+    #[inline]
+    pub fn next(&self) -> Option<T> {
+        match self.port.receive() {
+            Ok(Some(sample)) => Some(*sample.payload()),
+            _ => None,
+        }
+    }
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Debug for Sub<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Sub")
+    }
+}
+
+/// Removes the resources of every dead node of `instance` (a process that was killed).
+/// Returns how many dead nodes were cleaned.
+pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
+    let cfg = config_for(instance)?;
+    let mut dead = Vec::new();
+    Node::<Ipc>::list(&cfg, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| err(format!("listing nodes of instance {instance}"), e))?;
+    let mut cleaned = 0;
+    for view in dead {
+        if view.try_remove_stale_resources().is_ok() {
+            cleaned += 1;
+        }
+    }
+    Ok(cleaned)
+}
+
+/// Process ids of the live nodes of `instance`.
+pub fn live_node_pids(instance: &InstanceName) -> Result<Vec<u32>, IpcError> {
+    let cfg = config_for(instance)?;
+    let mut pids = Vec::new();
+    Node::<Ipc>::list(&cfg, |state| {
+        if let NodeState::Alive(view) = state
+            && let Some(details) = view.details()
+        {
+            pids.push(details.process_id().value() as u32);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| err(format!("listing nodes of instance {instance}"), e))?;
+    Ok(pids)
+}

@@ -1,0 +1,20 @@
+//! The real-time cycle runtime shared by every process of a cell.
+//!
+//! - [`rt`]: `SCHED_FIFO`, `mlockall`, real-time-safe malloc, prefaulted stack and heap,
+//!   `/dev/cpu_dma_latency` held at 0, CPU affinity. Refusals are warned about once.
+//! - [`cycle`]: periodic wake-ups on absolute deadlines (`clock_nanosleep(TIMER_ABSTIME)`),
+//!   the CS9 overrun rule and the cycle statistics every process publishes.
+//! - [`ipc`]: iceoryx2 nodes and typed ports for the services of `shm-schema`.
+//! - [`process`]: the skeleton every real-time process runs: arguments, cell configuration,
+//!   set-up, then the cycle until SIGTERM.
+//!
+//! # Real-time
+//! Functions that run inside a cycle say so in a `# Real-time` section: no allocation of our
+//! own, no lock, no formatted logging, no syscall but the one blocking wait and IPC calls.
+
+pub mod cycle;
+pub mod ipc;
+pub mod process;
+pub mod rt;
+pub mod signals;
+pub mod time;

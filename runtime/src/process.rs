@@ -1,0 +1,229 @@
+//! The skeleton of every real-time process of a cell.
+//!
+//! `main` of trajgen, servo, machine-sim and iobridge is one call to [`run`]:
+//!
+//! 1. arguments: `--instance NAME` (default `gantry`);
+//! 2. SIGTERM/SIGINT handler, iceoryx2 node;
+//! 3. the cell configuration from `<i>/cell/config` (published by the supervisor);
+//! 4. the task's own set-up (`build`: opens ports, preallocates, validates) — may fail;
+//! 5. real-time set-up ([`crate::rt::setup`]) with the role's priority and CPU;
+//! 6. the cycle until SIGTERM: wait, [`Task::cycle`], publish [`ProcessStatusV1`], finish;
+//! 7. a clean exit that removes the process' iceoryx2 resources.
+
+use crate::cycle::{CycleClock, WaitError, Wake};
+use crate::ipc::{self, Ipc, Pub, Sub};
+use crate::rt::{self, RtRequest};
+use crate::signals;
+use crate::time::now_ns;
+use iceoryx2::prelude::Node;
+use shm_schema::{CellConfigV1, InstanceName, ProcState, ProcessStatusV1, Role, ServiceId};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// Instance used when no `--instance` is given.
+pub const DEFAULT_INSTANCE: &str = "gantry";
+
+/// How long a process waits for the cell configuration before giving up.
+pub const CONFIG_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Everything a task's set-up may use.
+#[derive(Debug)]
+pub struct Context {
+    /// Instance the process belongs to.
+    pub instance: InstanceName,
+    /// Role of the process.
+    pub role: Role,
+    /// The process' iceoryx2 node; open ports with [`Pub::new`] and [`Sub::new`].
+    pub node: Node<Ipc>,
+    /// The validated cell configuration.
+    pub cell: CellConfigV1,
+}
+
+/// The periodic work of a process.
+pub trait Task {
+    /// One cycle, started by `wake`. May ask `clock` for an extra wake-up.
+    ///
+    /// # Real-time
+    /// Implementations allocate nothing of their own, take no lock, log nothing, and make no
+    /// system call but IPC calls.
+    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock);
+
+    /// The process' fault code for its status (0 for none).
+    fn fault(&self) -> u32 {
+        0
+    }
+}
+
+/// Error type of a task's set-up.
+pub type SetupError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Runs a real-time process; see the module documentation. Exit code 0 after a requested
+/// stop, 1 after a set-up failure, 2 on bad arguments.
+pub fn run<T: Task>(
+    role: Role,
+    about: &str,
+    build: impl FnOnce(&Context) -> Result<T, SetupError>,
+) -> ExitCode {
+    init_logging();
+    let instance = match parse_args(role, about) {
+        Ok(Some(i)) => i,
+        Ok(None) => return ExitCode::SUCCESS,
+        Err(msg) => {
+            eprintln!("{}: {msg}\nusage: {} [--instance NAME]", role.name(), role.name());
+            return ExitCode::from(2);
+        }
+    };
+    match run_inner(role, instance, build) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{} ({instance}): {e}", role.name());
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Logging to stderr, filtered by `RTC_LOG` (default `info`). Used by every binary.
+pub fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+    ipc::quiet_iceoryx2_log();
+}
+
+fn parse_args(role: Role, about: &str) -> Result<Option<InstanceName>, String> {
+    let mut instance = DEFAULT_INSTANCE.to_string();
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--instance" => instance = args.next().ok_or("--instance needs a NAME")?,
+            s if s.starts_with("--instance=") => instance = s["--instance=".len()..].to_string(),
+            "-h" | "--help" => {
+                println!(
+                    "{} — {about}\n\nusage: {} [--instance NAME]\n\nStarted by `supervisor run`; \
+                     reads its settings from the cell configuration the supervisor publishes \
+                     for instance NAME (default {DEFAULT_INSTANCE}).",
+                    role.name(),
+                    role.name()
+                );
+                return Ok(None);
+            }
+            other => return Err(format!("unknown argument {other:?}")),
+        }
+    }
+    InstanceName::new(&instance).map(Some).map_err(|e| e.to_string())
+}
+
+fn run_inner<T: Task>(
+    role: Role,
+    instance: InstanceName,
+    build: impl FnOnce(&Context) -> Result<T, SetupError>,
+) -> Result<(), SetupError> {
+    signals::install()?;
+    let node = ipc::node(&instance, role.name())?;
+    let cell = wait_for_cell_config(&node, &instance)?;
+    let pc = cell.process[role.index()];
+    let ctx = Context { instance, role, node, cell };
+    let status_pub = Pub::<ProcessStatusV1>::new(&ctx.node, &instance, ServiceId::Status(role))?;
+    let mut task = build(&ctx)?;
+
+    let (report, _rt_guard) = rt::setup(RtRequest {
+        priority: pc.priority,
+        cpu: usize::try_from(pc.cpu).ok(),
+    });
+    let mut status = ProcessStatusV1 {
+        pid: std::process::id(),
+        role: role as u32,
+        state: ProcState::Starting as u32,
+        policy: report.policy,
+        priority: report.priority,
+        cpu: report.cpu,
+        rt_flags: report.flags,
+        ..ProcessStatusV1::default()
+    };
+    status_pub.send(&status);
+    tracing::info!(
+        "{} ({instance}) cyclic: period {} µs, phase {} µs, {} priority {}{}",
+        role.name(),
+        pc.period_ns / 1000,
+        pc.phase_ns / 1000,
+        rt::policy_name(report.policy),
+        report.priority,
+        if report.cpu >= 0 { format!(", CPU {}", report.cpu) } else { String::new() }
+    );
+
+    let mut clock = CycleClock::new(pc.period_ns, pc.phase_ns, now_ns());
+    status.state = ProcState::Cyclic as u32;
+    // The cycle. Nothing in this loop allocates, locks or logs (see `Task::cycle`).
+    while !signals::stop_requested() {
+        let wake = match clock.wait() {
+            Ok(w) => w,
+            Err(WaitError::Interrupted) => continue,
+            Err(WaitError::Os(e)) => {
+                return Err(format!("clock_nanosleep failed: errno {e}").into());
+            }
+        };
+        task.cycle(&wake, &mut clock);
+        status.stamp_ns = wake.actual_ns;
+        status.fault = task.fault();
+        status.stats = *clock.stats();
+        status_pub.send(&status);
+        clock.finish(&wake, now_ns());
+    }
+    status.state = ProcState::Stopping as u32;
+    status_pub.send(&status);
+    tracing::info!(
+        "{} ({instance}) stopped after {} cycles, {} overruns, max wake-up latency {} µs",
+        role.name(),
+        clock.stats().cycles,
+        clock.stats().overruns,
+        clock.stats().max_wakeup_latency_ns / 1000
+    );
+    Ok(())
+}
+
+/// Waits (set-up only, polling every 2 ms) for the cell configuration and validates it.
+fn wait_for_cell_config(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+) -> Result<CellConfigV1, SetupError> {
+    let sub = Sub::<CellConfigV1>::new(node, instance, ServiceId::CellConfig, 1)?;
+    let start = Instant::now();
+    loop {
+        if let Some(cell) = sub.latest() {
+            validate_cell(&cell)?;
+            return Ok(cell);
+        }
+        if signals::stop_requested() {
+            return Err("stopped before the cell configuration arrived".into());
+        }
+        if start.elapsed() > CONFIG_TIMEOUT {
+            return Err(format!(
+                "no cell configuration on {} after {} s: is `supervisor run --instance {instance}` running?",
+                instance.service(ServiceId::CellConfig),
+                CONFIG_TIMEOUT.as_secs()
+            )
+            .into());
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// Checks what a process relies on; the supervisor validated everything else.
+pub fn validate_cell(cell: &CellConfigV1) -> Result<(), String> {
+    if cell.axes == 0 || cell.axes as usize > shm_schema::MAX_AXES {
+        return Err(format!("cell configuration has {} axes, 1..={} allowed", cell.axes, shm_schema::MAX_AXES));
+    }
+    for role in Role::ALL {
+        if cell.process[role.index()].period_ns == 0 {
+            return Err(format!("cell configuration: period of {} is 0", role.name()));
+        }
+    }
+    if !(cell.t_acc_s > 0.0) {
+        return Err(format!("cell configuration: t_acc {} s is not positive", cell.t_acc_s));
+    }
+    Ok(())
+}

@@ -1,0 +1,60 @@
+//! The one definition of everything that crosses a process boundary.
+//!
+//! Every payload here is `#[repr(C)]`, `Copy`, fixed size (arrays of [`MAX_AXES`]), free of
+//! pointers, and carries an explicit versioned iceoryx2 `type_name` (`"rtc::SetpointV1"`), so a
+//! process written in another language can join by copying the layout from
+//! `docs/services.md`. Changing a field means a new type name (`...V2`), never an edit in place:
+//! iceoryx2 checks the type name and size of a service, not its field layout.
+//!
+//! Service names are built here from an instance name (see [`names`]); no process spells a
+//! service name itself.
+//!
+//! Units, everywhere: positions in the axis unit (mm for linear axes, degrees for rotary
+//! ones), velocities in unit/s, efforts in N (linear) or N·m (rotary), times in nanoseconds of
+//! `CLOCK_MONOTONIC` when the field name ends in `_ns`, seconds when it ends in `_s`.
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+
+pub mod config;
+pub mod drive;
+pub mod motion;
+pub mod names;
+pub mod status;
+
+pub use config::{AxisConfigV1, CellConfigV1, ProcessConfigV1};
+pub use drive::{DriveCommandV1, DriveFeedbackV1, FieldbusImageV1, ServoStateV1};
+pub use motion::{CommandKind, MotionCommandV1, MotionState, SetpointV1};
+pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};
+pub use status::{CycleStatsV1, ProcState, ProcessStatusV1, Role};
+
+/// Capacity of every per-axis array in a shared payload. A cell uses the first `axes` entries.
+pub const MAX_AXES: usize = 8;
+
+/// Copies `s` into a fixed, NUL-padded byte field (truncating at `N - 1` bytes so the field
+/// always ends in NUL, as C expects).
+pub fn fixed_str<const N: usize>(s: &str) -> [u8; N] {
+    let mut out = [0u8; N];
+    let n = s.len().min(N.saturating_sub(1));
+    out[..n].copy_from_slice(&s.as_bytes()[..n]);
+    out
+}
+
+/// Reads a NUL-padded byte field back as text; invalid UTF-8 reads as `"?"`.
+pub fn str_of(bytes: &[u8]) -> &str {
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    core::str::from_utf8(&bytes[..end]).unwrap_or("?")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fixed_strings_round_trip_and_truncate() {
+        let f: [u8; 8] = fixed_str("theta");
+        assert_eq!(str_of(&f), "theta");
+        let g: [u8; 4] = fixed_str("abcdef");
+        assert_eq!(str_of(&g), "abc");
+        assert_eq!(g[3], 0);
+    }
+}

@@ -1,0 +1,131 @@
+//! Motion commands into trajgen and the setpoints it publishes.
+
+use crate::MAX_AXES;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// What a [`MotionCommandV1`] asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum CommandKind {
+    /// Move towards `target`; the axes blend into the next segment without stopping there.
+    Move = 1,
+    /// Stop exactly on the previous target (the same as repeating it).
+    Stop = 2,
+    /// End of program: stop exactly on the last target, then report `Done`.
+    End = 3,
+}
+
+impl CommandKind {
+    /// Decodes the wire value.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        [Self::Move, Self::Stop, Self::End].into_iter().find(|k| *k as u32 == v)
+    }
+}
+
+/// One instruction of a motion program, sent by a client to `<i>/trajgen/command`.
+///
+/// trajgen takes commands into a fixed queue as they arrive (flow control: a client keeps at
+/// most [`SetpointV1::queue_free`] commands in flight) and reads the next one only when the
+/// motion needs it, at `t = T1 - t_acc` (seed 003 §2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("rtc::MotionCommandV1")]
+pub struct MotionCommandV1 {
+    /// Sequence number, 1 for the first command a client sends, +1 for each next one.
+    pub seq: u64,
+    /// Program this command belongs to (chosen by the client, echoed in setpoints).
+    pub program_id: u32,
+    /// Line of the command in its program source (1-based, for progress and errors).
+    pub line: u32,
+    /// [`CommandKind`] as `u32`.
+    pub kind: u32,
+    /// Number of axes the client believes the cell has; must equal the cell's.
+    pub axes: u32,
+    /// Target position per axis (axis unit); `Move` only.
+    pub target: [f64; MAX_AXES],
+    /// Segment time the user asks for (s), 0 for none: `T1 = max(axis times, 2 t_acc, this)`.
+    pub user_time_s: f64,
+}
+
+/// State of the motion in a [`SetpointV1`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum MotionState {
+    /// No motion since start: the reference holds still.
+    Idle = 0,
+    /// A program is moving the axes.
+    Moving = 1,
+    /// The program reached its end; the reference is at rest on the last target.
+    Done = 2,
+    /// A command was refused (see [`SetpointV1::fault`]); the reference is at rest.
+    Fault = 3,
+}
+
+impl MotionState {
+    /// Decodes the wire value.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        [Self::Idle, Self::Moving, Self::Done, Self::Fault].into_iter().find(|s| *s as u32 == v)
+    }
+}
+
+/// trajgen fault codes in [`SetpointV1::fault`].
+pub mod trajgen_fault {
+    /// No fault.
+    pub const NONE: u32 = 0;
+    /// A command's `axes` differs from the cell's.
+    pub const AXES_MISMATCH: u32 = 1;
+    /// A target lies outside an axis' limits.
+    pub const TARGET_OUT_OF_LIMITS: u32 = 2;
+    /// A command kind is unknown or a value is not finite.
+    pub const BAD_COMMAND: u32 = 3;
+    /// A command arrived while the queue was full (the client ignored flow control).
+    pub const QUEUE_OVERFLOW: u32 = 4;
+    /// A command's sequence number skipped (a command was lost).
+    pub const SEQUENCE_GAP: u32 = 5;
+}
+
+/// The reference trajgen publishes on `<i>/trajgen/setpoint` every cycle.
+///
+/// Position and velocity are the exact trajectory at [`Self::stamp_ns`]: trajgen evaluates it
+/// against real elapsed time, so a consumer may extrapolate `position + velocity * dt`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("rtc::SetpointV1")]
+pub struct SetpointV1 {
+    /// +1 per published setpoint since trajgen started.
+    pub seq: u64,
+    /// Time the reference was evaluated at (ns, `CLOCK_MONOTONIC`).
+    pub stamp_ns: u64,
+    /// Start of the current motion (ns, `CLOCK_MONOTONIC`), 0 before the first.
+    pub motion_start_ns: u64,
+    /// Motion time: real time elapsed since `motion_start_ns` (s); 0 when idle.
+    pub motion_time_s: f64,
+    /// Sum of the segment times T of the current motion so far (s): its theoretical duration
+    /// once the state is `Done`.
+    pub theoretical_s: f64,
+    /// Time T of the segment being executed (s).
+    pub segment_time_s: f64,
+    /// Program of the current motion (from its commands).
+    pub program_id: u32,
+    /// Program line of the segment being executed, 0 for none.
+    pub line: u32,
+    /// [`MotionState`] as `u32`.
+    pub state: u32,
+    /// Number of axes in use.
+    pub axes: u32,
+    /// [`trajgen_fault`] code, 0 for none.
+    pub fault: u32,
+    /// Program line of the command that caused `fault`.
+    pub fault_line: u32,
+    /// Sequence number of the last command taken into the queue.
+    pub commands_taken: u64,
+    /// Free places in the command queue.
+    pub queue_free: u32,
+    /// Times the queue ran empty while a program was running (the axes stopped on the target).
+    pub starved: u32,
+    /// Reference position per axis (axis unit).
+    pub position: [f64; MAX_AXES],
+    /// Reference velocity per axis (unit/s).
+    pub velocity: [f64; MAX_AXES],
+}

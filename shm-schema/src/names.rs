@@ -1,0 +1,271 @@
+//! Instance names, service names and the quality of service each service is created with.
+//!
+//! Every service of a cell lives under `<instance>/`, and every iceoryx2 resource of an
+//! instance (shared-memory files, node and service folders) is isolated by the iceoryx2
+//! configuration built from the same name (see [`InstanceName::shm_prefix`] and
+//! [`InstanceName::root_dir`]), so two instances on one machine never meet.
+
+use core::fmt::{self, Write};
+
+/// Longest instance name accepted.
+pub const MAX_INSTANCE_LEN: usize = 32;
+
+/// A validated instance name: 1 to 32 of `[A-Za-z0-9_-]`.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct InstanceName {
+    bytes: [u8; MAX_INSTANCE_LEN],
+    len: u8,
+}
+
+/// Why an instance name was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InstanceError {
+    /// The name is empty.
+    Empty,
+    /// The name is longer than [`MAX_INSTANCE_LEN`].
+    TooLong {
+        /// Length given, in bytes.
+        len: usize,
+    },
+    /// A character outside `[A-Za-z0-9_-]`.
+    BadChar {
+        /// The character.
+        ch: char,
+        /// Its byte offset in the name.
+        at: usize,
+    },
+}
+
+impl fmt::Display for InstanceError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Empty => write!(f, "instance name is empty"),
+            Self::TooLong { len } => {
+                write!(f, "instance name is {len} bytes long, at most {MAX_INSTANCE_LEN} allowed")
+            }
+            Self::BadChar { ch, at } => write!(
+                f,
+                "instance name has {ch:?} at offset {at}; only letters, digits, '_' and '-' are allowed"
+            ),
+        }
+    }
+}
+
+impl core::error::Error for InstanceError {}
+
+impl InstanceName {
+    /// Validates `name`.
+    pub fn new(name: &str) -> Result<Self, InstanceError> {
+        if name.is_empty() {
+            return Err(InstanceError::Empty);
+        }
+        if name.len() > MAX_INSTANCE_LEN {
+            return Err(InstanceError::TooLong { len: name.len() });
+        }
+        if let Some((at, ch)) = name
+            .char_indices()
+            .find(|&(_, c)| !(c.is_ascii_alphanumeric() || c == '_' || c == '-'))
+        {
+            return Err(InstanceError::BadChar { ch, at });
+        }
+        let mut bytes = [0u8; MAX_INSTANCE_LEN];
+        bytes[..name.len()].copy_from_slice(name.as_bytes());
+        Ok(Self { bytes, len: name.len() as u8 })
+    }
+
+    /// The name as text.
+    pub fn as_str(&self) -> &str {
+        // Only ASCII was accepted in `new`.
+        core::str::from_utf8(&self.bytes[..self.len as usize]).unwrap_or("")
+    }
+
+    /// The full iceoryx2 service name of `service` in this instance.
+    pub fn service(&self, service: ServiceId) -> ServiceNameBuf {
+        let mut buf = ServiceNameBuf::default();
+        // Cannot overflow: 32 bytes of instance + the longest suffix fit in the buffer.
+        let _ = write!(buf, "{}/{}", self.as_str(), service.suffix());
+        buf
+    }
+
+    /// The file-name prefix of every iceoryx2 file of this instance (`/dev/shm/<prefix>...`).
+    pub fn shm_prefix(&self) -> ServiceNameBuf {
+        let mut buf = ServiceNameBuf::default();
+        let _ = write!(buf, "iox2_{}_", self.as_str());
+        buf
+    }
+
+    /// The iceoryx2 root folder of this instance (node and service descriptions, sockets).
+    pub fn root_dir(&self) -> ServiceNameBuf {
+        let mut buf = ServiceNameBuf::default();
+        let _ = write!(buf, "/tmp/iceoryx2/{}/", self.as_str());
+        buf
+    }
+}
+
+impl fmt::Debug for InstanceName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:?}", self.as_str())
+    }
+}
+
+impl fmt::Display for InstanceName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Capacity of a [`ServiceNameBuf`].
+pub const SERVICE_NAME_CAP: usize = 96;
+
+/// A service name (or other instance-derived string) built without allocation.
+#[derive(Clone, Copy)]
+pub struct ServiceNameBuf {
+    bytes: [u8; SERVICE_NAME_CAP],
+    len: usize,
+}
+
+impl Default for ServiceNameBuf {
+    fn default() -> Self {
+        Self { bytes: [0; SERVICE_NAME_CAP], len: 0 }
+    }
+}
+
+impl ServiceNameBuf {
+    /// The name as text.
+    pub fn as_str(&self) -> &str {
+        core::str::from_utf8(&self.bytes[..self.len]).unwrap_or("")
+    }
+}
+
+impl Write for ServiceNameBuf {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        let end = self.len + s.len();
+        if end > SERVICE_NAME_CAP {
+            return Err(fmt::Error);
+        }
+        self.bytes[self.len..end].copy_from_slice(s.as_bytes());
+        self.len = end;
+        Ok(())
+    }
+}
+
+impl fmt::Debug for ServiceNameBuf {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:?}", self.as_str())
+    }
+}
+
+impl fmt::Display for ServiceNameBuf {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Every service of a cell. All are publish-subscribe; `docs/services.md` lists them with
+/// their payload layouts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ServiceId {
+    /// `<i>/cell/config`: [`crate::CellConfigV1`], published once by the supervisor with
+    /// history 1, so a process that starts later still receives it.
+    CellConfig,
+    /// `<i>/trajgen/command`: [`crate::MotionCommandV1`], a client (the supervisor) to trajgen.
+    MotionCommand,
+    /// `<i>/trajgen/setpoint`: [`crate::SetpointV1`], trajgen to servo (and observers).
+    Setpoint,
+    /// `<i>/servo/state`: [`crate::ServoStateV1`], servo to iobridge (and observers).
+    ServoState,
+    /// `<i>/servo/drive_command`: [`crate::DriveCommandV1`], servo to the drives.
+    DriveCommand,
+    /// `<i>/machine/feedback`: [`crate::DriveFeedbackV1`], the drives to servo.
+    DriveFeedback,
+    /// `<i>/iobridge/output`: [`crate::FieldbusImageV1`], the fieldbus output image.
+    FieldbusOutput,
+    /// `<i>/<role>/status`: [`crate::ProcessStatusV1`], every real-time process to the
+    /// supervisor, every cycle.
+    Status(crate::Role),
+}
+
+/// How a service is created. Every process opens a service with these same values, so it does
+/// not matter which process creates it first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Qos {
+    /// Publishers allowed at once.
+    pub max_publishers: usize,
+    /// Subscribers allowed at once.
+    pub max_subscribers: usize,
+    /// Samples a late subscriber receives on connecting.
+    pub history: usize,
+    /// Largest receive buffer a subscriber may ask for.
+    pub subscriber_max_buffer: usize,
+    /// Nodes allowed to open the service at once.
+    pub max_nodes: usize,
+}
+
+impl ServiceId {
+    /// The part of the service name after `<instance>/`.
+    pub fn suffix(self) -> &'static str {
+        match self {
+            Self::CellConfig => "cell/config",
+            Self::MotionCommand => "trajgen/command",
+            Self::Setpoint => "trajgen/setpoint",
+            Self::ServoState => "servo/state",
+            Self::DriveCommand => "servo/drive_command",
+            Self::DriveFeedback => "machine/feedback",
+            Self::FieldbusOutput => "iobridge/output",
+            Self::Status(role) => role.status_suffix(),
+        }
+    }
+
+    /// Creation parameters of the service.
+    pub fn qos(self) -> Qos {
+        // Two publishers where a process may be replaced while its predecessor is still
+        // being cleaned up; observers (supervisor, recorder, a foreign tool) need subscriber
+        // slots beyond the one consumer.
+        let base = Qos {
+            max_publishers: 2,
+            max_subscribers: 8,
+            history: 0,
+            subscriber_max_buffer: 1024,
+            max_nodes: 16,
+        };
+        match self {
+            Self::CellConfig => Qos { history: 1, max_publishers: 1, ..base },
+            Self::MotionCommand => Qos { max_subscribers: 2, ..base },
+            _ => base,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Role;
+
+    #[test]
+    fn instance_names_are_validated() {
+        assert_eq!(InstanceName::new(""), Err(InstanceError::Empty));
+        assert_eq!(
+            InstanceName::new("a/b"),
+            Err(InstanceError::BadChar { ch: '/', at: 1 })
+        );
+        assert!(matches!(
+            InstanceName::new(&"x".repeat(33)),
+            Err(InstanceError::TooLong { len: 33 })
+        ));
+        assert_eq!(InstanceName::new("gantry-01_a").map(|i| i.as_str().len()), Ok(11));
+    }
+
+    #[test]
+    fn service_names_carry_the_instance() {
+        let i = InstanceName::new("t1").expect("valid");
+        assert_eq!(i.service(ServiceId::Setpoint).as_str(), "t1/trajgen/setpoint");
+        assert_eq!(i.service(ServiceId::Status(Role::Servo)).as_str(), "t1/servo/status");
+        assert_eq!(i.shm_prefix().as_str(), "iox2_t1_");
+        // The longest instance name still fits every name.
+        let long = InstanceName::new(&"z".repeat(MAX_INSTANCE_LEN)).expect("valid");
+        for id in [ServiceId::DriveCommand, ServiceId::Status(Role::Machine)] {
+            assert!(long.service(id).as_str().ends_with(id.suffix()));
+        }
+        assert!(long.root_dir().as_str().ends_with('/'));
+    }
+}
