@@ -116,3 +116,32 @@ impl Program {
         Ok(())
     }
 }
+
+impl Program {
+    /// The program as trajgen commands, numbered from `first_seq`.
+    pub fn to_commands(&self, program_id: u32, first_seq: u64) -> Vec<shm_schema::MotionCommandV1> {
+        use shm_schema::CommandKind;
+        self.instructions
+            .iter()
+            .enumerate()
+            .map(|(i, ins)| {
+                let (kind, target, user) = match ins.op {
+                    Op::Move { target, user_time_s, .. } => {
+                        (CommandKind::Move, target, user_time_s.unwrap_or(0.0))
+                    }
+                    Op::Stop => (CommandKind::Stop, [0.0; MAX_AXES], 0.0),
+                    Op::End => (CommandKind::End, [0.0; MAX_AXES], 0.0),
+                };
+                shm_schema::MotionCommandV1 {
+                    seq: first_seq + i as u64,
+                    program_id,
+                    line: ins.line,
+                    kind: kind as u32,
+                    axes: self.axes as u32,
+                    target,
+                    user_time_s: user,
+                }
+            })
+            .collect()
+    }
+}

@@ -12,6 +12,7 @@
 //! Functions that run inside a cycle say so in a `# Real-time` section: no allocation of our
 //! own, no lock, no formatted logging, no syscall but the one blocking wait and IPC calls.
 
+pub mod alloc_count;
 pub mod cycle;
 pub mod ipc;
 pub mod process;

@@ -99,7 +99,11 @@ pub struct SetpointV1 {
     pub stamp_ns: u64,
     /// Start of the current motion (ns, `CLOCK_MONOTONIC`), 0 before the first.
     pub motion_start_ns: u64,
-    /// Motion time: real time elapsed since `motion_start_ns` (s); 0 when idle.
+    /// End of the current motion (ns, `CLOCK_MONOTONIC`): the stamp of its first `Done`
+    /// setpoint; 0 while it runs.
+    pub motion_end_ns: u64,
+    /// Motion time: real time elapsed since `motion_start_ns` (s); 0 when idle, frozen at the
+    /// motion's duration once it is done.
     pub motion_time_s: f64,
     /// Sum of the segment times T of the current motion so far (s): its theoretical duration
     /// once the state is `Done`.

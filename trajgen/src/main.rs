@@ -1,0 +1,61 @@
+//! `trajgen`: the trajectory generator process. See the crate documentation.
+
+use runtime::cycle::{CycleClock, Wake};
+use runtime::ipc::{Pub, Sub};
+use runtime::process::{self, Context, SetupError, Task};
+use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV1, SetpointV1};
+use std::process::ExitCode;
+use trajgen::generator::{Generator, Params, QUEUE_CAP};
+
+struct Trajgen {
+    params: Params,
+    /// `None` until servo's commanded position is known: the motion starts where servo is.
+    generator: Option<Generator>,
+    commands: Sub<MotionCommandV1>,
+    servo: Sub<ServoStateV1>,
+    setpoints: Pub<SetpointV1>,
+}
+
+impl Trajgen {
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let i = &ctx.instance;
+        Ok(Self {
+            params: Params::from_cell(&ctx.cell),
+            generator: None,
+            commands: Sub::new(&ctx.node, i, ServiceId::MotionCommand, QUEUE_CAP)?,
+            servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 4)?,
+            setpoints: Pub::new(&ctx.node, i, ServiceId::Setpoint)?,
+        })
+    }
+}
+
+impl Task for Trajgen {
+    /// # Real-time
+    /// IPC calls, then [`Generator::step`]; nothing else.
+    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock) {
+        let latest_servo = self.servo.latest();
+        let generator = match (&mut self.generator, latest_servo) {
+            (Some(g), _) => g,
+            (None, Some(s)) => self.generator.insert(Generator::new(self.params, &s.cmd_position)),
+            // No servo yet: nothing to start from, publish nothing.
+            (None, None) => return,
+        };
+        while let Some(c) = self.commands.next() {
+            generator.push_command(&c);
+        }
+        let sp = generator.step(wake.actual_ns);
+        self.setpoints.send(&sp);
+        // Read the next command at exactly t = T1 - t_acc, not at the next period.
+        if let Some(t) = generator.next_transition_ns() {
+            clock.request_wake_at(t);
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    process::run(
+        Role::Trajgen,
+        "trajectory generator (seed 003 §2): blend zones against real elapsed time",
+        Trajgen::new,
+    )
+}

@@ -1,0 +1,301 @@
+//! The generator against the formula, with regular, late and exact cycles.
+
+use motion_program::{parse, theoretical_time};
+use shm_schema::motion::trajgen_fault;
+use shm_schema::{MAX_AXES, MotionCommandV1, MotionState, SetpointV1};
+use trajgen::blend::{Axes, Segment};
+use trajgen::generator::{Generator, Params};
+
+const TRIANGLE: &str = include_str!("../../examples/triangle.prog");
+const START: [f64; 3] = [40.0, 40.0, 0.0];
+const T0: u64 = 1_000_000_000_000; // an arbitrary CLOCK_MONOTONIC origin
+
+fn params() -> Params {
+    let mut p = Params {
+        axes: 3,
+        vmax: [1.0; MAX_AXES],
+        min: [0.0; MAX_AXES],
+        max: [0.0; MAX_AXES],
+        t_acc: 0.525,
+    };
+    p.vmax[..3].copy_from_slice(&[16.0, 16.0, 30.0]);
+    p.min[..3].copy_from_slice(&[0.0, 0.0, -180.0]);
+    p.max[..3].copy_from_slice(&[200.0, 150.0, 180.0]);
+    p
+}
+
+fn commands(src: &str) -> Vec<MotionCommandV1> {
+    parse(src, 3).expect("program parses").to_commands(7, 1)
+}
+
+fn loaded(src: &str) -> Generator {
+    let mut g = Generator::new(params(), &START);
+    for c in commands(src) {
+        g.push_command(&c);
+    }
+    g
+}
+
+/// The trajectory of the triangle built offline, straight from seed 003 §2: each segment's
+/// local time 0 lies T1 after the previous one's; (motion time of local 0, segment).
+fn offline_triangle() -> Vec<(f64, Segment)> {
+    let p = params();
+    let pts: [[f64; 3]; 5] =
+        [[40.0, 40.0, 0.0], [140.0, 40.0, 0.0], [90.0, 126.0, 0.0], [40.0, 40.0, 0.0], [40.0, 40.0, 0.0]];
+    let ax = |v: &[f64; 3]| {
+        let mut a = Axes::zeros();
+        a.as_mut_slice()[..3].copy_from_slice(v);
+        a
+    };
+    let mut out: Vec<(f64, Segment)> = Vec::new();
+    let mut b = ax(&START);
+    let mut a = b;
+    let mut origin = p.t_acc;
+    for c in &pts {
+        let t1 = motion_program::segment_time(&b.as_slice()[..3], c, &p.vmax[..3], p.t_acc, 0.0);
+        let s = Segment { a, b, c: ax(c), t1, t_acc: p.t_acc };
+        out.push((origin, s));
+        a = s.eval(s.transition_time()).0;
+        b = s.c;
+        origin += t1;
+    }
+    out
+}
+
+fn formula_at(plan: &[(f64, Segment)], mt: f64) -> (Axes, Axes) {
+    let (o, s) = plan
+        .iter()
+        .rev()
+        .find(|(o, s)| mt >= o - s.t_acc)
+        .copied()
+        .unwrap_or(plan[0]);
+    s.eval(mt - o)
+}
+
+fn run(g: &mut Generator, times: impl Iterator<Item = u64>) -> Vec<SetpointV1> {
+    let mut out = Vec::new();
+    for t in times {
+        let sp = g.step(t);
+        let done = sp.state != MotionState::Moving as u32;
+        out.push(sp);
+        if done && out.len() > 1 {
+            break;
+        }
+    }
+    out
+}
+
+fn assert_close(a: &[f64], b: &[f64], tol: f64, what: &str) {
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert!((x - y).abs() <= tol, "{what}: axis {i}: {x} vs {y}");
+    }
+}
+
+#[test]
+fn triangle_setpoints_equal_the_formula_at_their_time() {
+    let plan = offline_triangle();
+    let mut g = loaded(TRIANGLE);
+    let sps = run(&mut g, (0..).map(|k| T0 + k * 4_000_000));
+    let first = sps[0];
+    assert_eq!(first.motion_start_ns, T0);
+    for sp in &sps {
+        let mt = (sp.stamp_ns - T0) as f64 * 1e-9;
+        if sp.state != MotionState::Moving as u32 {
+            continue;
+        }
+        let (q, v) = formula_at(&plan, mt);
+        assert_close(&sp.position[..3], &q.as_slice()[..3], 1e-9, "position");
+        assert_close(&sp.velocity[..3], &v.as_slice()[..3], 1e-9, "velocity");
+        assert!((sp.motion_time_s - mt).abs() < 1e-12);
+    }
+    let last = sps.last().expect("setpoints");
+    assert_eq!(last.state, MotionState::Done as u32);
+    assert!((last.theoretical_s - 19.10).abs() < 1e-9, "{}", last.theoretical_s);
+    let measured = (last.motion_end_ns - last.motion_start_ns) as f64 * 1e-9;
+    assert!(measured >= 19.10 - 1e-9 && measured < 19.10 + 0.004, "measured {measured}");
+    assert_eq!(&last.position[..3], &START[..]);
+    assert_eq!(&last.velocity[..3], &[0.0; 3][..]);
+    // The program's line numbers are reported as the motion goes.
+    assert!(sps.iter().any(|s| s.line == 6) && sps.iter().any(|s| s.line == 5));
+}
+
+#[test]
+fn late_cycles_shorten_nothing_and_lengthen_nothing() {
+    let plan = offline_triangle();
+    // Irregular wake-ups: 1..9 ms, with a 300 ms stall in the middle of a blend zone and
+    // another across a segment transition.
+    let mut times = Vec::new();
+    let mut t = T0;
+    let mut k = 0u64;
+    while t < T0 + 21_000_000_000 {
+        times.push(t);
+        k += 1;
+        t += 1_000_000 + (k * 7_919 % 8) * 1_000_000;
+        if k == 1500 || k == 2500 {
+            t += 300_000_000;
+        }
+    }
+    let mut g = loaded(TRIANGLE);
+    let sps = run(&mut g, times.into_iter());
+    for sp in sps.iter().filter(|s| s.state == MotionState::Moving as u32) {
+        let (q, _) = formula_at(&plan, (sp.stamp_ns - T0) as f64 * 1e-9);
+        assert_close(&sp.position[..3], &q.as_slice()[..3], 1e-9, "position after late cycles");
+    }
+    let last = sps.last().expect("setpoints");
+    assert!((last.theoretical_s - 19.10).abs() < 1e-9);
+    let measured = (last.motion_end_ns - T0) as f64 * 1e-9;
+    // It ends at the first wake-up at or after 19.10 s, whatever happened before.
+    assert!(measured >= 19.10 - 1e-9 && measured <= 19.10 + 0.010, "{measured}");
+}
+
+#[test]
+fn waking_at_the_requested_transitions_ends_exactly_on_time() {
+    let mut g = loaded(TRIANGLE);
+    let mut now = T0;
+    let mut last = g.step(now);
+    let period = 4_000_000;
+    let mut transitions = 0;
+    while last.state == MotionState::Moving as u32 {
+        let grid = now + period;
+        now = match g.next_transition_ns() {
+            Some(t) if t < grid => {
+                transitions += 1;
+                t
+            }
+            _ => grid,
+        };
+        last = g.step(now);
+    }
+    assert!(transitions >= 4, "{transitions}");
+    let measured = (last.motion_end_ns - T0) as f64 * 1e-9;
+    assert!((measured - 19.10).abs() < 2e-9, "{measured}");
+}
+
+#[test]
+fn theoretical_time_of_the_generator_matches_the_planner() {
+    for src in [TRIANGLE, "MOVE(100,100,90)\nEND", "MOVE(50,50,0, T=9)\nMOVE(60,50,0)\nMOVE(60,50,0)\nEND"] {
+        let mut g = loaded(src);
+        let sps = run(&mut g, (0..).map(|k| T0 + k * 1_000_000));
+        let prog = parse(src, 3).expect("parses");
+        let expected = theoretical_time(&prog, &START, &params().vmax[..3], 0.525);
+        let last = sps.last().expect("setpoints");
+        assert_eq!(last.state, MotionState::Done as u32, "{src}");
+        assert!((last.theoretical_s - expected).abs() < 1e-9, "{src}: {} vs {expected}", last.theoretical_s);
+    }
+}
+
+#[test]
+fn an_empty_queue_stops_the_axes_exactly_on_the_target_and_waits() {
+    let mut g = Generator::new(params(), &START);
+    let cmds = commands("MOVE(100,40,0)\nMOVE(100,100,0)\nEND");
+    g.push_command(&cmds[0]);
+    let sps = run(&mut g, (0..12_000).map(|k| T0 + k * 1_000_000));
+    let last = sps.last().expect("setpoints");
+    assert_eq!(last.state, MotionState::Moving as u32);
+    assert_eq!(last.starved, 1);
+    assert_eq!(&last.position[..3], &[100.0, 40.0, 0.0][..]);
+    assert_eq!(&last.velocity[..3], &[0.0; 3][..]);
+    // The rest of the program arrives late; the motion resumes from rest and completes.
+    g.push_command(&cmds[1]);
+    g.push_command(&cmds[2]);
+    let sps = run(&mut g, (12_000..30_000).map(|k| T0 + k * 1_000_000));
+    let last = sps.last().expect("setpoints");
+    assert_eq!(last.state, MotionState::Done as u32);
+    assert_eq!(&last.position[..3], &[100.0, 100.0, 0.0][..]);
+}
+
+#[test]
+fn a_repeated_target_stops_exactly_on_the_point() {
+    let mut g = loaded("MOVE(100,40,0)\nMOVE(100,40,0)\nMOVE(100,100,0)\nEND");
+    let t_first = 60.0 / 16.0; // segment 1 (T1)
+    let mut at_rest = None;
+    for k in 0..20_000u64 {
+        let sp = g.step(T0 + k * 1_000_000);
+        // During the repeated-target segment the axes reach the point and rest.
+        let mt = k as f64 * 1e-3;
+        if (mt - (t_first + 0.525 * 2.0)).abs() < 0.0005 {
+            at_rest = Some(sp);
+        }
+    }
+    // At the instant the repeated-target segment ends the axes are on the point and at
+    // rest (to rounding: the quartic's velocity there is O(1e-29)).
+    let sp = at_rest.expect("sampled");
+    assert_close(&sp.position[..3], &[100.0, 40.0, 0.0], 1e-12, "position at the point");
+    assert_close(&sp.velocity[..3], &[0.0; 3], 1e-12, "velocity at the point");
+}
+
+fn fault_of(src_cmds: Vec<MotionCommandV1>) -> (SetpointV1, Generator) {
+    let mut g = Generator::new(params(), &START);
+    for c in &src_cmds {
+        g.push_command(c);
+    }
+    let sps = run(&mut g, (0..40_000).map(|k| T0 + k * 1_000_000));
+    (*sps.last().expect("setpoints"), g)
+}
+
+#[test]
+fn refused_commands_fault_and_nothing_moves_beyond_the_current_target() {
+    // Out of limits (y = 500) in a program queued whole: nothing moves at all.
+    let mut cmds = commands("MOVE(100,40,0)\nMOVE(100,140,0)\nEND");
+    cmds[1].target[1] = 500.0;
+    let (sp, _) = fault_of(cmds.clone());
+    assert_eq!(sp.fault, trajgen_fault::TARGET_OUT_OF_LIMITS);
+    assert_eq!(sp.fault_line, 2);
+    assert_eq!(sp.state, MotionState::Fault as u32);
+    assert_eq!(&sp.position[..3], &START[..], "nothing moved");
+
+    // The same command arriving mid-motion: the axes stop exactly on the current target.
+    let mut g = Generator::new(params(), &START);
+    g.push_command(&cmds[0]);
+    run(&mut g, (0..1000).map(|k| T0 + k * 1_000_000));
+    g.push_command(&cmds[1]);
+    let sps = run(&mut g, (1000..40_000).map(|k| T0 + k * 1_000_000));
+    let sp = sps.last().expect("setpoints");
+    assert_eq!((sp.fault, sp.state), (trajgen_fault::TARGET_OUT_OF_LIMITS, MotionState::Fault as u32));
+    assert_eq!(&sp.position[..3], &[100.0, 40.0, 0.0][..], "stopped on the last good target");
+    assert_eq!(sp.starved, 0, "a fault stop is not starvation");
+
+    let mut cmds = commands("MOVE(100,40,0)\nEND");
+    cmds[1].seq = 5;
+    assert_eq!(fault_of(cmds).0.fault, trajgen_fault::SEQUENCE_GAP);
+
+    let mut cmds = commands("MOVE(100,40,0)\nEND");
+    cmds[0].axes = 2;
+    let (sp, _) = fault_of(cmds);
+    assert_eq!(sp.fault, trajgen_fault::AXES_MISMATCH);
+    assert_eq!(&sp.position[..3], &START[..], "nothing moved");
+
+    let mut cmds = commands("MOVE(100,40,0)\nEND");
+    cmds[0].target[2] = f64::NAN;
+    assert_eq!(fault_of(cmds).0.fault, trajgen_fault::BAD_COMMAND);
+
+    // A new session (seq 1) clears the fault and runs.
+    let (_, mut g) = fault_of({
+        let mut c = commands("MOVE(100,40,0)\nEND");
+        c[0].axes = 1;
+        c
+    });
+    for c in commands("MOVE(60,40,0)\nEND") {
+        g.push_command(&c);
+    }
+    let sps = run(&mut g, (40_000..80_000).map(|k| T0 + k * 1_000_000));
+    let last = sps.last().expect("setpoints");
+    assert_eq!(last.fault, 0);
+    assert_eq!(last.state, MotionState::Done as u32);
+    assert_eq!(&last.position[..3], &[60.0, 40.0, 0.0][..]);
+}
+
+#[test]
+fn queue_overflow_is_refused_not_lost_silently() {
+    let mut g = Generator::new(params(), &START);
+    let mut cmds = Vec::new();
+    for i in 0..(trajgen::generator::QUEUE_CAP as u64 + 1) {
+        let mut c = commands("MOVE(50,50,0)\nEND")[0];
+        c.seq = i + 1;
+        cmds.push(c);
+    }
+    for c in &cmds {
+        g.push_command(c);
+    }
+    assert_eq!(g.step(T0).fault, trajgen_fault::QUEUE_OVERFLOW);
+}
