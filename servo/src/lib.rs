@@ -1,1 +1,253 @@
+//! Servo: the axes' position loops (seed 003 §3). It runs at its own period at all times,
+//! also when no setpoint comes (it holds the last one): its job is not to keep motion time
+//! but to keep the axes stable.
+//!
+//! Each cycle, per axis: the reference is the latest trajgen setpoint extrapolated to now
+//! (`p + v dt`, exact for trajgen's real-time trajectory, bounded to two trajgen periods, so
+//! a servo faster than trajgen gets a smooth reference and a silent trajgen is held), then a
+//! PID on the position error with velocity and acceleration feed-forward gives the effort.
+//!
+//! Safety rules:
+//! - a setpoint further from the current reference than the axis can move in the elapsed
+//!   time (plus its in-position band) is refused, and servo holds (`SETPOINT_JUMP`);
+//! - while the drives are disabled the reference follows the measured position and the
+//!   integrator is cleared, so enabling is bumpless; enable is requested as a 0-to-1 edge.
 
+use shm_schema::drive::servo_status as st;
+use shm_schema::{
+    AxisConfigV1, CellConfigV1, DriveCommandV1, DriveFeedbackV1, MAX_AXES, Role, ServoStateV1,
+    SetpointV1,
+};
+
+/// Gains and limits of one axis (see [`AxisConfigV1`] for units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisGains {
+    /// Proportional gain.
+    pub kp: f64,
+    /// Integral gain.
+    pub ki: f64,
+    /// Derivative gain on the velocity error.
+    pub kd: f64,
+    /// Velocity feed-forward.
+    pub kvff: f64,
+    /// Acceleration feed-forward.
+    pub kaff: f64,
+    /// Limit of the integral term.
+    pub integral_limit: f64,
+    /// Effort limit.
+    pub effort_limit: f64,
+    /// Largest velocity.
+    pub vmax: f64,
+    /// Following-error limit.
+    pub following_error_limit: f64,
+    /// In-position band.
+    pub in_position: f64,
+}
+
+impl From<&AxisConfigV1> for AxisGains {
+    fn from(a: &AxisConfigV1) -> Self {
+        Self {
+            kp: a.kp,
+            ki: a.ki,
+            kd: a.kd,
+            kvff: a.kvff,
+            kaff: a.kaff,
+            integral_limit: a.integral_limit,
+            effort_limit: a.effort_limit,
+            vmax: a.vmax,
+            following_error_limit: a.following_error_limit,
+            in_position: a.in_position,
+        }
+    }
+}
+
+/// Parameters of the controller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// Axes in use.
+    pub axes: usize,
+    /// Per-axis gains.
+    pub axis: [AxisGains; MAX_AXES],
+    /// Servo period (s).
+    pub period_s: f64,
+    /// Longest extrapolation of a setpoint (s): two trajgen periods.
+    pub max_extrapolation_s: f64,
+}
+
+impl Params {
+    /// From the cell configuration.
+    pub fn from_cell(cell: &CellConfigV1) -> Self {
+        let zero = AxisGains::from(&AxisConfigV1::default());
+        let mut axis = [zero; MAX_AXES];
+        for (i, a) in cell.axes().iter().enumerate() {
+            axis[i] = a.into();
+        }
+        Self {
+            axes: cell.axes as usize,
+            axis,
+            period_s: cell.process[Role::Servo.index()].period_ns as f64 * 1e-9,
+            max_extrapolation_s: 2.0 * cell.process[Role::Trajgen.index()].period_ns as f64 * 1e-9,
+        }
+    }
+}
+
+/// The controller state. Construct at set-up; [`Controller::cycle`] runs every cycle.
+#[derive(Clone, Debug)]
+pub struct Controller {
+    p: Params,
+    setpoint: Option<SetpointV1>,
+    reference: [f64; MAX_AXES],
+    have_reference: bool,
+    integral: [f64; MAX_AXES],
+    last_ns: u64,
+    enable_out: u32,
+    seq: u64,
+}
+
+impl Controller {
+    /// A controller that has seen nothing yet.
+    pub fn new(p: Params) -> Self {
+        Self {
+            p,
+            setpoint: None,
+            reference: [0.0; MAX_AXES],
+            have_reference: false,
+            integral: [0.0; MAX_AXES],
+            last_ns: 0,
+            enable_out: 0,
+            seq: 0,
+        }
+    }
+
+    /// One servo cycle at `now_ns` with the newest setpoint (if one arrived) and the newest
+    /// drive feedback (if any ever arrived). Returns the drive command and the servo state.
+    ///
+    /// # Real-time
+    /// Arithmetic only; no allocation, no system call.
+    pub fn cycle(
+        &mut self,
+        now_ns: u64,
+        new_setpoint: Option<&SetpointV1>,
+        feedback: Option<&DriveFeedbackV1>,
+    ) -> (DriveCommandV1, ServoStateV1) {
+        let n = self.p.axes;
+        self.seq += 1;
+        if let Some(sp) = new_setpoint {
+            self.setpoint = Some(*sp);
+        }
+        let dt = if self.last_ns == 0 {
+            self.p.period_s
+        } else {
+            ((now_ns.saturating_sub(self.last_ns)) as f64 * 1e-9).min(5.0 * self.p.period_s)
+        };
+        self.last_ns = now_ns;
+
+        let mut cmd = DriveCommandV1 {
+            seq: self.seq,
+            stamp_ns: now_ns,
+            enable: 0,
+            axes: n as u32,
+            effort: [0.0; MAX_AXES],
+        };
+        let mut state = ServoStateV1 {
+            seq: self.seq,
+            stamp_ns: now_ns,
+            measured_stamp_ns: 0,
+            setpoint_seq: self.setpoint.map_or(0, |s| s.seq),
+            status: 0,
+            axes: n as u32,
+            cmd_position: [0.0; MAX_AXES],
+            cmd_velocity: [0.0; MAX_AXES],
+            act_position: [0.0; MAX_AXES],
+            act_velocity: [0.0; MAX_AXES],
+            following_error: [0.0; MAX_AXES],
+            effort: [0.0; MAX_AXES],
+        };
+        let Some(fb) = feedback else {
+            state.status = st::NO_FEEDBACK;
+            return (cmd, state);
+        };
+        state.measured_stamp_ns = fb.stamp_ns;
+        state.act_position = fb.position;
+        state.act_velocity = fb.velocity;
+
+        if fb.enabled == 0 {
+            // Disabled: follow the machine, clear the integrator, ask for enable as an edge.
+            self.reference[..n].copy_from_slice(&fb.position[..n]);
+            self.have_reference = true;
+            self.integral = [0.0; MAX_AXES];
+            self.enable_out = if self.enable_out == 0 { 1 } else { 0 };
+            cmd.enable = self.enable_out;
+            state.status |= if fb.fault != 0 { st::DRIVE_FAULT } else { 0 };
+            state.cmd_position = self.reference;
+            if self.setpoint.is_none() {
+                state.status |= st::NO_SETPOINT;
+            }
+            return (cmd, state);
+        }
+        self.enable_out = 1;
+        cmd.enable = 1;
+        state.status |= st::ENABLED;
+        if !self.have_reference {
+            self.reference[..n].copy_from_slice(&fb.position[..n]);
+            self.have_reference = true;
+        }
+
+        // The reference: the setpoint extrapolated to now, or hold.
+        let mut target = self.reference;
+        let mut target_vel = [0.0; MAX_AXES];
+        let mut target_acc = [0.0; MAX_AXES];
+        match self.setpoint {
+            None => state.status |= st::NO_SETPOINT,
+            Some(sp) => {
+                let age = (now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9;
+                let stale = age > self.p.max_extrapolation_s;
+                let h = age.clamp(0.0, self.p.max_extrapolation_s);
+                for i in 0..n {
+                    target[i] = sp.position[i] + sp.velocity[i] * h;
+                    if !stale {
+                        target_vel[i] = sp.velocity[i];
+                        target_acc[i] = sp.acceleration[i];
+                    }
+                }
+                if stale {
+                    state.status |= st::SETPOINT_STALE;
+                }
+                // Refuse a jump: no axis may move further than it can in the elapsed time.
+                let jump = (0..n).any(|i| {
+                    let g = &self.p.axis[i];
+                    (target[i] - self.reference[i]).abs() > g.vmax * dt * 1.5 + g.in_position
+                });
+                if jump {
+                    state.status |= st::SETPOINT_JUMP;
+                    target = self.reference;
+                    target_vel = [0.0; MAX_AXES];
+                    target_acc = [0.0; MAX_AXES];
+                }
+            }
+        }
+        self.reference = target;
+
+        for i in 0..n {
+            let g = &self.p.axis[i];
+            let e = target[i] - fb.position[i];
+            let ev = target_vel[i] - fb.velocity[i];
+            self.integral[i] =
+                (self.integral[i] + g.ki * e * dt).clamp(-g.integral_limit, g.integral_limit);
+            let u = g.kp * e + self.integral[i] + g.kd * ev + g.kvff * target_vel[i]
+                + g.kaff * target_acc[i];
+            cmd.effort[i] = u.clamp(-g.effort_limit, g.effort_limit);
+            state.following_error[i] = e;
+            if e.abs() > g.following_error_limit {
+                state.status |= st::FOLLOWING_ERROR;
+            }
+        }
+        if fb.fault != 0 {
+            state.status |= st::DRIVE_FAULT;
+        }
+        state.cmd_position = target;
+        state.cmd_velocity = target_vel;
+        state.effort = cmd.effort;
+        (cmd, state)
+    }
+}

@@ -132,4 +132,6 @@ pub struct SetpointV1 {
     pub position: [f64; MAX_AXES],
     /// Reference velocity per axis (unit/s).
     pub velocity: [f64; MAX_AXES],
+    /// Reference acceleration per axis (unit/s²), for feed-forward.
+    pub acceleration: [f64; MAX_AXES],
 }

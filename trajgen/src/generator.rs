@@ -149,6 +149,16 @@ impl Generator {
         }
     }
 
+    /// Moves the resting point to `pos` when no segment runs (servo holds elsewhere, e.g.
+    /// after a restart of servo or of the machine). Ignored while moving.
+    pub fn resync(&mut self, pos: &[f64]) {
+        if self.seg.is_none() {
+            for (i, v) in pos.iter().take(self.p.axes).enumerate() {
+                self.rest[i] = *v;
+            }
+        }
+    }
+
     /// Motion state.
     pub fn state(&self) -> MotionState {
         self.state
@@ -272,9 +282,12 @@ impl Generator {
             }
             self.transition(seg, now_ns);
         }
-        let (pos, vel) = match &self.seg {
-            Some(seg) => seg.eval(mt - self.origin_s),
-            None => (self.rest, Axes::zeros()),
+        let (pos, vel, acc) = match &self.seg {
+            Some(seg) => {
+                let (p, v) = seg.eval(mt - self.origin_s);
+                (p, v, seg.accel(mt - self.origin_s))
+            }
+            None => (self.rest, Axes::zeros(), Axes::zeros()),
         };
         self.seq += 1;
         let motion_time_s = match self.state {
@@ -301,7 +314,9 @@ impl Generator {
             starved: self.starved,
             position: [0.0; MAX_AXES],
             velocity: [0.0; MAX_AXES],
+            acceleration: [0.0; MAX_AXES],
         };
+        sp.acceleration.copy_from_slice(acc.as_slice());
         sp.position.copy_from_slice(pos.as_slice());
         sp.velocity.copy_from_slice(vel.as_slice());
         sp

@@ -3,6 +3,7 @@
 use runtime::cycle::{CycleClock, Wake};
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, SetupError, Task};
+use shm_schema::drive::servo_status;
 use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV1, SetpointV1};
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
@@ -33,8 +34,15 @@ impl Task for Trajgen {
     /// # Real-time
     /// IPC calls, then [`Generator::step`]; nothing else.
     fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock) {
-        let latest_servo = self.servo.latest();
-        let generator = match (&mut self.generator, latest_servo) {
+        // Servo's commanded position, once servo has drive feedback.
+        let servo = self.servo.latest().filter(|s| s.status & servo_status::NO_FEEDBACK == 0);
+        let generator = match (&mut self.generator, servo) {
+            (Some(g), Some(s)) if s.status & servo_status::SETPOINT_JUMP != 0 => {
+                // Servo refuses our setpoint as a jump (it restarted, or the machine moved):
+                // at rest, start again from where servo holds.
+                g.resync(&s.cmd_position);
+                g
+            }
             (Some(g), _) => g,
             (None, Some(s)) => self.generator.insert(Generator::new(self.params, &s.cmd_position)),
             // No servo yet: nothing to start from, publish nothing.

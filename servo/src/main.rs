@@ -1,0 +1,49 @@
+//! `servo`: the position-loop process. See the crate documentation.
+
+use runtime::cycle::{CycleClock, Wake};
+use runtime::ipc::{Pub, Sub};
+use runtime::process::{self, Context, SetupError, Task};
+use servo::{Controller, Params};
+use shm_schema::{DriveCommandV1, DriveFeedbackV1, Role, ServiceId, ServoStateV1, SetpointV1};
+use std::process::ExitCode;
+
+struct Servo {
+    controller: Controller,
+    feedback: Option<DriveFeedbackV1>,
+    setpoints: Sub<SetpointV1>,
+    drive_feedback: Sub<DriveFeedbackV1>,
+    drive_commands: Pub<DriveCommandV1>,
+    state: Pub<ServoStateV1>,
+}
+
+impl Servo {
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let i = &ctx.instance;
+        Ok(Self {
+            controller: Controller::new(Params::from_cell(&ctx.cell)),
+            feedback: None,
+            setpoints: Sub::new(&ctx.node, i, ServiceId::Setpoint, 8)?,
+            drive_feedback: Sub::new(&ctx.node, i, ServiceId::DriveFeedback, 8)?,
+            drive_commands: Pub::new(&ctx.node, i, ServiceId::DriveCommand)?,
+            state: Pub::new(&ctx.node, i, ServiceId::ServoState)?,
+        })
+    }
+}
+
+impl Task for Servo {
+    /// # Real-time
+    /// IPC calls and [`Controller::cycle`]; nothing else.
+    fn cycle(&mut self, wake: &Wake, _clock: &mut CycleClock) {
+        let sp = self.setpoints.latest();
+        if let Some(fb) = self.drive_feedback.latest() {
+            self.feedback = Some(fb);
+        }
+        let (cmd, state) = self.controller.cycle(wake.actual_ns, sp.as_ref(), self.feedback.as_ref());
+        self.drive_commands.send(&cmd);
+        self.state.send(&state);
+    }
+}
+
+fn main() -> ExitCode {
+    process::run(Role::Servo, "axis position loops, running at all times", Servo::new)
+}
