@@ -1,1 +1,4 @@
+//! The supervisor: loads the cell configuration, launches the processes, runs programs,
+//! watches their health, stops them and removes every shared-memory resource.
 
+pub mod config;

@@ -1,0 +1,575 @@
+//! The cell configuration: one TOML file (or the embedded default), validated whole before
+//! anything starts. Every error names the file, line and column and says what is wrong.
+//! `docs/config.md` documents every key.
+
+use serde::Deserialize;
+use shm_schema::status::ROLE_COUNT;
+use shm_schema::{AxisConfigV1, CellConfigV1, MAX_AXES, ProcessConfigV1, Role, fixed_str};
+use std::fmt;
+use std::ops::Range;
+
+/// The embedded default cell (the Gantry UBA).
+pub const DEFAULT_TOML: &str = include_str!("../../examples/gantry-uba.toml");
+/// How the embedded default is named in messages.
+pub const DEFAULT_NAME: &str = "<embedded default: examples/gantry-uba.toml>";
+
+/// A configuration problem and where it is.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConfigError {
+    /// File name as given.
+    pub file: String,
+    /// 1-based line (0 when unknown).
+    pub line: usize,
+    /// 1-based column (0 when unknown).
+    pub col: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line > 0 {
+            write!(f, "{}:{}:{}: {}", self.file, self.line, self.col, self.message)
+        } else {
+            write!(f, "{}: {}", self.file, self.message)
+        }
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+/// `[cell]`.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellMeta {
+    /// Display name.
+    #[serde(default)]
+    pub name: String,
+}
+
+/// `[motion]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Motion {
+    /// Acceleration time (s).
+    pub t_acc: f64,
+    /// Time the axes must stay in position to count as settled (s). Default 0.1.
+    #[serde(default = "default_settle_time")]
+    pub settle_time: f64,
+    /// Longest wait for settling after the motion (s). Default 5.
+    #[serde(default = "default_settle_timeout")]
+    pub settle_timeout: f64,
+}
+
+fn default_settle_time() -> f64 {
+    0.1
+}
+fn default_settle_timeout() -> f64 {
+    5.0
+}
+
+/// `[drives]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drives {
+    /// Command watchdog of the drives (s).
+    pub command_timeout: f64,
+    /// Integration steps of the simulated machine per cycle. Default 4.
+    #[serde(default = "default_substeps")]
+    pub substeps: u32,
+}
+
+fn default_substeps() -> u32 {
+    4
+}
+
+/// `servo = { ... }` of an axis.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServoGains {
+    /// effort/unit
+    pub kp: f64,
+    /// effort/(unit·s)
+    #[serde(default)]
+    pub ki: f64,
+    /// effort·s/unit
+    #[serde(default)]
+    pub kd: f64,
+    /// effort·s/unit
+    #[serde(default)]
+    pub kvff: f64,
+    /// effort·s²/unit
+    #[serde(default)]
+    pub kaff: f64,
+    /// effort
+    #[serde(default)]
+    pub integral_limit: f64,
+}
+
+/// `sim = { ... }` of an axis.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimAxis {
+    /// effort·s²/unit
+    pub inertia: f64,
+    /// effort·s/unit
+    #[serde(default)]
+    pub viscous: f64,
+    /// effort
+    #[serde(default)]
+    pub coulomb: f64,
+    /// effort
+    pub effort_limit: f64,
+    /// unit/count
+    pub encoder_resolution: f64,
+}
+
+/// `[[axis]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Axis {
+    /// Name (`x`).
+    pub name: String,
+    /// Unit (`mm`, `deg`).
+    pub unit: String,
+    /// Lowest position.
+    pub min: f64,
+    /// Highest position.
+    pub max: f64,
+    /// Largest velocity (unit/s).
+    pub vmax: f64,
+    /// Start of the simulated machine.
+    pub start: f64,
+    /// Following-error limit.
+    pub following_error_limit: f64,
+    /// In-position band.
+    pub in_position: f64,
+    /// Servo gains.
+    pub servo: ServoGains,
+    /// Simulated mechanics.
+    pub sim: SimAxis,
+}
+
+/// `[process.<role>]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Process {
+    /// Program and arguments; `{instance}` is replaced.
+    pub command: Vec<String>,
+    /// Cycle period (µs).
+    pub period_us: u64,
+    /// Deadline offset within the period (µs). Default 0.
+    #[serde(default)]
+    pub phase_us: u64,
+    /// `SCHED_FIFO` priority, 0 for `SCHED_OTHER`.
+    pub priority: i32,
+    /// CPU to pin to. Default: none.
+    #[serde(default)]
+    pub cpu: Option<i32>,
+}
+
+/// `[process]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Processes {
+    /// The trajectory generator.
+    pub trajgen: Process,
+    /// The position loops.
+    pub servo: Process,
+    /// The IO bridge.
+    pub iobridge: Process,
+    /// The machine (simulated).
+    pub machine: Process,
+}
+
+impl Processes {
+    /// The process of `role`.
+    pub fn get(&self, role: Role) -> &Process {
+        match role {
+            Role::Trajgen => &self.trajgen,
+            Role::Servo => &self.servo,
+            Role::Iobridge => &self.iobridge,
+            Role::Machine => &self.machine,
+        }
+    }
+}
+
+/// `[supervisor]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupervisorSettings {
+    /// s
+    #[serde(default = "default_startup")]
+    pub startup_timeout: f64,
+    /// s
+    #[serde(default = "default_heartbeat")]
+    pub heartbeat_timeout: f64,
+    /// s
+    #[serde(default = "default_stop")]
+    pub stop_timeout: f64,
+}
+
+fn default_startup() -> f64 {
+    10.0
+}
+fn default_heartbeat() -> f64 {
+    1.0
+}
+fn default_stop() -> f64 {
+    3.0
+}
+
+impl Default for SupervisorSettings {
+    fn default() -> Self {
+        Self {
+            startup_timeout: default_startup(),
+            heartbeat_timeout: default_heartbeat(),
+            stop_timeout: default_stop(),
+        }
+    }
+}
+
+/// A whole, validated cell configuration.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// `[cell]`
+    #[serde(default)]
+    pub cell: CellMeta,
+    /// `[motion]`
+    pub motion: Motion,
+    /// `[drives]`
+    pub drives: Drives,
+    /// `[[axis]]`
+    pub axis: Vec<Axis>,
+    /// `[process.*]`
+    pub process: Processes,
+    /// `[supervisor]`
+    #[serde(default)]
+    pub supervisor: SupervisorSettings,
+}
+
+/// One step of a key path, to find where a value is written.
+#[derive(Clone, Copy, Debug)]
+enum Seg<'a> {
+    Key(&'a str),
+    Index(usize),
+}
+
+fn locate(src: &str, path: &[Seg<'_>]) -> Option<Range<usize>> {
+    let doc = toml_edit::Document::parse(src).ok()?;
+    let mut table: &dyn toml_edit::TableLike = doc.as_table();
+    let mut span = None;
+    let mut segs = path.iter().peekable();
+    while let Some(seg) = segs.next() {
+        let Seg::Key(k) = *seg else { break };
+        let Some((key, item)) = table.get_key_value(k) else { break };
+        // The key's own place is the most telling; fall back to its value's.
+        span = key.span().or_else(|| item.span()).or(span);
+        match segs.peek() {
+            Some(Seg::Index(i)) => {
+                segs.next();
+                let Some(t) = item.as_array_of_tables().and_then(|a| a.get(*i)) else { break };
+                span = t.span().or(span);
+                table = t;
+            }
+            Some(Seg::Key(_)) => match item.as_table_like() {
+                Some(t) => table = t,
+                None => break,
+            },
+            None => {}
+        }
+    }
+    span
+}
+
+fn line_col(src: &str, offset: usize) -> (usize, usize) {
+    let before = &src[..offset.min(src.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+impl Config {
+    /// Parses and validates `src` (named `file` in messages).
+    pub fn parse(src: &str, file: &str) -> Result<Self, ConfigError> {
+        let cfg: Config = toml::from_str(src).map_err(|e| {
+            let (line, col) = e.span().map_or((0, 0), |s| line_col(src, s.start));
+            ConfigError { file: file.into(), line, col, message: e.message().trim().to_string() }
+        })?;
+        cfg.validate().map_err(|(path, message)| {
+            let segs: Vec<Seg<'_>> = path.iter().map(|s| s.as_seg()).collect();
+            let (line, col) = locate(src, &segs).map_or((0, 0), |s| line_col(src, s.start));
+            ConfigError { file: file.into(), line, col, message }
+        })?;
+        Ok(cfg)
+    }
+
+    /// The embedded default.
+    pub fn default_cell() -> Self {
+        Self::parse(DEFAULT_TOML, DEFAULT_NAME).expect("the embedded default configuration is valid")
+    }
+
+    /// Loads `path`, or the embedded default for `None`.
+    pub fn load(path: Option<&std::path::Path>) -> Result<Self, ConfigError> {
+        match path {
+            None => Self::parse(DEFAULT_TOML, DEFAULT_NAME),
+            Some(p) => {
+                let file = p.display().to_string();
+                let src = std::fs::read_to_string(p).map_err(|e| ConfigError {
+                    file: file.clone(),
+                    line: 0,
+                    col: 0,
+                    message: format!("cannot read: {e}"),
+                })?;
+                Self::parse(&src, &file)
+            }
+        }
+    }
+
+    fn validate(&self) -> Result<(), (Vec<PathSeg>, String)> {
+        use PathSeg::{Idx, K};
+        let bad = |path: Vec<PathSeg>, msg: String| Err((path, msg));
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+
+        let m = &self.motion;
+        if !positive(m.t_acc) {
+            return bad(vec![K("motion"), K("t_acc")], format!("t_acc = {} s must be positive", m.t_acc));
+        }
+        if !non_negative(m.settle_time) {
+            return bad(vec![K("motion"), K("settle_time")], "settle_time must be 0 s or more".into());
+        }
+        if !positive(m.settle_timeout) {
+            return bad(vec![K("motion"), K("settle_timeout")], "settle_timeout must be positive".into());
+        }
+        let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
+        if !(self.drives.command_timeout.is_finite() && self.drives.command_timeout >= 3.0 * servo_period_s) {
+            return bad(
+                vec![K("drives"), K("command_timeout")],
+                format!(
+                    "command_timeout = {} s must be at least 3 servo periods ({} s)",
+                    self.drives.command_timeout,
+                    3.0 * servo_period_s
+                ),
+            );
+        }
+        if !(1..=1000).contains(&self.drives.substeps) {
+            return bad(vec![K("drives"), K("substeps")], "substeps must be 1..=1000".into());
+        }
+
+        if self.axis.is_empty() || self.axis.len() > MAX_AXES {
+            return bad(vec![K("axis")], format!("the cell has {} axes; 1..={MAX_AXES} allowed", self.axis.len()));
+        }
+        for (i, a) in self.axis.iter().enumerate() {
+            let at = |k: &'static str| vec![K("axis"), Idx(i), K(k)];
+            let sub = |t: &'static str, k: &'static str| vec![K("axis"), Idx(i), K(t), K(k)];
+            if a.name.is_empty() || a.name.len() > 15 || !a.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+                return bad(at("name"), format!("axis name {:?} must be 1 to 15 letters, digits or '_'", a.name));
+            }
+            if self.axis[..i].iter().any(|b| b.name == a.name) {
+                return bad(at("name"), format!("axis name {:?} is used twice", a.name));
+            }
+            if a.unit.is_empty() || a.unit.len() > 7 {
+                return bad(at("unit"), format!("unit {:?} must be 1 to 7 bytes", a.unit));
+            }
+            if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
+                return bad(at("max"), format!("axis {}: max ({}) must be greater than min ({})", a.name, a.max, a.min));
+            }
+            if !(a.start >= a.min && a.start <= a.max) {
+                return bad(at("start"), format!("axis {}: start {} lies outside {} .. {}", a.name, a.start, a.min, a.max));
+            }
+            for (k, v) in [("vmax", a.vmax), ("following_error_limit", a.following_error_limit), ("in_position", a.in_position)] {
+                if !positive(v) {
+                    return bad(at(k), format!("axis {}: {k} = {v} must be positive", a.name));
+                }
+            }
+            if a.in_position >= a.following_error_limit {
+                return bad(at("in_position"), format!("axis {}: in_position must be smaller than following_error_limit", a.name));
+            }
+            let g = &a.servo;
+            for (k, v) in [("kp", g.kp), ("ki", g.ki), ("kd", g.kd), ("kvff", g.kvff), ("kaff", g.kaff), ("integral_limit", g.integral_limit)] {
+                if !non_negative(v) {
+                    return bad(sub("servo", k), format!("axis {}: servo {k} = {v} must be 0 or more", a.name));
+                }
+            }
+            let s = &a.sim;
+            for (k, v, pos) in [
+                ("inertia", s.inertia, true),
+                ("viscous", s.viscous, false),
+                ("coulomb", s.coulomb, false),
+                ("effort_limit", s.effort_limit, true),
+                ("encoder_resolution", s.encoder_resolution, true),
+            ] {
+                if !(if pos { positive(v) } else { non_negative(v) }) {
+                    let need = if pos { "positive" } else { "0 or more" };
+                    return bad(sub("sim", k), format!("axis {}: sim {k} = {v} must be {need}", a.name));
+                }
+            }
+        }
+
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) as i32;
+        for role in Role::ALL {
+            let p = self.process.get(role);
+            let at = |k: &'static str| vec![K("process"), K(role.name()), K(k)];
+            if p.command.is_empty() || p.command[0].is_empty() {
+                return bad(at("command"), format!("process {}: command is empty", role.name()));
+            }
+            if !(50..=1_000_000).contains(&p.period_us) {
+                return bad(at("period_us"), format!("process {}: period_us = {} must be 50..=1000000", role.name(), p.period_us));
+            }
+            if p.phase_us >= p.period_us {
+                return bad(at("phase_us"), format!("process {}: phase_us must be smaller than period_us", role.name()));
+            }
+            if !(0..=99).contains(&p.priority) {
+                return bad(at("priority"), format!("process {}: priority {} must be 0..=99 (0: SCHED_OTHER)", role.name(), p.priority));
+            }
+            if let Some(cpu) = p.cpu
+                && !(0..cpus).contains(&cpu)
+            {
+                return bad(at("cpu"), format!("process {}: cpu {cpu} does not exist (this machine has CPUs 0..{})", role.name(), cpus - 1));
+            }
+        }
+        let s = &self.supervisor;
+        for (k, v) in [("startup_timeout", s.startup_timeout), ("heartbeat_timeout", s.heartbeat_timeout), ("stop_timeout", s.stop_timeout)] {
+            if !positive(v) {
+                return bad(vec![K("supervisor"), K(k)], format!("{k} = {v} s must be positive"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The axes as the motion language needs them.
+    pub fn axis_specs(&self) -> Vec<motion_program::AxisSpec> {
+        self.axis
+            .iter()
+            .map(|a| motion_program::AxisSpec {
+                name: a.name.clone(),
+                unit: a.unit.clone(),
+                min: a.min,
+                max: a.max,
+                vmax: a.vmax,
+            })
+            .collect()
+    }
+
+    /// The configuration as every process reads it from shared memory.
+    pub fn to_shm(&self) -> CellConfigV1 {
+        let mut c = CellConfigV1 {
+            axes: self.axis.len() as u32,
+            machine_substeps: self.drives.substeps,
+            t_acc_s: self.motion.t_acc,
+            drive_command_timeout_ns: (self.drives.command_timeout * 1e9) as u64,
+            process: [ProcessConfigV1::default(); ROLE_COUNT],
+            axis: [AxisConfigV1::default(); MAX_AXES],
+        };
+        for role in Role::ALL {
+            let p = self.process.get(role);
+            c.process[role.index()] = ProcessConfigV1 {
+                period_ns: p.period_us * 1000,
+                phase_ns: p.phase_us * 1000,
+                priority: p.priority,
+                cpu: p.cpu.unwrap_or(-1),
+            };
+        }
+        for (i, a) in self.axis.iter().enumerate() {
+            c.axis[i] = AxisConfigV1 {
+                name: fixed_str(&a.name),
+                unit: fixed_str(&a.unit),
+                min: a.min,
+                max: a.max,
+                vmax: a.vmax,
+                start: a.start,
+                following_error_limit: a.following_error_limit,
+                in_position: a.in_position,
+                kp: a.servo.kp,
+                ki: a.servo.ki,
+                kd: a.servo.kd,
+                kvff: a.servo.kvff,
+                kaff: a.servo.kaff,
+                integral_limit: a.servo.integral_limit,
+                inertia: a.sim.inertia,
+                viscous: a.sim.viscous,
+                coulomb: a.sim.coulomb,
+                effort_limit: a.sim.effort_limit,
+                encoder_resolution: a.sim.encoder_resolution,
+            };
+        }
+        c
+    }
+}
+
+/// An owned key-path step used by validation.
+#[derive(Clone, Copy, Debug)]
+enum PathSeg {
+    K(&'static str),
+    Idx(usize),
+}
+
+impl PathSeg {
+    fn as_seg(&self) -> Seg<'static> {
+        match *self {
+            PathSeg::K(k) => Seg::Key(k),
+            PathSeg::Idx(i) => Seg::Index(i),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_embedded_default_is_the_gantry_uba_cell() {
+        let c = Config::default_cell();
+        let names: Vec<_> = c.axis.iter().map(|a| a.name.as_str()).collect();
+        assert_eq!(names, ["x", "y", "theta"]);
+        assert!(c.process.trajgen.priority > c.process.servo.priority, "trajgen above servo (seed 003)");
+        let shm = c.to_shm();
+        assert_eq!(shm.axes, 3);
+        assert_eq!(shm_schema::str_of(&shm.axis[2].unit), "deg");
+        assert_eq!(shm.process[Role::Servo.index()].period_ns, 1_000_000);
+    }
+
+    /// Data-driven: replace `from` by `to` in the default file; the error must read `want`.
+    fn check(from: &str, to: &str, want: &str) {
+        assert!(DEFAULT_TOML.contains(from), "{from:?} not in the default file");
+        let src = DEFAULT_TOML.replacen(from, to, 1);
+        let e = Config::parse(&src, "cell.toml").expect_err(to);
+        let got = e.to_string();
+        assert!(got.starts_with(want), "\n got: {got}\nwant: {want}");
+    }
+
+    fn line_of(needle: &str) -> usize {
+        DEFAULT_TOML.lines().position(|l| l.contains(needle)).expect("present") + 1
+    }
+
+    #[test]
+    fn errors_name_file_line_and_reason() {
+        let t = line_of("t_acc = 0.525");
+        check("t_acc = 0.525", "t_acc = -1.0", &format!("cell.toml:{t}:1: t_acc = -1 s must be positive"));
+        check("t_acc = 0.525", "t_acc = 0.525\nspeed = 3", &format!("cell.toml:{}:1: unknown field `speed`", t + 1));
+        check("t_acc = 0.525", "t_acc = \"fast\"", &format!("cell.toml:{t}:9: invalid type: string \"fast\""));
+        let y_vmax = DEFAULT_TOML.lines().enumerate().filter(|(_, l)| l.starts_with("vmax = ")).nth(1).expect("y").0 + 1;
+        let src_line = |n: usize| format!("cell.toml:{n}:1: ");
+        check("vmax = 16.0\nstart = 40.0\nfollowing_error_limit = 1.0\nin_position = 0.01\nservo = { kp = 78.0",
+              "vmax = 0.0\nstart = 40.0\nfollowing_error_limit = 1.0\nin_position = 0.01\nservo = { kp = 78.0",
+              &(src_line(y_vmax) + "axis y: vmax = 0 must be positive"));
+        let prio = line_of("priority = 70");
+        check("priority = 70", "priority = 120", &(src_line(prio) + "process servo: priority 120 must be 0..=99"));
+        check("priority = 70", "priority = 70\ncpu = 64", &(src_line(prio + 1) + "process servo: cpu 64 does not exist"));
+        check("name = \"theta\"", "name = \"x\"", &(src_line(line_of("name = \"theta\"")) + "axis name \"x\" is used twice"));
+        check("start = 0.0", "start = 500.0", &(src_line(line_of("start = 0.0")) + "axis theta: start 500 lies outside"));
+        check("command_timeout = 0.1", "command_timeout = 0.001", &(src_line(line_of("command_timeout")) + "command_timeout = 0.001 s must be at least 3 servo periods"));
+        let kp = line_of("kp = 5.45");
+        check("kp = 5.45", "kp = -5.45", &format!("cell.toml:{kp}:11: axis theta: servo kp = -5.45 must be 0 or more"));
+        check("[process.iobridge]\n", "[process.iobridgee]\n", "cell.toml:");
+        check("period_us = 4000\nphase_us = 600", "period_us = 4000\nphase_us = 6000", &(src_line(line_of("phase_us = 600")) + "process iobridge: phase_us must be smaller"));
+    }
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let e = Config::load(Some(std::path::Path::new("/nonexistent/cell.toml"))).expect_err("missing");
+        assert!(e.to_string().starts_with("/nonexistent/cell.toml: cannot read"), "{e}");
+    }
+}
