@@ -234,3 +234,17 @@ pub fn live_node_pids(instance: &InstanceName) -> Result<Vec<u32>, IpcError> {
     .map_err(|e| err(format!("listing nodes of instance {instance}"), e))?;
     Ok(pids)
 }
+
+/// Removes the instance's global management segment (`..._node.<version>.global_mgmt`),
+/// which iceoryx2 keeps beyond every node's life on purpose. Only when no node of the
+/// instance is alive; the supervisor calls it last. Returns true if it removed it.
+pub fn remove_instance_segment(instance: &InstanceName) -> Result<bool, IpcError> {
+    if !live_node_pids(instance)?.is_empty() {
+        return Ok(false);
+    }
+    let cfg = config_for(instance)?;
+    // SAFETY: no node of this instance's iceoryx2 domain (its own prefix and root folder) is
+    // alive, checked just above; the instance refuses to start while one is.
+    unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Ipc>(&cfg) }
+        .map_err(|e| err(format!("global segment of instance {instance}"), e))
+}

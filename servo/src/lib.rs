@@ -3,13 +3,16 @@
 //! but to keep the axes stable.
 //!
 //! Each cycle, per axis: the reference is the latest trajgen setpoint extrapolated to now
-//! (`p + v dt`, exact for trajgen's real-time trajectory, bounded to two trajgen periods, so
-//! a servo faster than trajgen gets a smooth reference and a silent trajgen is held), then a
-//! PID on the position error with velocity and acceleration feed-forward gives the effort.
+//! (`p + v dt`: trajgen's trajectory is a function of real time, so a servo faster than
+//! trajgen gets a smooth reference and a late setpoint costs nothing), for at most
+//! `setpoint_timeout`, after which servo holds (`SETPOINT_STALE`). A PID on the position error
+//! with velocity and acceleration feed-forward gives the effort.
 //!
 //! Safety rules:
-//! - a setpoint further from the current reference than the axis can move in the elapsed
-//!   time (plus its in-position band) is refused, and servo holds (`SETPOINT_JUMP`);
+//! - trajgen never moves an axis faster than its `vmax` (the blend interpolates monotonically
+//!   between segment velocities), so a setpoint further from the previous one than
+//!   `vmax * (stamp difference)` is a jump: it is refused and servo holds (`SETPOINT_JUMP`).
+//!   The first setpoint servo sees must lie within the in-position band of where it holds;
 //! - while the drives are disabled the reference follows the measured position and the
 //!   integrator is cleared, so enabling is bumpless; enable is requested as a 0-to-1 edge.
 
@@ -70,7 +73,7 @@ pub struct Params {
     pub axis: [AxisGains; MAX_AXES],
     /// Servo period (s).
     pub period_s: f64,
-    /// Longest extrapolation of a setpoint (s): two trajgen periods.
+    /// Longest extrapolation of a setpoint (s), then servo holds.
     pub max_extrapolation_s: f64,
 }
 
@@ -86,7 +89,7 @@ impl Params {
             axes: cell.axes as usize,
             axis,
             period_s: cell.process[Role::Servo.index()].period_ns as f64 * 1e-9,
-            max_extrapolation_s: 2.0 * cell.process[Role::Trajgen.index()].period_ns as f64 * 1e-9,
+            max_extrapolation_s: cell.setpoint_timeout_ns as f64 * 1e-9,
         }
     }
 }
@@ -119,6 +122,31 @@ impl Controller {
         }
     }
 
+    /// True if `sp` lies further from the previous setpoint than the axes can move between
+    /// the two (or, for the first one, outside the in-position band of the held reference).
+    fn is_jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> bool {
+        let n = self.p.axes;
+        match &self.setpoint {
+            Some(prev) if prev.seq != sp.seq && sp.stamp_ns >= prev.stamp_ns => {
+                let span = (sp.stamp_ns - prev.stamp_ns) as f64 * 1e-9;
+                (0..n).any(|i| {
+                    let reach = self.p.axis[i].vmax * span * 1.001 + 1e-9;
+                    (sp.position[i] - prev.position[i]).abs() > reach
+                })
+            }
+            // A new source (trajgen restarted: its clock stamps restart too) or the first
+            // setpoint: it must start where servo holds.
+            _ => {
+                let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9).clamp(0.0, self.p.max_extrapolation_s);
+                (0..n).any(|i| {
+                    let g = &self.p.axis[i];
+                    let at_now = sp.position[i] + sp.velocity[i] * age;
+                    (at_now - self.reference[i]).abs() > g.vmax * dt * 1.5 + g.in_position
+                })
+            }
+        }
+    }
+
     /// One servo cycle at `now_ns` with the newest setpoint (if one arrived) and the newest
     /// drive feedback (if any ever arrived). Returns the drive command and the servo state.
     ///
@@ -132,9 +160,6 @@ impl Controller {
     ) -> (DriveCommandV1, ServoStateV1) {
         let n = self.p.axes;
         self.seq += 1;
-        if let Some(sp) = new_setpoint {
-            self.setpoint = Some(*sp);
-        }
         let dt = if self.last_ns == 0 {
             self.p.period_s
         } else {
@@ -176,6 +201,8 @@ impl Controller {
             self.reference[..n].copy_from_slice(&fb.position[..n]);
             self.have_reference = true;
             self.integral = [0.0; MAX_AXES];
+            // After enabling, the first setpoint must start where the machine is.
+            self.setpoint = None;
             self.enable_out = if self.enable_out == 0 { 1 } else { 0 };
             cmd.enable = self.enable_out;
             state.status |= if fb.fault != 0 { st::DRIVE_FAULT } else { 0 };
@@ -192,6 +219,16 @@ impl Controller {
             self.reference[..n].copy_from_slice(&fb.position[..n]);
             self.have_reference = true;
         }
+
+        // Take the new setpoint unless it jumps.
+        if let Some(sp) = new_setpoint {
+            if self.is_jump(sp, now_ns, dt) {
+                state.status |= st::SETPOINT_JUMP;
+            } else {
+                self.setpoint = Some(*sp);
+            }
+        }
+        state.setpoint_seq = self.setpoint.map_or(0, |s| s.seq);
 
         // The reference: the setpoint extrapolated to now, or hold.
         let mut target = self.reference;
@@ -212,17 +249,6 @@ impl Controller {
                 }
                 if stale {
                     state.status |= st::SETPOINT_STALE;
-                }
-                // Refuse a jump: no axis may move further than it can in the elapsed time.
-                let jump = (0..n).any(|i| {
-                    let g = &self.p.axis[i];
-                    (target[i] - self.reference[i]).abs() > g.vmax * dt * 1.5 + g.in_position
-                });
-                if jump {
-                    state.status |= st::SETPOINT_JUMP;
-                    target = self.reference;
-                    target_vel = [0.0; MAX_AXES];
-                    target_acc = [0.0; MAX_AXES];
                 }
             }
         }

@@ -83,6 +83,8 @@ pub struct CellConfigV1 {
     pub t_acc_s: f64,
     /// The drives drop enable and brake when no new command came for this long (ns).
     pub drive_command_timeout_ns: u64,
+    /// Servo extrapolates the latest setpoint at most this long, then holds (ns).
+    pub setpoint_timeout_ns: u64,
     /// Real-time settings per process, indexed by [`crate::Role`].
     pub process: [ProcessConfigV1; ROLE_COUNT],
     /// Axes; the first `axes` are in use.

@@ -59,6 +59,13 @@ pub struct Motion {
     /// Longest wait for settling after the motion (s). Default 5.
     #[serde(default = "default_settle_timeout")]
     pub settle_timeout: f64,
+    /// Servo extrapolates a late setpoint this long, then holds (s). Default 0.05.
+    #[serde(default = "default_setpoint_timeout")]
+    pub setpoint_timeout: f64,
+}
+
+fn default_setpoint_timeout() -> f64 {
+    0.05
 }
 
 fn default_settle_time() -> f64 {
@@ -343,6 +350,13 @@ impl Config {
         if !positive(m.settle_timeout) {
             return bad(vec![K("motion"), K("settle_timeout")], "settle_timeout must be positive".into());
         }
+        let trajgen_period_s = self.process.trajgen.period_us as f64 * 1e-6;
+        if !(m.setpoint_timeout.is_finite() && m.setpoint_timeout >= 2.0 * trajgen_period_s) {
+            return bad(
+                vec![K("motion"), K("setpoint_timeout")],
+                format!("setpoint_timeout = {} s must be at least 2 trajgen periods ({} s)", m.setpoint_timeout, 2.0 * trajgen_period_s),
+            );
+        }
         let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
         if !(self.drives.command_timeout.is_finite() && self.drives.command_timeout >= 3.0 * servo_period_s) {
             return bad(
@@ -460,6 +474,7 @@ impl Config {
             machine_substeps: self.drives.substeps,
             t_acc_s: self.motion.t_acc,
             drive_command_timeout_ns: (self.drives.command_timeout * 1e9) as u64,
+            setpoint_timeout_ns: (self.motion.setpoint_timeout * 1e9) as u64,
             process: [ProcessConfigV1::default(); ROLE_COUNT],
             axis: [AxisConfigV1::default(); MAX_AXES],
         };

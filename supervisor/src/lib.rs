@@ -2,3 +2,6 @@
 //! watches their health, stops them and removes every shared-memory resource.
 
 pub mod config;
+pub mod launch;
+pub mod report;
+pub mod run;

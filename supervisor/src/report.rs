@@ -1,0 +1,220 @@
+//! The result of a run: JSON for tools, a summary for people.
+
+use runtime::rt::policy_name;
+use serde::Serialize;
+use serde_json::{Map, Value, json};
+use shm_schema::{MAX_AXES, ProcessStatusV1, Role};
+
+/// One process' figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct ProcessReport {
+    /// Role name.
+    pub name: String,
+    /// Process id.
+    pub pid: u32,
+    /// Scheduling policy, as the kernel reports it.
+    pub policy: String,
+    /// Real-time priority.
+    pub priority: i32,
+    /// Cycle period (µs).
+    pub period_us: f64,
+    /// Cycles run.
+    pub cycles: u64,
+    /// Overruns (CS9 rule).
+    pub overruns: u64,
+    /// Periods skipped after overruns.
+    pub skipped: u64,
+    /// Largest wake-up latency (µs).
+    pub max_wakeup_latency_us: f64,
+    /// Largest execution time (µs).
+    pub max_exec_us: f64,
+    /// CPU time used (s).
+    pub cpu_s: Option<f64>,
+}
+
+impl ProcessReport {
+    /// From the last status a process published.
+    pub fn new(role: Role, pid: u32, policy: u32, priority: i32, s: &ProcessStatusV1, cpu_s: Option<f64>) -> Self {
+        Self {
+            name: role.name().into(),
+            pid,
+            policy: policy_name(policy).into(),
+            priority,
+            period_us: s.stats.period_ns as f64 * 1e-3,
+            cycles: s.stats.cycles,
+            overruns: s.stats.overruns,
+            skipped: s.stats.skipped,
+            max_wakeup_latency_us: s.stats.max_wakeup_latency_ns as f64 * 1e-3,
+            max_exec_us: s.stats.max_exec_ns as f64 * 1e-3,
+            cpu_s,
+        }
+    }
+}
+
+/// One trace row.
+#[derive(Clone, Copy, Debug)]
+pub struct TraceRow {
+    /// Motion time (s).
+    pub t_s: f64,
+    /// Commanded position.
+    pub cmd: [f64; MAX_AXES],
+    /// Measured position at the servo cycle that used this setpoint.
+    pub act: [f64; MAX_AXES],
+}
+
+/// Everything a run measured.
+#[derive(Clone, Debug)]
+pub struct Report {
+    /// Success.
+    pub ok: bool,
+    /// Program file.
+    pub program: String,
+    /// Instance name.
+    pub instance: String,
+    /// Cell name.
+    pub cell: String,
+    /// Axis names.
+    pub axes: Vec<String>,
+    /// Axis units.
+    pub units: Vec<String>,
+    /// vmax per axis.
+    pub vmax: Vec<f64>,
+    /// t_acc (s).
+    pub t_acc: f64,
+    /// Position the motion started from.
+    pub start: Vec<f64>,
+    /// Period per process (µs).
+    pub periods_us: Vec<(String, u64)>,
+    /// Sum of segment times, from trajgen (s).
+    pub theoretical_s: f64,
+    /// The same, computed by the supervisor from the program before the motion (s).
+    pub predicted_s: f64,
+    /// Wall-clock time from the first setpoint of the motion to its last (s).
+    pub measured_s: f64,
+    /// trajgen's period (s).
+    pub trajgen_period_s: f64,
+    /// From the last setpoint until the axes were in position (s).
+    pub settle_s: f64,
+    /// Measured position once settled.
+    pub final_position: Vec<f64>,
+    /// Final position minus the last target.
+    pub final_error: Vec<f64>,
+    /// Largest |following error| per axis during the motion and settling.
+    pub max_following_error: Vec<f64>,
+    /// Setpoints recorded.
+    pub setpoints: usize,
+    /// Setpoints missing from the record (sequence gaps).
+    pub lost_setpoints: u64,
+    /// Times trajgen's queue ran empty.
+    pub starved: u32,
+    /// iobridge: mean and max age of the position in the fieldbus image (µs).
+    pub iobridge_delay_us: Option<(f64, f64)>,
+    /// Per process.
+    pub processes: Vec<ProcessReport>,
+    /// The trace.
+    pub trace: Vec<TraceRow>,
+}
+
+fn per_axis(names: &[String], values: &[f64]) -> Value {
+    let mut m = Map::new();
+    for (n, v) in names.iter().zip(values) {
+        m.insert(n.clone(), json!(v));
+    }
+    Value::Object(m)
+}
+
+impl Report {
+    /// measured − theoretical (s).
+    pub fn difference_s(&self) -> f64 {
+        self.measured_s - self.theoretical_s
+    }
+
+    /// The JSON object of `supervisor run --json`.
+    pub fn to_json(&self) -> Value {
+        let mut procs = Map::new();
+        for p in &self.processes {
+            procs.insert(p.name.clone(), serde_json::to_value(p).unwrap_or(Value::Null));
+        }
+        let periods: Map<String, Value> = self.periods_us.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+        json!({
+            "ok": self.ok,
+            "program": self.program,
+            "instance": self.instance,
+            "cell": self.cell,
+            "theoretical_s": self.theoretical_s,
+            "predicted_s": self.predicted_s,
+            "measured_s": self.measured_s,
+            "difference_s": self.difference_s(),
+            "trajgen_period_s": self.trajgen_period_s,
+            "settle_s": self.settle_s,
+            "final_position": per_axis(&self.axes, &self.final_position),
+            "final_error": per_axis(&self.axes, &self.final_error),
+            "max_following_error": per_axis(&self.axes, &self.max_following_error),
+            "axes": self.axes,
+            "units": per_axis_str(&self.axes, &self.units),
+            "vmax": per_axis(&self.axes, &self.vmax),
+            "t_acc": self.t_acc,
+            "start": per_axis(&self.axes, &self.start),
+            "periods_us": periods,
+            "setpoints": self.setpoints,
+            "lost_setpoints": self.lost_setpoints,
+            "starved": self.starved,
+            "iobridge_delay_us": self.iobridge_delay_us.map(|(mean, max)| json!({"mean": mean, "max": max})),
+            "processes": procs,
+        })
+    }
+
+    /// The human summary.
+    pub fn human(&self) -> String {
+        let mut s = String::new();
+        let ax = |v: &[f64], prec: usize| -> String {
+            self.axes
+                .iter()
+                .zip(v)
+                .zip(&self.units)
+                .map(|((a, x), u)| format!("{a} {x:.prec$} {u}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        s += &format!("{} on {} (instance {}): done\n", self.program, self.cell, self.instance);
+        s += &format!(
+            "  motion time        {:.4} s measured, {:.4} s theoretical ({:+.2} ms; trajgen period {:.1} ms)\n",
+            self.measured_s,
+            self.theoretical_s,
+            self.difference_s() * 1e3,
+            self.trajgen_period_s * 1e3
+        );
+        s += &format!("  settled            {:.3} s after the last setpoint\n", self.settle_s);
+        s += &format!("  final position     {}\n", ax(&self.final_position, 4));
+        s += &format!("  max following err  {}\n", ax(&self.max_following_error, 4));
+        if let Some((mean, max)) = self.iobridge_delay_us {
+            s += &format!("  fieldbus image age {mean:.0} µs mean, {max:.0} µs max (measurement to write)\n");
+        }
+        s += &format!("  trace              {} setpoints, {} lost\n", self.setpoints, self.lost_setpoints);
+        s += "  process    pid      policy       prio  period   cycles   overruns  max wake-up  max exec   cpu\n";
+        for p in &self.processes {
+            s += &format!(
+                "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>8.0} µs  {:>6.0} µs  {}\n",
+                p.name,
+                p.pid,
+                p.policy,
+                p.priority,
+                p.period_us,
+                p.cycles,
+                p.overruns,
+                p.max_wakeup_latency_us,
+                p.max_exec_us,
+                p.cpu_s.map_or("-".to_string(), |c| format!("{c:.2} s"))
+            );
+        }
+        s
+    }
+}
+
+fn per_axis_str(names: &[String], values: &[String]) -> Value {
+    let mut m = Map::new();
+    for (n, v) in names.iter().zip(values) {
+        m.insert(n.clone(), json!(v));
+    }
+    Value::Object(m)
+}

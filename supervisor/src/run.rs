@@ -1,0 +1,529 @@
+//! `supervisor run`: one program on one instance of the cell, start to clean exit.
+//!
+//! 1. Load and validate the configuration and the program (nothing starts on an error).
+//! 2. Refuse an instance that is in use; clean dead nodes a killed run left behind.
+//! 3. Create the services, publish the cell configuration, start every process.
+//! 4. Wait until all are cyclic, trajgen publishes setpoints and the drives are enabled.
+//! 5. Stream the program to trajgen (flow-controlled by its free queue places), watch every
+//!    process' status and exit, trajgen's faults and servo's following error, record the trace.
+//! 6. When the motion is done, wait until the axes settle in position.
+//! 7. Stop every process (SIGTERM, then SIGKILL), drop our ports, check that no iceoryx2
+//!    resource of the instance is left, and report.
+
+use crate::config::Config;
+use crate::launch::{Children, cpu_seconds};
+use crate::report::{ProcessReport, Report, TraceRow};
+use motion_program::{Op, Program};
+use runtime::ipc::{self, Pub, Sub};
+use runtime::rt::sched_of;
+use runtime::signals;
+use shm_schema::drive::servo_status as st;
+use shm_schema::motion::trajgen_fault;
+use shm_schema::{
+    CellConfigV1, FieldbusImageV1, InstanceName, MAX_AXES, MotionCommandV1, MotionState, ProcState,
+    ProcessStatusV1, Role, ServiceId, ServoStateV1, SetpointV1,
+};
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// What `supervisor run` was asked to do.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// The program file.
+    pub program: PathBuf,
+    /// The configuration file; `None` for the embedded default.
+    pub config: Option<PathBuf>,
+    /// Instance name.
+    pub instance: String,
+    /// Trace CSV to write.
+    pub trace: Option<PathBuf>,
+    /// Show progress on stderr.
+    pub progress: bool,
+}
+
+/// Why a run failed.
+#[derive(Debug)]
+pub enum RunError {
+    /// Bad input (program, configuration, instance): nothing was started. Exit code 2.
+    Input(String),
+    /// The run started and failed. Exit code 1.
+    Failed(String),
+    /// Ctrl-C / SIGTERM. Exit code 130.
+    Interrupted,
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Input(m) | RunError::Failed(m) => f.write_str(m),
+            RunError::Interrupted => f.write_str("interrupted; every process was stopped"),
+        }
+    }
+}
+
+const TICK: Duration = Duration::from_millis(10);
+
+/// Runs a program; see the module documentation.
+pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
+    let cfg = Config::load(opts.config.as_deref()).map_err(|e| RunError::Input(e.to_string()))?;
+    let src = std::fs::read_to_string(&opts.program)
+        .map_err(|e| RunError::Input(format!("{}: cannot read: {e}", opts.program.display())))?;
+    let program = motion_program::parse(&src, cfg.axis.len())
+        .and_then(|p| p.check_limits(&cfg.axis_specs()).map(|()| p))
+        .map_err(|e| RunError::Input(format!("{}:{}:{}: {}", opts.program.display(), e.line, e.col, e.message)))?;
+    let instance = InstanceName::new(&opts.instance)
+        .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
+    signals::install().map_err(|e| RunError::Failed(format!("cannot install signal handlers: {e}")))?;
+
+    ipc::quiet_iceoryx2_log();
+    let _ = ipc::remove_dead_nodes(&instance);
+    let live = ipc::live_node_pids(&instance).unwrap_or_default();
+    if !live.is_empty() {
+        return Err(RunError::Input(format!(
+            "instance {instance} is in use by process(es) {live:?}; choose another --instance"
+        )));
+    }
+
+    let mut session = Session::open(&cfg, instance)?;
+    let outcome = session.drive(&cfg, &program, &src, opts);
+    let cpu: Vec<Option<f64>> = session.children.iter().map(|p| cpu_seconds(p.pid())).collect();
+    let pids: Vec<(Role, u32)> = session.children.iter().map(|p| (p.role, p.pid())).collect();
+    let sched: Vec<Option<(u32, i32)>> = pids.iter().map(|(_, pid)| sched_of(*pid as i32)).collect();
+    let stop_problems = session.children.stop_all();
+    let statuses = session.statuses;
+    drop(session);
+    let leftovers = cleanup(&instance);
+
+    let mut report = outcome?;
+    for (i, (role, pid)) in pids.iter().enumerate() {
+        let status = statuses[role.index()].unwrap_or_default();
+        let (policy, priority) = sched[i].unwrap_or((status.policy, status.priority));
+        report.processes.push(ProcessReport::new(*role, *pid, policy, priority, &status, cpu[i]));
+    }
+    if let Some((role, why)) = stop_problems.first() {
+        return Err(RunError::Failed(format!("{} {why}", role.name())));
+    }
+    if !leftovers.is_empty() {
+        return Err(RunError::Failed(format!("iceoryx2 resources left behind: {}", leftovers.join(", "))));
+    }
+    if let Some(path) = &opts.trace {
+        write_trace(path, &report).map_err(|e| RunError::Failed(format!("{}: {e}", path.display())))?;
+    }
+    Ok(report)
+}
+
+/// Removes what a clean shutdown leaves of the instance (empty folders) and lists any file
+/// that should not be there.
+fn cleanup(instance: &InstanceName) -> Vec<String> {
+    let _ = ipc::remove_dead_nodes(instance);
+    let _ = ipc::remove_instance_segment(instance);
+    let mut left = Vec::new();
+    let prefix = instance.shm_prefix();
+    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
+        for e in dir.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with(prefix.as_str()) {
+                left.push(format!("/dev/shm/{name}"));
+            }
+        }
+    }
+    let root = PathBuf::from(instance.root_dir().as_str());
+    collect_files(&root, &mut left);
+    if left.is_empty() {
+        remove_empty_dirs(&root);
+    }
+    left
+}
+
+fn collect_files(dir: &std::path::Path, out: &mut Vec<String>) {
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                collect_files(&p, out);
+            } else {
+                out.push(p.display().to_string());
+            }
+        }
+    }
+}
+
+fn remove_empty_dirs(dir: &std::path::Path) {
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            if e.path().is_dir() {
+                remove_empty_dirs(&e.path());
+            }
+        }
+    }
+    let _ = std::fs::remove_dir(dir);
+}
+
+/// The supervisor's ports and the processes of one run.
+struct Session {
+    instance: InstanceName,
+    children: Children,
+    statuses: [Option<ProcessStatusV1>; 4],
+    // Field order is drop order: ports before the node.
+    config_pub: Pub<CellConfigV1>,
+    command_pub: Pub<MotionCommandV1>,
+    setpoint_sub: Sub<SetpointV1>,
+    servo_sub: Sub<ServoStateV1>,
+    image_sub: Sub<FieldbusImageV1>,
+    status_subs: Vec<(Role, Sub<ProcessStatusV1>)>,
+    _node: iceoryx2::prelude::Node<ipc::Ipc>,
+}
+
+impl Session {
+    /// Creates every service, publishes the configuration and starts the processes.
+    fn open(cfg: &Config, instance: InstanceName) -> Result<Self, RunError> {
+        let f = |e: ipc::IpcError| RunError::Failed(e.to_string());
+        let node = ipc::node(&instance, "supervisor").map_err(f)?;
+        let i = &instance;
+        let config_pub = Pub::new(&node, i, ServiceId::CellConfig).map_err(f)?;
+        let command_pub = Pub::new(&node, i, ServiceId::MotionCommand).map_err(f)?;
+        let setpoint_sub = Sub::new(&node, i, ServiceId::Setpoint, 1024).map_err(f)?;
+        let servo_sub = Sub::new(&node, i, ServiceId::ServoState, 1024).map_err(f)?;
+        let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
+        let mut status_subs = Vec::new();
+        for role in Role::ALL {
+            status_subs.push((role, Sub::new(&node, i, ServiceId::Status(role), 64).map_err(f)?));
+        }
+        config_pub.send(&cfg.to_shm());
+        let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
+        for role in Role::ALL {
+            children.spawn(cfg, role, &instance).map_err(RunError::Failed)?;
+        }
+        Ok(Self {
+            instance,
+            children,
+            statuses: [None; 4],
+            config_pub,
+            command_pub,
+            setpoint_sub,
+            servo_sub,
+            image_sub,
+            status_subs,
+            _node: node,
+        })
+    }
+
+    /// Fails if a process exited or stopped cycling; refreshes the statuses.
+    fn check_health(&mut self, cfg: &Config, beats: &mut [(u64, Instant); 4]) -> Result<(), RunError> {
+        if signals::stop_requested() {
+            return Err(RunError::Interrupted);
+        }
+        if let Some((role, pid, status)) = self.children.exited() {
+            return Err(RunError::Failed(format!("{} (pid {pid}) exited unexpectedly: {status}", role.name())));
+        }
+        self.config_pub.update_connections();
+        for (role, sub) in &self.status_subs {
+            if let Some(s) = sub.latest() {
+                if ProcState::from_u32(s.state) == Some(ProcState::Fault) {
+                    return Err(RunError::Failed(format!("{} reports fault {}", role.name(), s.fault)));
+                }
+                let b = &mut beats[role.index()];
+                if s.stats.cycles != b.0 {
+                    *b = (s.stats.cycles, Instant::now());
+                }
+                self.statuses[role.index()] = Some(s);
+            }
+        }
+        let timeout = Duration::from_secs_f64(cfg.supervisor.heartbeat_timeout);
+        for role in Role::ALL {
+            let (cycles, at) = beats[role.index()];
+            if cycles > 0 && at.elapsed() > timeout {
+                return Err(RunError::Failed(format!(
+                    "{} stopped cycling: its status has not advanced for {:.2} s",
+                    role.name(),
+                    at.elapsed().as_secs_f64()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    fn drive(&mut self, cfg: &Config, program: &Program, src: &str, opts: &RunOptions) -> Result<Report, RunError> {
+        let n = cfg.axis.len();
+        let mut beats = [(0u64, Instant::now()); 4];
+
+        // Startup: every process cyclic, trajgen publishing, drives enabled.
+        let start = Instant::now();
+        let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
+        let (mut last_sp, mut last_servo) = (None::<SetpointV1>, None::<ServoStateV1>);
+        loop {
+            self.check_health(cfg, &mut beats)?;
+            if let Some(s) = self.setpoint_sub.latest() {
+                last_sp = Some(s);
+            }
+            if let Some(s) = self.servo_sub.latest() {
+                last_servo = Some(s);
+            }
+            let cyclic = |r: Role| {
+                self.statuses[r.index()].is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
+            };
+            let enabled = last_servo.is_some_and(|s| s.status & st::ENABLED != 0);
+            if Role::ALL.iter().all(|r| cyclic(*r)) && last_sp.is_some() && enabled {
+                break;
+            }
+            if start.elapsed() > startup {
+                let mut missing: Vec<String> =
+                    Role::ALL.iter().filter(|r| !cyclic(**r)).map(|r| format!("{} is not cyclic", r.name())).collect();
+                if last_sp.is_none() {
+                    missing.push("trajgen publishes no setpoint".into());
+                }
+                if !enabled {
+                    missing.push("the drives are not enabled".into());
+                }
+                return Err(RunError::Failed(format!(
+                    "startup did not complete within {:.1} s: {}",
+                    startup.as_secs_f64(),
+                    missing.join(", ")
+                )));
+            }
+            std::thread::sleep(TICK);
+        }
+        let start_sp = last_sp.expect("checked above");
+        let start_pos: Vec<f64> = start_sp.position[..n].to_vec();
+        let vmax: Vec<f64> = cfg.axis.iter().map(|a| a.vmax).collect();
+        let predicted = motion_program::theoretical_time(program, &start_pos, &vmax, cfg.motion.t_acc);
+
+        // Motion.
+        let program_id = (std::process::id() ^ (start_sp.seq as u32).rotate_left(16)) | 1;
+        let commands = program.to_commands(program_id, 1);
+        let mut sent = 0usize;
+        let mut rows: Vec<SetpointV1> = Vec::new();
+        let mut servo_log: Vec<ServoStateV1> = Vec::new();
+        let mut images = (0u64, 0u64, 0u64); // count, sum of delays, max delay (ns)
+        let mut done: Option<SetpointV1> = None;
+        let mut settled_at: Option<(u64, ServoStateV1)> = None;
+        let mut in_pos_since: Option<u64> = None;
+        let mut progress = Progress::new(opts.progress, predicted, src);
+        let settle_ns = (cfg.motion.settle_time * 1e9) as u64;
+        let mut done_at = None::<Instant>;
+        let last_target = program.instructions.iter().rev().find_map(|i| match i.op {
+            Op::Move { target, .. } => Some(target),
+            _ => None,
+        });
+
+        while settled_at.is_none() {
+            self.check_health(cfg, &mut beats)?;
+            // Setpoints of our motion.
+            let mut newest = None;
+            while let Some(sp) = self.setpoint_sub.next() {
+                newest = Some(sp);
+                if sp.program_id != program_id {
+                    continue;
+                }
+                if sp.fault != trajgen_fault::NONE || sp.state == MotionState::Fault as u32 {
+                    return Err(RunError::Failed(trajgen_fault_text(&sp, &opts.program)));
+                }
+                match MotionState::from_u32(sp.state) {
+                    Some(MotionState::Moving) => rows.push(sp),
+                    Some(MotionState::Done) if done.is_none() => {
+                        rows.push(sp);
+                        done = Some(sp);
+                        done_at = Some(Instant::now());
+                    }
+                    _ => {}
+                }
+            }
+            // Flow control: never more in flight than trajgen has free places.
+            if let Some(sp) = newest {
+                let in_flight = sent as u64 - sp.commands_taken.min(sent as u64);
+                let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
+                for c in commands.iter().skip(sent).take(credit) {
+                    if !self.command_pub.send(c) {
+                        return Err(RunError::Failed("trajgen's command service refused a command".into()));
+                    }
+                    sent += 1;
+                }
+                progress.show(&sp);
+            }
+            // Servo: following error, drive faults, settling.
+            while let Some(s) = self.servo_sub.next() {
+                if rows.is_empty() {
+                    continue;
+                }
+                if s.status & st::FOLLOWING_ERROR != 0 {
+                    let (i, e) = (0..n)
+                        .map(|i| (i, s.following_error[i]))
+                        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                        .unwrap_or((0, 0.0));
+                    let a = &cfg.axis[i];
+                    return Err(RunError::Failed(format!(
+                        "following error on axis {}: {:.4} {} exceeds its limit {} {}",
+                        a.name, e, a.unit, a.following_error_limit, a.unit
+                    )));
+                }
+                if s.status & st::DRIVE_FAULT != 0 {
+                    return Err(RunError::Failed("the drives report a fault (command timeout: servo stopped commanding)".into()));
+                }
+                if s.status & st::SETPOINT_JUMP != 0 {
+                    return Err(RunError::Failed("servo refused a setpoint as a jump".into()));
+                }
+                servo_log.push(s);
+                if let Some(d) = &done {
+                    let inside = (0..n).all(|i| s.following_error[i].abs() <= cfg.axis[i].in_position);
+                    let used_final = s.setpoint_seq >= d.seq;
+                    match (inside && used_final, in_pos_since) {
+                        (true, None) => in_pos_since = Some(s.stamp_ns),
+                        (true, Some(t0)) if s.stamp_ns - t0 >= settle_ns => settled_at = Some((t0, s)),
+                        (false, _) => in_pos_since = None,
+                        _ => {}
+                    }
+                }
+            }
+            while let Some(img) = self.image_sub.next() {
+                if !rows.is_empty() {
+                    let d = img.written_ns.saturating_sub(img.measured_ns);
+                    images = (images.0 + 1, images.1 + d, images.2.max(d));
+                }
+            }
+            if let Some(t) = done_at
+                && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout
+            {
+                let s = servo_log.last().copied();
+                let errs = s.map_or(String::new(), |s| {
+                    (0..n).map(|i| format!("{} {:.4} {}", cfg.axis[i].name, s.following_error[i], cfg.axis[i].unit)).collect::<Vec<_>>().join(", ")
+                });
+                return Err(RunError::Failed(format!(
+                    "the axes did not settle within {} s of the end of the motion (following error {errs})",
+                    cfg.motion.settle_timeout
+                )));
+            }
+            if settled_at.is_none() {
+                std::thread::sleep(TICK);
+            }
+        }
+        progress.finish();
+
+        let done = done.expect("settling needs done");
+        let (settle_start, final_state) = settled_at.expect("loop exit");
+        let motion_servo: Vec<&ServoStateV1> =
+            servo_log.iter().filter(|s| s.stamp_ns <= final_state.stamp_ns).collect();
+        let mut max_fe = [0.0f64; MAX_AXES];
+        for s in &motion_servo {
+            for i in 0..n {
+                max_fe[i] = max_fe[i].max(s.following_error[i].abs());
+            }
+        }
+        let trace = trace_rows(&rows, &servo_log);
+        let lost = lost_setpoints(&rows);
+        Ok(Report {
+            ok: true,
+            program: opts.program.display().to_string(),
+            instance: self.instance.to_string(),
+            cell: cfg.cell.name.clone(),
+            axes: cfg.axis.iter().map(|a| a.name.clone()).collect(),
+            units: cfg.axis.iter().map(|a| a.unit.clone()).collect(),
+            vmax,
+            t_acc: cfg.motion.t_acc,
+            start: start_pos,
+            periods_us: Role::ALL.iter().map(|r| (r.name().to_string(), cfg.process.get(*r).period_us)).collect(),
+            theoretical_s: done.theoretical_s,
+            predicted_s: predicted,
+            measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9,
+            trajgen_period_s: cfg.process.trajgen.period_us as f64 * 1e-6,
+            settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
+            final_position: final_state.act_position[..n].to_vec(),
+            final_error: last_target.map_or(vec![0.0; n], |t| (0..n).map(|i| final_state.act_position[i] - t[i]).collect()),
+            max_following_error: max_fe[..n].to_vec(),
+            setpoints: rows.len(),
+            lost_setpoints: lost,
+            starved: done.starved,
+            iobridge_delay_us: if images.0 > 0 {
+                Some((images.1 as f64 / images.0 as f64 * 1e-3, images.2 as f64 * 1e-3))
+            } else {
+                None
+            },
+            processes: Vec::new(),
+            trace,
+        })
+    }
+}
+
+fn trajgen_fault_text(sp: &SetpointV1, program: &std::path::Path) -> String {
+    let why = match sp.fault {
+        trajgen_fault::AXES_MISMATCH => "the command's axis count differs from the cell's",
+        trajgen_fault::TARGET_OUT_OF_LIMITS => "the target lies outside the axis limits",
+        trajgen_fault::BAD_COMMAND => "the command is malformed",
+        trajgen_fault::QUEUE_OVERFLOW => "its command queue overflowed",
+        trajgen_fault::SEQUENCE_GAP => "a command was lost (sequence gap)",
+        _ => "unknown fault",
+    };
+    format!("trajgen refused {}:{}: {why} (fault {}); the axes stopped", program.display(), sp.fault_line, sp.fault)
+}
+
+/// One row per setpoint: its command, and the measured position at the servo cycle that used
+/// it (the first servo cycle whose setpoint is this one or a later one).
+fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV1]) -> Vec<TraceRow> {
+    rows.iter()
+        .map(|sp| {
+            let idx = servo.partition_point(|s| s.setpoint_seq < sp.seq);
+            let act = servo.get(idx).or(servo.last()).map_or(sp.position, |s| s.act_position);
+            TraceRow { t_s: sp.motion_time_s, cmd: sp.position, act }
+        })
+        .collect()
+}
+
+fn lost_setpoints(rows: &[SetpointV1]) -> u64 {
+    rows.windows(2).map(|w| w[1].seq.saturating_sub(w[0].seq + 1)).sum()
+}
+
+fn write_trace(path: &std::path::Path, report: &Report) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let n = report.axes.len();
+    let mut header = vec!["t_s".to_string()];
+    header.extend(report.axes.iter().map(|a| format!("cmd_{a}")));
+    header.extend(report.axes.iter().map(|a| format!("act_{a}")));
+    writeln!(out, "{}", header.join(","))?;
+    for r in &report.trace {
+        write!(out, "{:.6}", r.t_s)?;
+        for v in &r.cmd[..n] {
+            write!(out, ",{v:.6}")?;
+        }
+        for v in &r.act[..n] {
+            write!(out, ",{v:.6}")?;
+        }
+        writeln!(out)?;
+    }
+    out.flush()
+}
+
+/// Progress on stderr: motion time against the total and the current program line.
+struct Progress<'a> {
+    on: bool,
+    tty: bool,
+    total: f64,
+    lines: Vec<&'a str>,
+    last: Option<Instant>,
+}
+
+impl<'a> Progress<'a> {
+    fn new(on: bool, total: f64, src: &'a str) -> Self {
+        Self { on, tty: std::io::stderr().is_terminal(), total, lines: src.lines().collect(), last: None }
+    }
+
+    fn show(&mut self, sp: &SetpointV1) {
+        let every = if self.tty { 0.2 } else { 1.0 };
+        if !self.on || sp.state != MotionState::Moving as u32 || self.last.is_some_and(|t| t.elapsed().as_secs_f64() < every) {
+            return;
+        }
+        self.last = Some(Instant::now());
+        let text = self.lines.get(sp.line.saturating_sub(1) as usize).map_or("", |l| l.split("//").next().unwrap_or("").trim());
+        let msg = format!("motion {:6.2} / {:.2} s   line {}: {}", sp.motion_time_s, self.total, sp.line, text);
+        if self.tty {
+            eprint!("\r\x1b[2K{msg}");
+        } else {
+            eprintln!("{msg}");
+        }
+    }
+
+    fn finish(&self) {
+        if self.on && self.tty && self.last.is_some() {
+            eprintln!();
+        }
+    }
+}
