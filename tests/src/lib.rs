@@ -1,1 +1,113 @@
-//! Helpers for the integration tests.
+//! Helpers for the integration tests: the real binaries, unique instance names, a watchdog,
+//! and the check that an instance left nothing behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+/// The folder holding the workspace's binaries, built once per test run (same profile as
+/// the tests).
+pub fn bin_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let exe = std::env::current_exe().expect("test executable path");
+        // target/<profile>/deps/<test> -> target/<profile>
+        let dir = exe.parent().and_then(Path::parent).expect("target dir").to_path_buf();
+        let release = dir.file_name().is_some_and(|n| n == "release");
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args(["build", "--bins", "--workspace"]);
+        if release {
+            cmd.arg("--release");
+        }
+        let status = cmd.status().expect("run cargo build");
+        assert!(status.success(), "cargo build --bins failed");
+        dir
+    })
+}
+
+/// A binary of the workspace.
+pub fn bin(name: &str) -> PathBuf {
+    bin_dir().join(name)
+}
+
+/// An instance name unique to this test and process.
+pub fn instance(test: &str) -> String {
+    let mut s = format!("t{}-{test}", std::process::id());
+    s.truncate(32);
+    s
+}
+
+/// Runs `cmd`, killing it if it takes longer than `watchdog` (a stuck test fails; nothing
+/// here bounds how fast anything must be).
+pub fn run_with_watchdog(cmd: &mut Command, watchdog: Duration) -> Output {
+    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spawn");
+    let start = Instant::now();
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            return child.wait_with_output().expect("output");
+        }
+        if start.elapsed() > watchdog {
+            let _ = child.kill();
+            let out = child.wait_with_output().expect("output");
+            panic!(
+                "watchdog: {:?} still running after {watchdog:?}\nstderr:\n{}",
+                cmd,
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Every iceoryx2 file of `instance` still present: shared memory and the root folder.
+pub fn leftovers(instance: &str) -> Vec<String> {
+    let mut left = Vec::new();
+    let prefix = format!("iox2_{instance}_");
+    for e in std::fs::read_dir("/dev/shm").into_iter().flatten().flatten() {
+        let name = e.file_name().to_string_lossy().to_string();
+        if name.starts_with(&prefix) {
+            left.push(format!("/dev/shm/{name}"));
+        }
+    }
+    fn walk(p: &Path, out: &mut Vec<String>) {
+        for e in std::fs::read_dir(p).into_iter().flatten().flatten() {
+            if e.path().is_dir() {
+                walk(&e.path(), out);
+            } else {
+                out.push(e.path().display().to_string());
+            }
+        }
+    }
+    walk(&PathBuf::from(format!("/tmp/iceoryx2/{instance}")), &mut left);
+    left
+}
+
+/// Asserts that `instance` left nothing behind.
+pub fn assert_clean(instance: &str) {
+    let left = leftovers(instance);
+    assert!(left.is_empty(), "instance {instance} left behind: {left:?}");
+}
+
+/// Pids of processes whose command line contains all of `needles`.
+pub fn pids_with(needles: &[&str]) -> Vec<i32> {
+    let mut pids = Vec::new();
+    for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<i32>() else { continue };
+        let Ok(cmdline) = std::fs::read(e.path().join("cmdline")) else { continue };
+        let cmdline = String::from_utf8_lossy(&cmdline).replace('\0', " ");
+        if needles.iter().all(|n| cmdline.contains(n)) {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+/// Parses the JSON object `supervisor run --json` prints.
+pub fn json_of(out: &Output) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(stdout.trim()).unwrap_or_else(|e| {
+        panic!("stdout is not JSON ({e}):\n{stdout}\nstderr:\n{}", String::from_utf8_lossy(&out.stderr))
+    })
+}
