@@ -48,7 +48,11 @@ pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
     let mut stamp = [0u8; 8];
     stamp.copy_from_slice(&img.image[..STAMP_BYTES]);
     let mut pos = [0.0; IMAGE_AXES];
-    for (i, p) in pos.iter_mut().enumerate().take((img.axes as usize).min(IMAGE_AXES)) {
+    for (i, p) in pos
+        .iter_mut()
+        .enumerate()
+        .take((img.axes as usize).min(IMAGE_AXES))
+    {
         let at = STAMP_BYTES + 4 * i;
         let mut b = [0u8; 4];
         b.copy_from_slice(&img.image[at..at + 4]);

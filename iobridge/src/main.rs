@@ -29,13 +29,17 @@ impl Task for Bridge {
 }
 
 fn main() -> ExitCode {
-    process::run(Role::Iobridge, "fieldbus output image with measurement timestamps", |ctx: &Context| {
-        let i = &ctx.instance;
-        Ok::<_, SetupError>(Bridge {
-            seq: 0,
-            servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
-            last: None,
-            output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
-        })
-    })
+    process::run(
+        Role::Iobridge,
+        "fieldbus output image with measurement timestamps",
+        |ctx: &Context| {
+            let i = &ctx.instance;
+            Ok::<_, SetupError>(Bridge {
+                seq: 0,
+                servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
+                last: None,
+                output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
+            })
+        },
+    )
 }

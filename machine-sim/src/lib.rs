@@ -153,7 +153,11 @@ impl Machine {
             self.last_enable = c.enable;
             for i in 0..self.axes {
                 let lim = self.axis[i].effort_limit;
-                self.effort[i] = if c.effort[i].is_finite() { c.effort[i].clamp(-lim, lim) } else { 0.0 };
+                self.effort[i] = if c.effort[i].is_finite() {
+                    c.effort[i].clamp(-lim, lim)
+                } else {
+                    0.0
+                };
             }
         }
         if self.enabled && now_ns.saturating_sub(self.last_cmd_ns) > self.timeout_ns {
@@ -238,13 +242,30 @@ mod tests {
     }
 
     fn cell() -> CellConfigV1 {
-        let mut c = CellConfigV1 { axes: 1, machine_substeps: 4, drive_command_timeout_ns: 20_000_000, ..Default::default() };
-        c.axis[0] = AxisConfigV1 { inertia: 0.01, coulomb: 0.0, effort_limit: 10.0, encoder_resolution: 0.001, ..Default::default() };
+        let mut c = CellConfigV1 {
+            axes: 1,
+            machine_substeps: 4,
+            drive_command_timeout_ns: 20_000_000,
+            ..Default::default()
+        };
+        c.axis[0] = AxisConfigV1 {
+            inertia: 0.01,
+            coulomb: 0.0,
+            effort_limit: 10.0,
+            encoder_resolution: 0.001,
+            ..Default::default()
+        };
         c
     }
 
     fn command(seq: u64, enable: u32, effort: f64) -> DriveCommandV1 {
-        let mut c = DriveCommandV1 { seq, stamp_ns: 0, enable, axes: 1, effort: [0.0; MAX_AXES] };
+        let mut c = DriveCommandV1 {
+            seq,
+            stamp_ns: 0,
+            enable,
+            axes: 1,
+            effort: [0.0; MAX_AXES],
+        };
         c.effort[0] = effort;
         c
     }
@@ -265,7 +286,10 @@ mod tests {
             t += ms;
             fb = m.cycle(t, Some(&command(2, 1, 1.0)));
         }
-        assert_eq!((fb.enabled, fb.brake, fb.fault), (0, 1, drive_fault::COMMAND_TIMEOUT));
+        assert_eq!(
+            (fb.enabled, fb.brake, fb.fault),
+            (0, 1, drive_fault::COMMAND_TIMEOUT)
+        );
         assert_eq!(fb.velocity[0], 0.0);
         // Commands resume with enable held at 1: no re-enable without an edge.
         let fb = m.cycle(t + ms, Some(&command(3, 1, 1.0)));

@@ -24,12 +24,16 @@ impl Task for Sim {
 }
 
 fn main() -> ExitCode {
-    process::run(Role::Machine, "simulated drives and mechanics", |ctx: &Context| {
-        let i = &ctx.instance;
-        Ok::<_, SetupError>(Sim {
-            machine: Machine::new(&ctx.cell),
-            commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
-            feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-        })
-    })
+    process::run(
+        Role::Machine,
+        "simulated drives and mechanics",
+        |ctx: &Context| {
+            let i = &ctx.instance;
+            Ok::<_, SetupError>(Sim {
+                machine: Machine::new(&ctx.cell),
+                commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
+                feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
+            })
+        },
+    )
 }

@@ -87,7 +87,11 @@ pub struct ProgramError {
 
 impl fmt::Display for ProgramError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "line {}, column {}: {}", self.line, self.col, self.message)
+        write!(
+            f,
+            "line {}, column {}: {}",
+            self.line, self.col, self.message
+        )
     }
 }
 
@@ -126,9 +130,11 @@ impl Program {
             .enumerate()
             .map(|(i, ins)| {
                 let (kind, target, user) = match ins.op {
-                    Op::Move { target, user_time_s, .. } => {
-                        (CommandKind::Move, target, user_time_s.unwrap_or(0.0))
-                    }
+                    Op::Move {
+                        target,
+                        user_time_s,
+                        ..
+                    } => (CommandKind::Move, target, user_time_s.unwrap_or(0.0)),
                     Op::Stop => (CommandKind::Stop, [0.0; MAX_AXES], 0.0),
                     Op::End => (CommandKind::End, [0.0; MAX_AXES], 0.0),
                 };

@@ -12,7 +12,11 @@ pub fn parse(src: &str, axes: usize) -> Result<Program, ProgramError> {
     for (idx, raw) in src.lines().enumerate() {
         let line = idx as u32 + 1;
         last_line = line;
-        let mut cur = Cursor { text: raw, pos: 0, line };
+        let mut cur = Cursor {
+            text: raw,
+            pos: 0,
+            line,
+        };
         cur.skip_ws();
         if cur.at_end_of_statement() {
             continue;
@@ -31,7 +35,9 @@ pub fn parse(src: &str, axes: usize) -> Result<Program, ProgramError> {
                 end_seen = Some(line);
                 Op::End
             }
-            "" => return Err(cur.error(format!("expected MOVE, STOP or END, found {}", cur.found()))),
+            "" => {
+                return Err(cur.error(format!("expected MOVE, STOP or END, found {}", cur.found())));
+            }
             other => {
                 return Err(ProgramError {
                     line,
@@ -78,7 +84,7 @@ fn parse_move(cur: &mut Cursor<'_>, axes: usize) -> Result<Op, ProgramError> {
             cur.skip_ws();
             let tcol = cur.col();
             let t = cur.number("the segment time T (s)")?;
-            if !(t > 0.0) {
+            if t <= 0.0 {
                 return Err(ProgramError {
                     line: cur.line,
                     col: tcol,
@@ -117,7 +123,11 @@ fn parse_move(cur: &mut Cursor<'_>, axes: usize) -> Result<Op, ProgramError> {
             _ => return Err(cur.error(format!("expected ',' or ')', found {}", cur.found()))),
         }
     }
-    Ok(Op::Move { target, cols, user_time_s })
+    Ok(Op::Move {
+        target,
+        cols,
+        user_time_s,
+    })
 }
 
 struct Cursor<'a> {
@@ -151,7 +161,10 @@ impl Cursor<'_> {
 
     fn word(&mut self) -> &str {
         let start = self.pos;
-        let len = self.rest().find(|c: char| !c.is_ascii_alphabetic()).unwrap_or(self.rest().len());
+        let len = self
+            .rest()
+            .find(|c: char| !c.is_ascii_alphabetic())
+            .unwrap_or(self.rest().len());
         self.pos += len;
         &self.text[start..self.pos]
     }
@@ -189,7 +202,9 @@ impl Cursor<'_> {
                 self.pos += len;
                 Ok(v)
             }
-            _ if tok.is_empty() => Err(self.error(format!("expected {what}, found {}", self.found()))),
+            _ if tok.is_empty() => {
+                Err(self.error(format!("expected {what}, found {}", self.found())))
+            }
             _ => Err(self.error(format!("{tok:?} is not a number (expected {what})"))),
         }
     }
@@ -199,7 +214,11 @@ impl Cursor<'_> {
     }
 
     fn error_at(&self, col: u32, message: String) -> ProgramError {
-        ProgramError { line: self.line, col, message }
+        ProgramError {
+            line: self.line,
+            col,
+            message,
+        }
     }
 }
 
@@ -213,17 +232,33 @@ mod tests {
     fn parses_the_seed_triangle() {
         let p = parse(TRIANGLE, 3).expect("parses");
         assert_eq!(p.instructions.len(), 6);
-        assert!(matches!(p.instructions[2].op, Op::Move { target, .. } if target[..3] == [90.0, 126.0, 0.0]));
+        assert!(
+            matches!(p.instructions[2].op, Op::Move { target, .. } if target[..3] == [90.0, 126.0, 0.0])
+        );
         assert_eq!(p.instructions[4].op, Op::Stop);
-        assert_eq!(p.instructions[5], Instruction { line: 6, col: 1, op: Op::End });
+        assert_eq!(
+            p.instructions[5],
+            Instruction {
+                line: 6,
+                col: 1,
+                op: Op::End
+            }
+        );
     }
 
     #[test]
     fn accepts_user_time_blank_lines_comments_and_lower_case() {
-        let p = parse("\n  // header\nmove( 1.5 , -2e1, +3 , T = 2.5 ) // c\nend\n// after\n", 3)
-            .expect("parses");
+        let p = parse(
+            "\n  // header\nmove( 1.5 , -2e1, +3 , T = 2.5 ) // c\nend\n// after\n",
+            3,
+        )
+        .expect("parses");
         match p.instructions[0].op {
-            Op::Move { target, cols, user_time_s } => {
+            Op::Move {
+                target,
+                cols,
+                user_time_s,
+            } => {
                 assert_eq!(target[..3], [1.5, -20.0, 3.0]);
                 assert_eq!(cols[..3], [7, 13, 19]);
                 assert_eq!(user_time_s, Some(2.5));
@@ -237,23 +272,47 @@ mod tests {
     fn check(src: &str, expected: &str) {
         let e = parse(src, 3).expect_err(src);
         let got = format!("{}:{}: {}", e.line, e.col, e.message);
-        assert!(got.starts_with(expected), "for {src:?}\n got: {got}\nwant: {expected}");
+        assert!(
+            got.starts_with(expected),
+            "for {src:?}\n got: {got}\nwant: {expected}"
+        );
     }
 
     #[test]
     fn errors_name_line_and_column() {
-        check("MOVE(1,2)\nEND", "1:9: MOVE has 2 coordinate(s), the cell has 3 axes");
-        check("MOVE(1,2,3,4)\nEND", "1:12: MOVE has more than 3 coordinates");
+        check(
+            "MOVE(1,2)\nEND",
+            "1:9: MOVE has 2 coordinate(s), the cell has 3 axes",
+        );
+        check(
+            "MOVE(1,2,3,4)\nEND",
+            "1:12: MOVE has more than 3 coordinates",
+        );
         check("MOVE(1,2;3)\nEND", "1:9: expected ',' or ')', found ';'");
-        check("MOVE(1,x,3)\nEND", "1:8: expected coordinate 2 of 3, found 'x'");
-        check("MOVE(1,2,3", "1:11: expected ',' or ')', found the end of the line");
+        check(
+            "MOVE(1,x,3)\nEND",
+            "1:8: expected coordinate 2 of 3, found 'x'",
+        );
+        check(
+            "MOVE(1,2,3",
+            "1:11: expected ',' or ')', found the end of the line",
+        );
         check("MOVE 1,2,3)\nEND", "1:6: expected '(' after MOVE");
-        check("MOVE(1,2,3) STOP\nEND", "1:13: unexpected 'S' after the instruction");
+        check(
+            "MOVE(1,2,3) STOP\nEND",
+            "1:13: unexpected 'S' after the instruction",
+        );
         check("\n  JUMP(1,2,3)\nEND", "2:3: unknown instruction \"JUMP\"");
         check("MOVE(1,2,3)\n", "2:1: the program has no END");
         check("END\nMOVE(1,2,3)", "2:1: instruction after END (line 1)");
-        check("MOVE(1,2,3, T=0)\nEND", "1:15: segment time T = 0 s must be positive");
-        check("MOVE(1,2, T=1)\nEND", "1:11: MOVE has 2 coordinate(s) before T=");
+        check(
+            "MOVE(1,2,3, T=0)\nEND",
+            "1:15: segment time T = 0 s must be positive",
+        );
+        check(
+            "MOVE(1,2, T=1)\nEND",
+            "1:11: MOVE has 2 coordinate(s) before T=",
+        );
         check("MOVE(1,2,1e999)\nEND", "1:10: \"1e999\" is not a number");
         check("MOVE(1,2,--3)\nEND", "1:10: \"--3\" is not a number");
         check("(1,2,3)\nEND", "1:1: expected MOVE, STOP or END, found '('");
@@ -271,7 +330,16 @@ mod tests {
         let p = parse("MOVE(1,2,3)\nMOVE(5, 150, 3)\nEND", 3).expect("parses");
         let e = p.check_limits(&axes).expect_err("out of limits");
         assert_eq!((e.line, e.col), (2, 9));
-        assert!(e.message.starts_with("y = 150 mm is outside the axis limits 0 .. 100 mm"), "{e}");
-        assert!(parse("MOVE(0,100,50)\nEND", 3).expect("parses").check_limits(&axes).is_ok());
+        assert!(
+            e.message
+                .starts_with("y = 150 mm is outside the axis limits 0 .. 100 mm"),
+            "{e}"
+        );
+        assert!(
+            parse("MOVE(0,100,50)\nEND", 3)
+                .expect("parses")
+                .check_limits(&axes)
+                .is_ok()
+        );
     }
 }

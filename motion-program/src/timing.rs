@@ -33,7 +33,11 @@ pub fn theoretical_time(program: &Program, start: &[f64], vmax: &[f64], t_acc: f
     let mut total = 0.0;
     for ins in &program.instructions {
         match ins.op {
-            Op::Move { target, user_time_s, .. } => {
+            Op::Move {
+                target,
+                user_time_s,
+                ..
+            } => {
                 total += segment_time(&b, &target[..n], vmax, t_acc, user_time_s.unwrap_or(0.0));
                 at_rest_segment = b[..] == target[..n];
                 b.copy_from_slice(&target[..n]);

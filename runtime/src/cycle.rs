@@ -72,7 +72,10 @@ impl CycleClock {
             next_ns: 0,
             extra_ns: None,
             overrun_pending: false,
-            stats: CycleStatsV1 { period_ns, ..CycleStatsV1::default() },
+            stats: CycleStatsV1 {
+                period_ns,
+                ..CycleStatsV1::default()
+            },
         };
         clock.next_ns = clock.grid_after(now + period_ns);
         clock

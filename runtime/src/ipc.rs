@@ -10,10 +10,10 @@
 //! iceoryx2. The set-up of [`crate::rt`] keeps that allocation on locked, prefaulted heap that
 //! malloc never returns to the kernel.
 
+use iceoryx2::node::NodeView;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use shm_schema::{InstanceName, ServiceId};
@@ -40,7 +40,10 @@ impl std::fmt::Display for IpcError {
 impl std::error::Error for IpcError {}
 
 fn err(what: impl Into<String>, reason: impl Debug) -> IpcError {
-    IpcError { what: what.into(), reason: format!("{reason:?}") }
+    IpcError {
+        what: what.into(),
+        reason: format!("{reason:?}"),
+    }
 }
 
 /// The iceoryx2 configuration of `instance`: file prefix `iox2_<instance>_`, root folder
@@ -114,7 +117,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Pub<T> {
             .max_loaned_samples(2)
             .create()
             .map_err(|e| err(format!("publisher on {}", instance.service(id)), e))?;
-        Ok(Self { port, _service: service })
+        Ok(Self {
+            port,
+            _service: service,
+        })
     }
 
     /// Publishes a copy of `value` straight into shared memory. False if iceoryx2 refused.
@@ -163,7 +169,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
             .buffer_size(buffer)
             .create()
             .map_err(|e| err(format!("subscriber on {}", instance.service(id)), e))?;
-        Ok(Self { port, _service: service })
+        Ok(Self {
+            port,
+            _service: service,
+        })
     }
 
     /// Takes every unread sample and returns the newest.

@@ -69,7 +69,11 @@ pub fn run<T: Task>(
         Ok(Some(i)) => i,
         Ok(None) => return ExitCode::SUCCESS,
         Err(msg) => {
-            eprintln!("{}: {msg}\nusage: {} [--instance NAME]", role.name(), role.name());
+            eprintln!(
+                "{}: {msg}\nusage: {} [--instance NAME]",
+                role.name(),
+                role.name()
+            );
             return ExitCode::from(2);
         }
     };
@@ -114,7 +118,9 @@ fn parse_args(role: Role, about: &str) -> Result<Option<InstanceName>, String> {
             other => return Err(format!("unknown argument {other:?}")),
         }
     }
-    InstanceName::new(&instance).map(Some).map_err(|e| e.to_string())
+    InstanceName::new(&instance)
+        .map(Some)
+        .map_err(|e| e.to_string())
 }
 
 fn run_inner<T: Task>(
@@ -126,7 +132,12 @@ fn run_inner<T: Task>(
     let node = ipc::node(&instance, role.name())?;
     let cell = wait_for_cell_config(&node, &instance)?;
     let pc = cell.process[role.index()];
-    let ctx = Context { instance, role, node, cell };
+    let ctx = Context {
+        instance,
+        role,
+        node,
+        cell,
+    };
     let status_pub = Pub::<ProcessStatusV1>::new(&ctx.node, &instance, ServiceId::Status(role))?;
     let mut task = build(&ctx)?;
 
@@ -152,7 +163,11 @@ fn run_inner<T: Task>(
         pc.phase_ns / 1000,
         rt::policy_name(report.policy),
         report.priority,
-        if report.cpu >= 0 { format!(", CPU {}", report.cpu) } else { String::new() }
+        if report.cpu >= 0 {
+            format!(", CPU {}", report.cpu)
+        } else {
+            String::new()
+        }
     );
 
     let mut clock = CycleClock::new(pc.period_ns, pc.phase_ns, now_ns());
@@ -215,15 +230,25 @@ fn wait_for_cell_config(
 /// Checks what a process relies on; the supervisor validated everything else.
 pub fn validate_cell(cell: &CellConfigV1) -> Result<(), String> {
     if cell.axes == 0 || cell.axes as usize > shm_schema::MAX_AXES {
-        return Err(format!("cell configuration has {} axes, 1..={} allowed", cell.axes, shm_schema::MAX_AXES));
+        return Err(format!(
+            "cell configuration has {} axes, 1..={} allowed",
+            cell.axes,
+            shm_schema::MAX_AXES
+        ));
     }
     for role in Role::ALL {
         if cell.process[role.index()].period_ns == 0 {
-            return Err(format!("cell configuration: period of {} is 0", role.name()));
+            return Err(format!(
+                "cell configuration: period of {} is 0",
+                role.name()
+            ));
         }
     }
-    if !(cell.t_acc_s > 0.0) {
-        return Err(format!("cell configuration: t_acc {} s is not positive", cell.t_acc_s));
+    if !(cell.t_acc_s.is_finite() && cell.t_acc_s > 0.0) {
+        return Err(format!(
+            "cell configuration: t_acc {} s is not positive",
+            cell.t_acc_s
+        ));
     }
     Ok(())
 }

@@ -46,7 +46,10 @@ pub struct RtGuard {
 
 /// Applies `req` to the calling thread and process. See the module documentation.
 pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
-    let mut report = RtReport { cpu: -1, ..RtReport::default() };
+    let mut report = RtReport {
+        cpu: -1,
+        ..RtReport::default()
+    };
 
     // SAFETY: mallopt only changes allocator tunables.
     unsafe {
@@ -86,7 +89,9 @@ pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
     }
 
     if req.priority > 0 {
-        let param = libc::sched_param { sched_priority: req.priority };
+        let param = libc::sched_param {
+            sched_priority: req.priority,
+        };
         // SAFETY: plain system call with a valid parameter block.
         if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
             report.policy = 1;
@@ -113,7 +118,9 @@ pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
 /// Opens `/dev/cpu_dma_latency` and writes a 32-bit 0: the CPUs stay out of deep idle
 /// states while the file is open (halves p99 wake-up latency on this machine).
 fn hold_dma_latency_zero() -> Option<File> {
-    let open = std::fs::OpenOptions::new().write(true).open("/dev/cpu_dma_latency");
+    let open = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency");
     match open.and_then(|mut f| f.write_all(&0i32.to_ne_bytes()).map(|_| f)) {
         Ok(f) => Some(f),
         Err(e) => {

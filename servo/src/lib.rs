@@ -137,7 +137,8 @@ impl Controller {
             // A new source (trajgen restarted: its clock stamps restart too) or the first
             // setpoint: it must start where servo holds.
             _ => {
-                let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9).clamp(0.0, self.p.max_extrapolation_s);
+                let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9)
+                    .clamp(0.0, self.p.max_extrapolation_s);
                 (0..n).any(|i| {
                     let g = &self.p.axis[i];
                     let at_now = sp.position[i] + sp.velocity[i] * age;
@@ -260,7 +261,10 @@ impl Controller {
             let ev = target_vel[i] - fb.velocity[i];
             self.integral[i] =
                 (self.integral[i] + g.ki * e * dt).clamp(-g.integral_limit, g.integral_limit);
-            let u = g.kp * e + self.integral[i] + g.kd * ev + g.kvff * target_vel[i]
+            let u = g.kp * e
+                + self.integral[i]
+                + g.kd * ev
+                + g.kvff * target_vel[i]
                 + g.kaff * target_acc[i];
             cmd.effort[i] = u.clamp(-g.effort_limit, g.effort_limit);
             state.following_error[i] = e;

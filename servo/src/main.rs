@@ -38,12 +38,18 @@ impl Task for Servo {
         if let Some(fb) = self.drive_feedback.latest() {
             self.feedback = Some(fb);
         }
-        let (cmd, state) = self.controller.cycle(wake.actual_ns, sp.as_ref(), self.feedback.as_ref());
+        let (cmd, state) =
+            self.controller
+                .cycle(wake.actual_ns, sp.as_ref(), self.feedback.as_ref());
         self.drive_commands.send(&cmd);
         self.state.send(&state);
     }
 }
 
 fn main() -> ExitCode {
-    process::run(Role::Servo, "axis position loops, running at all times", Servo::new)
+    process::run(
+        Role::Servo,
+        "axis position loops, running at all times",
+        Servo::new,
+    )
 }

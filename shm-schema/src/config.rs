@@ -4,8 +4,8 @@
 //! this once, with history 1. A process reads its own `process[role]` entry and the axes; it
 //! needs no TOML parser, so a process in any language can take part.
 
-use crate::status::ROLE_COUNT;
 use crate::MAX_AXES;
+use crate::status::ROLE_COUNT;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 

@@ -19,7 +19,9 @@ pub enum CommandKind {
 impl CommandKind {
     /// Decodes the wire value.
     pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Move, Self::Stop, Self::End].into_iter().find(|k| *k as u32 == v)
+        [Self::Move, Self::Stop, Self::End]
+            .into_iter()
+            .find(|k| *k as u32 == v)
     }
 }
 
@@ -65,7 +67,9 @@ pub enum MotionState {
 impl MotionState {
     /// Decodes the wire value.
     pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Idle, Self::Moving, Self::Done, Self::Fault].into_iter().find(|s| *s as u32 == v)
+        [Self::Idle, Self::Moving, Self::Done, Self::Fault]
+            .into_iter()
+            .find(|s| *s as u32 == v)
     }
 }
 

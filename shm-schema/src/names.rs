@@ -41,7 +41,10 @@ impl fmt::Display for InstanceError {
         match self {
             Self::Empty => write!(f, "instance name is empty"),
             Self::TooLong { len } => {
-                write!(f, "instance name is {len} bytes long, at most {MAX_INSTANCE_LEN} allowed")
+                write!(
+                    f,
+                    "instance name is {len} bytes long, at most {MAX_INSTANCE_LEN} allowed"
+                )
             }
             Self::BadChar { ch, at } => write!(
                 f,
@@ -70,7 +73,10 @@ impl InstanceName {
         }
         let mut bytes = [0u8; MAX_INSTANCE_LEN];
         bytes[..name.len()].copy_from_slice(name.as_bytes());
-        Ok(Self { bytes, len: name.len() as u8 })
+        Ok(Self {
+            bytes,
+            len: name.len() as u8,
+        })
     }
 
     /// The name as text.
@@ -126,7 +132,10 @@ pub struct ServiceNameBuf {
 
 impl Default for ServiceNameBuf {
     fn default() -> Self {
-        Self { bytes: [0; SERVICE_NAME_CAP], len: 0 }
+        Self {
+            bytes: [0; SERVICE_NAME_CAP],
+            len: 0,
+        }
     }
 }
 
@@ -229,8 +238,15 @@ impl ServiceId {
             max_nodes: 16,
         };
         match self {
-            Self::CellConfig => Qos { history: 1, max_publishers: 1, ..base },
-            Self::MotionCommand => Qos { max_subscribers: 2, ..base },
+            Self::CellConfig => Qos {
+                history: 1,
+                max_publishers: 1,
+                ..base
+            },
+            Self::MotionCommand => Qos {
+                max_subscribers: 2,
+                ..base
+            },
             _ => base,
         }
     }
@@ -252,14 +268,23 @@ mod tests {
             InstanceName::new(&"x".repeat(33)),
             Err(InstanceError::TooLong { len: 33 })
         ));
-        assert_eq!(InstanceName::new("gantry-01_a").map(|i| i.as_str().len()), Ok(11));
+        assert_eq!(
+            InstanceName::new("gantry-01_a").map(|i| i.as_str().len()),
+            Ok(11)
+        );
     }
 
     #[test]
     fn service_names_carry_the_instance() {
         let i = InstanceName::new("t1").expect("valid");
-        assert_eq!(i.service(ServiceId::Setpoint).as_str(), "t1/trajgen/setpoint");
-        assert_eq!(i.service(ServiceId::Status(Role::Servo)).as_str(), "t1/servo/status");
+        assert_eq!(
+            i.service(ServiceId::Setpoint).as_str(),
+            "t1/trajgen/setpoint"
+        );
+        assert_eq!(
+            i.service(ServiceId::Status(Role::Servo)).as_str(),
+            "t1/servo/status"
+        );
         assert_eq!(i.shm_prefix().as_str(), "iox2_t1_");
         // The longest instance name still fits every name.
         let long = InstanceName::new(&"z".repeat(MAX_INSTANCE_LEN)).expect("valid");

@@ -71,7 +71,9 @@ pub enum ProcState {
 impl ProcState {
     /// Decodes the wire value.
     pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Starting, Self::Cyclic, Self::Stopping, Self::Fault].into_iter().find(|s| *s as u32 == v)
+        [Self::Starting, Self::Cyclic, Self::Stopping, Self::Fault]
+            .into_iter()
+            .find(|s| *s as u32 == v)
     }
 }
 

@@ -29,7 +29,11 @@ pub struct ConfigError {
 impl fmt::Display for ConfigError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if self.line > 0 {
-            write!(f, "{}:{}:{}: {}", self.file, self.line, self.col, self.message)
+            write!(
+                f,
+                "{}:{}:{}: {}",
+                self.file, self.line, self.col, self.message
+            )
         } else {
             write!(f, "{}: {}", self.file, self.message)
         }
@@ -270,13 +274,17 @@ fn locate(src: &str, path: &[Seg<'_>]) -> Option<Range<usize>> {
     let mut segs = path.iter().peekable();
     while let Some(seg) = segs.next() {
         let Seg::Key(k) = *seg else { break };
-        let Some((key, item)) = table.get_key_value(k) else { break };
+        let Some((key, item)) = table.get_key_value(k) else {
+            break;
+        };
         // The key's own place is the most telling; fall back to its value's.
         span = key.span().or_else(|| item.span()).or(span);
         match segs.peek() {
             Some(Seg::Index(i)) => {
                 segs.next();
-                let Some(t) = item.as_array_of_tables().and_then(|a| a.get(*i)) else { break };
+                let Some(t) = item.as_array_of_tables().and_then(|a| a.get(*i)) else {
+                    break;
+                };
                 span = t.span().or(span);
                 table = t;
             }
@@ -302,19 +310,30 @@ impl Config {
     pub fn parse(src: &str, file: &str) -> Result<Self, ConfigError> {
         let cfg: Config = toml::from_str(src).map_err(|e| {
             let (line, col) = e.span().map_or((0, 0), |s| line_col(src, s.start));
-            ConfigError { file: file.into(), line, col, message: e.message().trim().to_string() }
+            ConfigError {
+                file: file.into(),
+                line,
+                col,
+                message: e.message().trim().to_string(),
+            }
         })?;
         cfg.validate().map_err(|(path, message)| {
             let segs: Vec<Seg<'_>> = path.iter().map(|s| s.as_seg()).collect();
             let (line, col) = locate(src, &segs).map_or((0, 0), |s| line_col(src, s.start));
-            ConfigError { file: file.into(), line, col, message }
+            ConfigError {
+                file: file.into(),
+                line,
+                col,
+                message,
+            }
         })?;
         Ok(cfg)
     }
 
     /// The embedded default.
     pub fn default_cell() -> Self {
-        Self::parse(DEFAULT_TOML, DEFAULT_NAME).expect("the embedded default configuration is valid")
+        Self::parse(DEFAULT_TOML, DEFAULT_NAME)
+            .expect("the embedded default configuration is valid")
     }
 
     /// Loads `path`, or the embedded default for `None`.
@@ -342,23 +361,38 @@ impl Config {
 
         let m = &self.motion;
         if !positive(m.t_acc) {
-            return bad(vec![K("motion"), K("t_acc")], format!("t_acc = {} s must be positive", m.t_acc));
+            return bad(
+                vec![K("motion"), K("t_acc")],
+                format!("t_acc = {} s must be positive", m.t_acc),
+            );
         }
         if !non_negative(m.settle_time) {
-            return bad(vec![K("motion"), K("settle_time")], "settle_time must be 0 s or more".into());
+            return bad(
+                vec![K("motion"), K("settle_time")],
+                "settle_time must be 0 s or more".into(),
+            );
         }
         if !positive(m.settle_timeout) {
-            return bad(vec![K("motion"), K("settle_timeout")], "settle_timeout must be positive".into());
+            return bad(
+                vec![K("motion"), K("settle_timeout")],
+                "settle_timeout must be positive".into(),
+            );
         }
         let trajgen_period_s = self.process.trajgen.period_us as f64 * 1e-6;
         if !(m.setpoint_timeout.is_finite() && m.setpoint_timeout >= 2.0 * trajgen_period_s) {
             return bad(
                 vec![K("motion"), K("setpoint_timeout")],
-                format!("setpoint_timeout = {} s must be at least 2 trajgen periods ({} s)", m.setpoint_timeout, 2.0 * trajgen_period_s),
+                format!(
+                    "setpoint_timeout = {} s must be at least 2 trajgen periods ({} s)",
+                    m.setpoint_timeout,
+                    2.0 * trajgen_period_s
+                ),
             );
         }
         let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
-        if !(self.drives.command_timeout.is_finite() && self.drives.command_timeout >= 3.0 * servo_period_s) {
+        if !(self.drives.command_timeout.is_finite()
+            && self.drives.command_timeout >= 3.0 * servo_period_s)
+        {
             return bad(
                 vec![K("drives"), K("command_timeout")],
                 format!(
@@ -369,42 +403,101 @@ impl Config {
             );
         }
         if !(1..=1000).contains(&self.drives.substeps) {
-            return bad(vec![K("drives"), K("substeps")], "substeps must be 1..=1000".into());
+            return bad(
+                vec![K("drives"), K("substeps")],
+                "substeps must be 1..=1000".into(),
+            );
         }
 
         if self.axis.is_empty() || self.axis.len() > MAX_AXES {
-            return bad(vec![K("axis")], format!("the cell has {} axes; 1..={MAX_AXES} allowed", self.axis.len()));
+            return bad(
+                vec![K("axis")],
+                format!(
+                    "the cell has {} axes; 1..={MAX_AXES} allowed",
+                    self.axis.len()
+                ),
+            );
         }
         for (i, a) in self.axis.iter().enumerate() {
             let at = |k: &'static str| vec![K("axis"), Idx(i), K(k)];
             let sub = |t: &'static str, k: &'static str| vec![K("axis"), Idx(i), K(t), K(k)];
-            if a.name.is_empty() || a.name.len() > 15 || !a.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-                return bad(at("name"), format!("axis name {:?} must be 1 to 15 letters, digits or '_'", a.name));
+            if a.name.is_empty()
+                || a.name.len() > 15
+                || !a
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_')
+            {
+                return bad(
+                    at("name"),
+                    format!(
+                        "axis name {:?} must be 1 to 15 letters, digits or '_'",
+                        a.name
+                    ),
+                );
             }
             if self.axis[..i].iter().any(|b| b.name == a.name) {
                 return bad(at("name"), format!("axis name {:?} is used twice", a.name));
             }
             if a.unit.is_empty() || a.unit.len() > 7 {
-                return bad(at("unit"), format!("unit {:?} must be 1 to 7 bytes", a.unit));
+                return bad(
+                    at("unit"),
+                    format!("unit {:?} must be 1 to 7 bytes", a.unit),
+                );
             }
             if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
-                return bad(at("max"), format!("axis {}: max ({}) must be greater than min ({})", a.name, a.max, a.min));
+                return bad(
+                    at("max"),
+                    format!(
+                        "axis {}: max ({}) must be greater than min ({})",
+                        a.name, a.max, a.min
+                    ),
+                );
             }
             if !(a.start >= a.min && a.start <= a.max) {
-                return bad(at("start"), format!("axis {}: start {} lies outside {} .. {}", a.name, a.start, a.min, a.max));
+                return bad(
+                    at("start"),
+                    format!(
+                        "axis {}: start {} lies outside {} .. {}",
+                        a.name, a.start, a.min, a.max
+                    ),
+                );
             }
-            for (k, v) in [("vmax", a.vmax), ("following_error_limit", a.following_error_limit), ("in_position", a.in_position)] {
+            for (k, v) in [
+                ("vmax", a.vmax),
+                ("following_error_limit", a.following_error_limit),
+                ("in_position", a.in_position),
+            ] {
                 if !positive(v) {
-                    return bad(at(k), format!("axis {}: {k} = {v} must be positive", a.name));
+                    return bad(
+                        at(k),
+                        format!("axis {}: {k} = {v} must be positive", a.name),
+                    );
                 }
             }
             if a.in_position >= a.following_error_limit {
-                return bad(at("in_position"), format!("axis {}: in_position must be smaller than following_error_limit", a.name));
+                return bad(
+                    at("in_position"),
+                    format!(
+                        "axis {}: in_position must be smaller than following_error_limit",
+                        a.name
+                    ),
+                );
             }
             let g = &a.servo;
-            for (k, v) in [("kp", g.kp), ("ki", g.ki), ("kd", g.kd), ("kvff", g.kvff), ("kaff", g.kaff), ("integral_limit", g.integral_limit)] {
+            for (k, v) in [
+                ("kp", g.kp),
+                ("ki", g.ki),
+                ("kd", g.kd),
+                ("kvff", g.kvff),
+                ("kaff", g.kaff),
+                ("integral_limit", g.integral_limit),
+            ] {
                 if !non_negative(v) {
-                    return bad(sub("servo", k), format!("axis {}: servo {k} = {v} must be 0 or more", a.name));
+                    return bad(
+                        sub("servo", k),
+                        format!("axis {}: servo {k} = {v} must be 0 or more", a.name),
+                    );
                 }
             }
             let s = &a.sim;
@@ -417,7 +510,10 @@ impl Config {
             ] {
                 if !(if pos { positive(v) } else { non_negative(v) }) {
                     let need = if pos { "positive" } else { "0 or more" };
-                    return bad(sub("sim", k), format!("axis {}: sim {k} = {v} must be {need}", a.name));
+                    return bad(
+                        sub("sim", k),
+                        format!("axis {}: sim {k} = {v} must be {need}", a.name),
+                    );
                 }
             }
         }
@@ -427,27 +523,64 @@ impl Config {
             let p = self.process.get(role);
             let at = |k: &'static str| vec![K("process"), K(role.name()), K(k)];
             if p.command.is_empty() || p.command[0].is_empty() {
-                return bad(at("command"), format!("process {}: command is empty", role.name()));
+                return bad(
+                    at("command"),
+                    format!("process {}: command is empty", role.name()),
+                );
             }
             if !(50..=1_000_000).contains(&p.period_us) {
-                return bad(at("period_us"), format!("process {}: period_us = {} must be 50..=1000000", role.name(), p.period_us));
+                return bad(
+                    at("period_us"),
+                    format!(
+                        "process {}: period_us = {} must be 50..=1000000",
+                        role.name(),
+                        p.period_us
+                    ),
+                );
             }
             if p.phase_us >= p.period_us {
-                return bad(at("phase_us"), format!("process {}: phase_us must be smaller than period_us", role.name()));
+                return bad(
+                    at("phase_us"),
+                    format!(
+                        "process {}: phase_us must be smaller than period_us",
+                        role.name()
+                    ),
+                );
             }
             if !(0..=99).contains(&p.priority) {
-                return bad(at("priority"), format!("process {}: priority {} must be 0..=99 (0: SCHED_OTHER)", role.name(), p.priority));
+                return bad(
+                    at("priority"),
+                    format!(
+                        "process {}: priority {} must be 0..=99 (0: SCHED_OTHER)",
+                        role.name(),
+                        p.priority
+                    ),
+                );
             }
             if let Some(cpu) = p.cpu
                 && !(0..cpus).contains(&cpu)
             {
-                return bad(at("cpu"), format!("process {}: cpu {cpu} does not exist (this machine has CPUs 0..{})", role.name(), cpus - 1));
+                return bad(
+                    at("cpu"),
+                    format!(
+                        "process {}: cpu {cpu} does not exist (this machine has CPUs 0..{})",
+                        role.name(),
+                        cpus - 1
+                    ),
+                );
             }
         }
         let s = &self.supervisor;
-        for (k, v) in [("startup_timeout", s.startup_timeout), ("heartbeat_timeout", s.heartbeat_timeout), ("stop_timeout", s.stop_timeout)] {
+        for (k, v) in [
+            ("startup_timeout", s.startup_timeout),
+            ("heartbeat_timeout", s.heartbeat_timeout),
+            ("stop_timeout", s.stop_timeout),
+        ] {
             if !positive(v) {
-                return bad(vec![K("supervisor"), K(k)], format!("{k} = {v} s must be positive"));
+                return bad(
+                    vec![K("supervisor"), K(k)],
+                    format!("{k} = {v} s must be positive"),
+                );
             }
         }
         Ok(())
@@ -539,7 +672,10 @@ mod tests {
         let c = Config::default_cell();
         let names: Vec<_> = c.axis.iter().map(|a| a.name.as_str()).collect();
         assert_eq!(names, ["x", "y", "theta"]);
-        assert!(c.process.trajgen.priority > c.process.servo.priority, "trajgen above servo (seed 003)");
+        assert!(
+            c.process.trajgen.priority > c.process.servo.priority,
+            "trajgen above servo (seed 003)"
+        );
         let shm = c.to_shm();
         assert_eq!(shm.axes, 3);
         assert_eq!(shm_schema::str_of(&shm.axis[2].unit), "deg");
@@ -548,7 +684,10 @@ mod tests {
 
     /// Data-driven: replace `from` by `to` in the default file; the error must read `want`.
     fn check(from: &str, to: &str, want: &str) {
-        assert!(DEFAULT_TOML.contains(from), "{from:?} not in the default file");
+        assert!(
+            DEFAULT_TOML.contains(from),
+            "{from:?} not in the default file"
+        );
         let src = DEFAULT_TOML.replacen(from, to, 1);
         let e = Config::parse(&src, "cell.toml").expect_err(to);
         let got = e.to_string();
@@ -556,35 +695,98 @@ mod tests {
     }
 
     fn line_of(needle: &str) -> usize {
-        DEFAULT_TOML.lines().position(|l| l.contains(needle)).expect("present") + 1
+        DEFAULT_TOML
+            .lines()
+            .position(|l| l.contains(needle))
+            .expect("present")
+            + 1
     }
 
     #[test]
     fn errors_name_file_line_and_reason() {
         let t = line_of("t_acc = 0.525");
-        check("t_acc = 0.525", "t_acc = -1.0", &format!("cell.toml:{t}:1: t_acc = -1 s must be positive"));
-        check("t_acc = 0.525", "t_acc = 0.525\nspeed = 3", &format!("cell.toml:{}:1: unknown field `speed`", t + 1));
-        check("t_acc = 0.525", "t_acc = \"fast\"", &format!("cell.toml:{t}:9: invalid type: string \"fast\""));
-        let y_vmax = DEFAULT_TOML.lines().enumerate().filter(|(_, l)| l.starts_with("vmax = ")).nth(1).expect("y").0 + 1;
+        check(
+            "t_acc = 0.525",
+            "t_acc = -1.0",
+            &format!("cell.toml:{t}:1: t_acc = -1 s must be positive"),
+        );
+        check(
+            "t_acc = 0.525",
+            "t_acc = 0.525\nspeed = 3",
+            &format!("cell.toml:{}:1: unknown field `speed`", t + 1),
+        );
+        check(
+            "t_acc = 0.525",
+            "t_acc = \"fast\"",
+            &format!("cell.toml:{t}:9: invalid type: string \"fast\""),
+        );
+        let y_vmax = DEFAULT_TOML
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| l.starts_with("vmax = "))
+            .nth(1)
+            .expect("y")
+            .0
+            + 1;
         let src_line = |n: usize| format!("cell.toml:{n}:1: ");
-        check("vmax = 16.0\nstart = 40.0\nfollowing_error_limit = 1.0\nin_position = 0.01\nservo = { kp = 78.0",
-              "vmax = 0.0\nstart = 40.0\nfollowing_error_limit = 1.0\nin_position = 0.01\nservo = { kp = 78.0",
-              &(src_line(y_vmax) + "axis y: vmax = 0 must be positive"));
+        check(
+            "vmax = 16.0\nstart = 40.0\nfollowing_error_limit = 1.0\nin_position = 0.01\nservo = { kp = 78.0",
+            "vmax = 0.0\nstart = 40.0\nfollowing_error_limit = 1.0\nin_position = 0.01\nservo = { kp = 78.0",
+            &(src_line(y_vmax) + "axis y: vmax = 0 must be positive"),
+        );
         let prio = line_of("priority = 70");
-        check("priority = 70", "priority = 120", &(src_line(prio) + "process servo: priority 120 must be 0..=99"));
-        check("priority = 70", "priority = 70\ncpu = 64", &(src_line(prio + 1) + "process servo: cpu 64 does not exist"));
-        check("name = \"theta\"", "name = \"x\"", &(src_line(line_of("name = \"theta\"")) + "axis name \"x\" is used twice"));
-        check("start = 0.0", "start = 500.0", &(src_line(line_of("start = 0.0")) + "axis theta: start 500 lies outside"));
-        check("command_timeout = 0.1", "command_timeout = 0.001", &(src_line(line_of("command_timeout")) + "command_timeout = 0.001 s must be at least 3 servo periods"));
+        check(
+            "priority = 70",
+            "priority = 120",
+            &(src_line(prio) + "process servo: priority 120 must be 0..=99"),
+        );
+        check(
+            "priority = 70",
+            "priority = 70\ncpu = 64",
+            &(src_line(prio + 1) + "process servo: cpu 64 does not exist"),
+        );
+        check(
+            "name = \"theta\"",
+            "name = \"x\"",
+            &(src_line(line_of("name = \"theta\"")) + "axis name \"x\" is used twice"),
+        );
+        check(
+            "start = 0.0",
+            "start = 500.0",
+            &(src_line(line_of("start = 0.0")) + "axis theta: start 500 lies outside"),
+        );
+        check(
+            "command_timeout = 0.1",
+            "command_timeout = 0.001",
+            &(src_line(line_of("command_timeout"))
+                + "command_timeout = 0.001 s must be at least 3 servo periods"),
+        );
         let kp = line_of("kp = 5.45");
-        check("kp = 5.45", "kp = -5.45", &format!("cell.toml:{kp}:11: axis theta: servo kp = -5.45 must be 0 or more"));
-        check("[process.iobridge]\n", "[process.iobridgee]\n", "cell.toml:");
-        check("period_us = 4000\nphase_us = 600", "period_us = 4000\nphase_us = 6000", &(src_line(line_of("phase_us = 600")) + "process iobridge: phase_us must be smaller"));
+        check(
+            "kp = 5.45",
+            "kp = -5.45",
+            &format!("cell.toml:{kp}:11: axis theta: servo kp = -5.45 must be 0 or more"),
+        );
+        check(
+            "[process.iobridge]\n",
+            "[process.iobridgee]\n",
+            "cell.toml:",
+        );
+        check(
+            "period_us = 4000\nphase_us = 600",
+            "period_us = 4000\nphase_us = 6000",
+            &(src_line(line_of("phase_us = 600")) + "process iobridge: phase_us must be smaller"),
+        );
     }
 
     #[test]
     fn a_missing_file_is_named() {
-        let e = Config::load(Some(std::path::Path::new("/nonexistent/cell.toml"))).expect_err("missing");
-        assert!(e.to_string().starts_with("/nonexistent/cell.toml: cannot read"), "{e}");
+        let e = Config::load(Some(std::path::Path::new("/nonexistent/cell.toml")))
+            .expect_err("missing");
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent/cell.toml: cannot read"),
+            "{e}"
+        );
     }
 }

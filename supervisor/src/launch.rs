@@ -39,7 +39,10 @@ fn resolve(program: &str) -> PathBuf {
     if program.contains('/') {
         return PathBuf::from(program);
     }
-    if let Some(dir) = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf)) {
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|p| p.parent().map(Path::to_path_buf))
+    {
         let candidate = dir.join(program);
         if candidate.is_file() {
             return candidate;
@@ -51,12 +54,20 @@ fn resolve(program: &str) -> PathBuf {
 impl Children {
     /// No process yet.
     pub fn new(stop_timeout: Duration) -> Self {
-        Self { procs: Vec::new(), stop_timeout }
+        Self {
+            procs: Vec::new(),
+            stop_timeout,
+        }
     }
 
     /// Starts the process of `role` as configured. Children inherit stderr; their log level
     /// defaults to warnings (`RTC_LOG` overrides).
-    pub fn spawn(&mut self, cfg: &Config, role: Role, instance: &InstanceName) -> Result<u32, String> {
+    pub fn spawn(
+        &mut self,
+        cfg: &Config,
+        role: Role,
+        instance: &InstanceName,
+    ) -> Result<u32, String> {
         let command: Vec<String> = cfg
             .process
             .get(role)
@@ -66,15 +77,21 @@ impl Children {
             .collect();
         let program = resolve(&command[0]);
         let mut cmd = Command::new(&program);
-        cmd.args(&command[1..]).stdin(Stdio::null()).stdout(Stdio::null());
+        cmd.args(&command[1..])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
         if std::env::var_os("RTC_LOG").is_none() {
             cmd.env("RTC_LOG", "warn");
         }
-        let child = cmd.spawn().map_err(|e| {
-            format!("cannot start {} ({}): {e}", role.name(), program.display())
-        })?;
+        let child = cmd
+            .spawn()
+            .map_err(|e| format!("cannot start {} ({}): {e}", role.name(), program.display()))?;
         let pid = child.id();
-        self.procs.push(Running { role, command, child });
+        self.procs.push(Running {
+            role,
+            command,
+            child,
+        });
         Ok(pid)
     }
 
@@ -121,7 +138,10 @@ fn stop_one(p: &mut Running, timeout: Duration) -> Option<String> {
             _ => {
                 let _ = p.child.kill();
                 let _ = p.child.wait();
-                return Some(format!("did not stop within {:.1} s of SIGTERM and was killed", timeout.as_secs_f64()));
+                return Some(format!(
+                    "did not stop within {:.1} s of SIGTERM and was killed",
+                    timeout.as_secs_f64()
+                ));
             }
         }
     }

@@ -7,7 +7,10 @@ use supervisor::config::{Config, DEFAULT_TOML};
 use supervisor::run::{RunError, RunOptions, run};
 
 #[derive(Parser)]
-#[command(version, about = "Real-time cell supervisor: launches trajgen, servo, iobridge and the machine, runs motion programs")]
+#[command(
+    version,
+    about = "Real-time cell supervisor: launches trajgen, servo, iobridge and the machine, runs motion programs"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -50,7 +53,15 @@ fn main() -> ExitCode {
         }
         Cmd::CheckConfig { config } => match Config::load(config.as_deref()) {
             Ok(c) => {
-                println!("ok: {} axes ({})", c.axis.len(), c.axis.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", "));
+                println!(
+                    "ok: {} axes ({})",
+                    c.axis.len(),
+                    c.axis
+                        .iter()
+                        .map(|a| a.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
                 ExitCode::SUCCESS
             }
             Err(e) => {
@@ -58,8 +69,20 @@ fn main() -> ExitCode {
                 ExitCode::from(2)
             }
         },
-        Cmd::Run { program, config, instance, trace, json } => {
-            let opts = RunOptions { program, config, instance, trace, progress: true };
+        Cmd::Run {
+            program,
+            config,
+            instance,
+            trace,
+            json,
+        } => {
+            let opts = RunOptions {
+                program,
+                config,
+                instance,
+                trace,
+                progress: true,
+            };
             match run(&opts) {
                 Ok(report) => {
                     if json {
@@ -72,7 +95,10 @@ fn main() -> ExitCode {
                 Err(e) => {
                     eprintln!("error: {e}");
                     if json {
-                        println!("{}", serde_json::json!({"ok": false, "error": e.to_string()}));
+                        println!(
+                            "{}",
+                            serde_json::json!({"ok": false, "error": e.to_string()})
+                        );
                     }
                     ExitCode::from(match e {
                         RunError::Input(_) => 2,

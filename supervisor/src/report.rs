@@ -34,7 +34,14 @@ pub struct ProcessReport {
 
 impl ProcessReport {
     /// From the last status a process published.
-    pub fn new(role: Role, pid: u32, policy: u32, priority: i32, s: &ProcessStatusV1, cpu_s: Option<f64>) -> Self {
+    pub fn new(
+        role: Role,
+        pid: u32,
+        policy: u32,
+        priority: i32,
+        s: &ProcessStatusV1,
+        cpu_s: Option<f64>,
+    ) -> Self {
         Self {
             name: role.name().into(),
             pid,
@@ -133,9 +140,16 @@ impl Report {
     pub fn to_json(&self) -> Value {
         let mut procs = Map::new();
         for p in &self.processes {
-            procs.insert(p.name.clone(), serde_json::to_value(p).unwrap_or(Value::Null));
+            procs.insert(
+                p.name.clone(),
+                serde_json::to_value(p).unwrap_or(Value::Null),
+            );
         }
-        let periods: Map<String, Value> = self.periods_us.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+        let periods: Map<String, Value> = self
+            .periods_us
+            .iter()
+            .map(|(k, v)| (k.clone(), json!(v)))
+            .collect();
         json!({
             "ok": self.ok,
             "program": self.program,
@@ -176,7 +190,10 @@ impl Report {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        s += &format!("{} on {} (instance {}): done\n", self.program, self.cell, self.instance);
+        s += &format!(
+            "{} on {} (instance {}): done\n",
+            self.program, self.cell, self.instance
+        );
         s += &format!(
             "  motion time        {:.4} s measured, {:.4} s theoretical ({:+.2} ms; trajgen period {:.1} ms)\n",
             self.measured_s,
@@ -184,13 +201,24 @@ impl Report {
             self.difference_s() * 1e3,
             self.trajgen_period_s * 1e3
         );
-        s += &format!("  settled            {:.3} s after the last setpoint\n", self.settle_s);
+        s += &format!(
+            "  settled            {:.3} s after the last setpoint\n",
+            self.settle_s
+        );
         s += &format!("  final position     {}\n", ax(&self.final_position, 4));
-        s += &format!("  max following err  {}\n", ax(&self.max_following_error, 4));
+        s += &format!(
+            "  max following err  {}\n",
+            ax(&self.max_following_error, 4)
+        );
         if let Some((mean, max)) = self.iobridge_delay_us {
-            s += &format!("  fieldbus image age {mean:.0} µs mean, {max:.0} µs max (measurement to write)\n");
+            s += &format!(
+                "  fieldbus image age {mean:.0} µs mean, {max:.0} µs max (measurement to write)\n"
+            );
         }
-        s += &format!("  trace              {} setpoints, {} lost\n", self.setpoints, self.lost_setpoints);
+        s += &format!(
+            "  trace              {} setpoints, {} lost\n",
+            self.setpoints, self.lost_setpoints
+        );
         s += "  process    pid      policy       prio  period   cycles   overruns  max wake-up  max exec   cpu\n";
         for p in &self.processes {
             s += &format!(

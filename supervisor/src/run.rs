@@ -71,10 +71,19 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .map_err(|e| RunError::Input(format!("{}: cannot read: {e}", opts.program.display())))?;
     let program = motion_program::parse(&src, cfg.axis.len())
         .and_then(|p| p.check_limits(&cfg.axis_specs()).map(|()| p))
-        .map_err(|e| RunError::Input(format!("{}:{}:{}: {}", opts.program.display(), e.line, e.col, e.message)))?;
+        .map_err(|e| {
+            RunError::Input(format!(
+                "{}:{}:{}: {}",
+                opts.program.display(),
+                e.line,
+                e.col,
+                e.message
+            ))
+        })?;
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    signals::install().map_err(|e| RunError::Failed(format!("cannot install signal handlers: {e}")))?;
+    signals::install()
+        .map_err(|e| RunError::Failed(format!("cannot install signal handlers: {e}")))?;
 
     ipc::quiet_iceoryx2_log();
     let _ = ipc::remove_dead_nodes(&instance);
@@ -87,9 +96,14 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
 
     let mut session = Session::open(&cfg, instance)?;
     let outcome = session.drive(&cfg, &program, &src, opts);
-    let cpu: Vec<Option<f64>> = session.children.iter().map(|p| cpu_seconds(p.pid())).collect();
+    let cpu: Vec<Option<f64>> = session
+        .children
+        .iter()
+        .map(|p| cpu_seconds(p.pid()))
+        .collect();
     let pids: Vec<(Role, u32)> = session.children.iter().map(|p| (p.role, p.pid())).collect();
-    let sched: Vec<Option<(u32, i32)>> = pids.iter().map(|(_, pid)| sched_of(*pid as i32)).collect();
+    let sched: Vec<Option<(u32, i32)>> =
+        pids.iter().map(|(_, pid)| sched_of(*pid as i32)).collect();
     let stop_problems = session.children.stop_all();
     let statuses = session.statuses;
     drop(session);
@@ -99,16 +113,22 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     for (i, (role, pid)) in pids.iter().enumerate() {
         let status = statuses[role.index()].unwrap_or_default();
         let (policy, priority) = sched[i].unwrap_or((status.policy, status.priority));
-        report.processes.push(ProcessReport::new(*role, *pid, policy, priority, &status, cpu[i]));
+        report.processes.push(ProcessReport::new(
+            *role, *pid, policy, priority, &status, cpu[i],
+        ));
     }
     if let Some((role, why)) = stop_problems.first() {
         return Err(RunError::Failed(format!("{} {why}", role.name())));
     }
     if !leftovers.is_empty() {
-        return Err(RunError::Failed(format!("iceoryx2 resources left behind: {}", leftovers.join(", "))));
+        return Err(RunError::Failed(format!(
+            "iceoryx2 resources left behind: {}",
+            leftovers.join(", ")
+        )));
     }
     if let Some(path) = &opts.trace {
-        write_trace(path, &report).map_err(|e| RunError::Failed(format!("{}: {e}", path.display())))?;
+        write_trace(path, &report)
+            .map_err(|e| RunError::Failed(format!("{}: {e}", path.display())))?;
     }
     Ok(report)
 }
@@ -188,12 +208,17 @@ impl Session {
         let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
         let mut status_subs = Vec::new();
         for role in Role::ALL {
-            status_subs.push((role, Sub::new(&node, i, ServiceId::Status(role), 64).map_err(f)?));
+            status_subs.push((
+                role,
+                Sub::new(&node, i, ServiceId::Status(role), 64).map_err(f)?,
+            ));
         }
         config_pub.send(&cfg.to_shm());
         let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
         for role in Role::ALL {
-            children.spawn(cfg, role, &instance).map_err(RunError::Failed)?;
+            children
+                .spawn(cfg, role, &instance)
+                .map_err(RunError::Failed)?;
         }
         Ok(Self {
             instance,
@@ -210,18 +235,29 @@ impl Session {
     }
 
     /// Fails if a process exited or stopped cycling; refreshes the statuses.
-    fn check_health(&mut self, cfg: &Config, beats: &mut [(u64, Instant); 4]) -> Result<(), RunError> {
+    fn check_health(
+        &mut self,
+        cfg: &Config,
+        beats: &mut [(u64, Instant); 4],
+    ) -> Result<(), RunError> {
         if signals::stop_requested() {
             return Err(RunError::Interrupted);
         }
         if let Some((role, pid, status)) = self.children.exited() {
-            return Err(RunError::Failed(format!("{} (pid {pid}) exited unexpectedly: {status}", role.name())));
+            return Err(RunError::Failed(format!(
+                "{} (pid {pid}) exited unexpectedly: {status}",
+                role.name()
+            )));
         }
         self.config_pub.update_connections();
         for (role, sub) in &self.status_subs {
             if let Some(s) = sub.latest() {
                 if ProcState::from_u32(s.state) == Some(ProcState::Fault) {
-                    return Err(RunError::Failed(format!("{} reports fault {}", role.name(), s.fault)));
+                    return Err(RunError::Failed(format!(
+                        "{} reports fault {}",
+                        role.name(),
+                        s.fault
+                    )));
                 }
                 let b = &mut beats[role.index()];
                 if s.stats.cycles != b.0 {
@@ -244,7 +280,13 @@ impl Session {
         Ok(())
     }
 
-    fn drive(&mut self, cfg: &Config, program: &Program, src: &str, opts: &RunOptions) -> Result<Report, RunError> {
+    fn drive(
+        &mut self,
+        cfg: &Config,
+        program: &Program,
+        src: &str,
+        opts: &RunOptions,
+    ) -> Result<Report, RunError> {
         let n = cfg.axis.len();
         let mut beats = [(0u64, Instant::now()); 4];
 
@@ -261,15 +303,19 @@ impl Session {
                 last_servo = Some(s);
             }
             let cyclic = |r: Role| {
-                self.statuses[r.index()].is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
+                self.statuses[r.index()]
+                    .is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
             };
             let enabled = last_servo.is_some_and(|s| s.status & st::ENABLED != 0);
             if Role::ALL.iter().all(|r| cyclic(*r)) && last_sp.is_some() && enabled {
                 break;
             }
             if start.elapsed() > startup {
-                let mut missing: Vec<String> =
-                    Role::ALL.iter().filter(|r| !cyclic(**r)).map(|r| format!("{} is not cyclic", r.name())).collect();
+                let mut missing: Vec<String> = Role::ALL
+                    .iter()
+                    .filter(|r| !cyclic(**r))
+                    .map(|r| format!("{} is not cyclic", r.name()))
+                    .collect();
                 if last_sp.is_none() {
                     missing.push("trajgen publishes no setpoint".into());
                 }
@@ -287,7 +333,8 @@ impl Session {
         let start_sp = last_sp.expect("checked above");
         let start_pos: Vec<f64> = start_sp.position[..n].to_vec();
         let vmax: Vec<f64> = cfg.axis.iter().map(|a| a.vmax).collect();
-        let predicted = motion_program::theoretical_time(program, &start_pos, &vmax, cfg.motion.t_acc);
+        let predicted =
+            motion_program::theoretical_time(program, &start_pos, &vmax, cfg.motion.t_acc);
 
         // Motion.
         let program_id = (std::process::id() ^ (start_sp.seq as u32).rotate_left(16)) | 1;
@@ -335,7 +382,9 @@ impl Session {
                 let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
                 for c in commands.iter().skip(sent).take(credit) {
                     if !self.command_pub.send(c) {
-                        return Err(RunError::Failed("trajgen's command service refused a command".into()));
+                        return Err(RunError::Failed(
+                            "trajgen's command service refused a command".into(),
+                        ));
                     }
                     sent += 1;
                 }
@@ -358,18 +407,26 @@ impl Session {
                     )));
                 }
                 if s.status & st::DRIVE_FAULT != 0 {
-                    return Err(RunError::Failed("the drives report a fault (command timeout: servo stopped commanding)".into()));
+                    return Err(RunError::Failed(
+                        "the drives report a fault (command timeout: servo stopped commanding)"
+                            .into(),
+                    ));
                 }
                 if s.status & st::SETPOINT_JUMP != 0 {
-                    return Err(RunError::Failed("servo refused a setpoint as a jump".into()));
+                    return Err(RunError::Failed(
+                        "servo refused a setpoint as a jump".into(),
+                    ));
                 }
                 servo_log.push(s);
                 if let Some(d) = &done {
-                    let inside = (0..n).all(|i| s.following_error[i].abs() <= cfg.axis[i].in_position);
+                    let inside =
+                        (0..n).all(|i| s.following_error[i].abs() <= cfg.axis[i].in_position);
                     let used_final = s.setpoint_seq >= d.seq;
                     match (inside && used_final, in_pos_since) {
                         (true, None) => in_pos_since = Some(s.stamp_ns),
-                        (true, Some(t0)) if s.stamp_ns - t0 >= settle_ns => settled_at = Some((t0, s)),
+                        (true, Some(t0)) if s.stamp_ns - t0 >= settle_ns => {
+                            settled_at = Some((t0, s))
+                        }
                         (false, _) => in_pos_since = None,
                         _ => {}
                     }
@@ -386,7 +443,15 @@ impl Session {
             {
                 let s = servo_log.last().copied();
                 let errs = s.map_or(String::new(), |s| {
-                    (0..n).map(|i| format!("{} {:.4} {}", cfg.axis[i].name, s.following_error[i], cfg.axis[i].unit)).collect::<Vec<_>>().join(", ")
+                    (0..n)
+                        .map(|i| {
+                            format!(
+                                "{} {:.4} {}",
+                                cfg.axis[i].name, s.following_error[i], cfg.axis[i].unit
+                            )
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 });
                 return Err(RunError::Failed(format!(
                     "the axes did not settle within {} s of the end of the motion (following error {errs})",
@@ -401,12 +466,14 @@ impl Session {
 
         let done = done.expect("settling needs done");
         let (settle_start, final_state) = settled_at.expect("loop exit");
-        let motion_servo: Vec<&ServoStateV1> =
-            servo_log.iter().filter(|s| s.stamp_ns <= final_state.stamp_ns).collect();
+        let motion_servo: Vec<&ServoStateV1> = servo_log
+            .iter()
+            .filter(|s| s.stamp_ns <= final_state.stamp_ns)
+            .collect();
         let mut max_fe = [0.0f64; MAX_AXES];
         for s in &motion_servo {
-            for i in 0..n {
-                max_fe[i] = max_fe[i].max(s.following_error[i].abs());
+            for (m, e) in max_fe.iter_mut().zip(&s.following_error[..n]) {
+                *m = m.max(e.abs());
             }
         }
         let trace = trace_rows(&rows, &servo_log);
@@ -421,20 +488,28 @@ impl Session {
             vmax,
             t_acc: cfg.motion.t_acc,
             start: start_pos,
-            periods_us: Role::ALL.iter().map(|r| (r.name().to_string(), cfg.process.get(*r).period_us)).collect(),
+            periods_us: Role::ALL
+                .iter()
+                .map(|r| (r.name().to_string(), cfg.process.get(*r).period_us))
+                .collect(),
             theoretical_s: done.theoretical_s,
             predicted_s: predicted,
             measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9,
             trajgen_period_s: cfg.process.trajgen.period_us as f64 * 1e-6,
             settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
             final_position: final_state.act_position[..n].to_vec(),
-            final_error: last_target.map_or(vec![0.0; n], |t| (0..n).map(|i| final_state.act_position[i] - t[i]).collect()),
+            final_error: last_target.map_or(vec![0.0; n], |t| {
+                (0..n).map(|i| final_state.act_position[i] - t[i]).collect()
+            }),
             max_following_error: max_fe[..n].to_vec(),
             setpoints: rows.len(),
             lost_setpoints: lost,
             starved: done.starved,
             iobridge_delay_us: if images.0 > 0 {
-                Some((images.1 as f64 / images.0 as f64 * 1e-3, images.2 as f64 * 1e-3))
+                Some((
+                    images.1 as f64 / images.0 as f64 * 1e-3,
+                    images.2 as f64 * 1e-3,
+                ))
             } else {
                 None
             },
@@ -453,7 +528,12 @@ fn trajgen_fault_text(sp: &SetpointV1, program: &std::path::Path) -> String {
         trajgen_fault::SEQUENCE_GAP => "a command was lost (sequence gap)",
         _ => "unknown fault",
     };
-    format!("trajgen refused {}:{}: {why} (fault {}); the axes stopped", program.display(), sp.fault_line, sp.fault)
+    format!(
+        "trajgen refused {}:{}: {why} (fault {}); the axes stopped",
+        program.display(),
+        sp.fault_line,
+        sp.fault
+    )
 }
 
 /// One row per setpoint: its command, and the measured position at the servo cycle that used
@@ -462,14 +542,23 @@ fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV1]) -> Vec<TraceRow> {
     rows.iter()
         .map(|sp| {
             let idx = servo.partition_point(|s| s.setpoint_seq < sp.seq);
-            let act = servo.get(idx).or(servo.last()).map_or(sp.position, |s| s.act_position);
-            TraceRow { t_s: sp.motion_time_s, cmd: sp.position, act }
+            let act = servo
+                .get(idx)
+                .or(servo.last())
+                .map_or(sp.position, |s| s.act_position);
+            TraceRow {
+                t_s: sp.motion_time_s,
+                cmd: sp.position,
+                act,
+            }
         })
         .collect()
 }
 
 fn lost_setpoints(rows: &[SetpointV1]) -> u64 {
-    rows.windows(2).map(|w| w[1].seq.saturating_sub(w[0].seq + 1)).sum()
+    rows.windows(2)
+        .map(|w| w[1].seq.saturating_sub(w[0].seq + 1))
+        .sum()
 }
 
 fn write_trace(path: &std::path::Path, report: &Report) -> std::io::Result<()> {
@@ -503,17 +592,32 @@ struct Progress<'a> {
 
 impl<'a> Progress<'a> {
     fn new(on: bool, total: f64, src: &'a str) -> Self {
-        Self { on, tty: std::io::stderr().is_terminal(), total, lines: src.lines().collect(), last: None }
+        Self {
+            on,
+            tty: std::io::stderr().is_terminal(),
+            total,
+            lines: src.lines().collect(),
+            last: None,
+        }
     }
 
     fn show(&mut self, sp: &SetpointV1) {
         let every = if self.tty { 0.2 } else { 1.0 };
-        if !self.on || sp.state != MotionState::Moving as u32 || self.last.is_some_and(|t| t.elapsed().as_secs_f64() < every) {
+        if !self.on
+            || sp.state != MotionState::Moving as u32
+            || self.last.is_some_and(|t| t.elapsed().as_secs_f64() < every)
+        {
             return;
         }
         self.last = Some(Instant::now());
-        let text = self.lines.get(sp.line.saturating_sub(1) as usize).map_or("", |l| l.split("//").next().unwrap_or("").trim());
-        let msg = format!("motion {:6.2} / {:.2} s   line {}: {}", sp.motion_time_s, self.total, sp.line, text);
+        let text = self
+            .lines
+            .get(sp.line.saturating_sub(1) as usize)
+            .map_or("", |l| l.split("//").next().unwrap_or("").trim());
+        let msg = format!(
+            "motion {:6.2} / {:.2} s   line {}: {}",
+            sp.motion_time_s, self.total, sp.line, text
+        );
         if self.tty {
             eprint!("\r\x1b[2K{msg}");
         } else {

@@ -13,7 +13,11 @@ pub fn bin_dir() -> &'static Path {
     DIR.get_or_init(|| {
         let exe = std::env::current_exe().expect("test executable path");
         // target/<profile>/deps/<test> -> target/<profile>
-        let dir = exe.parent().and_then(Path::parent).expect("target dir").to_path_buf();
+        let dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("target dir")
+            .to_path_buf();
         let release = dir.file_name().is_some_and(|n| n == "release");
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
@@ -42,7 +46,11 @@ pub fn instance(test: &str) -> String {
 /// Runs `cmd`, killing it if it takes longer than `watchdog` (a stuck test fails; nothing
 /// here bounds how fast anything must be).
 pub fn run_with_watchdog(cmd: &mut Command, watchdog: Duration) -> Output {
-    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spawn");
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
     let start = Instant::now();
     loop {
         if child.try_wait().expect("wait").is_some() {
@@ -65,7 +73,11 @@ pub fn run_with_watchdog(cmd: &mut Command, watchdog: Duration) -> Output {
 pub fn leftovers(instance: &str) -> Vec<String> {
     let mut left = Vec::new();
     let prefix = format!("iox2_{instance}_");
-    for e in std::fs::read_dir("/dev/shm").into_iter().flatten().flatten() {
+    for e in std::fs::read_dir("/dev/shm")
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
         let name = e.file_name().to_string_lossy().to_string();
         if name.starts_with(&prefix) {
             left.push(format!("/dev/shm/{name}"));
@@ -80,7 +92,10 @@ pub fn leftovers(instance: &str) -> Vec<String> {
             }
         }
     }
-    walk(&PathBuf::from(format!("/tmp/iceoryx2/{instance}")), &mut left);
+    walk(
+        &PathBuf::from(format!("/tmp/iceoryx2/{instance}")),
+        &mut left,
+    );
     left
 }
 
@@ -94,8 +109,12 @@ pub fn assert_clean(instance: &str) {
 pub fn pids_with(needles: &[&str]) -> Vec<i32> {
     let mut pids = Vec::new();
     for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
-        let Ok(pid) = e.file_name().to_string_lossy().parse::<i32>() else { continue };
-        let Ok(cmdline) = std::fs::read(e.path().join("cmdline")) else { continue };
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<i32>() else {
+            continue;
+        };
+        let Ok(cmdline) = std::fs::read(e.path().join("cmdline")) else {
+            continue;
+        };
         let cmdline = String::from_utf8_lossy(&cmdline).replace('\0', " ");
         if needles.iter().all(|n| cmdline.contains(n)) {
             pids.push(pid);
@@ -108,6 +127,9 @@ pub fn pids_with(needles: &[&str]) -> Vec<i32> {
 pub fn json_of(out: &Output) -> serde_json::Value {
     let stdout = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(stdout.trim()).unwrap_or_else(|e| {
-        panic!("stdout is not JSON ({e}):\n{stdout}\nstderr:\n{}", String::from_utf8_lossy(&out.stderr))
+        panic!(
+            "stdout is not JSON ({e}):\n{stdout}\nstderr:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        )
     })
 }

@@ -101,13 +101,25 @@ mod tests {
 
     /// The segment following `s` towards `d`, per seed 003: A = X(T1 - t_acc), B = C.
     fn next(s: &Segment, d: Axes, t1: f64) -> Segment {
-        Segment { a: s.eval(s.transition_time()).0, b: s.c, c: d, t1, t_acc: s.t_acc }
+        Segment {
+            a: s.eval(s.transition_time()).0,
+            b: s.c,
+            c: d,
+            t1,
+            t_acc: s.t_acc,
+        }
     }
 
     #[test]
     fn from_rest_the_blend_starts_at_rest_and_joins_the_line() {
         let p = axes(&[40.0, 40.0]);
-        let s = Segment { a: p, b: p, c: axes(&[140.0, 40.0]), t1: 6.25, t_acc: 0.5 };
+        let s = Segment {
+            a: p,
+            b: p,
+            c: axes(&[140.0, 40.0]),
+            t1: 6.25,
+            t_acc: 0.5,
+        };
         let (q0, v0) = s.eval(-0.5);
         assert!(close(&q0, &p, 1e-12) && close(&v0, &Axes::zeros(), 1e-12));
         // At t = t_acc the blend meets the line B + ΔC t / T1 with its velocity ΔC / T1.

@@ -73,7 +73,11 @@ impl Queue {
             target: [0.0; MAX_AXES],
             user_time_s: 0.0,
         };
-        Self { items: [empty; QUEUE_CAP], head: 0, len: 0 }
+        Self {
+            items: [empty; QUEUE_CAP],
+            head: 0,
+            len: 0,
+        }
     }
     fn push(&mut self, c: MotionCommandV1) -> bool {
         if self.len == QUEUE_CAP {
@@ -235,7 +239,13 @@ impl Generator {
 
     fn time_between(&self, b: &Axes, c: &Axes, user: f64) -> f64 {
         let n = self.p.axes;
-        segment_time(&b.as_slice()[..n], &c.as_slice()[..n], &self.p.vmax[..n], self.p.t_acc, user)
+        segment_time(
+            &b.as_slice()[..n],
+            &c.as_slice()[..n],
+            &self.p.vmax[..n],
+            self.p.t_acc,
+            user,
+        )
     }
 
     /// Starts a segment towards `c` from rest.
@@ -251,7 +261,17 @@ impl Generator {
         let t1 = self.time_between(&self.rest, &c, cmd.user_time_s);
         let origin = self.motion_time(now_ns) + self.p.t_acc;
         let rest = self.rest;
-        self.begin(Segment { a: rest, b: rest, c, t1, t_acc: self.p.t_acc }, origin, cmd.line);
+        self.begin(
+            Segment {
+                a: rest,
+                b: rest,
+                c,
+                t1,
+                t_acc: self.p.t_acc,
+            },
+            origin,
+            cmd.line,
+        );
     }
 
     fn motion_time(&self, now_ns: u64) -> f64 {
@@ -369,14 +389,30 @@ impl Generator {
         let a = seg.eval(seg.transition_time()).0;
         let origin = self.origin_s + seg.t1;
         let t_acc = self.p.t_acc;
-        let stop = Segment { a, b: seg.c, c: seg.c, t1: 2.0 * t_acc, t_acc };
+        let stop = Segment {
+            a,
+            b: seg.c,
+            c: seg.c,
+            t1: 2.0 * t_acc,
+            t_acc,
+        };
         let next = self.queue.front().copied();
         match next.map(|c| (c, CommandKind::from_u32(c.kind))) {
             Some((cmd, Some(CommandKind::Move))) => {
                 self.queue.pop();
                 let c = self.target_of(&cmd);
                 let t1 = self.time_between(&seg.c, &c, cmd.user_time_s);
-                self.begin(Segment { a, b: seg.c, c, t1, t_acc }, origin, cmd.line);
+                self.begin(
+                    Segment {
+                        a,
+                        b: seg.c,
+                        c,
+                        t1,
+                        t_acc,
+                    },
+                    origin,
+                    cmd.line,
+                );
             }
             Some((cmd, Some(CommandKind::Stop))) => {
                 self.queue.pop();

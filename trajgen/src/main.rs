@@ -35,7 +35,10 @@ impl Task for Trajgen {
     /// IPC calls, then [`Generator::step`]; nothing else.
     fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock) {
         // Servo's commanded position, once servo has drive feedback.
-        let servo = self.servo.latest().filter(|s| s.status & servo_status::NO_FEEDBACK == 0);
+        let servo = self
+            .servo
+            .latest()
+            .filter(|s| s.status & servo_status::NO_FEEDBACK == 0);
         let generator = match (&mut self.generator, servo) {
             (Some(g), Some(s)) if s.status & servo_status::SETPOINT_JUMP != 0 => {
                 // Servo refuses our setpoint as a jump (it restarted, or the machine moved):
@@ -44,7 +47,9 @@ impl Task for Trajgen {
                 g
             }
             (Some(g), _) => g,
-            (None, Some(s)) => self.generator.insert(Generator::new(self.params, &s.cmd_position)),
+            (None, Some(s)) => self
+                .generator
+                .insert(Generator::new(self.params, &s.cmd_position)),
             // No servo yet: nothing to start from, publish nothing.
             (None, None) => return,
         };

@@ -40,8 +40,13 @@ fn loaded(src: &str) -> Generator {
 /// local time 0 lies T1 after the previous one's; (motion time of local 0, segment).
 fn offline_triangle() -> Vec<(f64, Segment)> {
     let p = params();
-    let pts: [[f64; 3]; 5] =
-        [[40.0, 40.0, 0.0], [140.0, 40.0, 0.0], [90.0, 126.0, 0.0], [40.0, 40.0, 0.0], [40.0, 40.0, 0.0]];
+    let pts: [[f64; 3]; 5] = [
+        [40.0, 40.0, 0.0],
+        [140.0, 40.0, 0.0],
+        [90.0, 126.0, 0.0],
+        [40.0, 40.0, 0.0],
+        [40.0, 40.0, 0.0],
+    ];
     let ax = |v: &[f64; 3]| {
         let mut a = Axes::zeros();
         a.as_mut_slice()[..3].copy_from_slice(v);
@@ -53,7 +58,13 @@ fn offline_triangle() -> Vec<(f64, Segment)> {
     let mut origin = p.t_acc;
     for c in &pts {
         let t1 = motion_program::segment_time(&b.as_slice()[..3], c, &p.vmax[..3], p.t_acc, 0.0);
-        let s = Segment { a, b, c: ax(c), t1, t_acc: p.t_acc };
+        let s = Segment {
+            a,
+            b,
+            c: ax(c),
+            t1,
+            t_acc: p.t_acc,
+        };
         out.push((origin, s));
         a = s.eval(s.transition_time()).0;
         b = s.c;
@@ -110,9 +121,16 @@ fn triangle_setpoints_equal_the_formula_at_their_time() {
     }
     let last = sps.last().expect("setpoints");
     assert_eq!(last.state, MotionState::Done as u32);
-    assert!((last.theoretical_s - 19.10).abs() < 1e-9, "{}", last.theoretical_s);
+    assert!(
+        (last.theoretical_s - 19.10).abs() < 1e-9,
+        "{}",
+        last.theoretical_s
+    );
     let measured = (last.motion_end_ns - last.motion_start_ns) as f64 * 1e-9;
-    assert!(measured >= 19.10 - 1e-9 && measured < 19.10 + 0.004, "measured {measured}");
+    assert!(
+        (19.10 - 1e-9..19.10 + 0.004).contains(&measured),
+        "measured {measured}"
+    );
     assert_eq!(&last.position[..3], &START[..]);
     assert_eq!(&last.velocity[..3], &[0.0; 3][..]);
     // The program's line numbers are reported as the motion goes.
@@ -139,13 +157,21 @@ fn late_cycles_shorten_nothing_and_lengthen_nothing() {
     let sps = run(&mut g, times.into_iter());
     for sp in sps.iter().filter(|s| s.state == MotionState::Moving as u32) {
         let (q, _) = formula_at(&plan, (sp.stamp_ns - T0) as f64 * 1e-9);
-        assert_close(&sp.position[..3], &q.as_slice()[..3], 1e-9, "position after late cycles");
+        assert_close(
+            &sp.position[..3],
+            &q.as_slice()[..3],
+            1e-9,
+            "position after late cycles",
+        );
     }
     let last = sps.last().expect("setpoints");
     assert!((last.theoretical_s - 19.10).abs() < 1e-9);
     let measured = (last.motion_end_ns - T0) as f64 * 1e-9;
     // It ends at the first wake-up at or after 19.10 s, whatever happened before.
-    assert!(measured >= 19.10 - 1e-9 && measured <= 19.10 + 0.010, "{measured}");
+    assert!(
+        (19.10 - 1e-9..=19.10 + 0.010).contains(&measured),
+        "{measured}"
+    );
 }
 
 #[test]
@@ -173,14 +199,22 @@ fn waking_at_the_requested_transitions_ends_exactly_on_time() {
 
 #[test]
 fn theoretical_time_of_the_generator_matches_the_planner() {
-    for src in [TRIANGLE, "MOVE(100,100,90)\nEND", "MOVE(50,50,0, T=9)\nMOVE(60,50,0)\nMOVE(60,50,0)\nEND"] {
+    for src in [
+        TRIANGLE,
+        "MOVE(100,100,90)\nEND",
+        "MOVE(50,50,0, T=9)\nMOVE(60,50,0)\nMOVE(60,50,0)\nEND",
+    ] {
         let mut g = loaded(src);
         let sps = run(&mut g, (0..).map(|k| T0 + k * 1_000_000));
         let prog = parse(src, 3).expect("parses");
         let expected = theoretical_time(&prog, &START, &params().vmax[..3], 0.525);
         let last = sps.last().expect("setpoints");
         assert_eq!(last.state, MotionState::Done as u32, "{src}");
-        assert!((last.theoretical_s - expected).abs() < 1e-9, "{src}: {} vs {expected}", last.theoretical_s);
+        assert!(
+            (last.theoretical_s - expected).abs() < 1e-9,
+            "{src}: {} vs {expected}",
+            last.theoretical_s
+        );
     }
 }
 
@@ -220,7 +254,12 @@ fn a_repeated_target_stops_exactly_on_the_point() {
     // At the instant the repeated-target segment ends the axes are on the point and at
     // rest (to rounding: the quartic's velocity there is O(1e-29)).
     let sp = at_rest.expect("sampled");
-    assert_close(&sp.position[..3], &[100.0, 40.0, 0.0], 1e-12, "position at the point");
+    assert_close(
+        &sp.position[..3],
+        &[100.0, 40.0, 0.0],
+        1e-12,
+        "position at the point",
+    );
     assert_close(&sp.velocity[..3], &[0.0; 3], 1e-12, "velocity at the point");
 }
 
@@ -251,8 +290,18 @@ fn refused_commands_fault_and_nothing_moves_beyond_the_current_target() {
     g.push_command(&cmds[1]);
     let sps = run(&mut g, (1000..40_000).map(|k| T0 + k * 1_000_000));
     let sp = sps.last().expect("setpoints");
-    assert_eq!((sp.fault, sp.state), (trajgen_fault::TARGET_OUT_OF_LIMITS, MotionState::Fault as u32));
-    assert_eq!(&sp.position[..3], &[100.0, 40.0, 0.0][..], "stopped on the last good target");
+    assert_eq!(
+        (sp.fault, sp.state),
+        (
+            trajgen_fault::TARGET_OUT_OF_LIMITS,
+            MotionState::Fault as u32
+        )
+    );
+    assert_eq!(
+        &sp.position[..3],
+        &[100.0, 40.0, 0.0][..],
+        "stopped on the last good target"
+    );
     assert_eq!(sp.starved, 0, "a fault stop is not starvation");
 
     let mut cmds = commands("MOVE(100,40,0)\nEND");

@@ -25,8 +25,12 @@ fn scratch(test: &str, name: &str, content: &str) -> PathBuf {
 
 /// Checks a successful `--json` run: on time, on target, every process reported.
 fn check_run(j: &serde_json::Value, target: [f64; 3]) {
-    let f = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} missing in {j}"));
-    let (measured, theoretical, period) = (f("measured_s"), f("theoretical_s"), f("trajgen_period_s"));
+    let f = |k: &str| {
+        j[k].as_f64()
+            .unwrap_or_else(|| panic!("{k} missing in {j}"))
+    };
+    let (measured, theoretical, period) =
+        (f("measured_s"), f("theoretical_s"), f("trajgen_period_s"));
     assert!((f("predicted_s") - theoretical).abs() < 1e-9, "{j}");
     // The seed's bar: the measured motion time equals the theoretical one, within one
     // trajgen period (never shorter: the last setpoint is at or after the end).
@@ -41,7 +45,10 @@ fn check_run(j: &serde_json::Value, target: [f64; 3]) {
     }
     for p in ["trajgen", "servo", "iobridge", "machine"] {
         let proc_ = &j["processes"][p];
-        assert!(proc_["cycles"].as_u64().expect("cycles") > 0, "{p}: {proc_}");
+        assert!(
+            proc_["cycles"].as_u64().expect("cycles") > 0,
+            "{p}: {proc_}"
+        );
         assert!(proc_["pid"].as_u64().is_some());
         assert!(proc_["cpu_s"].as_f64().is_some(), "{p}: {proc_}");
     }
@@ -59,29 +66,49 @@ fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
             .arg(examples().join("triangle.prog")),
         WATCHDOG,
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let j = json_of(&out);
-    assert!((j["theoretical_s"].as_f64().expect("t") - 19.10).abs() < 1e-9, "{j}");
+    assert!(
+        (j["theoretical_s"].as_f64().expect("t") - 19.10).abs() < 1e-9,
+        "{j}"
+    );
     check_run(&j, [40.0, 40.0, 0.0]);
     assert_eq!(j["t_acc"].as_f64(), Some(0.525));
     assert_eq!(j["vmax"]["x"].as_f64(), Some(16.0));
     assert_eq!(j["periods_us"]["servo"].as_u64(), Some(1000));
-    assert_eq!(j["processes"]["trajgen"]["period_us"].as_f64(), Some(4000.0));
+    assert_eq!(
+        j["processes"]["trajgen"]["period_us"].as_f64(),
+        Some(4000.0)
+    );
 
     // The trace: a header, one row per setpoint, t_s rising from 0 to the measured time.
     let csv = std::fs::read_to_string(&trace).expect("trace written");
     let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some("t_s,cmd_x,cmd_y,cmd_theta,act_x,act_y,act_theta"));
-    let rows: Vec<Vec<f64>> =
-        lines.map(|l| l.split(',').map(|v| v.parse().expect("number")).collect()).collect();
-    assert_eq!(rows.len() as u64, j["setpoints"].as_u64().expect("setpoints"));
+    assert_eq!(
+        lines.next(),
+        Some("t_s,cmd_x,cmd_y,cmd_theta,act_x,act_y,act_theta")
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
+        .collect();
+    assert_eq!(
+        rows.len() as u64,
+        j["setpoints"].as_u64().expect("setpoints")
+    );
     assert_eq!(rows[0][0], 0.0);
     assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
     // The triangle's corner (140, 40) is blended: x passes near it, never beyond 140.
     let max_x = rows.iter().map(|r| r[1]).fold(f64::MIN, f64::max);
     assert!(max_x < 140.0 && max_x > 135.0, "{max_x}");
     // The machine followed: measured within the following error limit of commanded.
-    assert!(rows.iter().all(|r| (r[1] - r[4]).abs() < 1.0 && (r[2] - r[5]).abs() < 1.0));
+    assert!(
+        rows.iter()
+            .all(|r| (r[1] - r[4]).abs() < 1.0 && (r[2] - r[5]).abs() < 1.0)
+    );
     let _ = std::fs::remove_file(&trace);
     assert_clean(&inst);
 }
@@ -103,13 +130,26 @@ fn motion_time_holds_with_both_cores_loaded() {
             })
         })
         .collect();
-    let prog = scratch("loaded", "square.prog", "MOVE(140,40,0)\nMOVE(140,120,90)\nMOVE(40,120,0)\nMOVE(40,40,0)\nSTOP\nEND\n");
-    let out = run_with_watchdog(supervisor().args(["run", "--json", "--instance", &inst]).arg(&prog), WATCHDOG);
+    let prog = scratch(
+        "loaded",
+        "square.prog",
+        "MOVE(140,40,0)\nMOVE(140,120,90)\nMOVE(40,120,0)\nMOVE(40,40,0)\nSTOP\nEND\n",
+    );
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--json", "--instance", &inst])
+            .arg(&prog),
+        WATCHDOG,
+    );
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     for h in hogs {
         let _ = h.join();
     }
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     check_run(&json_of(&out), [40.0, 40.0, 0.0]);
     assert_clean(&inst);
 }
@@ -118,11 +158,20 @@ fn motion_time_holds_with_both_cores_loaded() {
 fn a_program_error_names_line_and_column_and_starts_nothing() {
     let inst = instance("badprog");
     let prog = scratch("badprog", "bad.prog", "MOVE(40,40,0)\nMOVE(140,40)\nEND\n");
-    let out = run_with_watchdog(supervisor().args(["run", "--instance", &inst]).arg(&prog), WATCHDOG);
+    let out = run_with_watchdog(
+        supervisor().args(["run", "--instance", &inst]).arg(&prog),
+        WATCHDOG,
+    );
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("bad.prog:2:12: MOVE has 2 coordinate(s), the cell has 3 axes"), "{err}");
-    assert!(pids_with(&["--instance", &inst]).is_empty(), "a process was started");
+    assert!(
+        err.contains("bad.prog:2:12: MOVE has 2 coordinate(s), the cell has 3 axes"),
+        "{err}"
+    );
+    assert!(
+        pids_with(&["--instance", &inst]).is_empty(),
+        "a process was started"
+    );
     assert_clean(&inst);
 }
 
@@ -130,10 +179,16 @@ fn a_program_error_names_line_and_column_and_starts_nothing() {
 fn a_target_outside_the_limits_is_refused_before_anything_moves() {
     let inst = instance("limits");
     let prog = scratch("limits", "far.prog", "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n");
-    let out = run_with_watchdog(supervisor().args(["run", "--instance", &inst]).arg(&prog), WATCHDOG);
+    let out = run_with_watchdog(
+        supervisor().args(["run", "--instance", &inst]).arg(&prog),
+        WATCHDOG,
+    );
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("far.prog:2:9: y = 400 mm is outside the axis limits 0 .. 150 mm"), "{err}");
+    assert!(
+        err.contains("far.prog:2:9: y = 400 mm is outside the axis limits 0 .. 150 mm"),
+        "{err}"
+    );
     assert_clean(&inst);
 }
 
@@ -141,15 +196,29 @@ fn a_target_outside_the_limits_is_refused_before_anything_moves() {
 fn a_bad_config_names_file_line_and_reason() {
     let inst = instance("badcfg");
     let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
-    let line = default.lines().position(|l| l.starts_with("t_acc")).expect("t_acc") + 1;
-    let cfg = scratch("badcfg", "cell.toml", &default.replacen("t_acc = 0.525", "t_acc = 0.525\nt_dec = 1", 1));
+    let line = default
+        .lines()
+        .position(|l| l.starts_with("t_acc"))
+        .expect("t_acc")
+        + 1;
+    let cfg = scratch(
+        "badcfg",
+        "cell.toml",
+        &default.replacen("t_acc = 0.525", "t_acc = 0.525\nt_dec = 1", 1),
+    );
     let out = run_with_watchdog(
-        supervisor().args(["run", "--instance", &inst, "--config"]).arg(&cfg).arg(examples().join("triangle.prog")),
+        supervisor()
+            .args(["run", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(examples().join("triangle.prog")),
         WATCHDOG,
     );
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains(&format!("cell.toml:{}:1: unknown field `t_dec`", line + 1)), "{err}");
+    assert!(
+        err.contains(&format!("cell.toml:{}:1: unknown field `t_dec`", line + 1)),
+        "{err}"
+    );
     assert_clean(&inst);
 }
 
@@ -163,11 +232,15 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
         "command = [\"sh\", \"-c\", \"exec {} --instance {{instance}}\"]",
         bin("iobridge").display()
     );
-    let cfg = scratch("kill", "cell.toml", &default.replacen(
-        "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
-        &wrapped,
-        1,
-    ));
+    let cfg = scratch(
+        "kill",
+        "cell.toml",
+        &default.replacen(
+            "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
+            &wrapped,
+            1,
+        ),
+    );
     let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
     let mut child = supervisor()
         .args(["run", "--instance", &inst, "--config"])
@@ -193,14 +266,23 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
     let out = {
         let start = std::time::Instant::now();
         while child.try_wait().expect("wait").is_none() {
-            assert!(start.elapsed() < WATCHDOG, "supervisor stuck after servo died");
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "supervisor stuck after servo died"
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
         child.wait_with_output().expect("output")
     };
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains(&format!("servo (pid {}) exited unexpectedly", servo[0])), "{err}");
-    assert!(pids_with(&["--instance", &inst]).is_empty(), "processes left running");
+    assert!(
+        err.contains(&format!("servo (pid {}) exited unexpectedly", servo[0])),
+        "{err}"
+    );
+    assert!(
+        pids_with(&["--instance", &inst]).is_empty(),
+        "processes left running"
+    );
     assert_clean(&inst);
 }

@@ -15,7 +15,8 @@ fn the_default_gains_follow_the_triangle_and_settle() {
     let mut servo = Controller::new(ServoParams::from_cell(&cell));
     let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
     let mut generator = Generator::new(Params::from_cell(&cell), &start);
-    let prog = motion_program::parse(include_str!("../../../examples/triangle.prog"), 3).expect("parses");
+    let prog =
+        motion_program::parse(include_str!("../../../examples/triangle.prog"), 3).expect("parses");
     for c in prog.to_commands(1, 1) {
         generator.push_command(&c);
     }
@@ -37,10 +38,15 @@ fn the_default_gains_follow_the_triangle_and_settle() {
         let (cmd, state) = servo.cycle(now, fresh.as_ref(), fb.as_ref());
         fb = Some(machine.cycle(now + ms / 2, Some(&cmd)));
         if k > 10 {
-            for i in 0..3 {
-                max_fe[i] = max_fe[i].max(state.following_error[i].abs());
+            for (m, e) in max_fe.iter_mut().zip(&state.following_error) {
+                *m = m.max(e.abs());
             }
-            assert_eq!(state.status & !shm_schema::drive::servo_status::ENABLED, 0, "status {:#x} at {k} ms", state.status);
+            assert_eq!(
+                state.status & !shm_schema::drive::servo_status::ENABLED,
+                0,
+                "status {:#x} at {k} ms",
+                state.status
+            );
         }
         if sp.is_some_and(|s| s.state == MotionState::Done as u32) && done_at.is_none() {
             done_at = Some(k);
@@ -51,8 +57,17 @@ fn the_default_gains_follow_the_triangle_and_settle() {
     }
     assert!(done_at.is_some(), "motion never finished");
     for (i, a) in cfg.axis.iter().enumerate() {
-        assert!(max_fe[i] < a.following_error_limit / 5.0, "{}: max following error {}", a.name, max_fe[i]);
+        assert!(
+            max_fe[i] < a.following_error_limit / 5.0,
+            "{}: max following error {}",
+            a.name,
+            max_fe[i]
+        );
         let p = machine.axes()[i].encoder();
-        assert!((p - start[i]).abs() <= a.in_position, "{}: ends at {p}", a.name);
+        assert!(
+            (p - start[i]).abs() <= a.in_position,
+            "{}: ends at {p}",
+            a.name
+        );
     }
 }

@@ -1,5 +1,10 @@
 //! One integration-test binary (as ripgrep does): `cell` runs the real processes,
-//! `closed_loop` runs servo and the machine model in-process.
+//! `closed_loop` runs servo and the machine model in-process, `no_alloc`
+//! proves the cycle code allocation-free.
 
 mod cell;
 mod closed_loop;
+mod no_alloc;
+
+#[global_allocator]
+static ALLOC: runtime::alloc_count::CountingAllocator = runtime::alloc_count::CountingAllocator;

@@ -1,0 +1,47 @@
+//! What the IPC calls of a cycle allocate, in steady state (documented in `runtime::ipc`):
+//! `receive` nothing, a publish (`loan_uninit` + `send`) at most once inside iceoryx2.
+
+use runtime::alloc_count::{CountingAllocator, count};
+use runtime::ipc::{self, Pub, Sub};
+use shm_schema::{InstanceName, ServiceId, SetpointV1};
+
+#[global_allocator]
+static A: CountingAllocator = CountingAllocator;
+
+#[test]
+fn steady_state_ipc_allocations() {
+    let name = format!("ipcalloc{}", std::process::id());
+    let instance = InstanceName::new(&name).expect("valid");
+    {
+        let node = ipc::node(&instance, "alloc-test").expect("node");
+        let tx: Pub<SetpointV1> = Pub::new(&node, &instance, ServiceId::Setpoint).expect("pub");
+        let rx: Sub<SetpointV1> = Sub::new(&node, &instance, ServiceId::Setpoint, 8).expect("sub");
+        let mut sp: SetpointV1 = unsafe { core::mem::zeroed() };
+        // Warm-up: the first sends after a connection change allocate.
+        for i in 0..100 {
+            sp.seq = i;
+            assert!(tx.send(&sp));
+            rx.latest();
+        }
+        const N: u64 = 1000;
+        let ((), sends) = count(|| {
+            for i in 0..N {
+                sp.seq = i;
+                tx.send(&sp);
+            }
+        });
+        let (got, receives) = count(|| {
+            let mut last = None;
+            for _ in 0..N {
+                last = rx.latest().or(last);
+            }
+            last
+        });
+        assert!(got.is_some());
+        assert_eq!(receives, 0, "receive allocated");
+        assert!(sends <= N, "{sends} allocations in {N} publishes");
+        eprintln!("steady state: {sends} allocations in {N} publishes, {receives} in {N} receives");
+    }
+    let _ = ipc::remove_instance_segment(&instance);
+    let _ = std::fs::remove_dir_all(instance.root_dir().as_str());
+}

@@ -1,0 +1,224 @@
+//! The byte layout of every shared payload, as `docs/payload-layouts.md` documents it for
+//! processes in other languages. The test fails if a field is missing from the listing (a gap
+//! or a short total), if the type has padding, or if the document differs; regenerate it with
+//! `BLESS=1 cargo test -p shm-schema --test layout`.
+
+use core::mem::{offset_of, size_of};
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use shm_schema::*;
+
+struct Layout {
+    name: &'static str,
+    type_name: &'static str,
+    size: usize,
+    fields: Vec<(usize, usize, &'static str, &'static str)>,
+}
+
+macro_rules! layout {
+    ($t:ty { $($f:ident : $c:literal = $s:expr),* $(,)? }) => {{
+        Layout {
+            name: stringify!($t),
+            // SAFETY: type_name has no preconditions; it is unsafe only to implement.
+            type_name: unsafe { <$t as ZeroCopySend>::type_name() },
+            size: size_of::<$t>(),
+            fields: vec![$((offset_of!($t, $f), $s, stringify!($f), $c)),*],
+        }
+    }};
+}
+
+const A: usize = MAX_AXES;
+
+fn layouts() -> Vec<Layout> {
+    vec![
+        layout!(CellConfigV1 {
+            axes: "uint32_t" = 4,
+            machine_substeps: "uint32_t" = 4,
+            t_acc_s: "double" = 8,
+            drive_command_timeout_ns: "uint64_t" = 8,
+            setpoint_timeout_ns: "uint64_t" = 8,
+            process: "ProcessConfigV1[4]" = 4 * size_of::<ProcessConfigV1>(),
+            axis: "AxisConfigV1[8]" = A * size_of::<AxisConfigV1>(),
+        }),
+        layout!(ProcessConfigV1 {
+            period_ns: "uint64_t" = 8,
+            phase_ns: "uint64_t" = 8,
+            priority: "int32_t" = 4,
+            cpu: "int32_t" = 4
+        }),
+        layout!(AxisConfigV1 {
+            name: "char[16]" = 16,
+            unit: "char[8]" = 8,
+            min: "double" = 8,
+            max: "double" = 8,
+            vmax: "double" = 8,
+            start: "double" = 8,
+            following_error_limit: "double" = 8,
+            in_position: "double" = 8,
+            kp: "double" = 8,
+            ki: "double" = 8,
+            kd: "double" = 8,
+            kvff: "double" = 8,
+            kaff: "double" = 8,
+            integral_limit: "double" = 8,
+            inertia: "double" = 8,
+            viscous: "double" = 8,
+            coulomb: "double" = 8,
+            effort_limit: "double" = 8,
+            encoder_resolution: "double" = 8,
+        }),
+        layout!(MotionCommandV1 {
+            seq: "uint64_t" = 8,
+            program_id: "uint32_t" = 4,
+            line: "uint32_t" = 4,
+            kind: "uint32_t" = 4,
+            axes: "uint32_t" = 4,
+            target: "double[8]" = 8 * A,
+            user_time_s: "double" = 8,
+        }),
+        layout!(SetpointV1 {
+            seq: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            motion_start_ns: "uint64_t" = 8,
+            motion_end_ns: "uint64_t" = 8,
+            motion_time_s: "double" = 8,
+            theoretical_s: "double" = 8,
+            segment_time_s: "double" = 8,
+            program_id: "uint32_t" = 4,
+            line: "uint32_t" = 4,
+            state: "uint32_t" = 4,
+            axes: "uint32_t" = 4,
+            fault: "uint32_t" = 4,
+            fault_line: "uint32_t" = 4,
+            commands_taken: "uint64_t" = 8,
+            queue_free: "uint32_t" = 4,
+            starved: "uint32_t" = 4,
+            position: "double[8]" = 8 * A,
+            velocity: "double[8]" = 8 * A,
+            acceleration: "double[8]" = 8 * A,
+        }),
+        layout!(ServoStateV1 {
+            seq: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            measured_stamp_ns: "uint64_t" = 8,
+            setpoint_seq: "uint64_t" = 8,
+            status: "uint32_t" = 4,
+            axes: "uint32_t" = 4,
+            cmd_position: "double[8]" = 8 * A,
+            cmd_velocity: "double[8]" = 8 * A,
+            act_position: "double[8]" = 8 * A,
+            act_velocity: "double[8]" = 8 * A,
+            following_error: "double[8]" = 8 * A,
+            effort: "double[8]" = 8 * A,
+        }),
+        layout!(DriveCommandV1 {
+            seq: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            enable: "uint32_t" = 4,
+            axes: "uint32_t" = 4,
+            effort: "double[8]" = 8 * A,
+        }),
+        layout!(DriveFeedbackV1 {
+            seq: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            command_seq: "uint64_t" = 8,
+            enabled: "uint32_t" = 4,
+            brake: "uint32_t" = 4,
+            fault: "uint32_t" = 4,
+            axes: "uint32_t" = 4,
+            position: "double[8]" = 8 * A,
+            velocity: "double[8]" = 8 * A,
+            effort: "double[8]" = 8 * A,
+        }),
+        layout!(FieldbusImageV1 {
+            seq: "uint64_t" = 8,
+            written_ns: "uint64_t" = 8,
+            measured_ns: "uint64_t" = 8,
+            source_seq: "uint64_t" = 8,
+            len: "uint32_t" = 4,
+            axes: "uint32_t" = 4,
+            image: "uint8_t[64]" = 64,
+        }),
+        layout!(ProcessStatusV1 {
+            pid: "uint32_t" = 4,
+            role: "uint32_t" = 4,
+            state: "uint32_t" = 4,
+            policy: "uint32_t" = 4,
+            priority: "int32_t" = 4,
+            cpu: "int32_t" = 4,
+            rt_flags: "uint32_t" = 4,
+            fault: "uint32_t" = 4,
+            stamp_ns: "uint64_t" = 8,
+            stats: "CycleStatsV1" = size_of::<CycleStatsV1>(),
+        }),
+        layout!(CycleStatsV1 {
+            period_ns: "uint64_t" = 8,
+            cycles: "uint64_t" = 8,
+            overruns: "uint64_t" = 8,
+            skipped: "uint64_t" = 8,
+            wakeup_latency_ns: "uint64_t" = 8,
+            max_wakeup_latency_ns: "uint64_t" = 8,
+            exec_ns: "uint64_t" = 8,
+            max_exec_ns: "uint64_t" = 8,
+            overrun_flag: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+        }),
+    ]
+}
+
+fn render() -> String {
+    let mut s = String::from(
+        "# Payload byte layouts\n\nGenerated by `shm-schema/tests/layout.rs` from the Rust \
+         definitions (`BLESS=1 cargo test -p shm-schema --test layout`); do not edit by hand. \
+         All types are `#[repr(C)]`, little-endian on this platform, 8-byte aligned, without \
+         padding. `MAX_AXES` = 8. Units and meanings: the field documentation in `shm-schema/src`.\n",
+    );
+    for l in layouts() {
+        s += &format!(
+            "\n## {}\n\niceoryx2 type name `{}`, {} bytes.\n\n| offset | size | field | C type |\n|---:|---:|---|---|\n",
+            l.name, l.type_name, l.size
+        );
+        for (off, size, name, c) in &l.fields {
+            s += &format!("| {off} | {size} | `{name}` | `{c}` |\n");
+        }
+    }
+    s
+}
+
+#[test]
+fn every_field_is_listed_without_gaps_or_padding() {
+    for l in layouts() {
+        let mut at = 0;
+        for (off, size, name, _) in &l.fields {
+            assert_eq!(
+                *off, at,
+                "{}: field {name} at {off}, expected {at} (a field is missing or padded)",
+                l.name
+            );
+            at += size;
+        }
+        assert_eq!(
+            at, l.size,
+            "{}: listed fields cover {at} of {} bytes",
+            l.name, l.size
+        );
+        assert!(
+            l.type_name.starts_with("rtc::") && l.type_name.ends_with("V1"),
+            "{}",
+            l.type_name
+        );
+    }
+}
+
+#[test]
+fn the_layout_document_is_current() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/payload-layouts.md");
+    let want = render();
+    if std::env::var_os("BLESS").is_some() {
+        std::fs::write(path, &want).expect("write docs/payload-layouts.md");
+    }
+    let have = std::fs::read_to_string(path).unwrap_or_default();
+    assert!(
+        have == want,
+        "docs/payload-layouts.md is stale: run BLESS=1 cargo test -p shm-schema --test layout"
+    );
+}
