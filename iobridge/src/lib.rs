@@ -64,23 +64,14 @@ pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shm_schema::MAX_AXES;
 
     #[test]
     fn the_image_carries_the_measurement_time_and_positions() {
         let mut s = ServoStateV1 {
             seq: 9,
-            stamp_ns: 0,
             measured_stamp_ns: 123_456_789_000,
-            setpoint_seq: 0,
-            status: 0,
             axes: 3,
-            cmd_position: [0.0; MAX_AXES],
-            cmd_velocity: [0.0; MAX_AXES],
-            act_position: [0.0; MAX_AXES],
-            act_velocity: [0.0; MAX_AXES],
-            following_error: [0.0; MAX_AXES],
-            effort: [0.0; MAX_AXES],
+            ..Default::default()
         };
         s.act_position[..3].copy_from_slice(&[40.0015, -0.002, 179.999]);
         let img = write_image(1, 123_460_000_000, &s);

@@ -22,55 +22,13 @@ use shm_schema::{
     SetpointV1,
 };
 
-/// Gains and limits of one axis (see [`AxisConfigV1`] for units).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AxisGains {
-    /// Proportional gain.
-    pub kp: f64,
-    /// Integral gain.
-    pub ki: f64,
-    /// Derivative gain on the velocity error.
-    pub kd: f64,
-    /// Velocity feed-forward.
-    pub kvff: f64,
-    /// Acceleration feed-forward.
-    pub kaff: f64,
-    /// Limit of the integral term.
-    pub integral_limit: f64,
-    /// Effort limit.
-    pub effort_limit: f64,
-    /// Largest velocity.
-    pub vmax: f64,
-    /// Following-error limit.
-    pub following_error_limit: f64,
-    /// In-position band.
-    pub in_position: f64,
-}
-
-impl From<&AxisConfigV1> for AxisGains {
-    fn from(a: &AxisConfigV1) -> Self {
-        Self {
-            kp: a.kp,
-            ki: a.ki,
-            kd: a.kd,
-            kvff: a.kvff,
-            kaff: a.kaff,
-            integral_limit: a.integral_limit,
-            effort_limit: a.effort_limit,
-            vmax: a.vmax,
-            following_error_limit: a.following_error_limit,
-            in_position: a.in_position,
-        }
-    }
-}
-
 /// Parameters of the controller.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params {
     /// Axes in use.
     pub axes: usize,
-    /// Per-axis gains.
-    pub axis: [AxisGains; MAX_AXES],
+    /// Per-axis gains and limits, as configured.
+    pub axis: [AxisConfigV1; MAX_AXES],
     /// Servo period (s).
     pub period_s: f64,
     /// Longest extrapolation of a setpoint (s), then servo holds.
@@ -80,14 +38,9 @@ pub struct Params {
 impl Params {
     /// From the cell configuration.
     pub fn from_cell(cell: &CellConfigV1) -> Self {
-        let zero = AxisGains::from(&AxisConfigV1::default());
-        let mut axis = [zero; MAX_AXES];
-        for (i, a) in cell.axes().iter().enumerate() {
-            axis[i] = a.into();
-        }
         Self {
             axes: cell.axes as usize,
-            axis,
+            axis: cell.axis,
             period_s: cell.process[Role::Servo.index()].period_ns as f64 * 1e-9,
             max_extrapolation_s: cell.setpoint_timeout_ns as f64 * 1e-9,
         }
@@ -171,23 +124,15 @@ impl Controller {
         let mut cmd = DriveCommandV1 {
             seq: self.seq,
             stamp_ns: now_ns,
-            enable: 0,
             axes: n as u32,
-            effort: [0.0; MAX_AXES],
+            ..Default::default()
         };
         let mut state = ServoStateV1 {
             seq: self.seq,
             stamp_ns: now_ns,
-            measured_stamp_ns: 0,
             setpoint_seq: self.setpoint.map_or(0, |s| s.seq),
-            status: 0,
             axes: n as u32,
-            cmd_position: [0.0; MAX_AXES],
-            cmd_velocity: [0.0; MAX_AXES],
-            act_position: [0.0; MAX_AXES],
-            act_velocity: [0.0; MAX_AXES],
-            following_error: [0.0; MAX_AXES],
-            effort: [0.0; MAX_AXES],
+            ..Default::default()
         };
         let Some(fb) = feedback else {
             state.status = st::NO_FEEDBACK;

@@ -6,7 +6,7 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
 /// Effort command from servo to the drives, `<i>/servo/drive_command`, every servo cycle.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::DriveCommandV1")]
 pub struct DriveCommandV1 {
     /// +1 per command; the drives use its advance as their command watchdog.
@@ -31,7 +31,7 @@ pub mod drive_fault {
 
 /// What the drives measure, `<i>/machine/feedback`, every machine cycle.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::DriveFeedbackV1")]
 pub struct DriveFeedbackV1 {
     /// +1 per sample.
@@ -76,7 +76,7 @@ pub mod servo_status {
 
 /// What servo publishes on `<i>/servo/state` every cycle.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::ServoStateV1")]
 pub struct ServoStateV1 {
     /// +1 per servo cycle.

@@ -31,7 +31,7 @@ impl CommandKind {
 /// most [`SetpointV1::queue_free`] commands in flight) and reads the next one only when the
 /// motion needs it, at `t = T1 - t_acc` (seed 003 §2).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::MotionCommandV1")]
 pub struct MotionCommandV1 {
     /// Sequence number, 1 for the first command a client sends, +1 for each next one.
@@ -94,7 +94,7 @@ pub mod trajgen_fault {
 /// Position and velocity are the exact trajectory at [`Self::stamp_ns`]: trajgen evaluates it
 /// against real elapsed time, so a consumer may extrapolate `position + velocity * dt`.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::SetpointV1")]
 pub struct SetpointV1 {
     /// +1 per published setpoint since trajgen started.

@@ -122,7 +122,7 @@ pub struct Report {
     pub trace: Vec<TraceRow>,
 }
 
-fn per_axis(names: &[String], values: &[f64]) -> Value {
+fn per_axis<T: Serialize>(names: &[String], values: &[T]) -> Value {
     let mut m = Map::new();
     for (n, v) in names.iter().zip(values) {
         m.insert(n.clone(), json!(v));
@@ -165,7 +165,7 @@ impl Report {
             "final_error": per_axis(&self.axes, &self.final_error),
             "max_following_error": per_axis(&self.axes, &self.max_following_error),
             "axes": self.axes,
-            "units": per_axis_str(&self.axes, &self.units),
+            "units": per_axis(&self.axes, &self.units),
             "vmax": per_axis(&self.axes, &self.vmax),
             "t_acc": self.t_acc,
             "start": per_axis(&self.axes, &self.start),
@@ -237,12 +237,4 @@ impl Report {
         }
         s
     }
-}
-
-fn per_axis_str(names: &[String], values: &[String]) -> Value {
-    let mut m = Map::new();
-    for (n, v) in names.iter().zip(values) {
-        m.insert(n.clone(), json!(v));
-    }
-    Value::Object(m)
 }

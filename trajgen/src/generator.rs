@@ -64,17 +64,8 @@ struct Queue {
 
 impl Queue {
     fn new() -> Self {
-        let empty = MotionCommandV1 {
-            seq: 0,
-            program_id: 0,
-            line: 0,
-            kind: 0,
-            axes: 0,
-            target: [0.0; MAX_AXES],
-            user_time_s: 0.0,
-        };
         Self {
-            items: [empty; QUEUE_CAP],
+            items: [MotionCommandV1::default(); QUEUE_CAP],
             head: 0,
             len: 0,
         }

@@ -154,20 +154,18 @@ fn motion_time_holds_with_both_cores_loaded() {
     assert_clean(&inst);
 }
 
-#[test]
-fn a_program_error_names_line_and_column_and_starts_nothing() {
-    let inst = instance("badprog");
-    let prog = scratch("badprog", "bad.prog", "MOVE(40,40,0)\nMOVE(140,40)\nEND\n");
+/// Runs `program` on a fresh instance; it must be refused with exit code 2 and `message`,
+/// before any process started.
+fn refused(test: &str, program: &str, message: &str) {
+    let inst = instance(test);
+    let prog = scratch(test, "p.prog", program);
     let out = run_with_watchdog(
         supervisor().args(["run", "--instance", &inst]).arg(&prog),
         WATCHDOG,
     );
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("bad.prog:2:12: MOVE has 2 coordinate(s), the cell has 3 axes"),
-        "{err}"
-    );
+    assert!(err.contains(&format!("p.prog:{message}")), "{err}");
     assert!(
         pids_with(&["--instance", &inst]).is_empty(),
         "a process was started"
@@ -176,20 +174,21 @@ fn a_program_error_names_line_and_column_and_starts_nothing() {
 }
 
 #[test]
+fn a_program_error_names_line_and_column_and_starts_nothing() {
+    refused(
+        "badprog",
+        "MOVE(40,40,0)\nMOVE(140,40)\nEND\n",
+        "2:12: MOVE has 2 coordinate(s), the cell has 3 axes",
+    );
+}
+
+#[test]
 fn a_target_outside_the_limits_is_refused_before_anything_moves() {
-    let inst = instance("limits");
-    let prog = scratch("limits", "far.prog", "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n");
-    let out = run_with_watchdog(
-        supervisor().args(["run", "--instance", &inst]).arg(&prog),
-        WATCHDOG,
+    refused(
+        "limits",
+        "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
+        "2:9: y = 400 mm is outside the axis limits 0 .. 150 mm",
     );
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("far.prog:2:9: y = 400 mm is outside the axis limits 0 .. 150 mm"),
-        "{err}"
-    );
-    assert_clean(&inst);
 }
 
 #[test]
