@@ -93,6 +93,7 @@ pub fn init_logging() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .try_init();
     ipc::quiet_iceoryx2_log();
@@ -130,7 +131,9 @@ fn run_inner<T: Task>(
 ) -> Result<(), SetupError> {
     signals::install()?;
     let node = ipc::node(&instance, role.name())?;
-    let cell = wait_for_cell_config(&node, &instance)?;
+    let Some(cell) = wait_for_cell_config(&node, &instance)? else {
+        return Ok(()); // stopped before the cell configuration arrived: nothing to do
+    };
     let pc = cell.process[role.index()];
     let ctx = Context {
         instance,
@@ -200,20 +203,21 @@ fn run_inner<T: Task>(
     Ok(())
 }
 
-/// Waits (set-up only, polling every 2 ms) for the cell configuration and validates it.
+/// Waits (set-up only, polling every 2 ms) for the cell configuration and validates it;
+/// `None` if a stop was requested meanwhile.
 fn wait_for_cell_config(
     node: &Node<Ipc>,
     instance: &InstanceName,
-) -> Result<CellConfigV1, SetupError> {
+) -> Result<Option<CellConfigV1>, SetupError> {
     let sub = Sub::<CellConfigV1>::new(node, instance, ServiceId::CellConfig, 1)?;
     let start = Instant::now();
     loop {
         if let Some(cell) = sub.latest() {
             validate_cell(&cell)?;
-            return Ok(cell);
+            return Ok(Some(cell));
         }
         if signals::stop_requested() {
-            return Err("stopped before the cell configuration arrived".into());
+            return Ok(None);
         }
         if start.elapsed() > CONFIG_TIMEOUT {
             return Err(format!(

@@ -94,7 +94,14 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         )));
     }
 
-    let mut session = Session::open(&cfg, instance)?;
+    let mut session = match Session::open(&cfg, instance) {
+        Ok(s) => s,
+        Err(e) => {
+            // Whatever was started is stopped (Children's drop); remove what it created.
+            cleanup(&instance);
+            return Err(e);
+        }
+    };
     let outcome = session.drive(&cfg, &program, &src, opts);
     let cpu: Vec<Option<f64>> = session
         .children

@@ -285,3 +285,36 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
     );
     assert_clean(&inst);
 }
+
+#[test]
+fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
+    let inst = instance("nostart");
+    let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
+    let cfg = scratch(
+        "nostart",
+        "cell.toml",
+        &default.replacen(
+            "command = [\"iobridge\"",
+            "command = [\"no-such-iobridge\"",
+            1,
+        ),
+    );
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("cannot start iobridge (no-such-iobridge)"),
+        "{err}"
+    );
+    assert!(
+        pids_with(&["--instance", &inst]).is_empty(),
+        "processes left running"
+    );
+    assert_clean(&inst);
+}
