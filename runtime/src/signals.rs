@@ -37,8 +37,3 @@ pub fn install() -> std::io::Result<()> {
 pub fn stop_requested() -> bool {
     STOP.load(Ordering::SeqCst)
 }
-
-/// Asks the loop to stop, as a signal would.
-pub fn request_stop() {
-    STOP.store(true, Ordering::SeqCst);
-}
