@@ -23,6 +23,16 @@ fn scratch(test: &str, name: &str, content: &str) -> PathBuf {
     p
 }
 
+/// The default configuration with `from` replaced by `to`, written for `test`.
+fn config_with(test: &str, from: &str, to: &str) -> PathBuf {
+    let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
+    assert!(
+        default.contains(from),
+        "{from:?} not in the default configuration"
+    );
+    scratch(test, "cell.toml", &default.replacen(from, to, 1))
+}
+
 /// Checks a successful `--json` run: on time, on target, every process reported.
 fn check_run(j: &serde_json::Value, target: [f64; 3]) {
     let f = |k: &str| {
@@ -200,11 +210,7 @@ fn a_bad_config_names_file_line_and_reason() {
         .position(|l| l.starts_with("t_acc"))
         .expect("t_acc")
         + 1;
-    let cfg = scratch(
-        "badcfg",
-        "cell.toml",
-        &default.replacen("t_acc = 0.525", "t_acc = 0.525\nt_dec = 1", 1),
-    );
+    let cfg = config_with("badcfg", "t_acc = 0.525", "t_acc = 0.525\nt_dec = 1");
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--instance", &inst, "--config"])
@@ -226,19 +232,14 @@ fn a_bad_config_names_file_line_and_reason() {
 #[test]
 fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
     let inst = instance("kill");
-    let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
     let wrapped = format!(
         "command = [\"sh\", \"-c\", \"exec {} --instance {{instance}}\"]",
         bin("iobridge").display()
     );
-    let cfg = scratch(
+    let cfg = config_with(
         "kill",
-        "cell.toml",
-        &default.replacen(
-            "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
-            &wrapped,
-            1,
-        ),
+        "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
+        &wrapped,
     );
     let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
     let mut child = supervisor()
@@ -289,15 +290,10 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
 #[test]
 fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
     let inst = instance("nostart");
-    let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
-    let cfg = scratch(
+    let cfg = config_with(
         "nostart",
-        "cell.toml",
-        &default.replacen(
-            "command = [\"iobridge\"",
-            "command = [\"no-such-iobridge\"",
-            1,
-        ),
+        "command = [\"iobridge\"",
+        "command = [\"no-such-iobridge\"",
     );
     let out = run_with_watchdog(
         supervisor()
