@@ -262,12 +262,12 @@ pub struct Config {
 
 /// One step of a key path, to find where a value is written.
 #[derive(Clone, Copy, Debug)]
-enum Seg<'a> {
-    Key(&'a str),
+enum Seg {
+    Key(&'static str),
     Index(usize),
 }
 
-fn locate(src: &str, path: &[Seg<'_>]) -> Option<Range<usize>> {
+fn locate(src: &str, path: &[Seg]) -> Option<Range<usize>> {
     let doc = toml_edit::Document::parse(src).ok()?;
     let mut table: &dyn toml_edit::TableLike = doc.as_table();
     let mut span = None;
@@ -318,8 +318,7 @@ impl Config {
             }
         })?;
         cfg.validate().map_err(|(path, message)| {
-            let segs: Vec<Seg<'_>> = path.iter().map(|s| s.as_seg()).collect();
-            let (line, col) = locate(src, &segs).map_or((0, 0), |s| line_col(src, s.start));
+            let (line, col) = locate(src, &path).map_or((0, 0), |s| line_col(src, s.start));
             ConfigError {
                 file: file.into(),
                 line,
@@ -353,9 +352,9 @@ impl Config {
         }
     }
 
-    fn validate(&self) -> Result<(), (Vec<PathSeg>, String)> {
-        use PathSeg::{Idx, K};
-        let bad = |path: Vec<PathSeg>, msg: String| Err((path, msg));
+    fn validate(&self) -> Result<(), (Vec<Seg>, String)> {
+        use Seg::{Index as Idx, Key as K};
+        let bad = |path: Vec<Seg>, msg: String| Err((path, msg));
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let non_negative = |v: f64| v.is_finite() && v >= 0.0;
 
@@ -644,22 +643,6 @@ impl Config {
             };
         }
         c
-    }
-}
-
-/// An owned key-path step used by validation.
-#[derive(Clone, Copy, Debug)]
-enum PathSeg {
-    K(&'static str),
-    Idx(usize),
-}
-
-impl PathSeg {
-    fn as_seg(&self) -> Seg<'static> {
-        match *self {
-            PathSeg::K(k) => Seg::Key(k),
-            PathSeg::Idx(i) => Seg::Index(i),
-        }
     }
 }
 

@@ -23,6 +23,17 @@ fn scratch(test: &str, name: &str, content: &str) -> PathBuf {
     p
 }
 
+/// Runs the triangle on `inst` with the configuration file `cfg`.
+fn run_triangle_with(inst: &str, cfg: &Path) -> std::process::Output {
+    run_with_watchdog(
+        supervisor()
+            .args(["run", "--instance", inst, "--config"])
+            .arg(cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    )
+}
+
 /// The default configuration with `from` replaced by `to`, written for `test`.
 fn config_with(test: &str, from: &str, to: &str) -> PathBuf {
     let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
@@ -211,13 +222,7 @@ fn a_bad_config_names_file_line_and_reason() {
         .expect("t_acc")
         + 1;
     let cfg = config_with("badcfg", "t_acc = 0.525", "t_acc = 0.525\nt_dec = 1");
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
+    let out = run_triangle_with(&inst, &cfg);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -295,13 +300,7 @@ fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
         "command = [\"iobridge\"",
         "command = [\"no-such-iobridge\"",
     );
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
+    let out = run_triangle_with(&inst, &cfg);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
