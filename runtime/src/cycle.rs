@@ -87,11 +87,6 @@ impl CycleClock {
         (base / self.period_ns + 1) * self.period_ns + self.phase_ns
     }
 
-    /// Cycle period (ns).
-    pub fn period_ns(&self) -> u64 {
-        self.period_ns
-    }
-
     /// The next grid deadline (ns).
     pub fn next_deadline_ns(&self) -> u64 {
         self.next_ns

@@ -15,8 +15,6 @@ use std::time::{Duration, Instant};
 pub struct Running {
     /// Its role.
     pub role: Role,
-    /// The command line it was started with.
-    pub command: Vec<String>,
     child: Child,
 }
 
@@ -87,11 +85,7 @@ impl Children {
             .spawn()
             .map_err(|e| format!("cannot start {} ({}): {e}", role.name(), program.display()))?;
         let pid = child.id();
-        self.procs.push(Running {
-            role,
-            command,
-            child,
-        });
+        self.procs.push(Running { role, child });
         Ok(pid)
     }
 

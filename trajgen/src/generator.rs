@@ -154,11 +154,6 @@ impl Generator {
         }
     }
 
-    /// Motion state.
-    pub fn state(&self) -> MotionState {
-        self.state
-    }
-
     /// Validates `c` and queues it. A refused command sets the fault, empties the queue and
     /// brings the axes to rest on their current target; the fault clears when a new client
     /// session starts (a command with `seq` 1) at rest.
