@@ -16,7 +16,7 @@
 //! `t = T1 - t_acc` and to end a motion at its exact end time.
 
 use crate::time::now_ns;
-use shm_schema::CycleStatsV1;
+use shm_schema::{CycleStatsV1, LatencyHistogramV1};
 
 /// One wake-up of the cycle.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -56,6 +56,8 @@ pub struct CycleClock {
     extra_ns: Option<u64>,
     overrun_pending: bool,
     stats: CycleStatsV1,
+    // Boxed: 30 KB, allocated once by `new`, never resized.
+    histogram: Box<LatencyHistogramV1>,
 }
 
 impl CycleClock {
@@ -76,6 +78,7 @@ impl CycleClock {
                 period_ns,
                 ..CycleStatsV1::default()
             },
+            histogram: Box::new(LatencyHistogramV1::new()),
         };
         clock.next_ns = clock.grid_after(now + period_ns);
         clock
@@ -95,6 +98,11 @@ impl CycleClock {
     /// Statistics so far.
     pub fn stats(&self) -> &CycleStatsV1 {
         &self.stats
+    }
+
+    /// Wake-up latency of every cycle so far (its `stamp_ns` is the latest wake-up).
+    pub fn histogram(&self) -> &LatencyHistogramV1 {
+        &self.histogram
     }
 
     /// Asks for one extra wake-up at `t` if it falls before the next grid deadline (and after
@@ -142,7 +150,8 @@ impl CycleClock {
         }
     }
 
-    /// Records a wake-up at `actual` for `deadline` (the bookkeeping half of [`Self::wait`]).
+    /// Records a wake-up at `actual` for `deadline` (the bookkeeping half of [`Self::wait`]):
+    /// statistics and the latency histogram.
     ///
     /// # Real-time
     /// Arithmetic only.
@@ -165,6 +174,8 @@ impl CycleClock {
         s.wakeup_latency_ns = wake.latency_ns();
         s.max_wakeup_latency_ns = s.max_wakeup_latency_ns.max(s.wakeup_latency_ns);
         s.overrun_flag = wake.overrun_flag as u32;
+        self.histogram.record(wake.latency_ns());
+        self.histogram.stamp_ns = actual;
         wake
     }
 
@@ -212,6 +223,9 @@ mod tests {
         assert_eq!(c.stats().overruns, 0);
         assert_eq!(c.stats().exec_ns, 80_000);
         assert!(!c.woke(d + P, true, d + P).overrun_flag);
+        let h = c.histogram();
+        assert_eq!((h.count, h.min_ns, h.max_ns), (2, 0, 20_000));
+        assert_eq!(h.stamp_ns, d + P);
     }
 
     #[test]

@@ -11,13 +11,17 @@
 //! malloc never returns to the kernel.
 
 use iceoryx2::node::NodeView;
+use iceoryx2::port::listener::Listener as IoxListener;
+use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use shm_schema::{InstanceName, ServiceId};
 use std::fmt::Debug;
+use std::time::Duration;
 
 /// The iceoryx2 service flavour of every port: inter-process, single-threaded.
 pub type Ipc = ipc::Service;
@@ -207,6 +211,98 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Debug for Sub<T> {
     }
 }
 
+fn open_event(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+) -> Result<EventFactory<Ipc>, IpcError> {
+    let name = instance.service(id);
+    let service_name =
+        ServiceName::new(name.as_str()).map_err(|e| err(format!("service name {name}"), e))?;
+    let q = id.qos();
+    node.service_builder(&service_name)
+        .event()
+        .max_notifiers(q.max_publishers)
+        .max_listeners(q.max_subscribers)
+        .max_nodes(q.max_nodes)
+        .open_or_create()
+        .map_err(|e| err(format!("event service {name}"), e))
+}
+
+/// The sending side of an event service: wakes every listener.
+pub struct Notifier {
+    port: IoxNotifier<Ipc>,
+    _service: EventFactory<Ipc>,
+}
+
+impl Notifier {
+    /// Opens (or creates) the event service `id` and a notifier on it.
+    pub fn new(node: &Node<Ipc>, instance: &InstanceName, id: ServiceId) -> Result<Self, IpcError> {
+        let service = open_event(node, instance, id)?;
+        let port = service
+            .notifier_builder()
+            .create()
+            .map_err(|e| err(format!("notifier on {}", instance.service(id)), e))?;
+        Ok(Self {
+            port,
+            _service: service,
+        })
+    }
+
+    /// Wakes every listener; returns how many were notified (0 if none or on failure).
+    ///
+    /// # Real-time
+    /// IPC call: one datagram per listener (none without listeners); no allocation in steady
+    /// state (the first notify after a listener connects allocates inside iceoryx2).
+    #[inline]
+    pub fn notify(&self) -> usize {
+        self.port.notify().unwrap_or(0)
+    }
+}
+
+impl Debug for Notifier {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Notifier")
+    }
+}
+
+/// The receiving side of an event service: a blocking wait for a notification.
+pub struct Listener {
+    port: IoxListener<Ipc>,
+    _service: EventFactory<Ipc>,
+}
+
+impl Listener {
+    /// Opens (or creates) the event service `id` and a listener on it.
+    pub fn new(node: &Node<Ipc>, instance: &InstanceName, id: ServiceId) -> Result<Self, IpcError> {
+        let service = open_event(node, instance, id)?;
+        let port = service
+            .listener_builder()
+            .create()
+            .map_err(|e| err(format!("listener on {}", instance.service(id)), e))?;
+        Ok(Self {
+            port,
+            _service: service,
+        })
+    }
+
+    /// Blocks until a notification arrives or `timeout` passes; takes every pending
+    /// notification. True if at least one arrived.
+    ///
+    /// # Real-time
+    /// The loop's one blocking wait (a socket receive); no allocation.
+    #[inline]
+    pub fn wait(&self, timeout: Duration) -> bool {
+        matches!(self.port.timed_wait(|_| {}, timeout), Ok(n) if n > 0)
+    }
+}
+
+impl Debug for Listener {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Listener")
+    }
+}
+
 /// Removes the resources of every dead node of `instance` (a process that was killed).
 /// Returns how many dead nodes were cleaned.
 pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
@@ -256,4 +352,52 @@ pub fn remove_instance_segment(instance: &InstanceName) -> Result<bool, IpcError
     // alive, checked just above; the instance refuses to start while one is.
     unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Ipc>(&cfg) }
         .map_err(|e| err(format!("global segment of instance {instance}"), e))
+}
+
+/// Removes what a clean shutdown leaves of the instance (dead nodes, the global segment,
+/// empty folders) once no node of it is alive, and lists any file that should not be there
+/// (empty when everything was cleaned).
+pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
+    let _ = remove_dead_nodes(instance);
+    let _ = remove_instance_segment(instance);
+    let mut left = Vec::new();
+    let prefix = instance.shm_prefix();
+    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
+        for e in dir.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with(prefix.as_str()) {
+                left.push(format!("/dev/shm/{name}"));
+            }
+        }
+    }
+    let root = std::path::PathBuf::from(instance.root_dir().as_str());
+    collect_files(&root, &mut left);
+    if left.is_empty() {
+        remove_empty_dirs(&root);
+    }
+    left
+}
+
+fn collect_files(dir: &std::path::Path, out: &mut Vec<String>) {
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                collect_files(&p, out);
+            } else {
+                out.push(p.display().to_string());
+            }
+        }
+    }
+}
+
+fn remove_empty_dirs(dir: &std::path::Path) {
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            if e.path().is_dir() {
+                remove_empty_dirs(&e.path());
+            }
+        }
+    }
+    let _ = std::fs::remove_dir(dir);
 }

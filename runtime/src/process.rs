@@ -8,6 +8,8 @@
 //! 4. the task's own set-up (`build`: opens ports, preallocates, validates) — may fail;
 //! 5. real-time set-up ([`crate::rt::setup`]) with the role's priority and CPU;
 //! 6. the cycle until SIGTERM: wait, [`Task::cycle`], publish [`ProcessStatusV1`], finish;
+//!    about every 100 ms, and once more on stopping, publish the wake-up latency histogram
+//!    ([`LatencyHistogramV1`] on `<i>/<role>/latency`);
 //! 7. a clean exit that removes the process' iceoryx2 resources.
 
 use crate::cycle::{CycleClock, WaitError, Wake};
@@ -16,12 +18,17 @@ use crate::rt::{self, RtRequest};
 use crate::signals;
 use crate::time::now_ns;
 use iceoryx2::prelude::Node;
-use shm_schema::{CellConfigV1, InstanceName, ProcState, ProcessStatusV1, Role, ServiceId};
+use shm_schema::{
+    CellConfigV1, InstanceName, LatencyHistogramV1, ProcState, ProcessStatusV1, Role, ServiceId,
+};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 /// Instance used when no `--instance` is given.
 pub const DEFAULT_INSTANCE: &str = "gantry";
+
+/// How often a process publishes its latency histogram (at most; once per cycle if slower).
+pub const LATENCY_PUBLISH_INTERVAL_NS: u64 = 100_000_000;
 
 /// How long a process waits for the cell configuration before giving up.
 pub const CONFIG_TIMEOUT: Duration = Duration::from_secs(10);
@@ -142,6 +149,8 @@ fn run_inner<T: Task>(
         cell,
     };
     let status_pub = Pub::<ProcessStatusV1>::new(&ctx.node, &instance, ServiceId::Status(role))?;
+    let latency_pub =
+        Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(role))?;
     let mut task = build(&ctx)?;
 
     let (report, _rt_guard) = rt::setup(RtRequest {
@@ -174,6 +183,7 @@ fn run_inner<T: Task>(
     );
 
     let mut clock = CycleClock::new(pc.period_ns, pc.phase_ns, now_ns());
+    let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(pc.period_ns).max(1);
     status.state = ProcState::Cyclic as u32;
     // The cycle. Nothing in this loop allocates, locks or logs (see `Task::cycle`).
     while !signals::stop_requested() {
@@ -189,16 +199,26 @@ fn run_inner<T: Task>(
         status.fault = task.fault();
         status.stats = *clock.stats();
         status_pub.send(&status);
+        if status.stats.cycles.is_multiple_of(latency_every) {
+            latency_pub.send(clock.histogram());
+        }
         clock.finish(&wake, now_ns());
     }
     status.state = ProcState::Stopping as u32;
     status_pub.send(&status);
+    latency_pub.send(clock.histogram());
+    let h = clock.histogram();
+    let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
     tracing::info!(
-        "{} ({instance}) stopped after {} cycles, {} overruns, max wake-up latency {} µs",
+        "{} ({instance}) stopped after {} cycles, {} overruns; wake-up latency p50 {:.1} µs, \
+         p99 {:.1} µs, p99.9 {:.1} µs, max {:.1} µs",
         role.name(),
         clock.stats().cycles,
         clock.stats().overruns,
-        clock.stats().max_wakeup_latency_ns / 1000
+        us(h.percentile(1, 2)),
+        us(h.percentile(99, 100)),
+        us(h.percentile(999, 1000)),
+        us(Some(h.max_ns)),
     );
     Ok(())
 }

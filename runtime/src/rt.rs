@@ -44,13 +44,27 @@ pub struct RtGuard {
     _dma_latency: Option<File>,
 }
 
-/// Applies `req` to the calling thread and process. See the module documentation.
+/// Applies `req` to the calling thread and process: [`setup_process`] then [`setup_thread`].
 pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
+    let (process, guard) = setup_process();
+    let thread = setup_thread(req);
+    (
+        RtReport {
+            flags: process.flags | thread.flags,
+            ..thread
+        },
+        guard,
+    )
+}
+
+/// The process-wide half: real-time-safe malloc, `mlockall`, a prefaulted heap reserve,
+/// `/dev/cpu_dma_latency` held at 0 (as long as the guard lives). Reports `MLOCK` and
+/// `DMA_LATENCY` in its flags.
+pub fn setup_process() -> (RtReport, RtGuard) {
     let mut report = RtReport {
         cpu: -1,
         ..RtReport::default()
     };
-
     // SAFETY: mallopt only changes allocator tunables.
     unsafe {
         // Never give memory back to the kernel, never serve large blocks by mmap: an
@@ -67,16 +81,30 @@ pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
             std::io::Error::last_os_error()
         );
     }
-    prefault_stack();
     prefault_heap();
+    let dma = hold_dma_latency_zero();
+    if dma.is_some() {
+        report.flags |= rt_flags::DMA_LATENCY;
+    }
+    (report, RtGuard { _dma_latency: dma })
+}
 
+/// The calling thread's half: a prefaulted stack, the CPU affinity and `SCHED_FIFO` priority
+/// of `req`. Reports `AFFINITY` and `SCHED` in its flags.
+pub fn setup_thread(req: RtRequest) -> RtReport {
+    let mut report = RtReport {
+        cpu: -1,
+        ..RtReport::default()
+    };
+    prefault_stack();
     if let Some(cpu) = req.cpu {
         // SAFETY: the set is zeroed then filled with one valid CPU index.
-        let ok = unsafe {
-            let mut set: libc::cpu_set_t = std::mem::zeroed();
-            libc::CPU_SET(cpu, &mut set);
-            libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0
-        };
+        let ok = cpu < libc::CPU_SETSIZE as usize
+            && unsafe {
+                let mut set: libc::cpu_set_t = std::mem::zeroed();
+                libc::CPU_SET(cpu, &mut set);
+                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0
+            };
         if ok {
             report.cpu = cpu as i32;
             report.flags |= rt_flags::AFFINITY;
@@ -87,12 +115,11 @@ pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
             );
         }
     }
-
     if req.priority > 0 {
         let param = libc::sched_param {
             sched_priority: req.priority,
         };
-        // SAFETY: plain system call with a valid parameter block.
+        // SAFETY: plain system call with a valid parameter block; 0 is the calling thread.
         if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
             report.policy = 1;
             report.priority = req.priority;
@@ -107,12 +134,7 @@ pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
     } else {
         report.flags |= rt_flags::SCHED;
     }
-
-    let dma = hold_dma_latency_zero();
-    if dma.is_some() {
-        report.flags |= rt_flags::DMA_LATENCY;
-    }
-    (report, RtGuard { _dma_latency: dma })
+    report
 }
 
 /// Opens `/dev/cpu_dma_latency` and writes a 32-bit 0: the CPUs stay out of deep idle

@@ -1,9 +1,11 @@
 //! What the IPC calls of a cycle allocate, in steady state (documented in `runtime::ipc`):
-//! `receive` nothing, a publish (`loan_uninit` + `send`) at most once inside iceoryx2.
+//! `receive` nothing, a publish (`loan_uninit` + `send`) at most once inside iceoryx2, an
+//! event's notify and wait nothing.
 
 use runtime::alloc_count::{CountingAllocator, count};
-use runtime::ipc::{self, Pub, Sub};
+use runtime::ipc::{self, Listener, Notifier, Pub, Sub};
 use shm_schema::{InstanceName, ServiceId, SetpointV1};
+use std::time::Duration;
 
 #[global_allocator]
 static A: CountingAllocator = CountingAllocator;
@@ -41,6 +43,25 @@ fn steady_state_ipc_allocations() {
         assert_eq!(receives, 0, "receive allocated");
         assert!(sends <= N, "{sends} allocations in {N} publishes");
         eprintln!("steady state: {sends} allocations in {N} publishes, {receives} in {N} receives");
+
+        // The IPC hop's event: notify, then the listener's wait.
+        let ready = Notifier::new(&node, &instance, ServiceId::SetpointReady).expect("notifier");
+        let wake = Listener::new(&node, &instance, ServiceId::SetpointReady).expect("listener");
+        for _ in 0..100 {
+            assert_eq!(ready.notify(), 1);
+            assert!(wake.wait(Duration::from_secs(1)));
+        }
+        let (woken, events) = count(|| {
+            let mut woken = 0;
+            for _ in 0..N {
+                ready.notify();
+                woken += wake.wait(Duration::from_secs(1)) as u64;
+            }
+            woken
+        });
+        assert_eq!(woken, N, "every notification wakes the listener");
+        assert_eq!(events, 0, "notify or wait allocated");
+        eprintln!("steady state: {events} allocations in {N} notify + wait");
     }
     let _ = ipc::remove_instance_segment(&instance);
     let _ = std::fs::remove_dir_all(instance.root_dir().as_str());

@@ -17,12 +17,14 @@
 
 pub mod config;
 pub mod drive;
+pub mod latency;
 pub mod motion;
 pub mod names;
 pub mod status;
 
 pub use config::{AxisConfigV1, CellConfigV1, ProcessConfigV1};
 pub use drive::{DriveCommandV1, DriveFeedbackV1, FieldbusImageV1, ServoStateV1};
+pub use latency::LatencyHistogramV1;
 pub use motion::{CommandKind, MotionCommandV1, MotionState, SetpointV1};
 pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};
 pub use status::{CycleStatsV1, ProcState, ProcessStatusV1, Role};

@@ -170,7 +170,7 @@ impl fmt::Display for ServiceNameBuf {
     }
 }
 
-/// Every service of a cell. All are publish-subscribe; `docs/services.md` lists them with
+/// Every service of a cell. All are publish-subscribe but [`ServiceId::SetpointReady`]; `docs/services.md` lists them with
 /// their payload layouts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ServiceId {
@@ -192,6 +192,12 @@ pub enum ServiceId {
     /// `<i>/<role>/status`: [`crate::ProcessStatusV1`], every real-time process to the
     /// supervisor, every cycle.
     Status(crate::Role),
+    /// `<i>/<role>/latency`: [`crate::LatencyHistogramV1`], the wake-up latency histogram of
+    /// every real-time process since its start, about every 100 ms and once more on stopping.
+    Latency(crate::Role),
+    /// `<i>/trajgen/setpoint` (event service): trajgen notifies it after each setpoint
+    /// publish, so a consumer may block until a setpoint arrives instead of polling.
+    SetpointReady,
 }
 
 /// How a service is created. Every process opens a service with these same values, so it does
@@ -222,6 +228,8 @@ impl ServiceId {
             Self::DriveFeedback => "machine/feedback",
             Self::FieldbusOutput => "iobridge/output",
             Self::Status(role) => role.status_suffix(),
+            Self::Latency(role) => role.latency_suffix(),
+            Self::SetpointReady => "trajgen/setpoint",
         }
     }
 
@@ -245,6 +253,13 @@ impl ServiceId {
             },
             Self::MotionCommand => Qos {
                 max_subscribers: 2,
+                ..base
+            },
+            // 30 KB a sample: keep few. A late observer gets the newest at once.
+            Self::Latency(_) => Qos {
+                history: 1,
+                subscriber_max_buffer: 2,
+                max_subscribers: 4,
                 ..base
             },
             _ => base,
@@ -288,7 +303,11 @@ mod tests {
         assert_eq!(i.shm_prefix().as_str(), "iox2_t1_");
         // The longest instance name still fits every name.
         let long = InstanceName::new(&"z".repeat(MAX_INSTANCE_LEN)).expect("valid");
-        for id in [ServiceId::DriveCommand, ServiceId::Status(Role::Machine)] {
+        for id in [
+            ServiceId::DriveCommand,
+            ServiceId::Status(Role::Machine),
+            ServiceId::Latency(Role::Iobridge),
+        ] {
             assert!(long.service(id).as_str().ends_with(id.suffix()));
         }
         assert!(long.root_dir().as_str().ends_with('/'));

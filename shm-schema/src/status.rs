@@ -52,6 +52,15 @@ impl Role {
             Self::Machine => "machine/status",
         }
     }
+
+    pub(crate) fn latency_suffix(self) -> &'static str {
+        match self {
+            Self::Trajgen => "trajgen/latency",
+            Self::Servo => "servo/latency",
+            Self::Iobridge => "iobridge/latency",
+            Self::Machine => "machine/latency",
+        }
+    }
 }
 
 /// Life-cycle state of a process, in [`ProcessStatusV1::state`].

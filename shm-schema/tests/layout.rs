@@ -150,6 +150,15 @@ fn layouts() -> Vec<Layout> {
             stamp_ns: "uint64_t" = 8,
             stats: "CycleStatsV1" = size_of::<CycleStatsV1>(),
         }),
+        layout!(LatencyHistogramV1 {
+            count: "uint64_t" = 8,
+            sum_ns: "uint64_t" = 8,
+            min_ns: "uint64_t" = 8,
+            max_ns: "uint64_t" = 8,
+            overflows: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            buckets: "uint64_t[3712]" = 8 * shm_schema::latency::BUCKETS,
+        }),
         layout!(CycleStatsV1 {
             period_ns: "uint64_t" = 8,
             cycles: "uint64_t" = 8,

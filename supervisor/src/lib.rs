@@ -2,6 +2,7 @@
 //! watches their health, stops them and removes every shared-memory resource.
 
 pub mod config;
+pub mod latency_cmd;
 pub mod launch;
 pub mod report;
 pub mod run;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use supervisor::config::{Config, DEFAULT_TOML};
+use supervisor::latency_cmd::{LatencyArgs, LatencyError, latency};
 use supervisor::run::{RunError, RunOptions, run};
 
 #[derive(Parser)]
@@ -42,11 +43,111 @@ enum Cmd {
     },
     /// Print the embedded default configuration.
     DefaultConfig,
+    /// Measure latency like cyclictest: the cycle runtime's timer wake-up (one thread per
+    /// CPU) and the one-way IPC hop between two processes, each test for the duration.
+    #[command(
+        after_help = "Output: one line per thread like cyclictest's (µs), with \
+        p50/p99/p99.9/p99.99 and Ovf (samples >= --histogram-us). Ctrl-C prints the figures \
+        so far. --histfile writes cyclictest's histogram format; --plot a PNG of it."
+    )]
+    Latency {
+        /// Period of the measuring loops (µs).
+        #[arg(long, short = 'i', default_value_t = 1000)]
+        interval_us: u64,
+        /// How long each test runs: seconds, or 30s, 5m, 2h, 1d. Default: until Ctrl-C.
+        #[arg(long, short = 'D')]
+        duration: Option<String>,
+        /// Timer threads, pinned round-robin over the CPUs (default: one per CPU, as --smp).
+        #[arg(long, short = 't', conflicts_with = "smp")]
+        threads: Option<usize>,
+        /// One timer thread per CPU, each pinned to its CPU (cyclictest -S); the default.
+        #[arg(long, short = 'S')]
+        smp: bool,
+        /// SCHED_FIFO priority of every measuring thread (0: SCHED_OTHER).
+        #[arg(long, short = 'p', default_value_t = 80)]
+        priority: i32,
+        /// Range of the 1-µs histogram (cyclictest -h); larger samples count as overflows.
+        #[arg(long, default_value_t = 1000)]
+        histogram_us: usize,
+        /// Write the histogram in cyclictest's --histfile format.
+        #[arg(long)]
+        histfile: Option<PathBuf>,
+        /// Print one JSON object on stdout instead of the text lines.
+        #[arg(long)]
+        json: bool,
+        /// Write a PNG of the histogram.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Tests to run, in order, comma-separated: timer, ipc, pipe (pipe: the raw-pipe
+        /// baseline of the IPC hop).
+        #[arg(long, default_value = "timer,ipc")]
+        test: String,
+        /// Instance name of the IPC hop's services (default latency-<pid>).
+        #[arg(long)]
+        instance: Option<String>,
+        /// No progress on stderr.
+        #[arg(long, short = 'q')]
+        quiet: bool,
+    },
+    /// The sending side of a latency hop (started by `supervisor latency`).
+    #[command(hide = true, name = "latency-peer")]
+    LatencyPeer {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
 }
 
 fn main() -> ExitCode {
     runtime::process::init_logging();
     match Cli::parse().cmd {
+        Cmd::Latency {
+            interval_us,
+            duration,
+            threads,
+            smp: _,
+            priority,
+            histogram_us,
+            histfile,
+            json,
+            plot,
+            test,
+            instance,
+            quiet,
+        } => {
+            let args = LatencyArgs {
+                interval_us,
+                duration,
+                threads,
+                priority,
+                histogram_us,
+                histfile,
+                json,
+                plot,
+                tests: test,
+                instance,
+                quiet,
+            };
+            match latency(&args) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(LatencyError::Input(e)) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(2)
+                }
+                Err(LatencyError::Failed(e)) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Cmd::LatencyPeer { args } => {
+            match latency::peer::Args::parse(&args).and_then(|a| latency::peer::run(&a)) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("latency-peer: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Cmd::DefaultConfig => {
             print!("{DEFAULT_TOML}");
             ExitCode::SUCCESS

@@ -98,7 +98,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         Ok(s) => s,
         Err(e) => {
             // Whatever was started is stopped (Children's drop); remove what it created.
-            cleanup(&instance);
+            ipc::remove_instance(&instance);
             return Err(e);
         }
     };
@@ -114,7 +114,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let stop_problems = session.children.stop_all();
     let statuses = session.statuses;
     drop(session);
-    let leftovers = cleanup(&instance);
+    let leftovers = ipc::remove_instance(&instance);
 
     let mut report = outcome?;
     for (i, (role, pid)) in pids.iter().enumerate() {
@@ -138,53 +138,6 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             .map_err(|e| RunError::Failed(format!("{}: {e}", path.display())))?;
     }
     Ok(report)
-}
-
-/// Removes what a clean shutdown leaves of the instance (empty folders) and lists any file
-/// that should not be there.
-fn cleanup(instance: &InstanceName) -> Vec<String> {
-    let _ = ipc::remove_dead_nodes(instance);
-    let _ = ipc::remove_instance_segment(instance);
-    let mut left = Vec::new();
-    let prefix = instance.shm_prefix();
-    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
-        for e in dir.flatten() {
-            let name = e.file_name().to_string_lossy().to_string();
-            if name.starts_with(prefix.as_str()) {
-                left.push(format!("/dev/shm/{name}"));
-            }
-        }
-    }
-    let root = PathBuf::from(instance.root_dir().as_str());
-    collect_files(&root, &mut left);
-    if left.is_empty() {
-        remove_empty_dirs(&root);
-    }
-    left
-}
-
-fn collect_files(dir: &std::path::Path, out: &mut Vec<String>) {
-    if let Ok(rd) = std::fs::read_dir(dir) {
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                collect_files(&p, out);
-            } else {
-                out.push(p.display().to_string());
-            }
-        }
-    }
-}
-
-fn remove_empty_dirs(dir: &std::path::Path) {
-    if let Ok(rd) = std::fs::read_dir(dir) {
-        for e in rd.flatten() {
-            if e.path().is_dir() {
-                remove_empty_dirs(&e.path());
-            }
-        }
-    }
-    let _ = std::fs::remove_dir(dir);
 }
 
 /// The supervisor's ports and the processes of one run.

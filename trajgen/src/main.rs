@@ -1,7 +1,7 @@
 //! `trajgen`: the trajectory generator process. See the crate documentation.
 
 use runtime::cycle::{CycleClock, Wake};
-use runtime::ipc::{Pub, Sub};
+use runtime::ipc::{Notifier, Pub, Sub};
 use runtime::process::{self, Context, SetupError, Task};
 use shm_schema::drive::servo_status;
 use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV1, SetpointV1};
@@ -15,6 +15,9 @@ struct Trajgen {
     commands: Sub<MotionCommandV1>,
     servo: Sub<ServoStateV1>,
     setpoints: Pub<SetpointV1>,
+    /// Wakes event-driven consumers after each setpoint (none in the default cell: servo
+    /// runs on its own phase of the shared grid).
+    ready: Notifier,
 }
 
 impl Trajgen {
@@ -26,6 +29,7 @@ impl Trajgen {
             commands: Sub::new(&ctx.node, i, ServiceId::MotionCommand, QUEUE_CAP)?,
             servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 4)?,
             setpoints: Pub::new(&ctx.node, i, ServiceId::Setpoint)?,
+            ready: Notifier::new(&ctx.node, i, ServiceId::SetpointReady)?,
         })
     }
 }
@@ -58,6 +62,7 @@ impl Task for Trajgen {
         }
         let sp = generator.step(wake.actual_ns);
         self.setpoints.send(&sp);
+        self.ready.notify();
         // Read the next command at exactly t = T1 - t_acc, not at the next period.
         if let Some(t) = generator.next_transition_ns() {
             clock.request_wake_at(t);
