@@ -527,8 +527,11 @@ fn hop_thread(
             cpu: Some(rx_cpu),
         });
         let timeout = Duration::from_millis(100);
+        // A setpoint published after this wake-up's clock read belongs to the next wake-up
+        // (its notification is still pending): it waits here.
+        let mut early: Option<SetpointV1> = None;
         // The measuring loop: servo's side of the hop. One blocking wait, one clock read,
-        // then the samples that arrived.
+        // then the samples that arrived before it.
         while !stopped(stop) {
             if !ready.wait(timeout) {
                 if let Ok(Some(status)) = peer.0.try_wait()
@@ -539,8 +542,12 @@ fn hop_thread(
                 continue;
             }
             let now = now_ns();
-            while let Some(sp) = setpoints.next() {
-                let ns = now.saturating_sub(sp.stamp_ns);
+            while let Some(sp) = early.take().or_else(|| setpoints.next()) {
+                if sp.stamp_ns > now {
+                    early = Some(sp);
+                    break;
+                }
+                let ns = now - sp.stamp_ns;
                 hist.record(ns);
                 rec.record(ns);
             }

@@ -6,3 +6,4 @@ pub mod latency_cmd;
 pub mod launch;
 pub mod report;
 pub mod run;
+pub mod status;

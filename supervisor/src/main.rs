@@ -43,6 +43,16 @@ enum Cmd {
     },
     /// Print the embedded default configuration.
     DefaultConfig,
+    /// Show the processes of a running instance: state, cycles, overruns and wake-up latency
+    /// percentiles since they started.
+    Status {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Measure latency like cyclictest: the cycle runtime's timer wake-up (one thread per
     /// CPU) and the one-way IPC hop between two processes, each test for the duration.
     #[command(
@@ -100,6 +110,29 @@ enum Cmd {
 fn main() -> ExitCode {
     runtime::process::init_logging();
     match Cli::parse().cmd {
+        Cmd::Status { instance, json } => {
+            let instance = match shm_schema::InstanceName::new(&instance) {
+                Ok(i) => i,
+                Err(e) => {
+                    eprintln!("error: --instance {instance:?}: {e}");
+                    return ExitCode::from(2);
+                }
+            };
+            match supervisor::status::read(&instance) {
+                Ok(seen) => {
+                    if json {
+                        println!("{}", supervisor::status::to_json(&instance, &seen));
+                    } else {
+                        print!("{}", supervisor::status::human(&instance, &seen));
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Cmd::Latency {
             interval_us,
             duration,

@@ -1,5 +1,6 @@
 //! The result of a run: JSON for tools, a summary for people.
 
+use latency::report::Summary;
 use runtime::rt::policy_name;
 use serde::Serialize;
 use serde_json::{Map, Value, json};
@@ -30,6 +31,9 @@ pub struct ProcessReport {
     pub max_exec_us: f64,
     /// CPU time used (s).
     pub cpu_s: Option<f64>,
+    /// Wake-up latency percentiles over the whole run, from the process' own histogram.
+    #[serde(skip)]
+    pub wakeup_latency: Option<Summary>,
 }
 
 impl ProcessReport {
@@ -54,7 +58,20 @@ impl ProcessReport {
             max_wakeup_latency_us: s.stats.max_wakeup_latency_ns as f64 * 1e-3,
             max_exec_us: s.stats.max_exec_ns as f64 * 1e-3,
             cpu_s,
+            wakeup_latency: None,
         }
+    }
+
+    /// As JSON: every field, and `wakeup_latency_us` with the percentiles.
+    pub fn to_json(&self) -> Value {
+        let mut v = serde_json::to_value(self).unwrap_or(Value::Null);
+        if let Some(o) = v.as_object_mut() {
+            o.insert(
+                "wakeup_latency_us".into(),
+                self.wakeup_latency.map_or(Value::Null, |m| m.to_json()),
+            );
+        }
+        v
     }
 }
 
@@ -140,10 +157,7 @@ impl Report {
     pub fn to_json(&self) -> Value {
         let mut procs = Map::new();
         for p in &self.processes {
-            procs.insert(
-                p.name.clone(),
-                serde_json::to_value(p).unwrap_or(Value::Null),
-            );
+            procs.insert(p.name.clone(), p.to_json());
         }
         let periods: Map<String, Value> = self
             .periods_us
@@ -219,10 +233,11 @@ impl Report {
             "  trace              {} setpoints, {} lost\n",
             self.setpoints, self.lost_setpoints
         );
-        s += "  process    pid      policy       prio  period   cycles   overruns  max wake-up  max exec   cpu\n";
+        s += "  process    pid      policy       prio  period   cycles   overruns  wake-up µs: p50    p99  p99.9      max  max exec   cpu\n";
         for p in &self.processes {
+            let m = p.wakeup_latency.unwrap_or_default();
             s += &format!(
-                "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>8.0} µs  {:>6.0} µs  {}\n",
+                "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>16.1} {:>6.1} {:>6.1} {:>8.1}  {:>6.0} µs  {}\n",
                 p.name,
                 p.pid,
                 p.policy,
@@ -230,6 +245,9 @@ impl Report {
                 p.period_us,
                 p.cycles,
                 p.overruns,
+                m.p50_us,
+                m.p99_us,
+                m.p99_9_us,
                 p.max_wakeup_latency_us,
                 p.max_exec_us,
                 p.cpu_s.map_or("-".to_string(), |c| format!("{c:.2} s"))

@@ -20,8 +20,8 @@ use runtime::signals;
 use shm_schema::drive::servo_status as st;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    CellConfigV1, FieldbusImageV1, InstanceName, MAX_AXES, MotionCommandV1, MotionState, ProcState,
-    ProcessStatusV1, Role, ServiceId, ServoStateV1, SetpointV1,
+    CellConfigV1, FieldbusImageV1, InstanceName, LatencyHistogramV1, MAX_AXES, MotionCommandV1,
+    MotionState, ProcState, ProcessStatusV1, Role, ServiceId, ServoStateV1, SetpointV1,
 };
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -111,8 +111,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let pids: Vec<(Role, u32)> = session.children.iter().map(|p| (p.role, p.pid())).collect();
     let sched: Vec<Option<(u32, i32)>> =
         pids.iter().map(|(_, pid)| sched_of(*pid as i32)).collect();
+    session.refresh_latency();
     let stop_problems = session.children.stop_all();
     let statuses = session.statuses;
+    let latencies = std::mem::take(&mut session.latencies);
     drop(session);
     let leftovers = ipc::remove_instance(&instance);
 
@@ -120,9 +122,11 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     for (i, (role, pid)) in pids.iter().enumerate() {
         let status = statuses[role.index()].unwrap_or_default();
         let (policy, priority) = sched[i].unwrap_or((status.policy, status.priority));
-        report.processes.push(ProcessReport::new(
-            *role, *pid, policy, priority, &status, cpu[i],
-        ));
+        let mut p = ProcessReport::new(*role, *pid, policy, priority, &status, cpu[i]);
+        p.wakeup_latency = latencies[role.index()]
+            .as_deref()
+            .map(latency::report::Summary::of);
+        report.processes.push(p);
     }
     if let Some((role, why)) = stop_problems.first() {
         return Err(RunError::Failed(format!("{} {why}", role.name())));
@@ -145,6 +149,7 @@ struct Session {
     instance: InstanceName,
     children: Children,
     statuses: [Option<ProcessStatusV1>; 4],
+    latencies: [Option<Box<LatencyHistogramV1>>; 4],
     // Field order is drop order: ports before the node.
     config_pub: Pub<CellConfigV1>,
     command_pub: Pub<MotionCommandV1>,
@@ -152,6 +157,7 @@ struct Session {
     servo_sub: Sub<ServoStateV1>,
     image_sub: Sub<FieldbusImageV1>,
     status_subs: Vec<(Role, Sub<ProcessStatusV1>)>,
+    latency_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
 }
 
@@ -167,10 +173,15 @@ impl Session {
         let servo_sub = Sub::new(&node, i, ServiceId::ServoState, 1024).map_err(f)?;
         let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
         let mut status_subs = Vec::new();
+        let mut latency_subs = Vec::new();
         for role in Role::ALL {
             status_subs.push((
                 role,
                 Sub::new(&node, i, ServiceId::Status(role), 64).map_err(f)?,
+            ));
+            latency_subs.push((
+                role,
+                Sub::new(&node, i, ServiceId::Latency(role), 1).map_err(f)?,
             ));
         }
         config_pub.send(&cfg.to_shm());
@@ -184,14 +195,25 @@ impl Session {
             instance,
             children,
             statuses: [None; 4],
+            latencies: Default::default(),
             config_pub,
             command_pub,
             setpoint_sub,
             servo_sub,
             image_sub,
             status_subs,
+            latency_subs,
             _node: node,
         })
+    }
+
+    /// Takes the newest latency histogram of every process (they publish about every 100 ms).
+    fn refresh_latency(&mut self) {
+        for (role, sub) in &self.latency_subs {
+            if let Some(h) = sub.latest() {
+                self.latencies[role.index()] = Some(Box::new(h));
+            }
+        }
     }
 
     /// Fails if a process exited or stopped cycling; refreshes the statuses.

@@ -72,6 +72,18 @@ fn check_run(j: &serde_json::Value, target: [f64; 3]) {
         );
         assert!(proc_["pid"].as_u64().is_some());
         assert!(proc_["cpu_s"].as_f64().is_some(), "{p}: {proc_}");
+        // The process' own latency histogram, over the run: sane, non-empty percentiles.
+        let l = &proc_["wakeup_latency_us"];
+        let v = |k: &str| l[k].as_f64().unwrap_or_else(|| panic!("{p}: {k} in {l}"));
+        assert!(l["samples"].as_u64().expect("samples") > 0, "{p}: {l}");
+        assert!(
+            v("min_us") <= v("p50_us")
+                && v("p50_us") <= v("p99_us")
+                && v("p99_us") <= v("p99_9_us")
+                && v("p99_9_us") <= v("p99_99_us")
+                && v("p99_99_us") <= v("max_us"),
+            "{p}: {l}"
+        );
     }
     assert_eq!(j["lost_setpoints"].as_u64(), Some(0), "{j}");
 }

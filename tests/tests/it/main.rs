@@ -1,9 +1,10 @@
 //! One integration-test binary (as ripgrep does): `cell` runs the real processes,
-//! `closed_loop` runs servo and the machine model in-process, `no_alloc`
-//! proves the cycle code allocation-free.
+//! `closed_loop` runs servo and the machine model in-process, `latency` runs the latency tool
+//! and `supervisor status`, `no_alloc` proves the cycle code allocation-free.
 
 mod cell;
 mod closed_loop;
+mod latency;
 mod no_alloc;
 
 #[global_allocator]
