@@ -7,7 +7,8 @@
 //!   (a separate process: [`peer`]) to a servo-style wake-up: `Pub::send` + `Notifier::notify`
 //!   on one side, `Listener::wait` on the other, first across two CPUs, then on one CPU.
 //! - **pipe** ([`Test::Pipe`]): the same hop through a raw pipe (`write` of the stamp, blocking
-//!   `read`), the baseline an IPC hop is compared with.
+//!   `read`), the baseline an IPC hop is compared with; **unix** ([`Test::Unix`]): the same
+//!   through a raw Unix datagram socket, the kernel mechanism iceoryx2's notification uses.
 //!
 //! A hop's latency is measured against one clock: the sender writes `CLOCK_MONOTONIC` into the
 //! message just before publishing, the receiver reads the clock as soon as its wait returns.

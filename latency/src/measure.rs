@@ -13,7 +13,8 @@ use runtime::rt::{self, RtRequest};
 use runtime::signals;
 use runtime::time::now_ns;
 use shm_schema::{InstanceName, LatencyHistogramV1, ServiceId, SetpointV1};
-use std::os::fd::AsRawFd;
+use std::os::fd::{AsRawFd, OwnedFd};
+use std::os::unix::net::UnixDatagram;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -29,11 +30,14 @@ pub enum Test {
     Ipc,
     /// The same hop through a raw pipe: the baseline.
     Pipe,
+    /// The same hop through a raw Unix datagram socket (the kernel mechanism under
+    /// iceoryx2's notification): a second baseline, to tell the kernel's share from ours.
+    Unix,
 }
 
 impl Test {
     /// Every test, in the order they run.
-    pub const ALL: [Test; 3] = [Test::Timer, Test::Ipc, Test::Pipe];
+    pub const ALL: [Test; 4] = [Test::Timer, Test::Ipc, Test::Pipe, Test::Unix];
 
     /// The name on the command line and in reports.
     pub fn name(self) -> &'static str {
@@ -41,6 +45,7 @@ impl Test {
             Test::Timer => "timer",
             Test::Ipc => "ipc",
             Test::Pipe => "pipe",
+            Test::Unix => "unix",
         }
     }
 
@@ -59,6 +64,9 @@ impl Test {
                 "one-way hop: iceoryx2 publish + notify -> Listener wait in another process"
             }
             Test::Pipe => "one-way hop: write to a pipe -> blocking read in another process",
+            Test::Unix => {
+                "one-way hop: send on a Unix datagram socket -> blocking read in another process"
+            }
         }
     }
 }
@@ -323,7 +331,7 @@ fn run_tests(opts: &Options, mut progress: impl FnMut(&[Running], f64)) -> Resul
                     })
                     .collect()
             }
-            Test::Ipc | Test::Pipe => {
+            Test::Ipc | Test::Pipe | Test::Unix => {
                 let rx = *cpus.last().unwrap_or(&0);
                 let mut p = Vec::new();
                 if cpus.len() > 1 {
@@ -475,6 +483,7 @@ fn spawn_peer(
     test: Test,
     tx_cpu: usize,
     instance: &InstanceName,
+    stdout: Stdio,
 ) -> Result<PeerGuard, String> {
     let mut cmd = Command::new(&opts.peer_exe);
     cmd.args(&opts.peer_args)
@@ -489,11 +498,7 @@ fn spawn_peer(
             .to_args(),
         )
         .stdin(Stdio::null())
-        .stdout(if test == Test::Pipe {
-            Stdio::piped()
-        } else {
-            Stdio::null()
-        });
+        .stdout(stdout);
     cmd.spawn().map(PeerGuard).map_err(|e| {
         format!(
             "cannot start the hop's sender {}: {e}",
@@ -521,7 +526,7 @@ fn hop_thread(
         let setpoints =
             Sub::<SetpointV1>::new(&node, instance, ServiceId::Setpoint, 16).map_err(f)?;
         let ready = Listener::new(&node, instance, ServiceId::SetpointReady).map_err(f)?;
-        let mut peer = spawn_peer(opts, test, tx_cpu, instance)?;
+        let mut peer = spawn_peer(opts, test, tx_cpu, instance, Stdio::null())?;
         report = rt::setup_thread(RtRequest {
             priority: opts.priority,
             cpu: Some(rx_cpu),
@@ -554,8 +559,20 @@ fn hop_thread(
         }
         drop(peer);
     } else {
-        let mut peer = spawn_peer(opts, test, tx_cpu, &opts.instance)?;
-        let out = peer.0.stdout.take().ok_or("the hop's sender has no pipe")?;
+        // The sender writes 8-byte stamps to its stdout: a pipe, or one end of a Unix
+        // datagram socket pair.
+        let (peer, out): (PeerGuard, OwnedFd) = if test == Test::Pipe {
+            let mut peer = spawn_peer(opts, test, tx_cpu, &opts.instance, Stdio::piped())?;
+            let out = peer.0.stdout.take().ok_or("the hop's sender has no pipe")?;
+            (peer, out.into())
+        } else {
+            let (rx, tx) = UnixDatagram::pair().map_err(|e| format!("socketpair: {e}"))?;
+            let tx = Stdio::from(OwnedFd::from(tx));
+            (
+                spawn_peer(opts, test, tx_cpu, &opts.instance, tx)?,
+                rx.into(),
+            )
+        };
         let fd = out.as_raw_fd();
         report = rt::setup_thread(RtRequest {
             priority: opts.priority,

@@ -2,7 +2,8 @@
 //!
 //! Every interval (a [`CycleClock`] of the cycle runtime, phase 0) it stamps a setpoint with
 //! `CLOCK_MONOTONIC` and sends it: for the IPC hop `Pub::send` then `Notifier::notify` (what
-//! trajgen does each cycle), for the pipe baseline an 8-byte `write` of the stamp to stdout.
+//! trajgen does each cycle), for the pipe and Unix-socket baselines an 8-byte `write` of the
+//! stamp to stdout (a pipe or a datagram socket).
 //! It stops on SIGTERM/SIGINT, when the pipe's reader is gone, or when the thread that
 //! started it exits (`PR_SET_PDEATHSIG`).
 
@@ -17,7 +18,7 @@ use shm_schema::{InstanceName, ServiceId, SetpointV1};
 /// What the sender is told.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Args {
-    /// [`Test::Ipc`] or [`Test::Pipe`].
+    /// [`Test::Ipc`], [`Test::Pipe`] or [`Test::Unix`].
     pub transport: Test,
     /// Instance of the IPC hop's services.
     pub instance: String,
@@ -59,7 +60,7 @@ impl Args {
                     transport = Some(
                         Test::from_name(value)
                             .filter(|t| *t != Test::Timer)
-                            .ok_or_else(|| bad("not ipc or pipe"))?,
+                            .ok_or_else(|| bad("not ipc, pipe or unix"))?,
                     )
                 }
                 "--instance" => instance = Some(value.clone()),

@@ -70,6 +70,7 @@ pub fn line(s: &Series) -> String {
         Test::Timer => "T",
         Test::Ipc => "I",
         Test::Pipe => "P",
+        Test::Unix => "U",
     };
     let cpus = match s.tx_cpu {
         Some(tx) => format!(" CPU {tx}->{}", s.cpu),

@@ -99,7 +99,9 @@ impl LatencyArgs {
         let mut tests = Vec::new();
         for name in self.tests.split(',').map(str::trim) {
             let t = Test::from_name(name).ok_or_else(|| {
-                format!("--test {name:?}: unknown; choose from timer, ipc, pipe (comma-separated)")
+                format!(
+                    "--test {name:?}: unknown; choose from timer, ipc, pipe, unix (comma-separated)"
+                )
             })?;
             if !tests.contains(&t) {
                 tests.push(t);

@@ -88,8 +88,8 @@ enum Cmd {
         /// Write a PNG of the histogram.
         #[arg(long)]
         plot: Option<PathBuf>,
-        /// Tests to run, in order, comma-separated: timer, ipc, pipe (pipe: the raw-pipe
-        /// baseline of the IPC hop).
+        /// Tests to run, in order, comma-separated: timer, ipc, and the baselines of the IPC
+        /// hop: pipe (a raw pipe) and unix (a raw Unix datagram socket).
         #[arg(long, default_value = "timer,ipc")]
         test: String,
         /// Instance name of the IPC hop's services (default latency-<pid>).
