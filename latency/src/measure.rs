@@ -15,6 +15,7 @@ use runtime::time::now_ns;
 use shm_schema::{InstanceName, LatencyHistogramV1, ServiceId, SetpointV1};
 use std::os::fd::{AsRawFd, OwnedFd};
 use std::os::unix::net::UnixDatagram;
+use std::os::unix::thread::JoinHandleExt;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -418,6 +419,16 @@ fn run_group(
         progress(&running, start.elapsed().as_secs_f64());
     }
     let elapsed = start.elapsed().as_secs_f64();
+    // A hop's receiver may be blocked in its wait with no sender left: interrupt it until it
+    // has seen the stop.
+    while !handles.iter().all(|h| h.is_finished()) {
+        for h in &handles {
+            if !h.is_finished() {
+                signals::wake_thread(h.as_pthread_t());
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
     let mut out = Vec::new();
     let mut errors = Vec::new();
     for h in handles {
@@ -531,14 +542,13 @@ fn hop_thread(
             priority: opts.priority,
             cpu: Some(rx_cpu),
         });
-        let timeout = Duration::from_millis(100);
         // A setpoint published after this wake-up's clock read belongs to the next wake-up
         // (its notification is still pending): it waits here.
         let mut early: Option<SetpointV1> = None;
         // The measuring loop: servo's side of the hop. One blocking wait, one clock read,
         // then the samples that arrived before it.
         while !stopped(stop) {
-            if !ready.wait(timeout) {
+            if !ready.wait() {
                 if let Ok(Some(status)) = peer.0.try_wait()
                     && !stopped(stop)
                 {
