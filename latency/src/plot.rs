@@ -88,14 +88,16 @@ pub fn png(title: &str, series: &[(String, Vec<u64>)]) -> Result<Vec<u8>, String
         .unwrap_or(1)
         .max(1);
     let decades = (cmax as f64).log10().ceil().max(1.0);
+    // The bottom of the y axis is half a sample, so a single sample stands above it.
+    let bottom = -0.3;
     let px = |us: f64| x0 + ((us / xmax) * (x1 - x0) as f64).round() as i32;
     let py = |count: u64| {
         let v = if count == 0 {
-            0.0
+            bottom
         } else {
-            (count as f64).log10() + 0.0
+            (count as f64).log10()
         };
-        y0 - ((v / decades) * (y0 - y1) as f64).round() as i32
+        y0 - (((v - bottom) / (decades - bottom)) * (y0 - y1) as f64).round() as i32
     };
 
     // Grid and ticks.
