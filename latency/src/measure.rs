@@ -233,12 +233,20 @@ impl Series {
         }
     }
 
-    /// A label like `T: 0` (timer thread 0) or `ipc 0->1` (hop from CPU 0 to CPU 1).
+    /// A label like `timer 0` (timer thread 0) or `ipc 0->1` (hop from CPU 0 to CPU 1).
     pub fn label(&self) -> String {
-        match self.tx_cpu {
-            None => format!("{} {}", self.test.name(), self.index),
-            Some(tx) => format!("{} {}->{}", self.test.name(), tx, self.cpu),
-        }
+        label(
+            self.test,
+            self.index,
+            self.tx_cpu.map(|tx| (tx as i64, self.cpu as i64)),
+        )
+    }
+}
+
+fn label(test: Test, index: usize, hop: Option<(i64, i64)>) -> String {
+    match hop {
+        None => format!("{} {index}", test.name()),
+        Some((tx, rx)) => format!("{} {tx}->{rx}", test.name()),
     }
 }
 
@@ -390,9 +398,9 @@ fn run_group(
         let index = first_index + i;
         let rec = Recorder::new(opts.histogram_us, live.clone());
         let (stop2, opts2, plan2) = (stop.clone(), opts.clone(), *plan);
-        let label = match plan {
-            Plan::Timer { .. } => format!("{} {i}", test.name()),
-            Plan::Hop { tx, rx } => format!("{} {tx}->{rx}", test.name()),
+        let label = match *plan {
+            Plan::Timer { .. } => label(test, index, None),
+            Plan::Hop { tx, rx } => label(test, index, Some((tx as i64, rx as i64))),
         };
         running.push(Running {
             label: label.clone(),
