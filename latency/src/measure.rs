@@ -86,6 +86,10 @@ pub enum Threads {
 pub struct Options {
     /// Period of the timer threads and of the hop sender (µs).
     pub interval_us: u64,
+    /// Their phase on the grid of `CLOCK_MONOTONIC` (µs, below the interval), as a process'
+    /// phase in the cell. A phase of 0 puts every wake-up on a whole millisecond, where the
+    /// kernel's own tick (every 1/HZ s, aligned to `CLOCK_MONOTONIC`) fires too.
+    pub phase_us: u64,
     /// How long each test runs; `None` until Ctrl-C.
     pub duration: Option<Duration>,
     /// Timer threads.
@@ -452,7 +456,7 @@ fn run_group(
     Ok((out, elapsed))
 }
 
-/// One timer thread: the cycle runtime's clock at the interval, phase 0, as cyclictest's
+/// One timer thread: the cycle runtime's clock at the interval and phase, as cyclictest's
 /// `clock_nanosleep` loop.
 fn timer_thread(
     opts: &Options,
@@ -466,7 +470,7 @@ fn timer_thread(
         cpu: Some(cpu),
     });
     let interval_ns = opts.interval_us * 1000;
-    let mut clock = CycleClock::new(interval_ns, 0, now_ns());
+    let mut clock = CycleClock::new(interval_ns, opts.phase_us * 1000, now_ns());
     // The measuring loop: the cycle runtime's own wait and bookkeeping, nothing else.
     while !stopped(stop) {
         let wake = match clock.wait() {
@@ -511,6 +515,7 @@ fn spawn_peer(
                 transport: test,
                 instance: instance.to_string(),
                 interval_us: opts.interval_us,
+                phase_us: opts.phase_us,
                 cpu: tx_cpu,
                 priority: opts.priority,
             }

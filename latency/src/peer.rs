@@ -1,6 +1,6 @@
 //! The sending side of a hop, a process of its own: trajgen's side.
 //!
-//! Every interval (a [`CycleClock`] of the cycle runtime, phase 0) it stamps a setpoint with
+//! Every interval (a [`CycleClock`] of the cycle runtime, at the given phase) it stamps a setpoint with
 //! `CLOCK_MONOTONIC` and sends it: for the IPC hop `Pub::send` then `Notifier::notify` (what
 //! trajgen does each cycle), for the pipe and Unix-socket baselines an 8-byte `write` of the
 //! stamp to stdout (a pipe or a datagram socket).
@@ -24,6 +24,8 @@ pub struct Args {
     pub instance: String,
     /// Period (µs).
     pub interval_us: u64,
+    /// Phase on the grid (µs).
+    pub phase_us: u64,
     /// CPU to pin to.
     pub cpu: usize,
     /// `SCHED_FIFO` priority (0: `SCHED_OTHER`).
@@ -40,6 +42,8 @@ impl Args {
             self.instance.clone(),
             "--interval-us".into(),
             self.interval_us.to_string(),
+            "--phase-us".into(),
+            self.phase_us.to_string(),
             "--cpu".into(),
             self.cpu.to_string(),
             "--priority".into(),
@@ -52,6 +56,7 @@ impl Args {
         let mut it = args.iter();
         let (mut transport, mut instance, mut interval_us, mut cpu, mut priority) =
             (None, None, None, None, None);
+        let mut phase_us = 0;
         while let Some(flag) = it.next() {
             let value = it.next().ok_or_else(|| format!("{flag} needs a value"))?;
             let bad = |what: &str| format!("{flag} {value:?}: {what}");
@@ -67,6 +72,7 @@ impl Args {
                 "--interval-us" => {
                     interval_us = Some(value.parse().map_err(|_| bad("not a number"))?)
                 }
+                "--phase-us" => phase_us = value.parse().map_err(|_| bad("not a number"))?,
                 "--cpu" => cpu = Some(value.parse().map_err(|_| bad("not a CPU number"))?),
                 "--priority" => priority = Some(value.parse().map_err(|_| bad("not a number"))?),
                 _ => return Err(format!("unknown argument {flag:?}")),
@@ -79,6 +85,7 @@ impl Args {
             interval_us: interval_us
                 .filter(|i| *i > 0)
                 .ok_or_else(|| missing("a positive --interval-us"))?,
+            phase_us,
             cpu: cpu.ok_or_else(|| missing("--cpu"))?,
             priority: priority.ok_or_else(|| missing("--priority"))?,
         })
@@ -106,7 +113,7 @@ pub fn run(args: &Args) -> Result<(), String> {
         priority: args.priority,
         cpu: Some(args.cpu),
     });
-    let mut clock = CycleClock::new(args.interval_us * 1000, 0, now_ns());
+    let mut clock = CycleClock::new(args.interval_us * 1000, args.phase_us * 1000, now_ns());
     let mut sp = SetpointV1::default();
     // The cycle: wait, stamp, send (+ notify). No allocation of ours, no lock, no log.
     while !signals::stop_requested() {
@@ -146,6 +153,7 @@ mod tests {
             transport: Test::Pipe,
             instance: "lat-1".into(),
             interval_us: 250,
+            phase_us: 100,
             cpu: 1,
             priority: 80,
         };

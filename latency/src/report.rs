@@ -1,6 +1,6 @@
 //! The figures of a latency run as text (cyclictest's lines, plus percentiles) and JSON.
 
-use crate::measure::{Results, Running, Series, Test};
+use crate::measure::{Options, Results, Running, Series, Test};
 use serde_json::{Value, json};
 use shm_schema::LatencyHistogramV1;
 use shm_schema::status::rt_flags;
@@ -97,8 +97,12 @@ pub fn line(s: &Series) -> String {
 }
 
 /// The text report: a header per test, one line per series, notes.
-pub fn text(r: &Results, histogram_us: usize) -> String {
-    let mut out = String::new();
+pub fn text(r: &Results, opts: &Options) -> String {
+    let histogram_us = opts.histogram_us;
+    let mut out = format!(
+        "# interval {} µs, phase {} µs on CLOCK_MONOTONIC, priority {}\n",
+        opts.interval_us, opts.phase_us, opts.priority
+    );
     if r.process_flags & rt_flags::DMA_LATENCY != 0 {
         out += "# /dev/cpu_dma_latency set to 0us\n";
     }
@@ -129,7 +133,7 @@ pub fn text(r: &Results, histogram_us: usize) -> String {
 }
 
 /// The JSON report: options, then per test the series with their figures.
-pub fn to_json(r: &Results, interval_us: u64, priority: i32, histogram_us: usize) -> Value {
+pub fn to_json(r: &Results, opts: &Options) -> Value {
     let mut tests = serde_json::Map::new();
     for (test, secs) in &r.elapsed_s {
         let series: Vec<Value> = r
@@ -162,9 +166,10 @@ pub fn to_json(r: &Results, interval_us: u64, priority: i32, histogram_us: usize
         );
     }
     json!({
-        "interval_us": interval_us,
-        "priority": priority,
-        "histogram_us": histogram_us,
+        "interval_us": opts.interval_us,
+        "phase_us": opts.phase_us,
+        "priority": opts.priority,
+        "histogram_us": opts.histogram_us,
         "mlockall": r.process_flags & rt_flags::MLOCK != 0,
         "cpu_dma_latency_0": r.process_flags & rt_flags::DMA_LATENCY != 0,
         "interrupted": r.interrupted,

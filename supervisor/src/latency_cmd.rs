@@ -15,6 +15,8 @@ pub const PEER_SUBCOMMAND: &str = "latency-peer";
 pub struct LatencyArgs {
     /// `--interval-us`.
     pub interval_us: u64,
+    /// `--phase-us`; `None` for half the interval.
+    pub phase_us: Option<u64>,
     /// `--duration`.
     pub duration: Option<String>,
     /// `--threads`.
@@ -79,6 +81,13 @@ impl LatencyArgs {
                 self.interval_us
             ));
         }
+        let phase_us = self.phase_us.unwrap_or(self.interval_us / 2);
+        if phase_us >= self.interval_us {
+            return Err(format!(
+                "--phase-us {phase_us}: must be below the interval ({} µs)",
+                self.interval_us
+            ));
+        }
         if !(0..=99).contains(&self.priority) {
             return Err(format!(
                 "--priority {}: must be 0 (SCHED_OTHER) to 99",
@@ -129,6 +138,7 @@ impl LatencyArgs {
             .map_err(|e| format!("cannot find the supervisor's own program: {e}"))?;
         Ok(Options {
             interval_us: self.interval_us,
+            phase_us,
             duration,
             threads,
             priority: self.priority,
@@ -194,16 +204,10 @@ pub fn latency(args: &LatencyArgs) -> Result<(), LatencyError> {
     if args.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report::to_json(
-                &results,
-                opts.interval_us,
-                opts.priority,
-                opts.histogram_us
-            ))
-            .unwrap_or_default()
+            serde_json::to_string_pretty(&report::to_json(&results, &opts)).unwrap_or_default()
         );
     } else {
-        print!("{}", report::text(&results, opts.histogram_us));
+        print!("{}", report::text(&results, &opts));
     }
     write_files(args, &opts, &results).map_err(LatencyError::Failed)
 }
@@ -214,8 +218,8 @@ fn write_files(args: &LatencyArgs, opts: &Options, r: &Results) -> Result<(), St
         let names: Vec<String> = r.series.iter().map(|s| s.label()).collect();
         let comments = vec![
             format!(
-                "supervisor latency: interval {} us, priority {}, 1-us bins",
-                opts.interval_us, opts.priority
+                "supervisor latency: interval {} us, phase {} us, priority {}, 1-us bins",
+                opts.interval_us, opts.phase_us, opts.priority
             ),
             format!("columns: {}", names.join(", ")),
         ];

@@ -64,6 +64,11 @@ enum Cmd {
         /// Period of the measuring loops (µs).
         #[arg(long, short = 'i', default_value_t = 1000)]
         interval_us: u64,
+        /// Phase of the loops on the grid of CLOCK_MONOTONIC (µs), as a process' phase in the
+        /// cell; default half the interval. 0 puts every wake-up on a whole millisecond,
+        /// together with the kernel's tick.
+        #[arg(long)]
+        phase_us: Option<u64>,
         /// How long each test runs: seconds, or 30s, 5m, 2h, 1d. Default: until Ctrl-C.
         #[arg(long, short = 'D')]
         duration: Option<String>,
@@ -135,6 +140,7 @@ fn main() -> ExitCode {
         }
         Cmd::Latency {
             interval_us,
+            phase_us,
             duration,
             threads,
             smp: _,
@@ -149,6 +155,7 @@ fn main() -> ExitCode {
         } => {
             let args = LatencyArgs {
                 interval_us,
+                phase_us,
                 duration,
                 threads,
                 priority,

@@ -168,6 +168,7 @@ fn bad_latency_options_are_refused_by_name() {
         (vec!["--interval-us", "5"], "--interval-us 5"),
         (vec!["--duration", "0"], "--duration \"0\""),
         (vec!["--priority", "120"], "--priority 120"),
+        (vec!["--phase-us", "1000"], "--phase-us 1000"),
         (vec!["--histfile", "/no/such/folder/h.txt"], "--histfile"),
     ] {
         let out = run_with_watchdog(supervisor().arg("latency").args(&args), WATCHDOG);
