@@ -6,8 +6,8 @@
 //!
 //! # Allocation
 //! Measured with a counting allocator (see `tests/ipc_alloc.rs` in this crate): in steady
-//! state `receive` allocates nothing, a publish (`loan_uninit` + `send`) allocates once inside
-//! iceoryx2. The set-up of [`crate::rt`] keeps that allocation on locked, prefaulted heap that
+//! state `receive`, `notify` and a listener's wait allocate nothing, a publish (`loan_uninit` +
+//! `send`) allocates once inside iceoryx2. The set-up of [`crate::rt`] keeps that allocation on locked, prefaulted heap that
 //! malloc never returns to the kernel.
 
 use iceoryx2::node::NodeView;
