@@ -68,6 +68,7 @@ fn a_short_latency_run_gives_sane_figures_and_files_and_leaves_nothing() {
                 "timer,ipc,pipe",
                 "--json",
             ])
+            .args(["--priority", PRIORITY])
             .args([
                 "--interval-us",
                 "500",
