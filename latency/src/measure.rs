@@ -219,21 +219,30 @@ pub struct Series {
 }
 
 impl Series {
-    fn new(test: Test, index: usize, interval_us: u64, rec: Recorder) -> Self {
+    /// The figures of the calling measuring thread, once its loop has ended.
+    fn of_thread(
+        test: Test,
+        index: usize,
+        interval_us: u64,
+        tx_cpu: Option<usize>,
+        hist: Box<LatencyHistogramV1>,
+        rec: Recorder,
+        report: rt::RtReport,
+    ) -> Self {
         Self {
             test,
             index,
-            tid: 0,
-            cpu: -1,
-            tx_cpu: None,
-            priority: 0,
+            tid: gettid(),
+            cpu: report.cpu,
+            tx_cpu: tx_cpu.map(|c| c as i32),
+            priority: report.priority,
             interval_us,
-            hist: Box::new(LatencyHistogramV1::new()),
+            hist,
             act_ns: rec.live.act_ns.load(Ordering::Relaxed),
             linear: rec.linear,
             overflows: rec.overflows,
             overflow_cycles: rec.overflow_cycles,
-            rt_flags: 0,
+            rt_flags: report.flags,
         }
     }
 
@@ -481,13 +490,16 @@ fn timer_thread(
         rec.record(wake.latency_ns());
         clock.finish(&wake, now_ns());
     }
-    let mut s = Series::new(Test::Timer, index, opts.interval_us, rec);
-    s.hist = Box::new(*clock.histogram());
-    s.tid = gettid();
-    s.cpu = report.cpu;
-    s.priority = report.priority;
-    s.rt_flags = report.flags;
-    Ok(s)
+    let hist = Box::new(*clock.histogram());
+    Ok(Series::of_thread(
+        Test::Timer,
+        index,
+        opts.interval_us,
+        None,
+        hist,
+        rec,
+        report,
+    ))
 }
 
 /// Stops the peer when dropped, so no error path leaves it running.
@@ -626,12 +638,13 @@ fn hop_thread(
         drop(out);
         drop(peer);
     }
-    let mut s = Series::new(test, index, opts.interval_us, rec);
-    s.hist = hist;
-    s.tid = gettid();
-    s.cpu = report.cpu;
-    s.tx_cpu = Some(tx_cpu as i32);
-    s.priority = report.priority;
-    s.rt_flags = report.flags;
-    Ok(s)
+    Ok(Series::of_thread(
+        test,
+        index,
+        opts.interval_us,
+        Some(tx_cpu),
+        hist,
+        rec,
+        report,
+    ))
 }

@@ -353,12 +353,6 @@ impl Listener {
     pub fn wait(&self) -> bool {
         matches!(self.port.blocking_wait(|_| {}), Ok(n) if n > 0)
     }
-
-    /// Takes every pending notification without blocking; true if there was one.
-    #[inline]
-    pub fn try_wait(&self) -> bool {
-        matches!(self.port.try_wait(|_| {}), Ok(n) if n > 0)
-    }
 }
 
 impl Debug for Listener {
