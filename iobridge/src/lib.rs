@@ -6,25 +6,32 @@
 //! the image. The fieldbus is simulated in this version: the image is published on
 //! `<i>/iobridge/output`.
 
-use shm_schema::drive::FIELDBUS_IMAGE_LEN;
-use shm_schema::{FieldbusImageV1, ServoStateV1};
+use shm_schema::drive::{FIELDBUS_IMAGE_LEN, IMAGE_INVALID};
+use shm_schema::{FieldbusImageV1, ServoStateV2};
 
 /// Bytes of the timestamp at the start of the image.
 pub const STAMP_BYTES: usize = 8;
 /// Axes that fit in the image.
 pub const IMAGE_AXES: usize = (FIELDBUS_IMAGE_LEN - STAMP_BYTES) / 4;
 
-/// Encodes a position in thousandths of the axis unit (saturating at the `i32` range).
+/// Encodes a position in thousandths of the axis unit (saturating at the `i32` range just
+/// inside it); a value that is not finite (no valid measurement) is [`IMAGE_INVALID`], never
+/// a believable number.
 #[inline]
 pub fn milli_units(v: f64) -> i32 {
-    (v * 1000.0).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+    if !v.is_finite() {
+        return IMAGE_INVALID;
+    }
+    (v * 1000.0)
+        .round()
+        .clamp(IMAGE_INVALID as f64 + 1.0, i32::MAX as f64) as i32
 }
 
 /// Writes the output image for `state` at `now_ns`.
 ///
 /// # Real-time
 /// Arithmetic and byte copies only.
-pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV1) -> FieldbusImageV1 {
+pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV2) -> FieldbusImageV1 {
     let axes = (state.axes as usize).min(IMAGE_AXES);
     let mut image = [0u8; FIELDBUS_IMAGE_LEN];
     image[..STAMP_BYTES].copy_from_slice(&(state.measured_stamp_ns / 1000).to_le_bytes());
@@ -43,7 +50,8 @@ pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV1) -> FieldbusImage
     }
 }
 
-/// Decodes an image: (measurement time µs, positions in axis units).
+/// Decodes an image: (measurement time µs, positions in axis units; NaN for
+/// [`IMAGE_INVALID`]).
 pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
     let mut stamp = [0u8; 8];
     stamp.copy_from_slice(&img.image[..STAMP_BYTES]);
@@ -56,7 +64,12 @@ pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
         let at = STAMP_BYTES + 4 * i;
         let mut b = [0u8; 4];
         b.copy_from_slice(&img.image[at..at + 4]);
-        *p = i32::from_le_bytes(b) as f64 / 1000.0;
+        let raw = i32::from_le_bytes(b);
+        *p = if raw == IMAGE_INVALID {
+            f64::NAN
+        } else {
+            raw as f64 / 1000.0
+        };
     }
     (u64::from_le_bytes(stamp), pos)
 }
@@ -67,7 +80,7 @@ mod tests {
 
     #[test]
     fn the_image_carries_the_measurement_time_and_positions() {
-        let mut s = ServoStateV1 {
+        let mut s = ServoStateV2 {
             seq: 9,
             measured_stamp_ns: 123_456_789_000,
             axes: 3,
@@ -81,5 +94,19 @@ mod tests {
         assert_eq!(stamp, 123_456_789);
         assert_eq!(&pos[..3], &[40.002, -0.002, 179.999]);
         assert_eq!(img.written_ns - img.measured_ns, 3_211_000);
+    }
+
+    #[test]
+    fn a_position_that_is_not_finite_is_marked_invalid_not_zero() {
+        let mut s = ServoStateV2 {
+            axes: 2,
+            ..Default::default()
+        };
+        s.act_position[..2].copy_from_slice(&[f64::NAN, f64::INFINITY]);
+        let img = write_image(1, 0, &s);
+        assert_eq!(&img.image[8..12], &IMAGE_INVALID.to_le_bytes());
+        let (_, pos) = read_image(&img);
+        assert!(pos[0].is_nan() && pos[1].is_nan());
+        assert_eq!(milli_units(-1e300), IMAGE_INVALID + 1);
     }
 }

@@ -4,20 +4,21 @@ use iobridge::write_image;
 use runtime::cycle::{CycleClock, Wake};
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, SetupError, Task};
-use shm_schema::{FieldbusImageV1, Role, ServiceId, ServoStateV1};
+use shm_schema::EventQueue;
+use shm_schema::{FieldbusImageV1, Role, ServiceId, ServoStateV2};
 use std::process::ExitCode;
 
 struct Bridge {
     seq: u64,
-    servo: Sub<ServoStateV1>,
-    last: Option<ServoStateV1>,
+    servo: Sub<ServoStateV2>,
+    last: Option<ServoStateV2>,
     output: Pub<FieldbusImageV1>,
 }
 
 impl Task for Bridge {
     /// # Real-time
     /// IPC calls and [`write_image`]; nothing else.
-    fn cycle(&mut self, wake: &Wake, _clock: &mut CycleClock) {
+    fn cycle(&mut self, wake: &Wake, _clock: &mut CycleClock, _events: &mut EventQueue) {
         if let Some(s) = self.servo.latest() {
             self.last = Some(s);
         }

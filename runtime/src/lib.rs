@@ -5,6 +5,7 @@
 //! - [`cycle`]: periodic wake-ups on absolute deadlines (`clock_nanosleep(TIMER_ABSTIME)`),
 //!   the CS9 overrun rule and the cycle statistics every process publishes.
 //! - [`ipc`]: iceoryx2 nodes and typed ports for the services of `shm-schema`.
+//! - [`events`]: a process' publisher of events.
 //! - [`process`]: the skeleton every real-time process runs: arguments, cell configuration,
 //!   set-up, then the cycle until SIGTERM.
 //!
@@ -14,6 +15,7 @@
 
 pub mod alloc_count;
 pub mod cycle;
+pub mod events;
 pub mod ipc;
 pub mod process;
 pub mod rt;

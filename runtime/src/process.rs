@@ -13,13 +13,16 @@
 //! 7. a clean exit that removes the process' iceoryx2 resources.
 
 use crate::cycle::{CycleClock, WaitError, Wake};
+use crate::events::EventSink;
 use crate::ipc::{self, Ipc, Pub, Sub};
 use crate::rt::{self, RtRequest};
 use crate::signals;
 use crate::time::now_ns;
 use iceoryx2::prelude::Node;
+use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV1, InstanceName, LatencyHistogramV1, ProcState, ProcessStatusV1, Role, ServiceId,
+    CellConfigV2, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
+    ProcessStatusV1, Role, ServiceId,
 };
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -29,6 +32,9 @@ pub const DEFAULT_INSTANCE: &str = "gantry";
 
 /// How often a process publishes its latency histogram (at most; once per cycle if slower).
 pub const LATENCY_PUBLISH_INTERVAL_NS: u64 = 100_000_000;
+
+/// Overruns are reported as an event at most this often (ns).
+pub const OVERRUN_EVENT_INTERVAL_NS: u64 = 1_000_000_000;
 
 /// How long a process waits for the cell configuration before giving up.
 pub const CONFIG_TIMEOUT: Duration = Duration::from_secs(10);
@@ -43,22 +49,26 @@ pub struct Context {
     /// The process' iceoryx2 node; open ports with [`Pub::new`] and [`Sub::new`].
     pub node: Node<Ipc>,
     /// The validated cell configuration.
-    pub cell: CellConfigV1,
+    pub cell: CellConfigV2,
 }
 
 /// The periodic work of a process.
 pub trait Task {
-    /// One cycle, started by `wake`. May ask `clock` for an extra wake-up.
+    /// One cycle, started by `wake`. May ask `clock` for an extra wake-up, and queue events
+    /// in `events` (the runtime publishes them on `<i>/events` after the cycle).
     ///
     /// # Real-time
     /// Implementations allocate nothing of their own, take no lock, log nothing, and make no
     /// system call but IPC calls.
-    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock);
+    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock, events: &mut EventQueue);
 
     /// The process' fault code for its status (0 for none).
     fn fault(&self) -> u32 {
         0
     }
+
+    /// Called once when the cycle ends (a stop was requested), before the last status.
+    fn stop(&mut self, _now_ns: u64, _events: &mut EventQueue) {}
 }
 
 /// Error type of a task's set-up.
@@ -151,7 +161,12 @@ fn run_inner<T: Task>(
     let status_pub = Pub::<ProcessStatusV1>::new(&ctx.node, &instance, ServiceId::Status(role))?;
     let latency_pub =
         Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(role))?;
+    let mut events = EventSink::new(&ctx.node, &instance, role as u32)?;
+    let mut queue = EventQueue::default();
     let mut task = build(&ctx)?;
+    // Connect to the subscribers that exist now (the supervisor's), so the first event in the
+    // cycle does not pay for it.
+    events.connect();
 
     let (report, _rt_guard) = rt::setup(RtRequest {
         priority: pc.priority,
@@ -184,6 +199,7 @@ fn run_inner<T: Task>(
 
     let mut clock = CycleClock::new(pc.period_ns, pc.phase_ns, now_ns());
     let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(pc.period_ns).max(1);
+    let mut overruns = OverrunReporter::default();
     status.state = ProcState::Cyclic as u32;
     // The cycle. Nothing in this loop allocates, locks or logs (see `Task::cycle`).
     while !signals::stop_requested() {
@@ -194,7 +210,7 @@ fn run_inner<T: Task>(
                 return Err(format!("clock_nanosleep failed: errno {e}").into());
             }
         };
-        task.cycle(&wake, &mut clock);
+        task.cycle(&wake, &mut clock, &mut queue);
         status.stamp_ns = wake.actual_ns;
         status.fault = task.fault();
         status.stats = *clock.stats();
@@ -202,8 +218,14 @@ fn run_inner<T: Task>(
         if status.stats.cycles.is_multiple_of(latency_every) {
             latency_pub.send(clock.histogram());
         }
+        if let Some(e) = overruns.check(wake.actual_ns, clock.stats().overruns) {
+            queue.push(e);
+        }
+        events.drain(&mut queue);
         clock.finish(&wake, now_ns());
     }
+    task.stop(now_ns(), &mut queue);
+    events.drain(&mut queue);
     status.state = ProcState::Stopping as u32;
     status_pub.send(&status);
     latency_pub.send(clock.histogram());
@@ -223,13 +245,48 @@ fn run_inner<T: Task>(
     Ok(())
 }
 
+/// Turns the overrun counter into events: one at the first overrun of a burst, then at most
+/// one per [`OVERRUN_EVENT_INTERVAL_NS`] while overruns go on, each with the overruns since the
+/// previous event.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OverrunReporter {
+    reported: u64,
+    last_event_ns: u64,
+}
+
+impl OverrunReporter {
+    /// The event to publish at `now_ns` given the process' overrun count, if any.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn check(&mut self, now_ns: u64, overruns: u64) -> Option<EventV1> {
+        if overruns <= self.reported
+            || (self.last_event_ns > 0
+                && now_ns.saturating_sub(self.last_event_ns) < OVERRUN_EVENT_INTERVAL_NS)
+        {
+            return None;
+        }
+        let new = overruns - self.reported;
+        self.reported = overruns;
+        self.last_event_ns = now_ns;
+        Some(EventV1::new(
+            now_ns,
+            code::OVERRUN_BURST,
+            -1,
+            new as f64,
+            0.0,
+            &["cycle ran past its next deadline"],
+        ))
+    }
+}
+
 /// Waits (set-up only, polling every 2 ms) for the cell configuration and validates it;
 /// `None` if a stop was requested meanwhile.
 fn wait_for_cell_config(
     node: &Node<Ipc>,
     instance: &InstanceName,
-) -> Result<Option<CellConfigV1>, SetupError> {
-    let sub = Sub::<CellConfigV1>::new(node, instance, ServiceId::CellConfig, 1)?;
+) -> Result<Option<CellConfigV2>, SetupError> {
+    let sub = Sub::<CellConfigV2>::new(node, instance, ServiceId::CellConfig, 1)?;
     let start = Instant::now();
     loop {
         if let Some(cell) = sub.latest() {
@@ -252,7 +309,7 @@ fn wait_for_cell_config(
 }
 
 /// Checks what a process relies on; the supervisor validated everything else.
-pub fn validate_cell(cell: &CellConfigV1) -> Result<(), String> {
+pub fn validate_cell(cell: &CellConfigV2) -> Result<(), String> {
     if cell.axes == 0 || cell.axes as usize > shm_schema::MAX_AXES {
         return Err(format!(
             "cell configuration has {} axes, 1..={} allowed",

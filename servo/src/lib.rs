@@ -1,25 +1,55 @@
-//! Servo: the axes' position loops (seed 003 §3). It runs at its own period at all times,
-//! also when no setpoint comes (it holds the last one): its job is not to keep motion time
-//! but to keep the axes stable.
+//! Servo: the servo layer of seed 001 (Stäubli's low-level interface) on top of CiA 402
+//! drives, and the axes' position loops (seed 003 §3). It runs at its own period at all
+//! times, also when no setpoint comes: its job is not to keep motion time but to keep the axes
+//! stable and safe.
 //!
-//! Each cycle, per axis: the reference is the latest trajgen setpoint extrapolated to now
-//! (`p + v dt`: trajgen's trajectory is a function of real time, so a servo faster than
-//! trajgen gets a smooth reference and a late setpoint costs nothing), for at most
-//! `setpoint_timeout`, after which servo holds (`SETPOINT_STALE`). A PID on the position error
-//! with velocity and acceleration feed-forward gives the effort.
+//! **Power** (seed 001's `LLI_enable`/`LLI_disable`, `LLI_state`). The arm starts disabled.
+//! An enable request (`<i>/servo/request`) starts the enabling sequence in the next cycle:
+//! every drive is stepped Shutdown → Switch on → Enable operation ([`cia402::enable_step`]);
+//! the arm is enabled when every axis is in Operation enabled, and an error if that takes
+//! longer than the enable timeout. A disable request starts the disabling sequence
+//! (Shutdown: transition 8) and aborts a pending enable. Servo follows setpoints only while
+//! enabled; otherwise its reference follows the measured position (bumpless enable: the
+//! drives' targets equal the actual position, the integrators are cleared).
 //!
-//! Safety rules:
-//! - trajgen never moves an axis faster than its `vmax` (the blend interpolates monotonically
-//!   between segment velocities), so a setpoint further from the previous one than
-//!   `vmax * (stamp difference)` is a jump: it is refused and servo holds (`SETPOINT_JUMP`).
-//!   The first setpoint servo sees must lie within the in-position band of where it holds;
-//! - while the drives are disabled the reference follows the measured position and the
-//!   integrator is cleared, so enabling is bumpless; enable is requested as a 0-to-1 edge.
+//! **Faults are latched.** Each of these cuts power (quick stop on every axis, then disable
+//! voltage) and stays latched until a reset request, after which an enable request is needed:
+//! - command validation every cycle (seed 001's rule for `LLI_set`): the commanded position
+//!   outside the joint range, a commanded velocity over its limit, a position step or a
+//!   velocity step per servo period over its limit (steps are scaled by the real time since
+//!   the previous cycle, so a late cycle is not a step), a value that is not finite;
+//! - feedback that is not finite (a lost encoder, an unstable simulation), or older than the
+//!   feedback timeout while powered (the drives went silent);
+//! - a following error over its limit (a device e-stop);
+//! - a drive in Fault, or a drive leaving Operation enabled without being asked.
+//!
+//! A reset request resets the drives' faults (bit 7 edge, [`cia402::FaultReset`]) and clears
+//! the latch once no drive is in Fault and the feedback is valid; otherwise it is refused.
+//! **No drive ever re-enables by itself**: power comes back only through reset, then enable.
+//!
+//! **Reference.** Each cycle the latest trajgen setpoint is extrapolated to now (position,
+//! velocity and acceleration: trajgen's trajectory is a function of real time, so a servo
+//! faster than trajgen gets a smooth reference and a late setpoint costs nothing), for at most
+//! the setpoint timeout. After that the setpoint is stale (trajgen stalled or died): the
+//! reference decelerates to rest at the axis' stop deceleration and holds, and only a new
+//! setpoint that starts where it holds is taken again. A setpoint that jumps further than the
+//! axes can move is refused and servo holds.
+//!
+//! **Modes.** In CST (the default) servo closes the position loop: PID on the position error
+//! with velocity and acceleration feed-forward, the effort as target torque. In CSP the drive
+//! closes it: servo sends the reference as target position, its velocity as velocity offset
+//! and the feed-forward effort as torque offset. In CSV servo closes the position loop with
+//! `kp` in (unit/s)/unit and the drive closes the velocity loop.
+//!
+//! **Settled**: an axis is settled when |following error| ≤ `in_position` and |measured
+//! velocity| ≤ `settle_velocity` have held for the settle time.
 
+use cia402::{FaultReset, Mode, State, cw, disable_step, enable_step};
 use shm_schema::drive::servo_status as st;
+use shm_schema::event::{EventQueue, code};
 use shm_schema::{
-    AxisConfigV1, CellConfigV1, DriveCommandV1, DriveFeedbackV1, MAX_AXES, Role, ServoStateV1,
-    SetpointV1,
+    AxisConfigV2, CellConfigV2, DriveCommandV2, DriveFeedbackV2, EventV1, MAX_AXES, Power,
+    RequestKind, Role, ServoRequestV1, ServoStateV2, SetpointV1, str_of,
 };
 
 /// Parameters of the controller.
@@ -27,91 +57,415 @@ use shm_schema::{
 pub struct Params {
     /// Axes in use.
     pub axes: usize,
-    /// Per-axis gains and limits, as configured.
-    pub axis: [AxisConfigV1; MAX_AXES],
+    /// Per-axis limits, gains and modes, as configured.
+    pub axis: [AxisConfigV2; MAX_AXES],
     /// Servo period (s).
     pub period_s: f64,
-    /// Longest extrapolation of a setpoint (s), then servo holds.
+    /// Longest extrapolation of a setpoint (s); then the reference comes to rest.
     pub max_extrapolation_s: f64,
+    /// Longest extrapolation with the setpoint's acceleration (s): two trajgen periods.
+    pub accel_horizon_s: f64,
+    /// Drive feedback older than this cuts power while powered (ns).
+    pub feedback_timeout_ns: u64,
+    /// Longest enabling sequence (ns).
+    pub enable_timeout_ns: u64,
+    /// Time within tolerance to be settled (ns).
+    pub settle_time_ns: u64,
 }
 
 impl Params {
     /// From the cell configuration.
-    pub fn from_cell(cell: &CellConfigV1) -> Self {
+    pub fn from_cell(cell: &CellConfigV2) -> Self {
         Self {
             axes: cell.axes as usize,
             axis: cell.axis,
             period_s: cell.process[Role::Servo.index()].period_ns as f64 * 1e-9,
             max_extrapolation_s: cell.setpoint_timeout_ns as f64 * 1e-9,
+            accel_horizon_s: 2.0 * cell.process[Role::Trajgen.index()].period_ns as f64 * 1e-9,
+            feedback_timeout_ns: cell.feedback_timeout_ns,
+            enable_timeout_ns: cell.enable_timeout_ns,
+            settle_time_ns: cell.settle_time_ns,
         }
     }
+}
+
+/// A latched fault: what cut power.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Latched {
+    /// Event code of the cause.
+    pub code: u32,
+    /// Axis, -1 for the arm.
+    pub axis: i32,
+    /// The value that tripped it.
+    pub value: f64,
+    /// The limit it exceeded.
+    pub limit: f64,
 }
 
 /// The controller state. Construct at set-up; [`Controller::cycle`] runs every cycle.
 #[derive(Clone, Debug)]
 pub struct Controller {
     p: Params,
+    power: Power,
+    power_since_ns: u64,
+    latched: Option<Latched>,
+    /// A reset request is in progress since this time.
+    resetting_since: Option<u64>,
+    fault_reset: [FaultReset; MAX_AXES],
+    request_seq: u64,
     setpoint: Option<SetpointV1>,
-    reference: [f64; MAX_AXES],
-    have_reference: bool,
+    /// The reference of the last cycle: position, velocity.
+    ref_pos: [f64; MAX_AXES],
+    ref_vel: [f64; MAX_AXES],
     integral: [f64; MAX_AXES],
+    in_tolerance_since: [u64; MAX_AXES],
+    feedback_seq: u64,
+    feedback_new_ns: u64,
+    stale_setpoint: bool,
+    jump_reported: bool,
     last_ns: u64,
-    enable_out: u32,
     seq: u64,
 }
 
+fn axis_name(a: &AxisConfigV2) -> &str {
+    str_of(&a.name)
+}
+
+/// What one cycle decided for the drives and for servo's state (internal).
+struct Out {
+    cmd: DriveCommandV2,
+    state: ServoStateV2,
+}
+
 impl Controller {
-    /// A controller that has seen nothing yet.
+    /// A controller that has seen nothing yet: the arm disabled.
     pub fn new(p: Params) -> Self {
         Self {
             p,
+            power: Power::Disabled,
+            power_since_ns: 0,
+            latched: None,
+            resetting_since: None,
+            fault_reset: [FaultReset::new(); MAX_AXES],
+            request_seq: 0,
             setpoint: None,
-            reference: [0.0; MAX_AXES],
-            have_reference: false,
+            ref_pos: [0.0; MAX_AXES],
+            ref_vel: [0.0; MAX_AXES],
             integral: [0.0; MAX_AXES],
+            in_tolerance_since: [0; MAX_AXES],
+            feedback_seq: 0,
+            feedback_new_ns: 0,
+            stale_setpoint: false,
+            jump_reported: false,
             last_ns: 0,
-            enable_out: 0,
             seq: 0,
         }
     }
 
+    /// The arm's power state.
+    pub fn power(&self) -> Power {
+        self.power
+    }
+
+    /// The latched fault, if any.
+    pub fn latched(&self) -> Option<Latched> {
+        self.latched
+    }
+
+    /// Latches a fault (the first cause wins), cuts power and reports both.
+    fn latch(&mut self, now_ns: u64, l: Latched, text: &[&str], events: &mut EventQueue) {
+        if self.latched.is_some() {
+            return;
+        }
+        self.latched = Some(l);
+        self.resetting_since = None;
+        events.push(EventV1::new(now_ns, l.code, l.axis, l.value, l.limit, text));
+        events.push(EventV1::new(
+            now_ns,
+            code::POWER_CUT,
+            l.axis,
+            l.code as f64,
+            0.0,
+            &["quick stop, then disable voltage; latched until reset"],
+        ));
+        if self.power != Power::Disabled {
+            self.set_power(Power::Disabling, now_ns);
+        }
+        self.setpoint = None;
+    }
+
+    fn set_power(&mut self, p: Power, now_ns: u64) {
+        self.power = p;
+        self.power_since_ns = now_ns;
+    }
+
+    /// Takes a request (seed 001: it takes effect in this cycle).
+    fn request(
+        &mut self,
+        now_ns: u64,
+        r: &ServoRequestV1,
+        feedback_ok: bool,
+        events: &mut EventQueue,
+    ) {
+        self.request_seq = r.seq;
+        let refuse = |why: &str, events: &mut EventQueue| {
+            events.push(EventV1::new(
+                now_ns,
+                code::REQUEST_REFUSED,
+                -1,
+                r.kind as f64,
+                0.0,
+                &[why],
+            ));
+        };
+        match RequestKind::from_u32(r.kind) {
+            Some(RequestKind::Enable) => {
+                if self.latched.is_some() {
+                    refuse("enable refused: a fault is latched, reset first", events);
+                } else if !feedback_ok {
+                    refuse("enable refused: no valid drive feedback", events);
+                } else if matches!(self.power, Power::Disabled | Power::Disabling) {
+                    self.set_power(Power::Enabling, now_ns);
+                    events.push(EventV1::new(now_ns, code::ENABLING, -1, 0.0, 0.0, &[]));
+                }
+            }
+            Some(RequestKind::Disable) => {
+                if matches!(self.power, Power::Enabling | Power::Enabled) {
+                    self.set_power(Power::Disabling, now_ns);
+                    events.push(EventV1::new(now_ns, code::DISABLING, -1, 0.0, 0.0, &[]));
+                }
+            }
+            Some(RequestKind::Reset) => {
+                if self.latched.is_some() {
+                    self.resetting_since = Some(now_ns);
+                    self.fault_reset = [FaultReset::new(); MAX_AXES];
+                }
+            }
+            None => refuse("unknown request kind", events),
+        }
+    }
+
+    /// Checks the feedback; latches what is wrong with it. True when it can be used.
+    fn check_feedback(&mut self, now_ns: u64, fb: &DriveFeedbackV2, ev: &mut EventQueue) -> bool {
+        let n = self.p.axes;
+        if fb.seq != self.feedback_seq {
+            self.feedback_seq = fb.seq;
+            self.feedback_new_ns = now_ns;
+        }
+        for i in 0..n {
+            let bad = [fb.position[i], fb.velocity[i], fb.torque[i]]
+                .iter()
+                .any(|v| !v.is_finite());
+            if bad {
+                let l = Latched {
+                    code: code::FEEDBACK_NOT_FINITE,
+                    axis: i as i32,
+                    value: fb.position[i],
+                    limit: 0.0,
+                };
+                let nb = self.p.axis[i].name;
+                self.latch(
+                    now_ns,
+                    l,
+                    &[str_of(&nb), ": feedback is not a finite number"],
+                    ev,
+                );
+                return false;
+            }
+        }
+        let age = now_ns.saturating_sub(self.feedback_new_ns);
+        let powered = (0..n)
+            .any(|i| State::from_statusword(fb.statusword[i]).is_some_and(|s| s.power_stage_on()));
+        if age > self.p.feedback_timeout_ns {
+            if powered || self.power != Power::Disabled {
+                let l = Latched {
+                    code: code::FEEDBACK_STALE,
+                    axis: -1,
+                    value: age as f64 * 1e-9,
+                    limit: self.p.feedback_timeout_ns as f64 * 1e-9,
+                };
+                self.latch(now_ns, l, &["no new drive feedback"], ev);
+            }
+            return false;
+        }
+        for i in 0..n {
+            let s = State::from_statusword(fb.statusword[i]);
+            let nb = self.p.axis[i].name;
+            let name = str_of(&nb);
+            if matches!(s, Some(State::Fault | State::FaultReactionActive)) {
+                if self.resetting_since.is_none() {
+                    let l = Latched {
+                        code: code::DRIVE_REPORTS_FAULT,
+                        axis: i as i32,
+                        value: fb.error_code[i] as f64,
+                        limit: 0.0,
+                    };
+                    let why = cia402::error_code::name(fb.error_code[i]);
+                    self.latch(now_ns, l, &[name, ": ", why], ev);
+                }
+            } else if self.power == Power::Enabled && s != Some(State::OperationEnabled) {
+                let l = Latched {
+                    code: code::DRIVE_LOST_ENABLE,
+                    axis: i as i32,
+                    value: fb.statusword[i] as f64,
+                    limit: 0.0,
+                };
+                let now_in = s.map_or("an unknown state", State::name);
+                self.latch(now_ns, l, &[name, ": ", now_in], ev);
+            }
+        }
+        true
+    }
+
+    /// The reference at `now_ns` from the held setpoint, or coming to rest without one.
+    /// Returns (position, velocity, acceleration) per axis.
+    fn reference(
+        &mut self,
+        now_ns: u64,
+        dt: f64,
+        events: &mut EventQueue,
+    ) -> ([f64; MAX_AXES], [f64; MAX_AXES], [f64; MAX_AXES]) {
+        let n = self.p.axes;
+        let (mut pos, mut vel, mut acc) = (self.ref_pos, [0.0; MAX_AXES], [0.0; MAX_AXES]);
+        if let Some(sp) = self.setpoint {
+            let h = (now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9;
+            if h <= self.p.max_extrapolation_s {
+                let h = h.max(0.0);
+                let ha = h.min(self.p.accel_horizon_s);
+                for i in 0..n {
+                    let a = sp.acceleration[i];
+                    pos[i] = sp.position[i] + sp.velocity[i] * h + a * ha * (h - 0.5 * ha);
+                    vel[i] = sp.velocity[i] + a * ha;
+                    acc[i] = if h <= self.p.accel_horizon_s { a } else { 0.0 };
+                }
+                self.stale_setpoint = false;
+                return (pos, vel, acc);
+            }
+            // Stale: trajgen stalled or died. Come to rest from here; only a setpoint that
+            // starts where the reference holds is taken again.
+            self.setpoint = None;
+            if !self.stale_setpoint {
+                self.stale_setpoint = true;
+                events.push(EventV1::new(
+                    now_ns,
+                    code::SETPOINT_STALE,
+                    -1,
+                    h,
+                    self.p.max_extrapolation_s,
+                    &["trajgen is silent; the reference comes to rest"],
+                ));
+            }
+        }
+        for i in 0..n {
+            let v = self.ref_vel[i];
+            let dv = self.p.axis[i].stop_deceleration * dt;
+            let v_new = if v.abs() <= dv {
+                0.0
+            } else {
+                v - dv * v.signum()
+            };
+            pos[i] = self.ref_pos[i] + 0.5 * (v + v_new) * dt;
+            vel[i] = v_new;
+            acc[i] = (v_new - v) / dt.max(1e-9);
+        }
+        (pos, vel, acc)
+    }
+
     /// True if `sp` lies further from the previous setpoint than the axes can move between
     /// the two (or, for the first one, outside the in-position band of the held reference).
-    fn is_jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> bool {
+    /// Returns the offending axis and distance.
+    fn jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
         let n = self.p.axes;
         match &self.setpoint {
             Some(prev) if prev.seq != sp.seq && sp.stamp_ns >= prev.stamp_ns => {
                 let span = (sp.stamp_ns - prev.stamp_ns) as f64 * 1e-9;
-                (0..n).any(|i| {
-                    let reach = self.p.axis[i].vmax * span * 1.001 + 1e-9;
-                    (sp.position[i] - prev.position[i]).abs() > reach
-                })
+                (0..n)
+                    .map(|i| (i, (sp.position[i] - prev.position[i]).abs()))
+                    .find(|&(i, d)| d > self.p.axis[i].vmax * span * 1.001 + 1e-9)
             }
-            // A new source (trajgen restarted: its clock stamps restart too) or the first
-            // setpoint: it must start where servo holds.
+            // A new source (trajgen restarted: its clock stamps restart too), the first
+            // setpoint, or one after a stale spell: it must start where servo holds.
             _ => {
                 let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9)
                     .clamp(0.0, self.p.max_extrapolation_s);
-                (0..n).any(|i| {
-                    let g = &self.p.axis[i];
-                    let at_now = sp.position[i] + sp.velocity[i] * age;
-                    (at_now - self.reference[i]).abs() > g.vmax * dt * 1.5 + g.in_position
-                })
+                (0..n)
+                    .map(|i| {
+                        let at_now = sp.position[i] + sp.velocity[i] * age;
+                        (i, (at_now - self.ref_pos[i]).abs())
+                    })
+                    .find(|&(i, d)| {
+                        let g = &self.p.axis[i];
+                        d > g.vmax * dt * 1.5 + g.in_position
+                    })
             }
         }
     }
 
-    /// One servo cycle at `now_ns` with the newest setpoint (if one arrived) and the newest
-    /// drive feedback (if any ever arrived). Returns the drive command and the servo state.
+    /// Command validation (seed 001's rule for `LLI_set`): the first rule the command breaks.
+    fn validate(
+        &self,
+        pos: &[f64; MAX_AXES],
+        vel: &[f64; MAX_AXES],
+        dt: f64,
+    ) -> Option<(Latched, &'static str)> {
+        let scale = (dt / self.p.period_s).max(1.0);
+        for i in 0..self.p.axes {
+            let a = &self.p.axis[i];
+            let at = |code, value, limit| Latched {
+                code,
+                axis: i as i32,
+                value,
+                limit,
+            };
+            if !(pos[i].is_finite() && vel[i].is_finite()) {
+                return Some((at(code::COMMAND_NOT_FINITE, pos[i], 0.0), "not a number"));
+            }
+            let tol = a.encoder_resolution;
+            if pos[i] < a.min - tol {
+                return Some((at(code::POSITION_OUT_OF_RANGE, pos[i], a.min), "below min"));
+            }
+            if pos[i] > a.max + tol {
+                return Some((at(code::POSITION_OUT_OF_RANGE, pos[i], a.max), "above max"));
+            }
+            if vel[i].abs() > a.velocity_limit {
+                let l = at(code::VELOCITY_OVER_LIMIT, vel[i], a.velocity_limit);
+                return Some((l, "velocity"));
+            }
+            let step = pos[i] - self.ref_pos[i];
+            if step.abs() > a.position_step_limit * scale {
+                let l = at(
+                    code::POSITION_STEP_OVER_LIMIT,
+                    step / scale,
+                    a.position_step_limit,
+                );
+                return Some((l, "position step"));
+            }
+            let vstep = vel[i] - self.ref_vel[i];
+            if vstep.abs() > a.velocity_step_limit * scale {
+                let l = at(
+                    code::VELOCITY_STEP_OVER_LIMIT,
+                    vstep / scale,
+                    a.velocity_step_limit,
+                );
+                return Some((l, "velocity step"));
+            }
+        }
+        None
+    }
+
+    /// One servo cycle at `now_ns`: the newest request, setpoint and drive feedback (each if
+    /// one arrived; `feedback` is the newest ever received). Events go to `events`.
     ///
     /// # Real-time
-    /// Arithmetic only; no allocation, no system call.
+    /// Arithmetic and copies only; no allocation, no system call.
     pub fn cycle(
         &mut self,
         now_ns: u64,
+        request: Option<&ServoRequestV1>,
         new_setpoint: Option<&SetpointV1>,
-        feedback: Option<&DriveFeedbackV1>,
-    ) -> (DriveCommandV1, ServoStateV1) {
+        feedback: Option<&DriveFeedbackV2>,
+        events: &mut EventQueue,
+    ) -> (DriveCommandV2, ServoStateV2) {
         let n = self.p.axes;
         self.seq += 1;
         let dt = if self.last_ns == 0 {
@@ -120,109 +474,339 @@ impl Controller {
             ((now_ns.saturating_sub(self.last_ns)) as f64 * 1e-9).min(5.0 * self.p.period_s)
         };
         self.last_ns = now_ns;
-
-        let mut cmd = DriveCommandV1 {
-            seq: self.seq,
-            stamp_ns: now_ns,
-            axes: n as u32,
-            ..Default::default()
+        let mut out = Out {
+            cmd: DriveCommandV2 {
+                seq: self.seq,
+                stamp_ns: now_ns,
+                axes: n as u32,
+                ..Default::default()
+            },
+            state: ServoStateV2 {
+                seq: self.seq,
+                stamp_ns: now_ns,
+                axes: n as u32,
+                fault_axis: -1,
+                ..Default::default()
+            },
         };
-        let mut state = ServoStateV1 {
-            seq: self.seq,
-            stamp_ns: now_ns,
-            setpoint_seq: self.setpoint.map_or(0, |s| s.seq),
-            axes: n as u32,
-            ..Default::default()
-        };
+        for i in 0..n {
+            out.cmd.mode[i] = self.p.axis[i].mode as i8;
+        }
         let Some(fb) = feedback else {
-            state.status = st::NO_FEEDBACK;
-            return (cmd, state);
+            out.state.status = st::NO_FEEDBACK;
+            if let Some(r) = request.filter(|r| r.seq != self.request_seq) {
+                self.request(now_ns, r, false, events);
+            }
+            out.state.request_seq = self.request_seq;
+            return (out.cmd, out.state);
         };
-        state.measured_stamp_ns = fb.stamp_ns;
-        state.act_position = fb.position;
-        state.act_velocity = fb.velocity;
+        out.cmd.feedback_seq = fb.seq;
+        out.cmd.feedback_stamp_ns = fb.stamp_ns;
+        out.state.measured_stamp_ns = fb.stamp_ns;
+        out.state.act_position = fb.position;
+        out.state.act_velocity = fb.velocity;
+        out.state.statusword = fb.statusword;
 
-        if fb.enabled == 0 {
-            // Disabled: follow the machine, clear the integrator, ask for enable as an edge.
-            self.reference[..n].copy_from_slice(&fb.position[..n]);
-            self.have_reference = true;
+        let feedback_ok = self.check_feedback(now_ns, fb, events);
+        if let Some(r) = request.filter(|r| r.seq != self.request_seq) {
+            self.request(now_ns, r, feedback_ok, events);
+        }
+        let states: [Option<State>; MAX_AXES] =
+            core::array::from_fn(|i| State::from_statusword(fb.statusword[i]));
+        self.advance_power(now_ns, &states[..n], fb, events);
+
+        if self.power == Power::Enabled && feedback_ok {
+            self.follow(now_ns, dt, new_setpoint, fb, &mut out, events);
+        } else {
+            // Not following: the reference is where the axes are (bumpless enable; a CSP
+            // drive gets its actual position as target), the integrators are cleared.
+            for i in 0..n {
+                if fb.position[i].is_finite() {
+                    self.ref_pos[i] = fb.position[i];
+                }
+                self.ref_vel[i] = 0.0;
+                out.cmd.target_position[i] = self.ref_pos[i];
+            }
             self.integral = [0.0; MAX_AXES];
-            // After enabling, the first setpoint must start where the machine is.
             self.setpoint = None;
-            self.enable_out = if self.enable_out == 0 { 1 } else { 0 };
-            cmd.enable = self.enable_out;
-            state.status |= if fb.fault != 0 { st::DRIVE_FAULT } else { 0 };
-            state.cmd_position = self.reference;
-            if self.setpoint.is_none() {
-                state.status |= st::NO_SETPOINT;
-            }
-            return (cmd, state);
+            out.state.cmd_position = self.ref_pos;
+            out.state.effort = fb.torque;
+            out.state.status |= st::NO_SETPOINT;
         }
-        self.enable_out = 1;
-        cmd.enable = 1;
-        state.status |= st::ENABLED;
-        if !self.have_reference {
-            self.reference[..n].copy_from_slice(&fb.position[..n]);
-            self.have_reference = true;
-        }
+        self.controlwords(&states[..n], fb, &mut out);
+        self.publishable(now_ns, &states[..n], fb, &mut out);
+        (out.cmd, out.state)
+    }
 
-        // Take the new setpoint unless it jumps.
+    /// Moves the arm's power state on from what the drives report.
+    fn advance_power(
+        &mut self,
+        now_ns: u64,
+        states: &[Option<State>],
+        fb: &DriveFeedbackV2,
+        events: &mut EventQueue,
+    ) {
+        let all = |f: fn(State) -> bool| states.iter().all(|s| s.is_some_and(f));
+        match self.power {
+            Power::Enabling if all(|s| s == State::OperationEnabled) => {
+                let took = now_ns.saturating_sub(self.power_since_ns) as f64 * 1e-9;
+                self.set_power(Power::Enabled, now_ns);
+                self.setpoint = None;
+                self.stale_setpoint = false;
+                self.jump_reported = false;
+                events.push(EventV1::new(now_ns, code::ENABLED, -1, took, 0.0, &[]));
+            }
+            Power::Enabling
+                if now_ns.saturating_sub(self.power_since_ns) > self.p.enable_timeout_ns =>
+            {
+                let took = now_ns.saturating_sub(self.power_since_ns) as f64 * 1e-9;
+                self.set_power(Power::Disabling, now_ns);
+                events.push(EventV1::new(
+                    now_ns,
+                    code::ENABLE_TIMEOUT,
+                    -1,
+                    took,
+                    self.p.enable_timeout_ns as f64 * 1e-9,
+                    &["a drive did not reach Operation enabled"],
+                ));
+            }
+            Power::Disabling if all(|s| !s.power_stage_on()) => {
+                self.set_power(Power::Disabled, now_ns);
+                events.push(EventV1::new(now_ns, code::DISABLED, -1, 0.0, 0.0, &[]));
+            }
+            _ => {}
+        }
+        if let Some(since) = self.resetting_since {
+            let faulted = states
+                .iter()
+                .any(|s| matches!(s, Some(State::Fault | State::FaultReactionActive)));
+            let valid = (0..self.p.axes).all(|i| fb.position[i].is_finite());
+            if !faulted && valid {
+                let l = self.latched.take();
+                self.resetting_since = None;
+                events.push(EventV1::new(
+                    now_ns,
+                    code::FAULT_CLEARED,
+                    -1,
+                    l.map_or(0.0, |l| l.code as f64),
+                    0.0,
+                    &["power stays off until an enable request"],
+                ));
+            } else if now_ns.saturating_sub(since) > self.p.enable_timeout_ns {
+                self.resetting_since = None;
+                let why = if faulted {
+                    "reset refused: a drive is still in Fault (its fault condition persists)"
+                } else {
+                    "reset refused: the feedback is still not valid"
+                };
+                events.push(EventV1::new(
+                    now_ns,
+                    code::REQUEST_REFUSED,
+                    -1,
+                    RequestKind::Reset as u32 as f64,
+                    0.0,
+                    &[why],
+                ));
+            }
+        }
+    }
+
+    /// Follows the setpoints while enabled: reference, validation, the loop, the following
+    /// error.
+    fn follow(
+        &mut self,
+        now_ns: u64,
+        dt: f64,
+        new_setpoint: Option<&SetpointV1>,
+        fb: &DriveFeedbackV2,
+        out: &mut Out,
+        events: &mut EventQueue,
+    ) {
+        let n = self.p.axes;
         if let Some(sp) = new_setpoint {
-            if self.is_jump(sp, now_ns, dt) {
-                state.status |= st::SETPOINT_JUMP;
-            } else {
-                self.setpoint = Some(*sp);
+            let finite = (0..n).all(|i| {
+                sp.position[i].is_finite()
+                    && sp.velocity[i].is_finite()
+                    && sp.acceleration[i].is_finite()
+            });
+            if !finite {
+                let l = Latched {
+                    code: code::COMMAND_NOT_FINITE,
+                    axis: -1,
+                    value: f64::NAN,
+                    limit: 0.0,
+                };
+                self.latch(now_ns, l, &["setpoint is not a finite number"], events);
+                return;
             }
-        }
-        state.setpoint_seq = self.setpoint.map_or(0, |s| s.seq);
-
-        // The reference: the setpoint extrapolated to now, or hold.
-        let mut target = self.reference;
-        let mut target_vel = [0.0; MAX_AXES];
-        let mut target_acc = [0.0; MAX_AXES];
-        match self.setpoint {
-            None => state.status |= st::NO_SETPOINT,
-            Some(sp) => {
-                let age = (now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9;
-                let stale = age > self.p.max_extrapolation_s;
-                let h = age.clamp(0.0, self.p.max_extrapolation_s);
-                for i in 0..n {
-                    target[i] = sp.position[i] + sp.velocity[i] * h;
-                    if !stale {
-                        target_vel[i] = sp.velocity[i];
-                        target_acc[i] = sp.acceleration[i];
+            match self.jump(sp, now_ns, dt) {
+                Some((i, d)) => {
+                    out.state.status |= st::SETPOINT_JUMP;
+                    if !self.jump_reported {
+                        self.jump_reported = true;
+                        let a = &self.p.axis[i];
+                        events.push(EventV1::new(
+                            now_ns,
+                            code::SETPOINT_JUMP,
+                            i as i32,
+                            d,
+                            a.vmax * dt * 1.5 + a.in_position,
+                            &[axis_name(a), ": setpoint refused, servo holds"],
+                        ));
                     }
                 }
-                if stale {
-                    state.status |= st::SETPOINT_STALE;
+                None => {
+                    self.setpoint = Some(*sp);
+                    self.jump_reported = false;
                 }
             }
         }
-        self.reference = target;
-
+        out.state.setpoint_seq = self.setpoint.map_or(0, |s| s.seq);
+        let (pos, vel, acc) = self.reference(now_ns, dt, events);
+        if self.setpoint.is_none() {
+            out.state.status |= if self.stale_setpoint {
+                st::SETPOINT_STALE
+            } else {
+                st::NO_SETPOINT
+            };
+        }
+        if let Some((l, what)) = self.validate(&pos, &vel, dt) {
+            let nb = if l.axis >= 0 {
+                self.p.axis[l.axis as usize].name
+            } else {
+                shm_schema::fixed_str("arm")
+            };
+            let name = str_of(&nb);
+            self.latch(now_ns, l, &[name, ": command ", what, " refused"], events);
+            return;
+        }
+        self.ref_pos = pos;
+        self.ref_vel = vel;
         for i in 0..n {
-            let g = &self.p.axis[i];
-            let e = target[i] - fb.position[i];
-            let ev = target_vel[i] - fb.velocity[i];
-            self.integral[i] =
-                (self.integral[i] + g.ki * e * dt).clamp(-g.integral_limit, g.integral_limit);
-            let u = g.kp * e
-                + self.integral[i]
-                + g.kd * ev
-                + g.kvff * target_vel[i]
-                + g.kaff * target_acc[i];
-            cmd.effort[i] = u.clamp(-g.effort_limit, g.effort_limit);
-            state.following_error[i] = e;
+            let g = self.p.axis[i];
+            let e = pos[i] - fb.position[i];
+            let ev = vel[i] - fb.velocity[i];
+            let ff = g.kvff * vel[i] + g.kaff * acc[i];
+            out.state.following_error[i] = e;
+            match Mode::from_i8(g.mode as i8) {
+                Some(Mode::Csp) => {
+                    out.cmd.target_position[i] = pos[i];
+                    out.cmd.velocity_offset[i] = vel[i];
+                    out.cmd.torque_offset[i] = ff;
+                    out.state.effort[i] = fb.torque[i];
+                }
+                Some(Mode::Csv) => {
+                    out.cmd.target_position[i] = pos[i];
+                    out.cmd.target_velocity[i] = vel[i] + g.kp * e;
+                    out.cmd.torque_offset[i] = g.kaff * acc[i];
+                    out.state.effort[i] = fb.torque[i];
+                }
+                _ => {
+                    self.integral[i] = (self.integral[i] + g.ki * e * dt)
+                        .clamp(-g.integral_limit, g.integral_limit);
+                    let u = g.kp * e + self.integral[i] + g.kd * ev + ff;
+                    let limit = g.effort_limit;
+                    out.cmd.target_position[i] = pos[i];
+                    out.cmd.target_torque[i] = u.clamp(-limit, limit);
+                    out.state.effort[i] = out.cmd.target_torque[i];
+                }
+            }
             if e.abs() > g.following_error_limit {
-                state.status |= st::FOLLOWING_ERROR;
+                let l = Latched {
+                    code: code::FOLLOWING_ERROR,
+                    axis: i as i32,
+                    value: e,
+                    limit: g.following_error_limit,
+                };
+                self.latch(now_ns, l, &[axis_name(&g), ": following error"], events);
             }
         }
-        if fb.fault != 0 {
-            state.status |= st::DRIVE_FAULT;
+        out.state.cmd_position = pos;
+        out.state.cmd_velocity = vel;
+        if self.power == Power::Enabled {
+            out.state.status |= st::ENABLED;
         }
-        state.cmd_position = target;
-        state.cmd_velocity = target_vel;
-        state.effort = cmd.effort;
-        (cmd, state)
+    }
+
+    /// The controlword of every axis for the power state and the latch.
+    fn controlwords(&mut self, states: &[Option<State>], fb: &DriveFeedbackV2, out: &mut Out) {
+        for (i, s) in states.iter().enumerate() {
+            let s = s.unwrap_or(State::NotReadyToSwitchOn);
+            out.cmd.controlword[i] = if self.latched.is_some() {
+                match s {
+                    _ if self.resetting_since.is_some() && s == State::Fault => {
+                        self.fault_reset[i].controlword(s)
+                    }
+                    // Cut: quick stop a drive that produces torque (11); once it is at rest
+                    // (or it has no power), disable voltage (12, 7, 10).
+                    State::OperationEnabled => cw::QUICK_STOP_CMD,
+                    State::QuickStopActive if fb.velocity[i] != 0.0 => cw::QUICK_STOP_CMD,
+                    _ => cw::DISABLE_VOLTAGE,
+                }
+            } else {
+                match self.power {
+                    Power::Enabling | Power::Enabled => enable_step(s),
+                    Power::Disabling | Power::Disabled => disable_step(s),
+                }
+            };
+        }
+    }
+
+    /// Fills the published state: power per axis, settled, the latch.
+    fn publishable(
+        &mut self,
+        now_ns: u64,
+        states: &[Option<State>],
+        fb: &DriveFeedbackV2,
+        out: &mut Out,
+    ) {
+        let s = &mut out.state;
+        s.request_seq = self.request_seq;
+        s.power = self.power as u8;
+        s.controlword = out.cmd.controlword;
+        if states
+            .iter()
+            .all(|s| s.is_some_and(|s| s != State::NotReadyToSwitchOn))
+        {
+            s.status |= st::INITIALIZED;
+        }
+        let mut all_settled = !states.is_empty();
+        for (i, state) in states.iter().enumerate() {
+            let oe = *state == Some(State::OperationEnabled);
+            let powered = state.is_some_and(State::power_stage_on);
+            s.axis_power[i] = match self.power {
+                Power::Enabled | Power::Enabling if oe => Power::Enabled,
+                Power::Enabling => Power::Enabling,
+                Power::Disabling if powered => Power::Disabling,
+                _ if oe => Power::Enabled,
+                _ => Power::Disabled,
+            } as u8;
+            let a = &self.p.axis[i];
+            let inside = self.power == Power::Enabled
+                && s.following_error[i].abs() <= a.in_position
+                && fb.velocity[i].abs() <= a.settle_velocity;
+            if !inside {
+                self.in_tolerance_since[i] = 0;
+            } else if self.in_tolerance_since[i] == 0 {
+                self.in_tolerance_since[i] = now_ns;
+            }
+            let settled = inside
+                && now_ns.saturating_sub(self.in_tolerance_since[i]) >= self.p.settle_time_ns;
+            if settled {
+                s.settled_axes |= 1 << i;
+            } else {
+                all_settled = false;
+            }
+        }
+        if all_settled {
+            s.status |= st::SETTLED;
+        }
+        if let Some(l) = self.latched {
+            s.status |= st::FAULT_LATCHED;
+            s.fault_code = l.code;
+            s.fault_axis = l.axis;
+            s.fault_value = l.value;
+            s.fault_limit = l.limit;
+        }
     }
 }

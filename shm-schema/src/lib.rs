@@ -17,13 +17,18 @@
 
 pub mod config;
 pub mod drive;
+pub mod event;
 pub mod latency;
 pub mod motion;
 pub mod names;
 pub mod status;
 
-pub use config::{AxisConfigV1, CellConfigV1, ProcessConfigV1};
-pub use drive::{DriveCommandV1, DriveFeedbackV1, FieldbusImageV1, ServoStateV1};
+pub use config::{AxisConfigV2, CellConfigV2, ConfiguredFaultV1, ProcessConfigV1};
+pub use drive::{
+    DriveCommandV2, DriveFeedbackV2, FaultInjectionV1, FieldbusImageV1, Power, RequestKind,
+    ServoRequestV1, ServoStateV2,
+};
+pub use event::{EventQueue, EventV1, Severity};
 pub use latency::LatencyHistogramV1;
 pub use motion::{CommandKind, MotionCommandV1, MotionState, SetpointV1};
 pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};

@@ -174,19 +174,31 @@ impl fmt::Display for ServiceNameBuf {
 /// their payload layouts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ServiceId {
-    /// `<i>/cell/config`: [`crate::CellConfigV1`], published once by the supervisor with
+    /// `<i>/cell/config`: [`crate::CellConfigV2`], published once by the supervisor with
     /// history 1, so a process that starts later still receives it.
     CellConfig,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV1`], a client (the supervisor) to trajgen.
     MotionCommand,
     /// `<i>/trajgen/setpoint`: [`crate::SetpointV1`], trajgen to servo (and observers).
     Setpoint,
-    /// `<i>/servo/state`: [`crate::ServoStateV1`], servo to iobridge (and observers).
+    /// `<i>/servo/state`: [`crate::ServoStateV2`], servo to iobridge (and observers).
     ServoState,
-    /// `<i>/servo/drive_command`: [`crate::DriveCommandV1`], servo to the drives.
+    /// `<i>/servo/request`: [`crate::ServoRequestV1`], a client (the supervisor) to servo:
+    /// enable, disable, reset.
+    ServoRequest,
+    /// `<i>/servo/drive_command`: [`crate::DriveCommandV2`], servo to the drives.
     DriveCommand,
-    /// `<i>/machine/feedback`: [`crate::DriveFeedbackV1`], the drives to servo.
+    /// `<i>/machine/feedback`: [`crate::DriveFeedbackV2`], the drives to servo.
     DriveFeedback,
+    /// `<i>/machine/inject`: [`crate::FaultInjectionV1`], a client to the simulated drives.
+    FaultInjection,
+    /// `<i>/machine/sense_to_command`: [`crate::LatencyHistogramV1`] of the sense-to-command
+    /// latency the drives measure (sampling the encoders to applying the command computed
+    /// from that sample), about every 100 ms and once more on stopping.
+    SenseToCommand,
+    /// `<i>/events`: [`crate::EventV1`], every process (and the supervisor) to whoever
+    /// listens.
+    Events,
     /// `<i>/iobridge/output`: [`crate::FieldbusImageV1`], the fieldbus output image.
     FieldbusOutput,
     /// `<i>/<role>/status`: [`crate::ProcessStatusV1`], every real-time process to the
@@ -224,8 +236,12 @@ impl ServiceId {
             Self::MotionCommand => "trajgen/command",
             Self::Setpoint => "trajgen/setpoint",
             Self::ServoState => "servo/state",
+            Self::ServoRequest => "servo/request",
             Self::DriveCommand => "servo/drive_command",
             Self::DriveFeedback => "machine/feedback",
+            Self::FaultInjection => "machine/inject",
+            Self::SenseToCommand => "machine/sense_to_command",
+            Self::Events => "events",
             Self::FieldbusOutput => "iobridge/output",
             Self::Status(role) => role.status_suffix(),
             Self::Latency(role) => role.latency_suffix(),
@@ -255,8 +271,17 @@ impl ServiceId {
                 max_subscribers: 2,
                 ..base
             },
+            // Every process writes events, and the supervisor; several tools may read them.
+            Self::Events => Qos {
+                max_publishers: 16,
+                ..base
+            },
+            Self::ServoRequest | Self::FaultInjection => Qos {
+                max_publishers: 8,
+                ..base
+            },
             // 30 KB a sample: keep few. A late observer gets the newest at once.
-            Self::Latency(_) => Qos {
+            Self::Latency(_) | Self::SenseToCommand => Qos {
                 history: 1,
                 subscriber_max_buffer: 2,
                 max_subscribers: 4,

@@ -3,7 +3,7 @@
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
-/// The processes of a cell. The value is the index into [`crate::CellConfigV1::process`].
+/// The processes of a cell. The value is the index into [`crate::CellConfigV2::process`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum Role {

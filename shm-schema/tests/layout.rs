@@ -30,14 +30,18 @@ const A: usize = MAX_AXES;
 
 fn layouts() -> Vec<Layout> {
     vec![
-        layout!(CellConfigV1 {
+        layout!(CellConfigV2 {
             axes: "uint32_t" = 4,
             machine_substeps: "uint32_t" = 4,
             t_acc_s: "double" = 8,
             drive_command_timeout_ns: "uint64_t" = 8,
             setpoint_timeout_ns: "uint64_t" = 8,
+            feedback_timeout_ns: "uint64_t" = 8,
+            enable_timeout_ns: "uint64_t" = 8,
+            settle_time_ns: "uint64_t" = 8,
             process: "ProcessConfigV1[4]" = 4 * size_of::<ProcessConfigV1>(),
-            axis: "AxisConfigV1[8]" = A * size_of::<AxisConfigV1>(),
+            axis: "AxisConfigV2[8]" = A * size_of::<AxisConfigV2>(),
+            inject: "ConfiguredFaultV1[4]" = 4 * size_of::<ConfiguredFaultV1>(),
         }),
         layout!(ProcessConfigV1 {
             period_ns: "uint64_t" = 8,
@@ -45,7 +49,7 @@ fn layouts() -> Vec<Layout> {
             priority: "int32_t" = 4,
             cpu: "int32_t" = 4
         }),
-        layout!(AxisConfigV1 {
+        layout!(AxisConfigV2 {
             name: "char[16]" = 16,
             unit: "char[8]" = 8,
             min: "double" = 8,
@@ -54,17 +58,34 @@ fn layouts() -> Vec<Layout> {
             start: "double" = 8,
             following_error_limit: "double" = 8,
             in_position: "double" = 8,
+            settle_velocity: "double" = 8,
+            velocity_limit: "double" = 8,
+            position_step_limit: "double" = 8,
+            velocity_step_limit: "double" = 8,
+            stop_deceleration: "double" = 8,
             kp: "double" = 8,
             ki: "double" = 8,
             kd: "double" = 8,
             kvff: "double" = 8,
             kaff: "double" = 8,
             integral_limit: "double" = 8,
+            mode: "int32_t" = 4,
+            quick_stop_option: "int32_t" = 4,
+            drive_kp: "double" = 8,
+            drive_ki: "double" = 8,
+            drive_kd: "double" = 8,
+            quick_stop_deceleration: "double" = 8,
             inertia: "double" = 8,
             viscous: "double" = 8,
             coulomb: "double" = 8,
             effort_limit: "double" = 8,
             encoder_resolution: "double" = 8,
+        }),
+        layout!(ConfiguredFaultV1 {
+            at_ns: "uint64_t" = 8,
+            duration_ns: "uint64_t" = 8,
+            axis: "uint32_t" = 4,
+            code: "uint32_t" = 4,
         }),
         layout!(MotionCommandV1 {
             seq: "uint64_t" = 8,
@@ -96,13 +117,25 @@ fn layouts() -> Vec<Layout> {
             velocity: "double[8]" = 8 * A,
             acceleration: "double[8]" = 8 * A,
         }),
-        layout!(ServoStateV1 {
+        layout!(ServoStateV2 {
             seq: "uint64_t" = 8,
             stamp_ns: "uint64_t" = 8,
             measured_stamp_ns: "uint64_t" = 8,
             setpoint_seq: "uint64_t" = 8,
+            request_seq: "uint64_t" = 8,
             status: "uint32_t" = 4,
             axes: "uint32_t" = 4,
+            power: "uint8_t" = 1,
+            axis_power: "uint8_t[8]" = A,
+            reserved: "uint8_t[7]" = 7,
+            settled_axes: "uint32_t" = 4,
+            fault_code: "uint32_t" = 4,
+            fault_axis: "int32_t" = 4,
+            reserved2: "uint32_t" = 4,
+            fault_value: "double" = 8,
+            fault_limit: "double" = 8,
+            controlword: "uint16_t[8]" = 2 * A,
+            statusword: "uint16_t[8]" = 2 * A,
             cmd_position: "double[8]" = 8 * A,
             cmd_velocity: "double[8]" = 8 * A,
             act_position: "double[8]" = 8 * A,
@@ -110,24 +143,57 @@ fn layouts() -> Vec<Layout> {
             following_error: "double[8]" = 8 * A,
             effort: "double[8]" = 8 * A,
         }),
-        layout!(DriveCommandV1 {
+        layout!(ServoRequestV1 {
+            seq: "uint64_t" = 8,
+            kind: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+        }),
+        layout!(DriveCommandV2 {
             seq: "uint64_t" = 8,
             stamp_ns: "uint64_t" = 8,
-            enable: "uint32_t" = 4,
+            feedback_seq: "uint64_t" = 8,
+            feedback_stamp_ns: "uint64_t" = 8,
             axes: "uint32_t" = 4,
-            effort: "double[8]" = 8 * A,
+            reserved: "uint32_t" = 4,
+            controlword: "uint16_t[8]" = 2 * A,
+            mode: "int8_t[8]" = A,
+            target_position: "double[8]" = 8 * A,
+            target_velocity: "double[8]" = 8 * A,
+            target_torque: "double[8]" = 8 * A,
+            velocity_offset: "double[8]" = 8 * A,
+            torque_offset: "double[8]" = 8 * A,
         }),
-        layout!(DriveFeedbackV1 {
+        layout!(DriveFeedbackV2 {
             seq: "uint64_t" = 8,
             stamp_ns: "uint64_t" = 8,
             command_seq: "uint64_t" = 8,
-            enabled: "uint32_t" = 4,
-            brake: "uint32_t" = 4,
-            fault: "uint32_t" = 4,
+            sense_to_command_ns: "uint64_t" = 8,
             axes: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+            statusword: "uint16_t[8]" = 2 * A,
+            mode_display: "int8_t[8]" = A,
+            error_code: "uint16_t[8]" = 2 * A,
             position: "double[8]" = 8 * A,
             velocity: "double[8]" = 8 * A,
-            effort: "double[8]" = 8 * A,
+            torque: "double[8]" = 8 * A,
+            following_error: "double[8]" = 8 * A,
+        }),
+        layout!(FaultInjectionV1 {
+            seq: "uint64_t" = 8,
+            axis: "uint32_t" = 4,
+            code: "uint16_t" = 2,
+            active: "uint16_t" = 2,
+        }),
+        layout!(EventV1 {
+            seq: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            value: "double" = 8,
+            limit: "double" = 8,
+            source: "uint32_t" = 4,
+            severity: "uint32_t" = 4,
+            code: "uint32_t" = 4,
+            axis: "int32_t" = 4,
+            text: "char[64]" = 64,
         }),
         layout!(FieldbusImageV1 {
             seq: "uint64_t" = 8,
@@ -211,7 +277,10 @@ fn every_field_is_listed_without_gaps_or_padding() {
             l.name, l.size
         );
         assert!(
-            l.type_name.starts_with("rtc::") && l.type_name.ends_with("V1"),
+            l.type_name.starts_with("rtc::")
+                && l.type_name
+                    .rsplit_once('V')
+                    .is_some_and(|(_, v)| v.parse::<u32>().is_ok()),
             "{}",
             l.type_name
         );

@@ -3,10 +3,16 @@
 //! `docs/config.md` documents every key.
 
 use serde::Deserialize;
+use shm_schema::config::MAX_CONFIGURED_FAULTS;
+use shm_schema::drive::injected;
 use shm_schema::status::ROLE_COUNT;
-use shm_schema::{AxisConfigV1, CellConfigV1, MAX_AXES, ProcessConfigV1, Role, fixed_str};
+use shm_schema::{
+    AxisConfigV2, CellConfigV2, ConfiguredFaultV1, MAX_AXES, ProcessConfigV1, Role, fixed_str,
+};
 use std::fmt;
 use std::ops::Range;
+
+mod stability;
 
 /// The embedded default cell (the Gantry UBA).
 pub const DEFAULT_TOML: &str = include_str!("../../examples/gantry-uba.toml");
@@ -83,16 +89,60 @@ fn default_settle_timeout() -> f64 {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Drives {
-    /// Command watchdog of the drives (s).
+    /// Command watchdog of the drives (s): a powered drive without a new command this long
+    /// faults (0xFF01).
     pub command_timeout: f64,
+    /// Servo cuts power when the drive feedback is older than this (s). Default 0.1.
+    #[serde(default = "default_feedback_timeout")]
+    pub feedback_timeout: f64,
+    /// Longest enabling sequence (s). Default 0.5.
+    #[serde(default = "default_enable_timeout")]
+    pub enable_timeout: f64,
     /// Integration steps of the simulated machine per cycle. Default 4.
     #[serde(default = "default_substeps")]
     pub substeps: u32,
+    /// Faults the simulated drives raise at set times (`[[drives.inject]]`).
+    #[serde(default)]
+    pub inject: Vec<Inject>,
 }
 
 fn default_substeps() -> u32 {
     4
 }
+fn default_feedback_timeout() -> f64 {
+    0.1
+}
+fn default_enable_timeout() -> f64 {
+    0.5
+}
+
+/// A configured fault: `[[drives.inject]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Inject {
+    /// Axis name.
+    pub axis: String,
+    /// `over-current`, `encoder-loss` or `following-error`.
+    pub fault: String,
+    /// Time after the axis' drive first reaches Operation enabled (s).
+    pub at: f64,
+    /// How long the condition lasts (s). Default 0: one drive cycle.
+    #[serde(default)]
+    pub duration: f64,
+}
+
+/// The CiA 402 error code of a fault name of `[[drives.inject]]` and `supervisor inject`.
+pub fn fault_code(name: &str) -> Option<u16> {
+    match name {
+        "over-current" => Some(injected::OVER_CURRENT),
+        "encoder-loss" => Some(injected::ENCODER_LOSS),
+        "following-error" => Some(injected::FOLLOWING_ERROR),
+        _ => None,
+    }
+}
+
+/// The fault names [`fault_code`] knows.
+pub const FAULT_NAMES: &str = "over-current, encoder-loss, following-error";
 
 /// `servo = { ... }` of an axis.
 #[derive(Clone, Debug, Deserialize)]
@@ -155,10 +205,126 @@ pub struct Axis {
     pub following_error_limit: f64,
     /// In-position band.
     pub in_position: f64,
+    /// Settled needs |velocity| at most this (unit/s). Default 10 × `in_position` per s.
+    #[serde(default)]
+    pub settle_velocity: Option<f64>,
     /// Servo gains.
     pub servo: ServoGains,
+    /// Command validation limits (defaults derived from vmax, t_acc and the servo period).
+    #[serde(default)]
+    pub limits: Limits,
+    /// The drive: mode of operation and its own loop.
+    #[serde(default)]
+    pub drive: DriveSettings,
     /// Simulated mechanics.
     pub sim: SimAxis,
+}
+
+impl Axis {
+    /// Command validation: largest |commanded velocity| (unit/s).
+    pub fn velocity_limit(&self) -> f64 {
+        self.limits.velocity.unwrap_or(1.1 * self.vmax)
+    }
+
+    /// Command validation: largest position step per servo period (unit).
+    pub fn position_step_limit(&self, servo_period_s: f64) -> f64 {
+        self.limits
+            .position_step
+            .unwrap_or(1.5 * self.vmax * servo_period_s)
+    }
+
+    /// Command validation: largest velocity step per servo period (unit/s).
+    pub fn velocity_step_limit(&self, servo_period_s: f64, t_acc: f64) -> f64 {
+        self.limits
+            .velocity_step
+            .unwrap_or(3.0 * self.vmax / t_acc * servo_period_s)
+    }
+
+    /// Deceleration of servo's reference when setpoints stop (unit/s²).
+    pub fn stop_deceleration(&self, t_acc: f64) -> f64 {
+        self.limits.stop_deceleration.unwrap_or(self.vmax / t_acc)
+    }
+
+    /// The drive's quick-stop deceleration (unit/s²).
+    pub fn quick_stop_deceleration(&self, t_acc: f64) -> f64 {
+        self.drive
+            .quick_stop_deceleration
+            .unwrap_or(4.0 * self.vmax / t_acc)
+    }
+
+    /// Settled needs |velocity| at most this (unit/s).
+    pub fn settle_velocity(&self) -> f64 {
+        self.settle_velocity.unwrap_or(10.0 * self.in_position)
+    }
+}
+
+/// `limits = { ... }` of an axis: command validation (seed 001's `LLI_set` rule). Each
+/// omitted key takes the default documented in `docs/drives.md`.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// Largest |commanded velocity| (unit/s). Default 1.1 × vmax.
+    pub velocity: Option<f64>,
+    /// Largest position step per servo period (unit). Default 1.5 × vmax × period.
+    pub position_step: Option<f64>,
+    /// Largest velocity step per servo period (unit/s). Default 3 × vmax / t_acc × period.
+    pub velocity_step: Option<f64>,
+    /// Deceleration of the reference when setpoints stop (unit/s²). Default vmax / t_acc.
+    pub stop_deceleration: Option<f64>,
+}
+
+/// `drive = { ... }` of an axis.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveSettings {
+    /// `"cst"` (servo closes the position loop; default), `"csp"` (the drive does) or `"csv"`.
+    #[serde(default = "default_mode")]
+    pub mode: String,
+    /// The drive's position gain (CSP; effort/unit).
+    #[serde(default)]
+    pub kp: f64,
+    /// The drive's integral gain (CSP, CSV).
+    #[serde(default)]
+    pub ki: f64,
+    /// The drive's velocity gain (CSP, CSV; effort·s/unit).
+    #[serde(default)]
+    pub kd: f64,
+    /// Quick stop option code (0x605A): 0, 1, 2 (default) or 6.
+    #[serde(default = "default_quick_stop_option")]
+    pub quick_stop_option: i32,
+    /// Quick-stop deceleration (0x6085; unit/s²). Default 4 × vmax / t_acc.
+    #[serde(default)]
+    pub quick_stop_deceleration: Option<f64>,
+}
+
+impl Default for DriveSettings {
+    fn default() -> Self {
+        Self {
+            mode: default_mode(),
+            kp: 0.0,
+            ki: 0.0,
+            kd: 0.0,
+            quick_stop_option: default_quick_stop_option(),
+            quick_stop_deceleration: None,
+        }
+    }
+}
+
+fn default_mode() -> String {
+    "cst".into()
+}
+fn default_quick_stop_option() -> i32 {
+    2
+}
+
+/// The CiA 402 mode of a `drive.mode` name.
+pub fn mode_of(name: &str) -> Option<cia402::Mode> {
+    match name {
+        "csp" => Some(cia402::Mode::Csp),
+        "csv" => Some(cia402::Mode::Csv),
+        "cst" => Some(cia402::Mode::Cst),
+        _ => None,
+    }
 }
 
 /// `[process.<role>]`.
@@ -407,6 +573,53 @@ impl Config {
                 "substeps must be 1..=1000".into(),
             );
         }
+        let machine_period_s = self.process.machine.period_us as f64 * 1e-6;
+        for (k, v, min) in [
+            (
+                "feedback_timeout",
+                self.drives.feedback_timeout,
+                3.0 * machine_period_s,
+            ),
+            (
+                "enable_timeout",
+                self.drives.enable_timeout,
+                5.0 * servo_period_s,
+            ),
+        ] {
+            if !(v.is_finite() && v >= min) {
+                return bad(
+                    vec![K("drives"), K(k)],
+                    format!("{k} = {v} s must be at least {min} s"),
+                );
+            }
+        }
+        if self.drives.inject.len() > MAX_CONFIGURED_FAULTS {
+            return bad(
+                vec![K("drives"), K("inject")],
+                format!(
+                    "{} configured faults; at most {MAX_CONFIGURED_FAULTS}",
+                    self.drives.inject.len()
+                ),
+            );
+        }
+        for (j, f) in self.drives.inject.iter().enumerate() {
+            let at = |k: &'static str| vec![K("drives"), K("inject"), Idx(j), K(k)];
+            if !self.axis.iter().any(|a| a.name == f.axis) {
+                return bad(at("axis"), format!("inject: there is no axis {:?}", f.axis));
+            }
+            if fault_code(&f.fault).is_none() {
+                return bad(
+                    at("fault"),
+                    format!("inject: fault {:?} is not one of {FAULT_NAMES}", f.fault),
+                );
+            }
+            if !(non_negative(f.at) && non_negative(f.duration)) {
+                return bad(
+                    at("at"),
+                    "inject: at and duration must be 0 s or more".into(),
+                );
+            }
+        }
 
         if self.axis.is_empty() || self.axis.len() > MAX_AXES {
             return bad(
@@ -515,6 +728,108 @@ impl Config {
                     );
                 }
             }
+            if let Some(v) = a.settle_velocity
+                && !positive(v)
+            {
+                return bad(
+                    at("settle_velocity"),
+                    format!("axis {}: settle_velocity = {v} must be positive", a.name),
+                );
+            }
+            let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
+            let t_acc = self.motion.t_acc;
+            for (k, v) in [
+                ("velocity", a.velocity_limit()),
+                ("position_step", a.position_step_limit(servo_period_s)),
+                (
+                    "velocity_step",
+                    a.velocity_step_limit(servo_period_s, t_acc),
+                ),
+                ("stop_deceleration", a.stop_deceleration(t_acc)),
+            ] {
+                if !positive(v) {
+                    return bad(
+                        sub("limits", k),
+                        format!("axis {}: limits {k} = {v} must be positive", a.name),
+                    );
+                }
+            }
+            if a.velocity_limit() < a.vmax {
+                return bad(
+                    sub("limits", "velocity"),
+                    format!(
+                        "axis {}: limits velocity = {} is below vmax = {}: every move would be refused",
+                        a.name,
+                        a.velocity_limit(),
+                        a.vmax
+                    ),
+                );
+            }
+            if a.stop_deceleration(t_acc) * servo_period_s
+                > a.velocity_step_limit(servo_period_s, t_acc)
+            {
+                return bad(
+                    sub("limits", "stop_deceleration"),
+                    format!(
+                        "axis {}: stop_deceleration = {} changes the velocity by more than limits velocity_step = {} per servo period: coming to rest would cut power",
+                        a.name,
+                        a.stop_deceleration(t_acc),
+                        a.velocity_step_limit(servo_period_s, t_acc)
+                    ),
+                );
+            }
+            let d = &a.drive;
+            let Some(mode) = mode_of(&d.mode) else {
+                return bad(
+                    sub("drive", "mode"),
+                    format!(
+                        "axis {}: drive mode {:?} is not one of \"cst\", \"csp\", \"csv\"",
+                        a.name, d.mode
+                    ),
+                );
+            };
+            if cia402::QuickStopOption::from_i16(d.quick_stop_option as i16).is_none()
+                || !(0..=8).contains(&d.quick_stop_option)
+            {
+                return bad(
+                    sub("drive", "quick_stop_option"),
+                    format!(
+                        "axis {}: drive quick_stop_option = {} must be 0, 1, 2 or 6",
+                        a.name, d.quick_stop_option
+                    ),
+                );
+            }
+            for (k, v) in [("kp", d.kp), ("ki", d.ki), ("kd", d.kd)] {
+                if !non_negative(v) {
+                    return bad(
+                        sub("drive", k),
+                        format!("axis {}: drive {k} = {v} must be 0 or more", a.name),
+                    );
+                }
+            }
+            if !positive(a.quick_stop_deceleration(t_acc)) {
+                return bad(
+                    sub("drive", "quick_stop_deceleration"),
+                    format!(
+                        "axis {}: drive quick_stop_deceleration must be positive",
+                        a.name
+                    ),
+                );
+            }
+            if mode != cia402::Mode::Cst && d.kd <= 0.0 {
+                return bad(
+                    sub("drive", "kd"),
+                    format!(
+                        "axis {}: drive mode {} needs the drive's own velocity gain kd > 0",
+                        a.name, d.mode
+                    ),
+                );
+            }
+            let machine_step_s =
+                self.process.machine.period_us as f64 * 1e-6 / self.drives.substeps.max(1) as f64;
+            if let Err(why) = stability::check(a, mode, servo_period_s, machine_step_s) {
+                return bad(vec![K("axis"), Idx(i), K("sim"), K("inertia")], why);
+            }
         }
 
         let cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) as i32;
@@ -600,16 +915,31 @@ impl Config {
     }
 
     /// The configuration as every process reads it from shared memory.
-    pub fn to_shm(&self) -> CellConfigV1 {
-        let mut c = CellConfigV1 {
+    pub fn to_shm(&self) -> CellConfigV2 {
+        let ns = |s: f64| (s * 1e9) as u64;
+        let mut c = CellConfigV2 {
             axes: self.axis.len() as u32,
             machine_substeps: self.drives.substeps,
             t_acc_s: self.motion.t_acc,
-            drive_command_timeout_ns: (self.drives.command_timeout * 1e9) as u64,
-            setpoint_timeout_ns: (self.motion.setpoint_timeout * 1e9) as u64,
+            drive_command_timeout_ns: ns(self.drives.command_timeout),
+            setpoint_timeout_ns: ns(self.motion.setpoint_timeout),
+            feedback_timeout_ns: ns(self.drives.feedback_timeout),
+            enable_timeout_ns: ns(self.drives.enable_timeout),
+            settle_time_ns: ns(self.motion.settle_time),
             process: [ProcessConfigV1::default(); ROLE_COUNT],
-            axis: [AxisConfigV1::default(); MAX_AXES],
+            axis: [AxisConfigV2::default(); MAX_AXES],
+            inject: [ConfiguredFaultV1::default(); MAX_CONFIGURED_FAULTS],
         };
+        for (j, f) in self.drives.inject.iter().enumerate() {
+            c.inject[j] = ConfiguredFaultV1 {
+                at_ns: ns(f.at),
+                duration_ns: ns(f.duration),
+                axis: self.axis.iter().position(|a| a.name == f.axis).unwrap_or(0) as u32,
+                code: fault_code(&f.fault).unwrap_or(0) as u32,
+            };
+        }
+        let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
+        let t_acc = self.motion.t_acc;
         for role in Role::ALL {
             let p = self.process.get(role);
             c.process[role.index()] = ProcessConfigV1 {
@@ -620,7 +950,7 @@ impl Config {
             };
         }
         for (i, a) in self.axis.iter().enumerate() {
-            c.axis[i] = AxisConfigV1 {
+            c.axis[i] = AxisConfigV2 {
                 name: fixed_str(&a.name),
                 unit: fixed_str(&a.unit),
                 min: a.min,
@@ -629,6 +959,17 @@ impl Config {
                 start: a.start,
                 following_error_limit: a.following_error_limit,
                 in_position: a.in_position,
+                settle_velocity: a.settle_velocity(),
+                velocity_limit: a.velocity_limit(),
+                position_step_limit: a.position_step_limit(servo_period_s),
+                velocity_step_limit: a.velocity_step_limit(servo_period_s, t_acc),
+                stop_deceleration: a.stop_deceleration(t_acc),
+                mode: mode_of(&a.drive.mode).unwrap_or(cia402::Mode::Cst) as i32,
+                quick_stop_option: a.drive.quick_stop_option,
+                drive_kp: a.drive.kp,
+                drive_ki: a.drive.ki,
+                drive_kd: a.drive.kd,
+                quick_stop_deceleration: a.quick_stop_deceleration(t_acc),
                 kp: a.servo.kp,
                 ki: a.servo.ki,
                 kd: a.servo.kd,

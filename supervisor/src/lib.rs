@@ -2,6 +2,8 @@
 //! watches their health, stops them and removes every shared-memory resource.
 
 pub mod config;
+pub mod control;
+pub mod events;
 pub mod latency_cmd;
 pub mod launch;
 pub mod report;

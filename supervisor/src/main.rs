@@ -104,6 +104,35 @@ enum Cmd {
         #[arg(long, short = 'q')]
         quiet: bool,
     },
+    /// Print the events of a running instance as they happen (docs/events.md).
+    Events {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Keep printing until Ctrl-C (without it: what arrives within half a second).
+        #[arg(long, short = 'f')]
+        follow: bool,
+        /// One JSON object per line instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Inject a fault condition into a simulated drive of a running instance (or clear it).
+    Inject {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Axis name.
+        #[arg(long)]
+        axis: String,
+        /// over-current, encoder-loss or following-error.
+        fault: String,
+        /// Clear the condition instead of raising it.
+        #[arg(long)]
+        clear: bool,
+        /// Cell configuration the instance runs (for the axis names); default the embedded one.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// The sending side of a latency hop (started by `supervisor latency`).
     #[command(hide = true, name = "latency-peer")]
     LatencyPeer {
@@ -188,6 +217,38 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Cmd::Events {
+            instance,
+            follow,
+            json,
+        } => match shm_schema::InstanceName::new(&instance)
+            .map_err(|e| format!("--instance {instance:?}: {e}"))
+            .and_then(|i| supervisor::events::follow(&i, follow, json))
+        {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        },
+        Cmd::Inject {
+            instance,
+            axis,
+            fault,
+            clear,
+            config,
+        } => {
+            match supervisor::control::inject(&instance, config.as_deref(), &axis, &fault, clear) {
+                Ok(msg) => {
+                    println!("{msg}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(2)
+                }
+            }
+        }
         Cmd::DefaultConfig => {
             print!("{DEFAULT_TOML}");
             ExitCode::SUCCESS
@@ -238,12 +299,12 @@ fn main() -> ExitCode {
                     if json {
                         println!(
                             "{}",
-                            serde_json::json!({"ok": false, "error": e.to_string()})
+                            serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
                         );
                     }
                     ExitCode::from(match e {
                         RunError::Input(_) => 2,
-                        RunError::Failed(_) => 1,
+                        RunError::Failed { .. } => 1,
                         RunError::Interrupted => 130,
                     })
                 }

@@ -137,6 +137,11 @@ pub struct Report {
     pub processes: Vec<ProcessReport>,
     /// The trace.
     pub trace: Vec<TraceRow>,
+    /// Every event of the run (`docs/events.md`).
+    pub events: Vec<Value>,
+    /// Sense-to-command latency the drives measured over the run: sampling the encoders to
+    /// applying the command computed from that sample.
+    pub sense_to_command: Option<Summary>,
 }
 
 fn per_axis<T: Serialize>(names: &[String], values: &[T]) -> Value {
@@ -189,6 +194,8 @@ impl Report {
             "starved": self.starved,
             "iobridge_delay_us": self.iobridge_delay_us.map(|(mean, max)| json!({"mean": mean, "max": max})),
             "processes": procs,
+            "sense_to_command_us": self.sense_to_command.map_or(Value::Null, |m| m.to_json()),
+            "events": self.events,
         })
     }
 
@@ -229,6 +236,22 @@ impl Report {
                 "  fieldbus image age {mean:.0} µs mean, {max:.0} µs max (measurement to write)\n"
             );
         }
+        if let Some(m) = self.sense_to_command {
+            s += &format!(
+                "  sense to command   {:.0} µs p50, {:.0} µs p99, {:.0} µs max (encoder sample to the drives applying its command)\n",
+                m.p50_us, m.p99_us, m.max_us
+            );
+        }
+        let worst = self
+            .events
+            .iter()
+            .filter(|e| e["severity"] != "info")
+            .count();
+        s += &format!(
+            "  events             {} ({} warnings or errors)\n",
+            self.events.len(),
+            worst
+        );
         s += &format!(
             "  trace              {} setpoints, {} lost\n",
             self.setpoints, self.lost_setpoints

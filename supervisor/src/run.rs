@@ -11,6 +11,7 @@
 //!    resource of the instance is left, and report.
 
 use crate::config::Config;
+use crate::events::{self, Axes};
 use crate::launch::{Children, cpu_seconds};
 use crate::report::{ProcessReport, Report, TraceRow};
 use motion_program::{Op, Program};
@@ -20,8 +21,9 @@ use runtime::signals;
 use shm_schema::drive::servo_status as st;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    CellConfigV1, FieldbusImageV1, InstanceName, LatencyHistogramV1, MAX_AXES, MotionCommandV1,
-    MotionState, ProcState, ProcessStatusV1, Role, ServiceId, ServoStateV1, SetpointV1,
+    CellConfigV2, EventV1, FieldbusImageV1, InstanceName, LatencyHistogramV1, MAX_AXES,
+    MotionCommandV1, MotionState, ProcState, ProcessStatusV1, RequestKind, Role, ServiceId,
+    ServoRequestV1, ServoStateV2, SetpointV1,
 };
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -48,15 +50,38 @@ pub enum RunError {
     /// Bad input (program, configuration, instance): nothing was started. Exit code 2.
     Input(String),
     /// The run started and failed. Exit code 1.
-    Failed(String),
+    Failed {
+        /// What went wrong.
+        message: String,
+        /// The events of the run up to the failure (`docs/events.md`).
+        events: Vec<serde_json::Value>,
+    },
     /// Ctrl-C / SIGTERM. Exit code 130.
     Interrupted,
+}
+
+impl RunError {
+    /// A started run failed (its events are attached when the run ends).
+    pub fn failed(message: impl Into<String>) -> Self {
+        Self::Failed {
+            message: message.into(),
+            events: Vec::new(),
+        }
+    }
+
+    /// The events the failed run recorded.
+    pub fn events(&self) -> &[serde_json::Value] {
+        match self {
+            Self::Failed { events, .. } => events,
+            _ => &[],
+        }
+    }
 }
 
 impl std::fmt::Display for RunError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            RunError::Input(m) | RunError::Failed(m) => f.write_str(m),
+            RunError::Input(m) | RunError::Failed { message: m, .. } => f.write_str(m),
             RunError::Interrupted => f.write_str("interrupted; every process was stopped"),
         }
     }
@@ -83,7 +108,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
     signals::install()
-        .map_err(|e| RunError::Failed(format!("cannot install signal handlers: {e}")))?;
+        .map_err(|e| RunError::failed(format!("cannot install signal handlers: {e}")))?;
 
     ipc::quiet_iceoryx2_log();
     let _ = ipc::remove_dead_nodes(&instance);
@@ -94,7 +119,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         )));
     }
 
-    let mut session = match Session::open(&cfg, instance) {
+    let mut session = match Session::open(&cfg, instance, opts.progress) {
         Ok(s) => s,
         Err(e) => {
             // Whatever was started is stopped (Children's drop); remove what it created.
@@ -113,12 +138,30 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         pids.iter().map(|(_, pid)| sched_of(*pid as i32)).collect();
     session.refresh_latency();
     let stop_problems = session.children.stop_all();
+    session.take_events();
     let statuses = session.statuses;
     let latencies = std::mem::take(&mut session.latencies);
+    let sense_to_command = session.sense_to_command.take();
+    let events: Vec<serde_json::Value> = session
+        .events
+        .iter()
+        .map(|e| events::to_json(e, &session.axes, session.t0_ns))
+        .collect();
     drop(session);
     let leftovers = ipc::remove_instance(&instance);
 
-    let mut report = outcome?;
+    let mut report = match outcome {
+        Ok(r) => r,
+        Err(RunError::Failed { message, .. }) => {
+            return Err(RunError::Failed { message, events });
+        }
+        Err(e) => return Err(e),
+    };
+    report.events = events;
+    report.sense_to_command = sense_to_command
+        .as_deref()
+        .filter(|h| h.count > 0)
+        .map(latency::report::Summary::of);
     for (i, (role, pid)) in pids.iter().enumerate() {
         let status = statuses[role.index()].unwrap_or_default();
         let (policy, priority) = sched[i].unwrap_or((status.policy, status.priority));
@@ -129,17 +172,17 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         report.processes.push(p);
     }
     if let Some((role, why)) = stop_problems.first() {
-        return Err(RunError::Failed(format!("{} {why}", role.name())));
+        return Err(RunError::failed(format!("{} {why}", role.name())));
     }
     if !leftovers.is_empty() {
-        return Err(RunError::Failed(format!(
+        return Err(RunError::failed(format!(
             "iceoryx2 resources left behind: {}",
             leftovers.join(", ")
         )));
     }
     if let Some(path) = &opts.trace {
         write_trace(path, &report)
-            .map_err(|e| RunError::Failed(format!("{}: {e}", path.display())))?;
+            .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
     }
     Ok(report)
 }
@@ -150,11 +193,21 @@ struct Session {
     children: Children,
     statuses: [Option<ProcessStatusV1>; 4],
     latencies: [Option<Box<LatencyHistogramV1>>; 4],
+    sense_to_command: Option<Box<LatencyHistogramV1>>,
+    /// Every event of the run, in the order they arrived.
+    events: Vec<EventV1>,
+    axes: Axes,
+    t0_ns: u64,
+    print_events: bool,
+    request_seq: u64,
     // Field order is drop order: ports before the node.
-    config_pub: Pub<CellConfigV1>,
+    config_pub: Pub<CellConfigV2>,
     command_pub: Pub<MotionCommandV1>,
+    request_pub: Pub<ServoRequestV1>,
+    events_sub: Sub<EventV1>,
+    sense_sub: Sub<LatencyHistogramV1>,
     setpoint_sub: Sub<SetpointV1>,
-    servo_sub: Sub<ServoStateV1>,
+    servo_sub: Sub<ServoStateV2>,
     image_sub: Sub<FieldbusImageV1>,
     status_subs: Vec<(Role, Sub<ProcessStatusV1>)>,
     latency_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
@@ -163,12 +216,15 @@ struct Session {
 
 impl Session {
     /// Creates every service, publishes the configuration and starts the processes.
-    fn open(cfg: &Config, instance: InstanceName) -> Result<Self, RunError> {
-        let f = |e: ipc::IpcError| RunError::Failed(e.to_string());
+    fn open(cfg: &Config, instance: InstanceName, print_events: bool) -> Result<Self, RunError> {
+        let f = |e: ipc::IpcError| RunError::failed(e.to_string());
         let node = ipc::node(&instance, "supervisor").map_err(f)?;
         let i = &instance;
         let config_pub = Pub::new(&node, i, ServiceId::CellConfig).map_err(f)?;
         let command_pub = Pub::new(&node, i, ServiceId::MotionCommand).map_err(f)?;
+        let request_pub = Pub::new(&node, i, ServiceId::ServoRequest).map_err(f)?;
+        let events_sub = Sub::new(&node, i, ServiceId::Events, 1024).map_err(f)?;
+        let sense_sub = Sub::new(&node, i, ServiceId::SenseToCommand, 1).map_err(f)?;
         let setpoint_sub = Sub::new(&node, i, ServiceId::Setpoint, 1024).map_err(f)?;
         let servo_sub = Sub::new(&node, i, ServiceId::ServoState, 1024).map_err(f)?;
         let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
@@ -184,20 +240,30 @@ impl Session {
                 Sub::new(&node, i, ServiceId::Latency(role), 1).map_err(f)?,
             ));
         }
-        config_pub.send(&cfg.to_shm());
+        let cell = cfg.to_shm();
+        config_pub.send(&cell);
         let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
         for role in Role::ALL {
             children
                 .spawn(cfg, role, &instance)
-                .map_err(RunError::Failed)?;
+                .map_err(RunError::failed)?;
         }
         Ok(Self {
             instance,
             children,
             statuses: [None; 4],
             latencies: Default::default(),
+            sense_to_command: None,
+            events: Vec::new(),
+            axes: Axes::of_cell(&cell),
+            t0_ns: runtime::time::now_ns(),
+            print_events,
+            request_seq: 0,
             config_pub,
             command_pub,
+            request_pub,
+            events_sub,
+            sense_sub,
             setpoint_sub,
             servo_sub,
             image_sub,
@@ -207,13 +273,63 @@ impl Session {
         })
     }
 
-    /// Takes the newest latency histogram of every process (they publish about every 100 ms).
+    /// Takes the newest latency histogram of every process (they publish about every 100 ms)
+    /// and the drives' sense-to-command histogram.
     fn refresh_latency(&mut self) {
         for (role, sub) in &self.latency_subs {
             if let Some(h) = sub.latest() {
                 self.latencies[role.index()] = Some(Box::new(h));
             }
         }
+        if let Some(h) = self.sense_sub.latest() {
+            self.sense_to_command = Some(Box::new(h));
+        }
+    }
+
+    /// Takes the events that arrived, printing them as they happen.
+    fn take_events(&mut self) {
+        while let Some(e) = self.events_sub.next() {
+            if self.print_events {
+                eprintln!("{}", events::line(&e, &self.axes, self.t0_ns));
+            }
+            self.events.push(e);
+        }
+    }
+
+    /// Asks servo for `kind` (it takes effect in servo's next cycle).
+    fn request(&mut self, kind: RequestKind) -> Result<(), RunError> {
+        self.request_seq += 1;
+        let r = ServoRequestV1 {
+            seq: self.request_seq,
+            kind: kind as u32,
+            reserved: 0,
+        };
+        if self.request_pub.send(&r) {
+            Ok(())
+        } else {
+            Err(RunError::failed(
+                "servo's request service refused a request",
+            ))
+        }
+    }
+
+    /// The latched fault servo reports, in words, with the event that explains it.
+    fn fault_text(&self, cfg: &Config, s: &ServoStateV2) -> String {
+        let cause = self
+            .events
+            .iter()
+            .rev()
+            .find(|e| e.code == s.fault_code)
+            .map(|e| events::line(e, &self.axes, self.t0_ns));
+        let name = shm_schema::event::info(s.fault_code).map_or("unknown fault", |i| i.name);
+        let axis = usize::try_from(s.fault_axis)
+            .ok()
+            .and_then(|i| cfg.axis.get(i))
+            .map_or(String::new(), |a| format!(" on axis {}", a.name));
+        format!(
+            "servo cut power: {name}{axis}{}",
+            cause.map_or(String::new(), |c| format!("\n  {c}"))
+        )
     }
 
     /// Fails if a process exited or stopped cycling; refreshes the statuses.
@@ -226,16 +342,17 @@ impl Session {
             return Err(RunError::Interrupted);
         }
         if let Some((role, pid, status)) = self.children.exited() {
-            return Err(RunError::Failed(format!(
+            return Err(RunError::failed(format!(
                 "{} (pid {pid}) exited unexpectedly: {status}",
                 role.name()
             )));
         }
         self.config_pub.update_connections();
+        self.take_events();
         for (role, sub) in &self.status_subs {
             if let Some(s) = sub.latest() {
                 if ProcState::from_u32(s.state) == Some(ProcState::Fault) {
-                    return Err(RunError::Failed(format!(
+                    return Err(RunError::failed(format!(
                         "{} reports fault {}",
                         role.name(),
                         s.fault
@@ -252,7 +369,7 @@ impl Session {
         for role in Role::ALL {
             let (cycles, at) = beats[role.index()];
             if cycles > 0 && at.elapsed() > timeout {
-                return Err(RunError::Failed(format!(
+                return Err(RunError::failed(format!(
                     "{} stopped cycling: its status has not advanced for {:.2} s",
                     role.name(),
                     at.elapsed().as_secs_f64()
@@ -272,10 +389,14 @@ impl Session {
         let n = cfg.axis.len();
         let mut beats = [(0u64, Instant::now()); 4];
 
-        // Startup: every process cyclic, trajgen publishing, drives enabled.
+        // Startup: every process cyclic, trajgen publishing, the drives initialized; then
+        // an enable request, and a setpoint from after the arm is enabled (trajgen starts
+        // where servo holds).
         let start = Instant::now();
         let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
-        let (mut last_sp, mut last_servo) = (None::<SetpointV1>, None::<ServoStateV1>);
+        let (mut last_sp, mut last_servo) = (None::<SetpointV1>, None::<ServoStateV2>);
+        let mut enable_sent = false;
+        let mut enabled_at: Option<u64> = None;
         loop {
             self.check_health(cfg, &mut beats)?;
             if let Some(s) = self.setpoint_sub.latest() {
@@ -284,12 +405,29 @@ impl Session {
             if let Some(s) = self.servo_sub.latest() {
                 last_servo = Some(s);
             }
+            if let Some(s) = last_servo
+                && s.status & st::FAULT_LATCHED != 0
+            {
+                self.take_events();
+                return Err(RunError::failed(self.fault_text(cfg, &s)));
+            }
+            let statuses = self.statuses;
             let cyclic = |r: Role| {
-                self.statuses[r.index()]
+                statuses[r.index()]
                     .is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
             };
-            let enabled = last_servo.is_some_and(|s| s.status & st::ENABLED != 0);
-            if Role::ALL.iter().all(|r| cyclic(*r)) && last_sp.is_some() && enabled {
+            let initialized = last_servo.is_some_and(|s| s.status & st::INITIALIZED != 0);
+            let all_cyclic = Role::ALL.iter().all(|r| cyclic(*r));
+            if all_cyclic && initialized && last_sp.is_some() && !enable_sent {
+                self.request(RequestKind::Enable)?;
+                enable_sent = true;
+            }
+            if let Some(s) = last_servo.filter(|s| s.status & st::ENABLED != 0) {
+                enabled_at.get_or_insert(s.stamp_ns);
+            }
+            if let (Some(t), Some(sp)) = (enabled_at, last_sp)
+                && sp.stamp_ns > t
+            {
                 break;
             }
             if start.elapsed() > startup {
@@ -301,10 +439,13 @@ impl Session {
                 if last_sp.is_none() {
                     missing.push("trajgen publishes no setpoint".into());
                 }
-                if !enabled {
-                    missing.push("the drives are not enabled".into());
+                if !initialized {
+                    missing.push("the drives did not initialize".into());
                 }
-                return Err(RunError::Failed(format!(
+                if enabled_at.is_none() {
+                    missing.push("the arm is not enabled".into());
+                }
+                return Err(RunError::failed(format!(
                     "startup did not complete within {:.1} s: {}",
                     startup.as_secs_f64(),
                     missing.join(", ")
@@ -323,10 +464,10 @@ impl Session {
         let commands = program.to_commands(program_id, 1);
         let mut sent = 0usize;
         let mut rows: Vec<SetpointV1> = Vec::new();
-        let mut servo_log: Vec<ServoStateV1> = Vec::new();
+        let mut servo_log: Vec<ServoStateV2> = Vec::new();
         let mut images = (0u64, 0u64, 0u64); // count, sum of delays, max delay (ns)
         let mut done: Option<SetpointV1> = None;
-        let mut settled_at: Option<(u64, ServoStateV1)> = None;
+        let mut settled_at: Option<(u64, ServoStateV2)> = None;
         let mut in_pos_since: Option<u64> = None;
         let mut progress = Progress::new(opts.progress, predicted, src);
         let settle_ns = (cfg.motion.settle_time * 1e9) as u64;
@@ -346,7 +487,7 @@ impl Session {
                     continue;
                 }
                 if sp.fault != trajgen_fault::NONE || sp.state == MotionState::Fault as u32 {
-                    return Err(RunError::Failed(trajgen_fault_text(&sp, &opts.program)));
+                    return Err(RunError::failed(trajgen_fault_text(&sp, &opts.program)));
                 }
                 match MotionState::from_u32(sp.state) {
                     Some(MotionState::Moving) => rows.push(sp),
@@ -364,8 +505,8 @@ impl Session {
                 let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
                 for c in commands.iter().skip(sent).take(credit) {
                     if !self.command_pub.send(c) {
-                        return Err(RunError::Failed(
-                            "trajgen's command service refused a command".into(),
+                        return Err(RunError::failed(
+                            "trajgen's command service refused a command",
                         ));
                     }
                     sent += 1;
@@ -377,32 +518,22 @@ impl Session {
                 if rows.is_empty() {
                     continue;
                 }
-                if s.status & st::FOLLOWING_ERROR != 0 {
-                    let (i, e) = (0..n)
-                        .map(|i| (i, s.following_error[i]))
-                        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-                        .unwrap_or((0, 0.0));
-                    let a = &cfg.axis[i];
-                    return Err(RunError::Failed(format!(
-                        "following error on axis {}: {:.4} {} exceeds its limit {} {}",
-                        a.name, e, a.unit, a.following_error_limit, a.unit
-                    )));
-                }
-                if s.status & st::DRIVE_FAULT != 0 {
-                    return Err(RunError::Failed(
-                        "the drives report a fault (command timeout: servo stopped commanding)"
-                            .into(),
-                    ));
+                if s.status & st::FAULT_LATCHED != 0 {
+                    self.take_events();
+                    return Err(RunError::failed(self.fault_text(cfg, &s)));
                 }
                 if s.status & st::SETPOINT_JUMP != 0 {
-                    return Err(RunError::Failed(
-                        "servo refused a setpoint as a jump".into(),
+                    self.take_events();
+                    return Err(RunError::failed(
+                        "servo refused a setpoint as a jump (see the setpoint-jump event)",
                     ));
                 }
                 servo_log.push(s);
                 if let Some(d) = &done {
-                    let inside =
-                        (0..n).all(|i| s.following_error[i].abs() <= cfg.axis[i].in_position);
+                    let inside = (0..n).all(|i| {
+                        s.following_error[i].abs() <= cfg.axis[i].in_position
+                            && s.act_velocity[i].abs() <= cfg.axis[i].settle_velocity()
+                    });
                     let used_final = s.setpoint_seq >= d.seq;
                     match (inside && used_final, in_pos_since) {
                         (true, None) => in_pos_since = Some(s.stamp_ns),
@@ -435,7 +566,7 @@ impl Session {
                         .collect::<Vec<_>>()
                         .join(", ")
                 });
-                return Err(RunError::Failed(format!(
+                return Err(RunError::failed(format!(
                     "the axes did not settle within {} s of the end of the motion (following error {errs})",
                     cfg.motion.settle_timeout
                 )));
@@ -448,7 +579,7 @@ impl Session {
 
         let done = done.expect("settling needs done");
         let (settle_start, final_state) = settled_at.expect("loop exit");
-        let motion_servo: Vec<&ServoStateV1> = servo_log
+        let motion_servo: Vec<&ServoStateV2> = servo_log
             .iter()
             .filter(|s| s.stamp_ns <= final_state.stamp_ns)
             .collect();
@@ -497,6 +628,8 @@ impl Session {
             },
             processes: Vec::new(),
             trace,
+            events: Vec::new(),
+            sense_to_command: None,
         })
     }
 }
@@ -520,7 +653,7 @@ fn trajgen_fault_text(sp: &SetpointV1, program: &std::path::Path) -> String {
 
 /// One row per setpoint: its command, and the measured position at the servo cycle that used
 /// it (the first servo cycle whose setpoint is this one or a later one).
-fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV1]) -> Vec<TraceRow> {
+fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV2]) -> Vec<TraceRow> {
     rows.iter()
         .map(|sp| {
             let idx = servo.partition_point(|s| s.setpoint_seq < sp.seq);

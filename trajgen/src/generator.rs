@@ -37,7 +37,7 @@ pub struct Params {
 
 impl Params {
     /// Parameters from the cell configuration.
-    pub fn from_cell(cell: &shm_schema::CellConfigV1) -> Self {
+    pub fn from_cell(cell: &shm_schema::CellConfigV2) -> Self {
         let mut p = Params {
             axes: cell.axes as usize,
             vmax: [1.0; MAX_AXES],

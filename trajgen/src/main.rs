@@ -3,8 +3,9 @@
 use runtime::cycle::{CycleClock, Wake};
 use runtime::ipc::{Notifier, Pub, Sub};
 use runtime::process::{self, Context, SetupError, Task};
+use shm_schema::EventQueue;
 use shm_schema::drive::servo_status;
-use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV1, SetpointV1};
+use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV2, SetpointV1};
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
 
@@ -13,7 +14,7 @@ struct Trajgen {
     /// `None` until servo's commanded position is known: the motion starts where servo is.
     generator: Option<Generator>,
     commands: Sub<MotionCommandV1>,
-    servo: Sub<ServoStateV1>,
+    servo: Sub<ServoStateV2>,
     setpoints: Pub<SetpointV1>,
     /// Wakes event-driven consumers after each setpoint (none in the default cell: servo
     /// runs on its own phase of the shared grid).
@@ -37,16 +38,20 @@ impl Trajgen {
 impl Task for Trajgen {
     /// # Real-time
     /// IPC calls, then [`Generator::step`]; nothing else.
-    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock) {
+    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock, _events: &mut EventQueue) {
         // Servo's commanded position, once servo has drive feedback.
         let servo = self
             .servo
             .latest()
             .filter(|s| s.status & servo_status::NO_FEEDBACK == 0);
         let generator = match (&mut self.generator, servo) {
-            (Some(g), Some(s)) if s.status & servo_status::SETPOINT_JUMP != 0 => {
-                // Servo refuses our setpoint as a jump (it restarted, or the machine moved):
-                // at rest, start again from where servo holds.
+            (Some(g), Some(s))
+                if s.status & (servo_status::SETPOINT_JUMP | servo_status::ENABLED)
+                    != servo_status::ENABLED =>
+            {
+                // Servo does not follow us (the arm is not enabled, or it refused our
+                // setpoint as a jump because it restarted or the machine moved): at rest,
+                // start again from where servo holds.
                 g.resync(&s.cmd_position);
                 g
             }

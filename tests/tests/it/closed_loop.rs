@@ -1,18 +1,18 @@
 //! Servo's controller against the machine model, in one process at the default gains: the
-//! default cell is stable and follows the blended triangle within its limits.
+//! default cell is stable and follows the blended triangle within its limits, in CST (servo
+//! closes the loop) and in CSP (the drives close it), at 1 kHz and at 4 kHz.
 
-use machine_sim::Machine;
-use servo::{Controller, Params as ServoParams};
+use crate::loop_sim::{Loop, MS};
+use shm_schema::drive::servo_status as st;
 use shm_schema::{MotionState, Role};
 use supervisor::config::Config;
 use trajgen::generator::{Generator, Params};
 
-#[test]
-fn the_default_gains_follow_the_triangle_and_settle() {
-    let cfg = Config::default_cell();
+/// Runs the triangle; returns the largest |following error| per axis.
+fn triangle(cfg: &Config) -> [f64; 3] {
     let cell = cfg.to_shm();
-    let mut machine = Machine::new(&cell);
-    let mut servo = Controller::new(ServoParams::from_cell(&cell));
+    let mut lp = Loop::new(&cell);
+    lp.enable();
     let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
     let mut generator = Generator::new(Params::from_cell(&cell), &start);
     let prog =
@@ -20,54 +20,128 @@ fn the_default_gains_follow_the_triangle_and_settle() {
     for c in prog.to_commands(1, 1) {
         generator.push_command(&c);
     }
-    let ms = 1_000_000u64;
-    let tg = cell.process[Role::Trajgen.index()].period_ns / ms;
-    let mut fb = None;
-    let mut sp = None;
+    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
     let mut max_fe = [0.0f64; 3];
     let mut done_at = None;
-    for k in 1..30_000u64 {
-        let now = 1_000_000_000 + k * ms;
-        let fresh = if k % tg == 0 {
-            let s = generator.step(now);
-            sp = Some(s);
-            Some(s)
-        } else {
-            None
-        };
-        let (cmd, state) = servo.cycle(now, fresh.as_ref(), fb.as_ref());
-        fb = Some(machine.cycle(now + ms / 2, Some(&cmd)));
-        if k > 10 {
-            for (m, e) in max_fe.iter_mut().zip(&state.following_error) {
-                *m = m.max(e.abs());
-            }
-            assert_eq!(
-                state.status & !shm_schema::drive::servo_status::ENABLED,
-                0,
-                "status {:#x} at {k} ms",
-                state.status
-            );
+    let mut sp = None;
+    for k in 1..(30_000 * MS / lp.period) {
+        let fresh = (k % tg == 0).then(|| generator.step(lp.now + 100_000));
+        if fresh.is_some() {
+            sp = fresh;
         }
+        let state = lp.step_with(None, fresh.as_ref(), None);
+        for (m, e) in max_fe.iter_mut().zip(&state.following_error) {
+            *m = m.max(e.abs());
+        }
+        let mut allowed = st::ENABLED | st::SETTLED | st::INITIALIZED;
+        if sp.is_none() || k <= tg {
+            allowed |= st::NO_SETPOINT; // before the first setpoint
+        }
+        let unexpected = state.status & !allowed;
+        assert_eq!(
+            unexpected,
+            0,
+            "status {:#x} at {k}: {:?}",
+            state.status,
+            lp.codes()
+        );
         if sp.is_some_and(|s| s.state == MotionState::Done as u32) && done_at.is_none() {
             done_at = Some(k);
         }
-        if done_at.is_some_and(|d| k > d + 1000) {
+        if done_at.is_some_and(|d| k > d + 1000 * MS / lp.period) {
+            assert!(
+                state.status & st::SETTLED != 0,
+                "not settled a second after the end"
+            );
             break;
         }
     }
     assert!(done_at.is_some(), "motion never finished");
     for (i, a) in cfg.axis.iter().enumerate() {
-        assert!(
-            max_fe[i] < a.following_error_limit / 5.0,
-            "{}: max following error {}",
-            a.name,
-            max_fe[i]
-        );
-        let p = machine.axes()[i].encoder();
+        let p = lp.machine.axes()[i].encoder();
         assert!(
             (p - start[i]).abs() <= a.in_position,
             "{}: ends at {p}",
             a.name
+        );
+    }
+    max_fe
+}
+
+/// The default cell with every axis in CSP, the drives' own gains set.
+pub fn csp_config(servo_period_us: u64) -> Config {
+    let mut src = supervisor::config::DEFAULT_TOML.to_string();
+    for (axis, gains) in [
+        ("x", "kp = 300.0, ki = 2000.0, kd = 2.5"),
+        ("y", "kp = 190.0, ki = 1200.0, kd = 1.6"),
+        ("theta", "kp = 13.0, ki = 80.0, kd = 0.11"),
+    ] {
+        let at = src.find(&format!("name = \"{axis}\"")).expect("axis");
+        let sim = at + src[at..].find("sim = {").expect("sim");
+        src.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
+    }
+    let src = src.replace(
+        "period_us = 1000\nphase_us = 400",
+        &format!(
+            "period_us = {servo_period_us}\nphase_us = {}",
+            servo_period_us * 2 / 5
+        ),
+    );
+    Config::parse(&src, "csp").expect("valid csp config")
+}
+
+#[test]
+fn the_default_gains_follow_the_triangle_and_settle() {
+    let cfg = Config::default_cell();
+    let fe = triangle(&cfg);
+    for (i, a) in cfg.axis.iter().enumerate() {
+        assert!(
+            fe[i] < a.following_error_limit / 5.0,
+            "{}: {}",
+            a.name,
+            fe[i]
+        );
+    }
+}
+
+#[test]
+fn csp_axes_follow_the_triangle_with_the_drives_closing_the_loop() {
+    let cfg = csp_config(1000);
+    let fe = triangle(&cfg);
+    for (i, a) in cfg.axis.iter().enumerate() {
+        assert!(
+            fe[i] < a.following_error_limit / 5.0,
+            "{}: {}",
+            a.name,
+            fe[i]
+        );
+    }
+}
+
+/// The default cell with the machine and servo at `period_us`, their phases scaled.
+pub fn at_rate(period_us: u64) -> Config {
+    let src = supervisor::config::DEFAULT_TOML
+        .replace(
+            "period_us = 1000\nphase_us = 100",
+            &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
+        )
+        .replace(
+            "period_us = 1000\nphase_us = 400",
+            &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
+        );
+    Config::parse(&src, "rate").expect("valid")
+}
+
+#[test]
+fn at_4_khz_the_following_error_is_no_worse_than_at_1_khz() {
+    let slow = triangle(&Config::default_cell());
+    let fast = triangle(&at_rate(250));
+    for i in 0..3 {
+        assert!(
+            fast[i] <= slow[i] * 1.05 + 1e-4,
+            "axis {i}: {} at 4 kHz vs {} at 1 kHz",
+            fast[i],
+            slow[i]
         );
     }
 }

@@ -5,7 +5,9 @@
 mod cell;
 mod closed_loop;
 mod latency;
+mod loop_sim;
 mod no_alloc;
+mod servo_layer;
 
 #[global_allocator]
 static ALLOC: runtime::alloc_count::CountingAllocator = runtime::alloc_count::CountingAllocator;

@@ -22,6 +22,13 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
     }
     let mut clock = CycleClock::new(1_000_000, 0, 1_000_000_000);
     let ms = 1_000_000u64;
+    let enable = shm_schema::ServoRequestV1 {
+        seq: 1,
+        kind: shm_schema::RequestKind::Enable as u32,
+        reserved: 0,
+    };
+    let mut q = shm_schema::EventQueue::default();
+    let mut events = 0;
     let (cycles, allocs) = count(|| {
         let mut fb = None;
         let mut n = 0u64;
@@ -29,8 +36,11 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
             let now = 1_000_000_000 + k * ms;
             let wake = clock.woke(clock.next_deadline_ns(), true, now);
             let sp = (k % 4 == 0).then(|| generator.step(now));
-            let (cmd, state) = servo.cycle(now, sp.as_ref(), fb.as_ref());
-            fb = Some(machine.cycle(now, Some(&cmd)));
+            let req = (k == 1).then_some(enable);
+            let (cmd, state) = servo.cycle(now, req.as_ref(), sp.as_ref(), fb.as_ref(), &mut q);
+            fb = Some(machine.cycle(now, Some(&cmd), None, &mut q));
+            events += q.as_slice().len();
+            q.clear();
             std::hint::black_box(iobridge::write_image(k, now, &state));
             clock.finish(&wake, now + 50_000);
             n += 1;
@@ -39,4 +49,8 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
     });
     assert_eq!(cycles, 20_000);
     assert_eq!(allocs, 0, "allocations in {cycles} cycles");
+    assert!(
+        events >= 5,
+        "the cycles ran the drives' and servo's state machines: {events} events"
+    );
 }

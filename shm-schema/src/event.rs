@@ -1,0 +1,509 @@
+//! Events (seed 001's event function): one `<i>/events` service for the whole cell.
+//!
+//! Any process writes fixed-size [`EventV1`] records in its cycle, without allocation; the
+//! supervisor reads them, prints them as they happen and puts them in its reports. Every
+//! refusal, fault, drive state change and overrun burst is an event naming what happened,
+//! where (source process, axis), the value and the limit it crossed. [`code`] lists every
+//! code; [`CODES`] describes them (and `docs/events.md` is generated from it).
+
+use crate::MAX_AXES;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// Bytes of [`EventV1::text`].
+pub const EVENT_TEXT_LEN: usize = 64;
+
+/// Source of an event that is not a real-time process: the supervisor.
+pub const SOURCE_SUPERVISOR: u32 = 100;
+
+/// How bad an event is, in [`EventV1::severity`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[repr(u32)]
+pub enum Severity {
+    /// Something changed as asked (a drive state, power on).
+    Info = 0,
+    /// Something the user should look at; nothing was stopped by it.
+    Warning = 1,
+    /// A refusal or a fault: power was cut, or a command was refused.
+    Error = 2,
+}
+
+impl Severity {
+    /// Decodes the wire value.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        [Self::Info, Self::Warning, Self::Error]
+            .into_iter()
+            .find(|s| *s as u32 == v)
+    }
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Info => "info",
+            Self::Warning => "warning",
+            Self::Error => "error",
+        }
+    }
+}
+
+/// One event, on `<i>/events`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("rtc::EventV1")]
+pub struct EventV1 {
+    /// +1 per event of this source since it started.
+    pub seq: u64,
+    /// When it happened (ns, `CLOCK_MONOTONIC`).
+    pub stamp_ns: u64,
+    /// The value that caused it (unit per code: see [`CODES`]).
+    pub value: f64,
+    /// The limit it was compared with (same unit), 0 when there is none.
+    pub limit: f64,
+    /// Source process: a [`crate::Role`] as `u32`, or [`SOURCE_SUPERVISOR`].
+    pub source: u32,
+    /// [`Severity`] as `u32`.
+    pub severity: u32,
+    /// One of [`code`].
+    pub code: u32,
+    /// Axis index, -1 for the whole cell.
+    pub axis: i32,
+    /// A short text, NUL-padded UTF-8 (a drive state's name, a cause).
+    pub text: [u8; EVENT_TEXT_LEN],
+}
+
+impl Default for EventV1 {
+    fn default() -> Self {
+        Self {
+            seq: 0,
+            stamp_ns: 0,
+            value: 0.0,
+            limit: 0.0,
+            source: 0,
+            severity: 0,
+            code: 0,
+            axis: -1,
+            text: [0; EVENT_TEXT_LEN],
+        }
+    }
+}
+
+impl EventV1 {
+    /// An event of `code` (its severity from [`CODES`]) at `stamp_ns` on `axis` (-1 for
+    /// none), with its text made of `parts` (truncated to fit).
+    ///
+    /// # Real-time
+    /// Copies only; no allocation.
+    pub fn new(
+        stamp_ns: u64,
+        code: u32,
+        axis: i32,
+        value: f64,
+        limit: f64,
+        parts: &[&str],
+    ) -> Self {
+        let mut text = [0u8; EVENT_TEXT_LEN];
+        let mut at = 0;
+        for p in parts {
+            for &b in p.as_bytes() {
+                if at + 1 >= EVENT_TEXT_LEN {
+                    break;
+                }
+                text[at] = b;
+                at += 1;
+            }
+        }
+        // Never cut a UTF-8 character in half.
+        while at > 0 && core::str::from_utf8(&text[..at]).is_err() {
+            at -= 1;
+            text[at] = 0;
+        }
+        Self {
+            seq: 0,
+            stamp_ns,
+            value,
+            limit,
+            source: 0,
+            severity: info(code).map_or(Severity::Error, |i| i.severity) as u32,
+            code,
+            axis,
+            text,
+        }
+    }
+
+    /// The text.
+    pub fn text(&self) -> &str {
+        crate::str_of(&self.text)
+    }
+}
+
+/// Event codes. Hundreds group them: 1xx drives (device side), 2xx servo refusals and
+/// faults, 3xx the arm's power, 4xx timing, 5xx the supervisor.
+pub mod code {
+    /// A drive took a CiA 402 transition; value: the transition number.
+    pub const DRIVE_TRANSITION: u32 = 101;
+    /// A drive raised a fault; value: its CiA 402 error code (0x603F).
+    pub const DRIVE_FAULT: u32 = 102;
+    /// A fault was injected into a simulated drive; value: the error code (0 = cleared).
+    pub const FAULT_INJECTED: u32 = 103;
+    /// A drive's command watchdog expired; value: time since the last command (s).
+    pub const COMMAND_TIMEOUT: u32 = 104;
+    /// A drive refused a command value (not finite, or an unsupported mode); value: the axis'
+    /// requested mode.
+    pub const DRIVE_COMMAND_REFUSED: u32 = 105;
+
+    /// A commanded position lies outside the joint range; value: position, limit: the bound.
+    pub const POSITION_OUT_OF_RANGE: u32 = 201;
+    /// A commanded velocity exceeds its limit (unit/s).
+    pub const VELOCITY_OVER_LIMIT: u32 = 202;
+    /// The commanded position moved further in one cycle than allowed (unit per period).
+    pub const POSITION_STEP_OVER_LIMIT: u32 = 203;
+    /// The commanded velocity changed more in one cycle than allowed (unit/s per period).
+    pub const VELOCITY_STEP_OVER_LIMIT: u32 = 204;
+    /// A value in a setpoint or command is not a finite number.
+    pub const COMMAND_NOT_FINITE: u32 = 205;
+    /// A value in the drives' feedback is not a finite number.
+    pub const FEEDBACK_NOT_FINITE: u32 = 206;
+    /// The following error exceeds its limit (axis unit): a device e-stop.
+    pub const FOLLOWING_ERROR: u32 = 207;
+    /// A drive reports Fault; value: its error code.
+    pub const DRIVE_REPORTS_FAULT: u32 = 208;
+    /// No new drive feedback for longer than the feedback timeout; value: its age (s).
+    pub const FEEDBACK_STALE: u32 = 209;
+    /// The enabling sequence did not complete within the enable timeout (s).
+    pub const ENABLE_TIMEOUT: u32 = 210;
+    /// A setpoint jumped further than the axes can move and was refused; servo holds.
+    pub const SETPOINT_JUMP: u32 = 211;
+    /// No fresh setpoint for longer than the setpoint timeout; value: its age (s). The
+    /// reference comes to rest.
+    pub const SETPOINT_STALE: u32 = 212;
+    /// A request was refused; value: the request kind (1 enable, 2 disable, 3 reset).
+    pub const REQUEST_REFUSED: u32 = 213;
+    /// A drive left Operation enabled on its own; value: its statusword.
+    pub const DRIVE_LOST_ENABLE: u32 = 214;
+
+    /// The enabling sequence started.
+    pub const ENABLING: u32 = 301;
+    /// Every axis is in Operation enabled.
+    pub const ENABLED: u32 = 302;
+    /// The disabling sequence started.
+    pub const DISABLING: u32 = 303;
+    /// Every axis is without power.
+    pub const DISABLED: u32 = 304;
+    /// Power was cut (quick stop, then disable) because of a fault; value: the fault's code.
+    pub const POWER_CUT: u32 = 305;
+    /// A latched fault was cleared by a reset request.
+    pub const FAULT_CLEARED: u32 = 306;
+
+    /// A burst of overruns; value: overruns since the previous such event.
+    pub const OVERRUN_BURST: u32 = 401;
+
+    /// The supervisor sent a request or a command on the user's behalf.
+    pub const SUPERVISOR_ACTION: u32 = 501;
+}
+
+/// What a code means, for documents and reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CodeInfo {
+    /// The code.
+    pub code: u32,
+    /// Its short name (lower case, dashes).
+    pub name: &'static str,
+    /// Its severity.
+    pub severity: Severity,
+    /// Unit of `value` and `limit` (`"axis unit"`, `"s"`, …), empty if they are not used.
+    pub unit: &'static str,
+    /// What it means and what follows.
+    pub meaning: &'static str,
+}
+
+/// Every event code.
+pub const CODES: &[CodeInfo] = &[
+    CodeInfo {
+        code: code::DRIVE_TRANSITION,
+        name: "drive-transition",
+        severity: Severity::Info,
+        unit: "transition number",
+        meaning: "A drive took a CiA 402 state transition (numbers as in the profile, docs/drives.md); the text names the new state.",
+    },
+    CodeInfo {
+        code: code::DRIVE_FAULT,
+        name: "drive-fault",
+        severity: Severity::Error,
+        unit: "error code (0x603F)",
+        meaning: "A drive raised a fault: transition 13, fault reaction (quick-stop ramp), then Fault. Power stays off until a fault reset and a new enable.",
+    },
+    CodeInfo {
+        code: code::FAULT_INJECTED,
+        name: "fault-injected",
+        severity: Severity::Warning,
+        unit: "error code (0 = cleared)",
+        meaning: "A fault condition was injected into (or cleared from) a simulated drive, by configuration or by `supervisor inject`.",
+    },
+    CodeInfo {
+        code: code::COMMAND_TIMEOUT,
+        name: "command-timeout",
+        severity: Severity::Error,
+        unit: "s",
+        meaning: "A drive received no new command for longer than `[drives] command_timeout`: fault 0xFF01, the motor stops and the power stage turns off.",
+    },
+    CodeInfo {
+        code: code::DRIVE_COMMAND_REFUSED,
+        name: "drive-command-refused",
+        severity: Severity::Error,
+        unit: "mode",
+        meaning: "A drive refused a command: a target that is not a finite number, or a mode of operation it does not support. It keeps its last valid target.",
+    },
+    CodeInfo {
+        code: code::POSITION_OUT_OF_RANGE,
+        name: "position-out-of-range",
+        severity: Severity::Error,
+        unit: "axis unit",
+        meaning: "Command validation: the commanded position lies outside [min, max]. Power is cut and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::VELOCITY_OVER_LIMIT,
+        name: "velocity-over-limit",
+        severity: Severity::Error,
+        unit: "axis unit/s",
+        meaning: "Command validation: |commanded velocity| exceeds `limits.velocity`. Power is cut and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::POSITION_STEP_OVER_LIMIT,
+        name: "position-step-over-limit",
+        severity: Severity::Error,
+        unit: "axis unit per servo period",
+        meaning: "Command validation: the commanded position moved more than `limits.position_step` in one servo period (scaled by the real time since the previous cycle). Power is cut and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::VELOCITY_STEP_OVER_LIMIT,
+        name: "velocity-step-over-limit",
+        severity: Severity::Error,
+        unit: "axis unit/s per servo period",
+        meaning: "Command validation: the commanded velocity changed more than `limits.velocity_step` in one servo period (scaled by the real time since the previous cycle). Power is cut and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::COMMAND_NOT_FINITE,
+        name: "command-not-finite",
+        severity: Severity::Error,
+        unit: "",
+        meaning: "A setpoint or the command servo computed holds a value that is not a finite number (NaN, infinity). Power is cut at once and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::FEEDBACK_NOT_FINITE,
+        name: "feedback-not-finite",
+        severity: Severity::Error,
+        unit: "",
+        meaning: "The drives' feedback holds a value that is not a finite number (a lost encoder, an unstable simulation). Power is cut at once and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::FOLLOWING_ERROR,
+        name: "following-error",
+        severity: Severity::Error,
+        unit: "axis unit",
+        meaning: "|commanded − measured position| exceeds `following_error_limit` (a device e-stop). Power is cut and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::DRIVE_REPORTS_FAULT,
+        name: "drive-reports-fault",
+        severity: Severity::Error,
+        unit: "error code (0x603F)",
+        meaning: "Servo sees a drive in Fault (or Fault reaction active). Every other axis is stopped and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::FEEDBACK_STALE,
+        name: "feedback-stale",
+        severity: Severity::Error,
+        unit: "s",
+        meaning: "No new drive feedback for longer than `[drives] feedback_timeout`: servo cannot close the loop. It commands a quick stop and latches the fault until reset.",
+    },
+    CodeInfo {
+        code: code::ENABLE_TIMEOUT,
+        name: "enable-timeout",
+        severity: Severity::Error,
+        unit: "s",
+        meaning: "The enabling sequence did not reach Operation enabled on every axis within `[drives] enable_timeout`. Power is taken off again.",
+    },
+    CodeInfo {
+        code: code::SETPOINT_JUMP,
+        name: "setpoint-jump",
+        severity: Severity::Warning,
+        unit: "axis unit",
+        meaning: "A setpoint lies further from the previous one (or, for the first, from where servo holds) than the axis can move: it is refused and servo holds. trajgen restarts from where servo holds.",
+    },
+    CodeInfo {
+        code: code::SETPOINT_STALE,
+        name: "setpoint-stale",
+        severity: Severity::Warning,
+        unit: "s",
+        meaning: "No fresh setpoint for longer than `[motion] setpoint_timeout` while moving: servo brings the reference to rest at the axis' stop deceleration and holds.",
+    },
+    CodeInfo {
+        code: code::REQUEST_REFUSED,
+        name: "request-refused",
+        severity: Severity::Warning,
+        unit: "request kind",
+        meaning: "A request was refused: enable while a fault is latched (reset first), or reset while its cause persists (the text says which).",
+    },
+    CodeInfo {
+        code: code::DRIVE_LOST_ENABLE,
+        name: "drive-lost-enable",
+        severity: Severity::Error,
+        unit: "statusword",
+        meaning: "A drive left Operation enabled without being asked. Power is cut on every axis and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::ENABLING,
+        name: "enabling",
+        severity: Severity::Info,
+        unit: "",
+        meaning: "An enable request started the enabling sequence (Shutdown, Switch on, Enable operation).",
+    },
+    CodeInfo {
+        code: code::ENABLED,
+        name: "enabled",
+        severity: Severity::Info,
+        unit: "s",
+        meaning: "Every axis is in Operation enabled; value: how long enabling took.",
+    },
+    CodeInfo {
+        code: code::DISABLING,
+        name: "disabling",
+        severity: Severity::Info,
+        unit: "",
+        meaning: "A disable request started the disabling sequence (it aborts a pending enable).",
+    },
+    CodeInfo {
+        code: code::DISABLED,
+        name: "disabled",
+        severity: Severity::Info,
+        unit: "",
+        meaning: "Every axis is without power.",
+    },
+    CodeInfo {
+        code: code::POWER_CUT,
+        name: "power-cut",
+        severity: Severity::Error,
+        unit: "event code",
+        meaning: "Power was cut because of the fault whose code is the value: quick stop on every axis, then disable voltage. Latched until a reset request; then an enable request.",
+    },
+    CodeInfo {
+        code: code::FAULT_CLEARED,
+        name: "fault-cleared",
+        severity: Severity::Info,
+        unit: "event code",
+        meaning: "A reset request cleared the latched fault whose code is the value. Power stays off until an enable request.",
+    },
+    CodeInfo {
+        code: code::OVERRUN_BURST,
+        name: "overrun-burst",
+        severity: Severity::Warning,
+        unit: "overruns",
+        meaning: "A process' cycle ran past its next deadline (the CS9 overrun rule); value: overruns since the previous such event of the process (at most one event per second).",
+    },
+    CodeInfo {
+        code: code::SUPERVISOR_ACTION,
+        name: "supervisor-action",
+        severity: Severity::Info,
+        unit: "",
+        meaning: "The supervisor acted (a request to servo, a fault injection); the text says what.",
+    },
+];
+
+/// The description of `code`.
+pub fn info(code: u32) -> Option<&'static CodeInfo> {
+    CODES.iter().find(|c| c.code == code)
+}
+
+/// A fixed-capacity queue of events a cycle fills and its process drains into the events
+/// service after the cycle (so the cycle's library code needs no IPC).
+#[derive(Clone, Copy, Debug)]
+pub struct EventQueue {
+    items: [EventV1; EVENT_QUEUE_CAP],
+    len: usize,
+    /// Events dropped because the queue was full.
+    pub dropped: u64,
+}
+
+/// Capacity of an [`EventQueue`]: room for one event per axis and kind in a cycle.
+pub const EVENT_QUEUE_CAP: usize = 4 * MAX_AXES;
+
+impl Default for EventQueue {
+    fn default() -> Self {
+        Self {
+            items: [EventV1::default(); EVENT_QUEUE_CAP],
+            len: 0,
+            dropped: 0,
+        }
+    }
+}
+
+impl EventQueue {
+    /// Appends `e`; counts it as dropped when full.
+    ///
+    /// # Real-time
+    /// A copy; no allocation.
+    pub fn push(&mut self, e: EventV1) {
+        if self.len < EVENT_QUEUE_CAP {
+            self.items[self.len] = e;
+            self.len += 1;
+        } else {
+            self.dropped += 1;
+        }
+    }
+
+    /// The queued events, oldest first.
+    pub fn as_slice(&self) -> &[EventV1] {
+        &self.items[..self.len]
+    }
+
+    /// Empties the queue.
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// True when nothing is queued.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_are_unique_and_described() {
+        for (i, c) in CODES.iter().enumerate() {
+            assert!(
+                CODES[..i]
+                    .iter()
+                    .all(|d| d.code != c.code && d.name != c.name)
+            );
+            assert!(!c.meaning.is_empty());
+        }
+        assert_eq!(
+            EventV1::new(0, code::FOLLOWING_ERROR, 0, 1.5, 1.0, &[]).severity,
+            Severity::Error as u32
+        );
+    }
+
+    #[test]
+    fn text_is_truncated_on_a_character_boundary() {
+        let long = "é".repeat(40);
+        let e = EventV1::new(1, code::DRIVE_TRANSITION, 2, 4.0, 0.0, &["x: ", &long]);
+        assert!(e.text().starts_with("x: é"));
+        assert!(e.text().len() < EVENT_TEXT_LEN);
+        assert_eq!(e.text[EVENT_TEXT_LEN - 1], 0);
+    }
+
+    #[test]
+    fn the_queue_counts_what_it_drops() {
+        let mut q = EventQueue::default();
+        for k in 0..EVENT_QUEUE_CAP + 3 {
+            q.push(EventV1::new(k as u64, code::ENABLED, -1, 0.0, 0.0, &[]));
+        }
+        assert_eq!((q.as_slice().len(), q.dropped), (EVENT_QUEUE_CAP, 3));
+        q.clear();
+        assert!(q.is_empty());
+    }
+}

@@ -1,0 +1,173 @@
+//! Refuses physically absurd axes: a loop that is unstable at the configured period.
+//!
+//! The axis is linearised (no Coulomb friction, no effort limit, no quantisation): a rigid body
+//! `J dv/dt = u − b v`, held constant over each period (zero-order hold, integrated exactly).
+//! Servo's loop (CST, CSV's outer loop) samples the position every servo period `T` and its
+//! effort acts one period later (the machine applies the command at its next cycle: the
+//! sense-to-command latency of the default phases). The drive's own loop (CSP, CSV) runs at
+//! every integration step without delay. The loop is stable when every eigenvalue of its
+//! discrete state matrix lies inside the unit circle; a configuration whose matrix has a
+//! spectral radius of 1 or more is refused, with the radius. This is what caught an x inertia
+//! of `1e-300`: accepted before, it made the simulation produce NaN.
+
+use super::Axis;
+use cia402::Mode;
+use nalgebra::{Matrix3, Matrix4};
+
+/// Exact zero-order-hold integration of `J dv/dt = u − b v` over `t`: the coefficients of
+/// `p' = p + c_pv v + c_pu u`, `v' = a v + c_vu u`.
+fn zoh(j: f64, b: f64, t: f64) -> (f64, f64, f64, f64) {
+    if b * t / j < 1e-9 {
+        (1.0, t, t * t / (2.0 * j), t / j)
+    } else {
+        let a = (-b * t / j).exp();
+        let tau = j / b;
+        (a, tau * (1.0 - a), (t - tau * (1.0 - a)) / b, (1.0 - a) / b)
+    }
+}
+
+fn radius4(m: &Matrix4<f64>) -> f64 {
+    if m.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
+    m.complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, |r: f64, v| {
+            if v.is_finite() {
+                r.max(v)
+            } else {
+                f64::INFINITY
+            }
+        })
+}
+
+fn radius3(m: &Matrix3<f64>) -> f64 {
+    if m.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
+    m.complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, |r: f64, v| {
+            if v.is_finite() {
+                r.max(v)
+            } else {
+                f64::INFINITY
+            }
+        })
+}
+
+/// Spectral radius of servo's loop (CST): state `[p, v, I, u_prev]`, reference 0.
+pub fn servo_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
+    let (a, c_pv, c_pu, c_vu) = zoh(j, b, t);
+    // u_new = −kp p − kd v + I', I' = I − ki T p.
+    #[rustfmt::skip]
+    let m = Matrix4::new(
+        1.0, c_pv, 0.0, c_pu,
+        0.0, a, 0.0, c_vu,
+        -ki * t, 0.0, 1.0, 0.0,
+        -kp - ki * t, -kd, 1.0, 0.0,
+    );
+    radius4(&m)
+}
+
+/// Spectral radius of a drive's own loop (CSP), without delay: state `[p, v, I]`.
+pub fn drive_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
+    let (a, c_pv, c_pu, c_vu) = zoh(j, b, t);
+    // u = −kp p − kd v + I', I' = I − ki T p, applied in the same step.
+    let u = [-kp - ki * t, -kd, 1.0];
+    #[rustfmt::skip]
+    let m = Matrix3::new(
+        1.0 + c_pu * u[0], c_pv + c_pu * u[1], c_pu * u[2],
+        c_vu * u[0], a + c_vu * u[1], c_vu * u[2],
+        -ki * t, 0.0, 1.0,
+    );
+    radius3(&m)
+}
+
+/// Checks the loops of `a` in `mode`; the error says which loop, the radius and what to
+/// change.
+pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> Result<(), String> {
+    let (j, b) = (a.sim.inertia, a.sim.viscous);
+    let g = &a.servo;
+    let unstable = |what: &str, r: f64, period_s: f64, gains: &str| {
+        format!(
+            "axis {}: sim inertia {} makes {what} unstable at its {:.0} µs period (spectral \
+             radius {r:.3e} ≥ 1, linearised with viscous {b}): raise the inertia or lower {gains}",
+            a.name,
+            j,
+            period_s * 1e6
+        )
+    };
+    if b * machine_step_s / j >= 1.0 || !(b * machine_step_s / j).is_finite() {
+        return Err(format!(
+            "axis {}: sim viscous {b} over inertia {j} reverses the velocity within one \
+             integration step ({:.1} µs): raise the inertia, lower viscous or add substeps",
+            a.name,
+            machine_step_s * 1e6
+        ));
+    }
+    match mode {
+        Mode::Csp => {
+            let d = &a.drive;
+            let r = drive_radius(d.kp, d.ki, d.kd, j, b, machine_step_s);
+            if !(r < 1.0) {
+                return Err(unstable(
+                    "the drive's position loop",
+                    r,
+                    machine_step_s,
+                    "drive kp, ki, kd",
+                ));
+            }
+        }
+        Mode::Csv => {
+            let d = &a.drive;
+            // The drive's velocity loop alone: u = −kd v + I, I' = I − ki T v.
+            let r = drive_radius(0.0, 0.0, d.kd, j, b, machine_step_s);
+            if !(r < 1.0) {
+                return Err(unstable(
+                    "the drive's velocity loop",
+                    r,
+                    machine_step_s,
+                    "drive kd",
+                ));
+            }
+        }
+        _ => {
+            let r = servo_radius(g.kp, g.ki, g.kd, j, b, servo_period_s);
+            if !(r < 1.0) {
+                return Err(unstable(
+                    "servo's position loop",
+                    r,
+                    servo_period_s,
+                    "servo kp, ki, kd",
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pd_loop_is_stable_with_sane_gains_and_unstable_with_a_tiny_inertia() {
+        // The default x axis at 1 kHz and at 4 kHz.
+        for t in [1e-3, 250e-6] {
+            let r = servo_radius(125.0, 1000.0, 1.4, 0.008, 0.02, t);
+            assert!(r < 1.0, "radius {r} at {t}");
+        }
+        assert!(servo_radius(125.0, 1000.0, 1.4, 1e-300, 0.02, 1e-3) >= 1.0);
+        // Far too much velocity gain for the inertia: kd T / J = 5.
+        assert!(servo_radius(1.0, 0.0, 40.0, 0.008, 0.0, 1e-3) >= 1.0);
+    }
+
+    #[test]
+    fn the_drive_loop_without_delay_tolerates_more_gain() {
+        assert!(drive_radius(200.0, 0.0, 2.0, 0.008, 0.0, 250e-6) < 1.0);
+        assert!(drive_radius(200.0, 0.0, 2.0, 1e-9, 0.0, 250e-6) >= 1.0);
+    }
+}

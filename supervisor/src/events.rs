@@ -1,0 +1,143 @@
+//! Events as people read them: one line per event for the terminal, one JSON object per
+//! event for reports, and `supervisor events --follow`.
+
+use runtime::ipc::{self, Sub};
+use runtime::signals;
+use serde_json::{Value, json};
+use shm_schema::event::{self, CodeInfo, SOURCE_SUPERVISOR};
+use shm_schema::{CellConfigV2, EventV1, InstanceName, Role, ServiceId, Severity, str_of};
+use std::time::Duration;
+
+/// Axis names and units, to name an event's axis and the unit of its value.
+#[derive(Clone, Debug, Default)]
+pub struct Axes {
+    /// (name, unit) per axis index.
+    pub axes: Vec<(String, String)>,
+}
+
+impl Axes {
+    /// From the configuration every process reads.
+    pub fn of_cell(cell: &CellConfigV2) -> Self {
+        Self {
+            axes: cell
+                .axes()
+                .iter()
+                .map(|a| (str_of(&a.name).to_string(), str_of(&a.unit).to_string()))
+                .collect(),
+        }
+    }
+
+    fn get(&self, axis: i32) -> Option<&(String, String)> {
+        usize::try_from(axis).ok().and_then(|i| self.axes.get(i))
+    }
+}
+
+/// The name of an event's source.
+pub fn source_name(source: u32) -> String {
+    if source == SOURCE_SUPERVISOR {
+        return "supervisor".into();
+    }
+    Role::ALL
+        .iter()
+        .find(|r| **r as u32 == source)
+        .map_or_else(|| format!("source {source}"), |r| r.name().to_string())
+}
+
+/// A value in the unit its code gives it.
+fn value_text(info: Option<&CodeInfo>, v: f64, unit: &str) -> String {
+    match info.map_or("", |i| i.unit) {
+        "axis unit" => format!("{v:.4} {unit}"),
+        "axis unit/s" => format!("{v:.4} {unit}/s"),
+        "axis unit per servo period" => format!("{v:.5} {unit}"),
+        "axis unit/s per servo period" => format!("{v:.4} {unit}/s"),
+        u if u.starts_with("error code") || u == "statusword" => {
+            format!("{:#06x}", v as u64)
+        }
+        "event code" => event::info(v as u32).map_or(format!("{v}"), |i| i.name.to_string()),
+        "s" => format!("{:.1} ms", v * 1e3),
+        "" => String::new(),
+        _ => format!("{v}"),
+    }
+}
+
+/// One line: time since `t0_ns`, severity, source, code name, axis, value against limit, text.
+pub fn line(e: &EventV1, axes: &Axes, t0_ns: u64) -> String {
+    let info = event::info(e.code);
+    let sev = Severity::from_u32(e.severity).map_or("?", Severity::name);
+    let t = (e.stamp_ns as i128 - t0_ns as i128) as f64 * 1e-9;
+    let (axis, unit) = axes
+        .get(e.axis)
+        .map_or(("", ""), |(n, u)| (n.as_str(), u.as_str()));
+    let mut s = format!(
+        "[{t:9.3} s] {sev:<7} {:<9} {}",
+        source_name(e.source),
+        info.map_or_else(|| format!("code {}", e.code), |i| i.name.to_string())
+    );
+    if !axis.is_empty() {
+        s += &format!(" axis {axis}");
+    }
+    let value = value_text(info, e.value, unit);
+    if !value.is_empty() {
+        s += &format!(": {value}");
+        if e.limit != 0.0 {
+            s += &format!(" (limit {})", value_text(info, e.limit, unit));
+        }
+    }
+    if !e.text().is_empty() {
+        s += &format!(" — {}", e.text());
+    }
+    s
+}
+
+/// One JSON object (`docs/events.md` documents the fields).
+pub fn to_json(e: &EventV1, axes: &Axes, t0_ns: u64) -> Value {
+    let info = event::info(e.code);
+    json!({
+        "t_s": (e.stamp_ns as i128 - t0_ns as i128) as f64 * 1e-9,
+        "stamp_ns": e.stamp_ns,
+        "source": source_name(e.source),
+        "seq": e.seq,
+        "severity": Severity::from_u32(e.severity).map_or("?", Severity::name),
+        "code": e.code,
+        "name": info.map_or("unknown", |i| i.name),
+        "axis": axes.get(e.axis).map(|(n, _)| n.clone()),
+        "value": if e.value.is_finite() { json!(e.value) } else { Value::Null },
+        "limit": e.limit,
+        "text": e.text(),
+    })
+}
+
+/// `supervisor events --instance NAME [--follow] [--json]`: prints the events of a running
+/// instance as they happen (with `--follow`, until Ctrl-C; without, for `listen`).
+pub fn follow(instance: &InstanceName, forever: bool, json: bool) -> Result<(), String> {
+    ipc::quiet_iceoryx2_log();
+    if ipc::live_node_pids(instance).unwrap_or_default().is_empty() {
+        return Err(format!("no process of instance {instance} is running"));
+    }
+    signals::install().map_err(|e| format!("cannot install signal handlers: {e}"))?;
+    let f = |e: ipc::IpcError| e.to_string();
+    let node = ipc::node(instance, &format!("events-{}", std::process::id())).map_err(f)?;
+    let config = Sub::<CellConfigV2>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+    let events = Sub::<EventV1>::new(&node, instance, ServiceId::Events, 1024).map_err(f)?;
+    let mut axes = Axes::default();
+    let t0 = runtime::time::now_ns();
+    let listen = Duration::from_millis(500);
+    let start = std::time::Instant::now();
+    while forever || start.elapsed() < listen {
+        if signals::stop_requested() {
+            break;
+        }
+        if let Some(c) = config.latest() {
+            axes = Axes::of_cell(&c);
+        }
+        while let Some(e) = events.next() {
+            if json {
+                println!("{}", to_json(&e, &axes, t0));
+            } else {
+                println!("{}", line(&e, &axes, t0));
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(())
+}

@@ -1,0 +1,126 @@
+//! Servo's controller and the machine model in one process, in the order the cell runs them:
+//! the drives sample and apply the newest command (phase 100 µs), servo reads that sample and
+//! commands (phase 400 µs), the drives apply it at their next cycle.
+
+use machine_sim::Machine;
+use servo::{Controller, Params as ServoParams};
+use shm_schema::drive::servo_status as st;
+use shm_schema::{
+    CellConfigV2, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
+    RequestKind, Role, ServoRequestV1, ServoStateV2, SetpointV1,
+};
+
+pub const MS: u64 = 1_000_000;
+
+pub struct Loop {
+    pub machine: Machine,
+    pub servo: Controller,
+    pub fb: Option<DriveFeedbackV2>,
+    pub cmd: Option<DriveCommandV2>,
+    pub state: ServoStateV2,
+    /// Every event so far.
+    pub events: Vec<EventV1>,
+    queue: EventQueue,
+    /// Time of the next machine cycle (ns).
+    pub now: u64,
+    pub period: u64,
+    /// Servo's phase after the machine's (ns).
+    offset: u64,
+    request_seq: u64,
+}
+
+impl Loop {
+    pub fn new(cell: &CellConfigV2) -> Self {
+        Self {
+            machine: Machine::new(cell),
+            servo: Controller::new(ServoParams::from_cell(cell)),
+            fb: None,
+            cmd: None,
+            state: ServoStateV2::default(),
+            events: Vec::new(),
+            queue: EventQueue::default(),
+            now: 1_000_000_000 + cell.process[Role::Machine.index()].phase_ns,
+            period: cell.process[Role::Servo.index()].period_ns,
+            offset: cell.process[Role::Servo.index()].phase_ns
+                - cell.process[Role::Machine.index()].phase_ns,
+            request_seq: 0,
+        }
+    }
+
+    /// One period: the machine's cycle, then servo's (with `request` and `setpoint`).
+    pub fn step_with(
+        &mut self,
+        request: Option<RequestKind>,
+        setpoint: Option<&SetpointV1>,
+        inject: Option<&FaultInjectionV1>,
+    ) -> ServoStateV2 {
+        let fb = self
+            .machine
+            .cycle(self.now, self.cmd.as_ref(), inject, &mut self.queue);
+        self.fb = Some(fb);
+        let r = request.map(|k| {
+            self.request_seq += 1;
+            ServoRequestV1 {
+                seq: self.request_seq,
+                kind: k as u32,
+                reserved: 0,
+            }
+        });
+        let (cmd, state) = self.servo.cycle(
+            self.now + self.offset,
+            r.as_ref(),
+            setpoint,
+            self.fb.as_ref(),
+            &mut self.queue,
+        );
+        self.cmd = Some(cmd);
+        self.state = state;
+        self.events.extend_from_slice(self.queue.as_slice());
+        self.queue.clear();
+        self.now += self.period;
+        state
+    }
+
+    pub fn step(&mut self) -> ServoStateV2 {
+        self.step_with(None, None, None)
+    }
+
+    /// Servo's time of the cycle that just ran.
+    pub fn servo_now(&self) -> u64 {
+        self.now - self.period + self.offset
+    }
+
+    /// Requests `kind` and runs until `done` holds (at most `cycles`); panics otherwise.
+    pub fn until(
+        &mut self,
+        kind: Option<RequestKind>,
+        cycles: usize,
+        done: impl Fn(&ServoStateV2) -> bool,
+    ) -> ServoStateV2 {
+        let mut s = self.step_with(kind, None, None);
+        for _ in 0..cycles {
+            if done(&s) {
+                return s;
+            }
+            s = self.step();
+        }
+        panic!(
+            "not reached in {cycles} cycles: status {:#x}, events {:?}",
+            s.status,
+            self.codes()
+        );
+    }
+
+    /// Enables the arm.
+    pub fn enable(&mut self) -> ServoStateV2 {
+        self.until(None, 10, |s| s.status & st::INITIALIZED != 0);
+        self.until(Some(RequestKind::Enable), 50, |s| {
+            s.status & st::ENABLED != 0
+        })
+    }
+
+    /// The codes of every event so far.
+    pub fn codes(&self) -> Vec<u32> {
+        self.events.iter().map(|e| e.code).collect()
+    }
+}

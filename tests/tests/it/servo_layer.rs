@@ -1,0 +1,427 @@
+//! Seed 001's servo layer over the CiA 402 drives, in one process (servo's controller and the
+//! machine model, `loop_sim`): power requests, command validation that cuts power and
+//! latches, no re-enable without reset, injected drive faults, stale feedback, and a servo
+//! that keeps the axes still when trajgen dies.
+
+use crate::loop_sim::{Loop, MS};
+use cia402::{State, cw};
+use shm_schema::drive::{injected, servo_status as st};
+use shm_schema::event::code;
+use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, Role, SetpointV1};
+use supervisor::config::Config;
+use trajgen::generator::{Generator, Params};
+
+fn cfg_with(from: &str, to: &str) -> Config {
+    let src = supervisor::config::DEFAULT_TOML.to_string();
+    assert!(src.contains(from), "{from:?}");
+    Config::parse(&src.replacen(from, to, 1), "test").expect("valid")
+}
+
+fn states(lp: &Loop) -> Vec<State> {
+    let fb = lp.fb.expect("feedback");
+    (0..3)
+        .map(|i| State::from_statusword(fb.statusword[i]).expect("state"))
+        .collect()
+}
+
+/// A setpoint at servo's next cycle, at `pos` with `vel` on x (y, theta at their start).
+fn setpoint(lp: &Loop, seq: u64, x: f64, vx: f64) -> SetpointV1 {
+    let mut sp = SetpointV1 {
+        seq,
+        stamp_ns: lp.now + 300_000,
+        axes: 3,
+        state: MotionState::Moving as u32,
+        ..Default::default()
+    };
+    sp.position[..3].copy_from_slice(&[x, 40.0, 0.0]);
+    sp.velocity[0] = vx;
+    sp
+}
+
+/// After a latch: power goes off on every axis and stays off; enable is refused until a
+/// reset; the reset brings nothing back by itself; enable then works again.
+fn check_latched_then_recover(lp: &mut Loop, want: u32) {
+    let s = lp.until(None, 500, |s| s.power == Power::Disabled as u8);
+    assert_eq!(s.fault_code, want, "events {:?}", lp.codes());
+    assert_ne!(s.status & st::FAULT_LATCHED, 0);
+    assert!(lp.codes().contains(&want));
+    assert!(lp.codes().contains(&code::POWER_CUT));
+    // Quick stop first (11), then disable voltage: every drive ends without power.
+    let transitions: Vec<f64> = lp
+        .events
+        .iter()
+        .filter(|e| e.code == code::DRIVE_TRANSITION)
+        .map(|e| e.value)
+        .collect();
+    assert!(
+        transitions.contains(&11.0) || transitions.contains(&13.0),
+        "{transitions:?}"
+    );
+    lp.until(None, 500, |_| {
+        states(lp).iter().all(|s| !s.power_stage_on())
+    });
+    // Latched: enable is refused, for as long as we wait.
+    let before = lp.events.len();
+    lp.step_with(Some(RequestKind::Enable), None, None);
+    for _ in 0..300 {
+        let s = lp.step();
+        assert_ne!(s.status & st::FAULT_LATCHED, 0);
+        assert_eq!(s.power, Power::Disabled as u8);
+        assert!(states(lp).iter().all(|s| *s != State::OperationEnabled));
+    }
+    assert!(
+        lp.events[before..]
+            .iter()
+            .any(|e| e.code == code::REQUEST_REFUSED)
+    );
+    // Reset clears the latch; power stays off until an enable request.
+    lp.until(Some(RequestKind::Reset), 50, |s| {
+        s.status & st::FAULT_LATCHED == 0
+    });
+    assert!(lp.codes().contains(&code::FAULT_CLEARED));
+    for _ in 0..300 {
+        assert_eq!(lp.step().power, Power::Disabled as u8);
+    }
+    lp.until(Some(RequestKind::Enable), 50, |s| {
+        s.status & st::ENABLED != 0
+    });
+    assert!(states(lp).iter().all(|s| *s == State::OperationEnabled));
+}
+
+#[test]
+fn enable_and_disable_take_effect_in_the_next_cycle_and_a_disable_aborts_an_enable() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    let s = lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
+    assert_eq!(s.power, Power::Disabled as u8);
+    // The drives sit without power until asked.
+    for _ in 0..100 {
+        let s = lp.step();
+        assert_eq!(s.status & st::ENABLED, 0);
+    }
+    assert!(states(&lp).iter().all(|s| !s.power_stage_on()));
+    let s = lp.step_with(Some(RequestKind::Enable), None, None);
+    assert_eq!(s.power, Power::Enabling as u8);
+    assert!(s.controlword[..3].iter().all(|w| *w == cw::SWITCH_ON_CMD));
+    let s = lp.step_with(Some(RequestKind::Disable), None, None);
+    assert_eq!(
+        s.power,
+        Power::Disabling as u8,
+        "the disable aborts the pending enable"
+    );
+    let s = lp.until(None, 50, |s| s.power == Power::Disabled as u8);
+    assert_eq!(s.status & st::ENABLED, 0);
+    assert!(lp.codes().contains(&code::DISABLING) && !lp.codes().contains(&code::ENABLED));
+    let s = lp.enable();
+    assert!(s.axis_power[..3].iter().all(|p| *p == Power::Enabled as u8));
+    let s = lp.step_with(Some(RequestKind::Disable), None, None);
+    assert!(
+        s.controlword[..3].iter().all(|w| *w == cw::SHUTDOWN),
+        "transition 8"
+    );
+    lp.until(None, 50, |s| s.power == Power::Disabled as u8);
+    assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
+}
+
+#[test]
+fn servo_does_not_follow_setpoints_unless_enabled() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
+    for k in 1..200 {
+        let sp = setpoint(&lp, k, 40.0 + k as f64 * 0.01, 10.0);
+        let s = lp.step_with(None, Some(&sp), None);
+        assert_eq!(s.setpoint_seq, 0);
+    }
+    assert_eq!(lp.machine.axes()[0].position, 40.0, "the axis never moved");
+}
+
+#[test]
+fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
+    // (what, configuration change, setpoint x and x velocity relative to the start, code)
+    let cases: [(&str, (&str, &str), f64, f64, u32); 5] = [
+        (
+            "range",
+            ("max = 200.0", "max = 40.005"),
+            0.02,
+            0.0,
+            code::POSITION_OUT_OF_RANGE,
+        ),
+        ("velocity", ("", ""), 0.0, 20.0, code::VELOCITY_OVER_LIMIT),
+        (
+            "position step",
+            ("", ""),
+            0.03,
+            0.0,
+            code::POSITION_STEP_OVER_LIMIT,
+        ),
+        (
+            "velocity step",
+            ("", ""),
+            0.0,
+            1.0,
+            code::VELOCITY_STEP_OVER_LIMIT,
+        ),
+        (
+            "not finite",
+            ("", ""),
+            f64::NAN,
+            0.0,
+            code::COMMAND_NOT_FINITE,
+        ),
+    ];
+    for (what, (from, to), dx, vx, want) in cases {
+        let cfg = if from.is_empty() {
+            Config::default_cell()
+        } else {
+            cfg_with(from, to)
+        };
+        let mut lp = Loop::new(&cfg.to_shm());
+        lp.enable();
+        // Hold with a valid setpoint for a while, then the bad one.
+        for k in 1..50 {
+            let sp = setpoint(&lp, k, 40.0, 0.0);
+            let s = lp.step_with(None, Some(&sp), None);
+            assert_eq!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
+        }
+        let sp = setpoint(&lp, 50, 40.0 + dx, vx);
+        let s = lp.step_with(None, Some(&sp), None);
+        assert_ne!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
+        assert_eq!(s.fault_code, want, "{what}");
+        let e = lp
+            .events
+            .iter()
+            .find(|e| e.code == want)
+            .expect("the rule's event");
+        if want != code::COMMAND_NOT_FINITE {
+            assert_eq!(e.axis, 0, "{what}: names the axis");
+            assert!(
+                e.limit > 0.0 && e.value.abs() > e.limit.abs() * 0.99,
+                "{what}: {e:?}"
+            );
+        }
+        check_latched_then_recover(&mut lp, want);
+    }
+}
+
+#[test]
+fn a_following_error_latches_like_a_device_estop() {
+    // x cannot produce the force to follow (its effort barely beats friction).
+    let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.5");
+    let cell = cfg.to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
+    for c in motion_program::parse("MOVE(140,40,0)\nEND", 3)
+        .expect("parses")
+        .to_commands(1, 1)
+    {
+        g.push_command(&c);
+    }
+    let mut latched = false;
+    for k in 0..20_000u64 {
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        if s.status & st::FAULT_LATCHED != 0 {
+            latched = true;
+            assert_eq!(s.fault_code, code::FOLLOWING_ERROR);
+            assert_eq!(s.fault_axis, 0);
+            assert!(s.fault_value.abs() > 1.0 && s.fault_limit == 1.0);
+            break;
+        }
+    }
+    assert!(latched, "no following error: {:?}", lp.codes());
+    check_latched_then_recover(&mut lp, code::FOLLOWING_ERROR);
+}
+
+#[test]
+fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let inject = |seq, active| FaultInjectionV1 {
+        seq,
+        axis: 1,
+        code: injected::OVER_CURRENT,
+        active,
+    };
+    lp.step_with(None, None, Some(&inject(1, 1)));
+    let s = lp.until(None, 50, |s| s.status & st::FAULT_LATCHED != 0);
+    assert_eq!(s.fault_code, code::DRIVE_REPORTS_FAULT);
+    assert_eq!((s.fault_axis, s.fault_value), (1, 0x2310 as f64));
+    let fault = lp
+        .events
+        .iter()
+        .find(|e| e.code == code::DRIVE_FAULT)
+        .expect("drive event");
+    assert_eq!(
+        (fault.axis, fault.value, fault.text()),
+        (1, 0x2310 as f64, "y: over-current")
+    );
+    lp.until(None, 500, |_| states(&lp)[1] == State::Fault);
+    // The condition persists: a reset is refused and the drive stays in Fault.
+    let before = lp.events.len();
+    lp.step_with(Some(RequestKind::Reset), None, None);
+    for _ in 0..700 {
+        lp.step();
+    }
+    assert_eq!(states(&lp)[1], State::Fault);
+    assert_ne!(lp.state.status & st::FAULT_LATCHED, 0);
+    assert!(
+        lp.events[before..]
+            .iter()
+            .any(|e| e.code == code::REQUEST_REFUSED && e.text().contains("still in Fault"))
+    );
+    // Cleared: the reset works (transition 15), power stays off until enable.
+    lp.step_with(None, None, Some(&inject(2, 0)));
+    check_latched_then_recover(&mut lp, code::DRIVE_REPORTS_FAULT);
+    assert!(
+        lp.events
+            .iter()
+            .any(|e| e.code == code::DRIVE_TRANSITION && e.value == 15.0)
+    );
+}
+
+#[test]
+fn a_lost_encoder_is_a_fault_at_once_and_never_a_believable_number() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let f = FaultInjectionV1 {
+        seq: 1,
+        axis: 0,
+        code: injected::ENCODER_LOSS,
+        active: 1,
+    };
+    lp.step_with(None, None, Some(&f));
+    let s = lp.step();
+    assert_eq!(s.fault_code, code::FEEDBACK_NOT_FINITE);
+    assert!(s.act_position[0].is_nan());
+    let image = iobridge::write_image(1, 0, &s);
+    assert!(
+        iobridge::read_image(&image).1[0].is_nan(),
+        "the image marks it invalid"
+    );
+}
+
+#[test]
+fn no_drive_re_enables_after_a_command_timeout_without_reset() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    // Servo goes silent for longer than the drives' watchdog (0.1 s): the machine runs alone.
+    let mut q = shm_schema::EventQueue::default();
+    for _ in 0..150 {
+        lp.machine.cycle(lp.now, None, None, &mut q);
+        lp.now += lp.period;
+    }
+    assert!(
+        lp.machine
+            .drives()
+            .iter()
+            .all(|d| d.state() == State::Fault)
+    );
+    assert!(q.as_slice().iter().any(|e| e.code == code::COMMAND_TIMEOUT));
+    // Servo comes back: it sees the faults, latches, and nothing powers up by itself.
+    for _ in 0..500 {
+        let s = lp.step();
+        assert_eq!(s.status & st::ENABLED, 0);
+    }
+    assert_eq!(lp.state.fault_code, code::DRIVE_REPORTS_FAULT);
+    assert_eq!(
+        lp.fb.expect("fb").error_code[0],
+        cia402::error_code::COMMAND_TIMEOUT
+    );
+    check_latched_then_recover(&mut lp, code::DRIVE_REPORTS_FAULT);
+}
+
+#[test]
+fn servo_notices_stale_feedback_and_cuts_power() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    // The drives' feedback stops (the machine process stalls or died); servo keeps cycling.
+    let fb = lp.fb;
+    let mut q = shm_schema::EventQueue::default();
+    let mut s = lp.state;
+    for k in 0..200 {
+        let t = lp.now + k * MS;
+        s = lp.servo.cycle(t, None, None, fb.as_ref(), &mut q).1;
+        if s.status & st::FAULT_LATCHED != 0 {
+            // Within the feedback timeout (0.1 s) plus a cycle.
+            assert!(k * MS <= cell.feedback_timeout_ns + 2 * MS, "after {k} ms");
+            break;
+        }
+    }
+    assert_eq!(s.fault_code, code::FEEDBACK_STALE);
+    let e = q
+        .as_slice()
+        .iter()
+        .find(|e| e.code == code::FEEDBACK_STALE)
+        .expect("event");
+    assert!(e.value > e.limit && e.limit == 0.1, "{e:?}");
+    let (cmd, _) = lp
+        .servo
+        .cycle(lp.now + 201 * MS, None, None, fb.as_ref(), &mut q);
+    assert!(
+        cmd.controlword[..3]
+            .iter()
+            .all(|w| *w == cw::QUICK_STOP_CMD)
+    );
+}
+
+#[test]
+fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
+    for c in motion_program::parse("MOVE(140,90,90)\nEND", 3)
+        .expect("parses")
+        .to_commands(1, 1)
+    {
+        g.push_command(&c);
+    }
+    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    // 2 s of motion at full speed, then trajgen dies.
+    for k in 0..2000 {
+        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000));
+        lp.step_with(None, sp.as_ref(), None);
+    }
+    assert!(
+        lp.state.cmd_velocity[0] > 10.0,
+        "moving at {}",
+        lp.state.cmd_velocity[0]
+    );
+    let mut max_fe = [0.0f64; 3];
+    for _ in 0..2000 {
+        let s = lp.step();
+        for i in 0..3 {
+            max_fe[i] = max_fe[i].max(s.following_error[i].abs());
+        }
+    }
+    let s = lp.state;
+    assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
+    assert_ne!(s.status & st::ENABLED, 0);
+    assert_ne!(s.status & st::SETPOINT_STALE, 0);
+    assert!(lp.codes().contains(&code::SETPOINT_STALE));
+    for i in 0..3 {
+        assert!(max_fe[i] < 0.5, "axis {i}: following error {}", max_fe[i]);
+        assert_eq!(s.cmd_velocity[i], 0.0);
+    }
+    // At rest, and no drift: another 5 s change nothing beyond the in-position band.
+    let held = lp
+        .machine
+        .axes()
+        .iter()
+        .map(|a| a.position)
+        .collect::<Vec<_>>();
+    for _ in 0..5000 {
+        lp.step();
+    }
+    for (i, a) in lp.machine.axes().iter().enumerate() {
+        assert!((a.position - held[i]).abs() <= 0.01, "axis {i} drifted");
+        assert!(lp.state.following_error[i].abs() <= 0.01);
+    }
+    assert_ne!(lp.state.status & st::SETTLED, 0);
+}
