@@ -32,8 +32,9 @@
 //! faster than trajgen gets a smooth reference and a late setpoint costs nothing), for at most
 //! the setpoint timeout. After that the setpoint is stale (trajgen stalled or died): the
 //! reference decelerates to rest at the axis' stop deceleration and holds, and only a new
-//! setpoint that starts where it holds is taken again. A setpoint that jumps further than the
-//! axes can move is refused and servo holds.
+//! setpoint that starts where it holds is taken again. The first setpoint of a source (after
+//! enabling, after a stale spell, after trajgen restarted) must start where servo holds, or
+//! it is refused and servo holds; after that, command validation judges every step.
 //!
 //! **Modes.** In CST (the default) servo closes the position loop: PID on the position error
 //! with velocity and acceleration feed-forward, the effort as target torque. In CSP the drive
@@ -371,34 +372,29 @@ impl Controller {
         (pos, vel, acc)
     }
 
-    /// True if `sp` lies further from the previous setpoint than the axes can move between
-    /// the two (or, for the first one, outside the in-position band of the held reference).
-    /// Returns the offending axis and distance.
+    /// A setpoint from a new source (the first one, one after a stale spell, or one whose
+    /// stamp goes back: trajgen restarted) must start where servo holds: within the
+    /// in-position band plus what the axis can move in 1.5 cycles. Returns the offending axis
+    /// and distance. Setpoints of the same source are checked by command validation instead
+    /// (a step too large cuts power).
     fn jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
-        let n = self.p.axes;
-        match &self.setpoint {
-            Some(prev) if prev.seq != sp.seq && sp.stamp_ns >= prev.stamp_ns => {
-                let span = (sp.stamp_ns - prev.stamp_ns) as f64 * 1e-9;
-                (0..n)
-                    .map(|i| (i, (sp.position[i] - prev.position[i]).abs()))
-                    .find(|&(i, d)| d > self.p.axis[i].vmax * span * 1.001 + 1e-9)
-            }
-            // A new source (trajgen restarted: its clock stamps restart too), the first
-            // setpoint, or one after a stale spell: it must start where servo holds.
-            _ => {
-                let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9)
-                    .clamp(0.0, self.p.max_extrapolation_s);
-                (0..n)
-                    .map(|i| {
-                        let at_now = sp.position[i] + sp.velocity[i] * age;
-                        (i, (at_now - self.ref_pos[i]).abs())
-                    })
-                    .find(|&(i, d)| {
-                        let g = &self.p.axis[i];
-                        d > g.vmax * dt * 1.5 + g.in_position
-                    })
-            }
+        if self
+            .setpoint
+            .is_some_and(|prev| prev.seq != sp.seq && sp.stamp_ns >= prev.stamp_ns)
+        {
+            return None;
         }
+        let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9)
+            .clamp(0.0, self.p.max_extrapolation_s);
+        (0..self.p.axes)
+            .map(|i| {
+                let at_now = sp.position[i] + sp.velocity[i] * age;
+                (i, (at_now - self.ref_pos[i]).abs())
+            })
+            .find(|&(i, d)| {
+                let g = &self.p.axis[i];
+                d > g.vmax * dt * 1.5 + g.in_position
+            })
     }
 
     /// Command validation (seed 001's rule for `LLI_set`): the first rule the command breaks.

@@ -85,11 +85,6 @@ impl Loop {
         self.step_with(None, None, None)
     }
 
-    /// Servo's time of the cycle that just ran.
-    pub fn servo_now(&self) -> u64 {
-        self.now - self.period + self.offset
-    }
-
     /// Requests `kind` and runs until `done` holds (at most `cycles`); panics otherwise.
     pub fn until(
         &mut self,
