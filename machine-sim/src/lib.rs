@@ -25,8 +25,8 @@
 //! `J dv/dt = u - b v - Fc sign(v)`, with stiction (at rest the axis stays put while
 //! `|u| <= Fc`), the effort clamped to the drive's limit, and the position read through an
 //! encoder of finite resolution. It integrates over real elapsed time (semi-implicit Euler,
-//! `substeps` steps per machine cycle, the drive's own loop running at every step), so a late
-//! cycle simulates the time that really passed.
+//! `substeps` steps per machine period, the drive's own loop running at every step), so a
+//! late cycle simulates the time that really passed, in more steps of the same size.
 
 use cia402::{Conditions, Device, Mode, QuickStopOption, State, error_code};
 use shm_schema::event::{EventQueue, code};
@@ -153,6 +153,8 @@ pub struct Drive {
     first_enabled_ns: u64,
     /// The fault condition present in the latest cycle (0: none).
     condition: u16,
+    /// A configured fault is present.
+    configured_active: bool,
 }
 
 impl Drive {
@@ -180,6 +182,7 @@ impl Drive {
             following_error: 0.0,
             first_enabled_ns: 0,
             condition: 0,
+            configured_active: false,
         }
     }
 
@@ -228,6 +231,8 @@ pub struct Machine {
     drive: [Drive; MAX_AXES],
     names: [[u8; 16]; MAX_AXES],
     substeps: u32,
+    /// The machine's period (s): the integration step is `period_s / substeps`.
+    period_s: f64,
     timeout_ns: u64,
     inject: [shm_schema::ConfiguredFaultV1; shm_schema::config::MAX_CONFIGURED_FAULTS],
     controlword: [u16; MAX_AXES],
@@ -263,6 +268,8 @@ impl Machine {
             drive,
             names,
             substeps: cell.machine_substeps.max(1),
+            period_s: (cell.process[shm_schema::Role::Machine.index()].period_ns as f64 * 1e-9)
+                .max(1e-6),
             timeout_ns: cell.drive_command_timeout_ns,
             inject: cell.inject,
             controlword: [0; MAX_AXES],
@@ -353,32 +360,34 @@ impl Machine {
         ));
     }
 
-    /// The fault condition axis `i` sees at `now_ns` (0 for none).
-    fn condition(&self, i: usize, now_ns: u64, period_ns: u64) -> u16 {
+    /// The configured fault (`[[drives.inject]]`) present on axis `i` at `now_ns` (0: none).
+    fn configured(&self, i: usize, now_ns: u64, period_ns: u64) -> u16 {
+        let d = &self.drive[i];
+        if d.first_enabled_ns == 0 {
+            return 0;
+        }
+        self.inject
+            .iter()
+            .filter(|f| f.code != 0 && f.axis as usize == i)
+            .find(|f| {
+                let from = d.first_enabled_ns + f.at_ns;
+                now_ns >= from && now_ns < from + f.duration_ns.max(period_ns)
+            })
+            .map_or(0, |f| f.code as u16)
+    }
+
+    /// The fault condition axis `i` sees (0 for none), given its configured one.
+    fn condition(&self, i: usize, configured: u16) -> u16 {
         let d = &self.drive[i];
         if d.injected != 0 {
-            return d.injected;
+            d.injected
+        } else if d.refused {
+            error_code::PARAMETER
+        } else if self.watchdog_tripped {
+            error_code::COMMAND_TIMEOUT
+        } else {
+            configured
         }
-        if d.refused {
-            return error_code::PARAMETER;
-        }
-        if self.watchdog_tripped {
-            return error_code::COMMAND_TIMEOUT;
-        }
-        if d.first_enabled_ns > 0 {
-            for f in self
-                .inject
-                .iter()
-                .filter(|f| f.code != 0 && f.axis as usize == i)
-            {
-                let from = d.first_enabled_ns + f.at_ns;
-                let len = f.duration_ns.max(period_ns);
-                if now_ns >= from && now_ns < from + len {
-                    return f.code as u16;
-                }
-            }
-        }
-        0
     }
 
     /// One machine cycle at `now_ns`: take the newest command and fault injection (if any
@@ -399,6 +408,14 @@ impl Machine {
             self.last_cmd_ns = now_ns;
         }
         let period_ns = now_ns.saturating_sub(self.last_ns).max(1);
+        // 0x6061 shows the mode requested by the previous command: a mode change takes
+        // effect one drive cycle after it arrives. A mode the drive does not support is not
+        // taken.
+        for d in &mut self.drive[..self.axes] {
+            if Mode::from_i8(d.mode_request).is_some() {
+                d.mode_display = d.mode_request;
+            }
+        }
         let mut sense_to_command_ns = 0;
         if let Some(c) = command.filter(|c| c.seq != self.last_cmd_seq) {
             sense_to_command_ns = self.take_command(now_ns, c, events);
@@ -426,11 +443,26 @@ impl Machine {
         }
 
         for i in 0..self.axes {
-            let fault = self.condition(i, now_ns, period_ns);
+            let configured = self.configured(i, now_ns, period_ns);
+            let fault = self.condition(i, configured);
+            if configured != 0 && !self.drive[i].configured_active {
+                events.push(EventV1::new(
+                    now_ns,
+                    code::FAULT_INJECTED,
+                    i as i32,
+                    configured as f64,
+                    0.0,
+                    &[
+                        name_of(&self.names, i),
+                        ": ",
+                        error_code::name(configured),
+                        " (configured)",
+                    ],
+                ));
+            }
+            self.drive[i].configured_active = configured != 0;
             let d = &mut self.drive[i];
             d.condition = fault;
-            // 0x6061 shows the mode requested a cycle ago.
-            let mode_now = d.mode_request;
             let before = d.state();
             let t = d.device.step(
                 self.controlword[i],
@@ -473,16 +505,17 @@ impl Machine {
                     }
                 }
             }
-            if Mode::from_i8(mode_now).is_some() {
-                d.mode_display = mode_now;
-            }
         }
 
         let elapsed = ((now_ns - self.last_ns) as f64 * 1e-9).min(MAX_STEP_S);
         self.last_ns = now_ns;
-        let dt = elapsed / self.substeps as f64;
+        // The integration step keeps its nominal size: a late cycle runs more steps, so the
+        // drive's own loop (CSP, CSV) never integrates a host stall in one stride.
+        let nominal = self.period_s / self.substeps as f64;
+        let steps = ((elapsed / nominal).ceil() as u32).max(self.substeps);
+        let dt = elapsed / steps as f64;
         let dt_ns = (dt * 1e9) as u64;
-        for k in 0..self.substeps {
+        for k in 0..steps {
             let t_ns = now_ns + k as u64 * dt_ns;
             for i in 0..self.axes {
                 let (d, a) = (&mut self.drive[i], &mut self.axis[i]);
@@ -603,6 +636,7 @@ mod tests {
             drive_command_timeout_ns: 20 * MS,
             ..Default::default()
         };
+        c.process[shm_schema::Role::Machine.index()].period_ns = MS;
         c.axis[0] = AxisConfigV2 {
             name: shm_schema::fixed_str("x"),
             inertia: 0.01,
@@ -805,6 +839,46 @@ mod tests {
         at(&mut b, kb + 10, 0x0F, 1.0);
         let (va, vb) = (a.axes()[0].velocity, b.axes()[0].velocity);
         assert!((va - vb).abs() < 1e-9, "{va} vs {vb}");
+    }
+
+    #[test]
+    fn a_host_stall_does_not_destabilise_the_drives_own_loop() {
+        // The default x axis' CSP gains: kd dt / J = 3 at a 10 ms step, 0.08 at 250 µs.
+        let mut c = cell(Mode::Csp);
+        c.axis[0].inertia = 0.008;
+        c.axis[0].effort_limit = 100.0;
+        (c.axis[0].drive_kp, c.axis[0].drive_kd) = (300.0, 2.5);
+        let mut m = Machine::new(&c);
+        let mut k = 1;
+        for w in [0, cw::SHUTDOWN, cw::SWITCH_ON_CMD, cw::ENABLE_OPERATION_CMD] {
+            let mut q = EventQueue::default();
+            m.cycle(
+                k * MS,
+                Some(&command(k, w, Mode::Csp, 0.0, 0.0)),
+                None,
+                &mut q,
+            );
+            k += 1;
+        }
+        let mut q = EventQueue::default();
+        for j in 0..500 {
+            m.cycle(
+                (k + j) * MS,
+                Some(&command(k + j, 0x0F, Mode::Csp, 0.0, 0.5)),
+                None,
+                &mut q,
+            );
+        }
+        // A 40 ms stall as the target moves on: four substeps would be 10 ms each.
+        let k = k + 540;
+        let fb = m.cycle(
+            k * MS,
+            Some(&command(k, 0x0F, Mode::Csp, 0.0, 0.6)),
+            None,
+            &mut q,
+        );
+        assert!((0.45..0.7).contains(&fb.position[0]), "{}", fb.position[0]);
+        assert!(fb.velocity[0].abs() < 10.0, "{}", fb.velocity[0]);
     }
 
     #[test]

@@ -436,6 +436,28 @@ pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
     left
 }
 
+/// [`remove_instance`], after waiting up to `patience` for the live nodes of the instance to
+/// go (clients such as `supervisor status` or `inject` that are just finishing).
+pub fn remove_instance_waiting(
+    instance: &InstanceName,
+    patience: std::time::Duration,
+) -> Vec<String> {
+    let start = std::time::Instant::now();
+    while start.elapsed() < patience && !live_node_pids(instance).unwrap_or_default().is_empty() {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    remove_instance(instance)
+}
+
+/// For a client of an instance (status, events, inject): once its own node is gone, removes
+/// what is left of the instance if no process of it is alive any more (the instance ended
+/// while the client ran).
+pub fn cleanup_after_client(instance: &InstanceName) {
+    if live_node_pids(instance).is_ok_and(|p| p.is_empty()) {
+        let _ = remove_instance(instance);
+    }
+}
+
 fn collect_files(dir: &std::path::Path, out: &mut Vec<String>) {
     if let Ok(rd) = std::fs::read_dir(dir) {
         for e in rd.flatten() {

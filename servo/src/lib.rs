@@ -391,10 +391,16 @@ impl Controller {
                 let at_now = sp.position[i] + sp.velocity[i] * age;
                 (i, (at_now - self.ref_pos[i]).abs())
             })
-            .find(|&(i, d)| {
-                let g = &self.p.axis[i];
-                d > g.vmax * dt * 1.5 + g.in_position
-            })
+            .find(|&(i, d)| d > self.start_tolerance(i, dt))
+    }
+
+    /// How far a new source's first setpoint may lie from where servo holds: what the axis
+    /// moves in 1.5 cycles plus the in-position band, but never more than one position step
+    /// command validation allows (so a setpoint it takes is never a step it would refuse).
+    fn start_tolerance(&self, i: usize, dt: f64) -> f64 {
+        let g = &self.p.axis[i];
+        let scale = (dt / self.p.period_s).max(1.0);
+        (g.vmax * dt * 1.5 + g.in_position).min(g.position_step_limit * scale)
     }
 
     /// Command validation (seed 001's rule for `LLI_set`): the first rule the command breaks.
@@ -646,7 +652,7 @@ impl Controller {
                             code::SETPOINT_JUMP,
                             i as i32,
                             d,
-                            a.vmax * dt * 1.5 + a.in_position,
+                            self.start_tolerance(i, dt),
                             &[axis_name(a), ": setpoint refused, servo holds"],
                         ));
                     }

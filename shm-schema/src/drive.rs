@@ -67,7 +67,8 @@ pub struct DriveFeedbackV2 {
     pub reserved: u32,
     /// Statusword per axis (0x6041). Decode it with the profile's masks (`cia402`).
     pub statusword: [u16; MAX_AXES],
-    /// Mode of operation display per axis (0x6061); follows the requested mode a cycle late.
+    /// Mode of operation display per axis (0x6061): the mode requested by the previous
+    /// command (a change takes effect one drive cycle after it arrives).
     pub mode_display: [i8; MAX_AXES],
     /// Error code per axis (0x603F): the latest fault, 0 for none; kept until a fault reset.
     pub error_code: [u16; MAX_AXES],
@@ -91,7 +92,8 @@ pub mod servo_status {
     /// The latest setpoint is older than the setpoint timeout: servo brings the reference
     /// to rest along its path and holds.
     pub const SETPOINT_STALE: u32 = 4;
-    /// A setpoint jumped further than the axes can move and was refused; servo holds.
+    /// The first setpoint of a new source did not start where servo holds and was refused;
+    /// servo holds.
     pub const SETPOINT_JUMP: u32 = 8;
     /// A fault is latched (see [`super::ServoStateV2::fault_code`]): power was cut and stays
     /// off until a reset request.

@@ -147,8 +147,7 @@ pub mod code {
     pub const FAULT_INJECTED: u32 = 103;
     /// A drive's command watchdog expired; value: time since the last command (s).
     pub const COMMAND_TIMEOUT: u32 = 104;
-    /// A drive refused a command value (not finite, or an unsupported mode); value: the axis'
-    /// requested mode.
+    /// A drive refused a command whose target is not finite; value: the axis' requested mode.
     pub const DRIVE_COMMAND_REFUSED: u32 = 105;
 
     /// A commanded position lies outside the joint range; value: position, limit: the bound.
@@ -171,7 +170,7 @@ pub mod code {
     pub const FEEDBACK_STALE: u32 = 209;
     /// The enabling sequence did not complete within the enable timeout (s).
     pub const ENABLE_TIMEOUT: u32 = 210;
-    /// A setpoint jumped further than the axes can move and was refused; servo holds.
+    /// A new source's first setpoint does not start where servo holds; refused, servo holds.
     pub const SETPOINT_JUMP: u32 = 211;
     /// No fresh setpoint for longer than the setpoint timeout; value: its age (s). The
     /// reference comes to rest.
@@ -251,7 +250,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "drive-command-refused",
         severity: Severity::Error,
         unit: "mode",
-        meaning: "A drive refused a command: a target that is not a finite number, or a mode of operation it does not support. It keeps its last valid target.",
+        meaning: "A drive refused a command whose target is not a finite number: it keeps its last valid target and faults (0x6320, parameter error). A mode of operation it does not support is not taken: 0x6061 keeps showing the mode in effect.",
     },
     CodeInfo {
         code: code::POSITION_OUT_OF_RANGE,
@@ -328,14 +327,14 @@ pub const CODES: &[CodeInfo] = &[
         name: "setpoint-jump",
         severity: Severity::Warning,
         unit: "axis unit",
-        meaning: "A setpoint lies further from the previous one (or, for the first, from where servo holds) than the axis can move: it is refused and servo holds. trajgen restarts from where servo holds.",
+        meaning: "The first setpoint of a source (after enabling, after a stale spell, after trajgen restarted) lies further from where servo holds than the axis may start from (1.5 cycles at vmax plus the in-position band, at most one position step): it is refused and servo holds. trajgen restarts from where servo holds once at rest.",
     },
     CodeInfo {
         code: code::SETPOINT_STALE,
         name: "setpoint-stale",
         severity: Severity::Warning,
         unit: "s",
-        meaning: "No fresh setpoint for longer than `[motion] setpoint_timeout` while moving: servo brings the reference to rest at the axis' stop deceleration and holds.",
+        meaning: "No fresh setpoint for longer than `[motion] setpoint_timeout` while the arm is enabled (trajgen stalled or died): servo brings the reference to rest at the axis' stop deceleration and holds; only a setpoint that starts where it holds is taken again.",
     },
     CodeInfo {
         code: code::REQUEST_REFUSED,

@@ -69,7 +69,8 @@ pub struct Motion {
     /// Longest wait for settling after the motion (s). Default 5.
     #[serde(default = "default_settle_timeout")]
     pub settle_timeout: f64,
-    /// Servo extrapolates a late setpoint this long, then holds (s). Default 0.05.
+    /// Servo extrapolates a late setpoint this long, then brings the reference to rest (s).
+    /// Default 0.05.
     #[serde(default = "default_setpoint_timeout")]
     pub setpoint_timeout: f64,
 }
@@ -1101,6 +1102,74 @@ mod tests {
             "period_us = 4000\nphase_us = 6000",
             &(src_line(line_of("phase_us = 600")) + "process iobridge: phase_us must be smaller"),
         );
+    }
+
+    #[test]
+    fn physically_absurd_or_inconsistent_axes_are_refused_with_the_reason() {
+        let sim = line_of("inertia = 0.008");
+        // The inertia accepted before this check ran the triangle with x = NaN.
+        check(
+            "inertia = 0.008",
+            "inertia = 1e-300",
+            &format!(
+                "cell.toml:{sim}:9: axis x: sim inertia 1e-300 makes servo's position loop \
+                 unstable at its 1000 µs period"
+            ),
+        );
+        // Far too much velocity gain for the inertia at this period.
+        check(
+            "kd = 1.4,",
+            "kd = 40.0,",
+            &format!(
+                "cell.toml:{}:9: axis x: sim inertia 0.008 makes servo's position loop unstable",
+                sim
+            ),
+        );
+        let x = line_of("name = \"x\"");
+        check(
+            "in_position = 0.01            # mm",
+            "in_position = 0.01\ndrive = { mode = \"position\" }",
+            &format!(
+                "cell.toml:{}:11: axis x: drive mode \"position\" is not one of",
+                x + 8
+            ),
+        );
+        check(
+            "in_position = 0.01            # mm",
+            "in_position = 0.01\nlimits = { velocity = 10.0 }",
+            &format!(
+                "cell.toml:{}:12: axis x: limits velocity = 10 is below vmax = 16",
+                x + 8
+            ),
+        );
+        check(
+            "in_position = 0.01            # mm",
+            "in_position = 0.01\nlimits = { stop_deceleration = 1000.0 }",
+            "cell.toml:",
+        );
+        check(
+            "in_position = 0.01            # mm",
+            "in_position = 0.01\ndrive = { mode = \"csp\", kp = 100.0 }",
+            "cell.toml:",
+        );
+        check(
+            "substeps = 4 ",
+            "substeps = 4\n[[drives.inject]]\naxis = \"z\"\nfault = \"over-current\"\nat = 1.0\n",
+            "cell.toml:",
+        );
+    }
+
+    #[test]
+    fn derived_limits_follow_vmax_t_acc_and_the_servo_period() {
+        let c = Config::default_cell();
+        let x = &c.axis[0];
+        assert!((x.velocity_limit() - 17.6).abs() < 1e-12);
+        assert!((x.position_step_limit(0.001) - 0.024).abs() < 1e-12);
+        assert!((x.velocity_step_limit(0.001, 0.525) - 3.0 * 16.0 / 0.525 * 0.001).abs() < 1e-12);
+        assert!((x.stop_deceleration(0.525) - 16.0 / 0.525).abs() < 1e-12);
+        let shm = c.to_shm();
+        assert_eq!(shm.axis[0].mode, cia402::Mode::Cst as i32);
+        assert_eq!(shm.feedback_timeout_ns, 100_000_000);
     }
 
     #[test]

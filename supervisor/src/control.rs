@@ -63,6 +63,9 @@ pub fn inject(
     ));
     // Keep the ports until the drives have taken it (their next cycle).
     std::thread::sleep(Duration::from_millis(50));
+    drop((port, events));
+    drop(node);
+    ipc::cleanup_after_client(&instance);
     Ok(format!(
         "{what} {fault} on axis {axis} of instance {instance}"
     ))

@@ -139,5 +139,8 @@ pub fn follow(instance: &InstanceName, forever: bool, json: bool) -> Result<(), 
         }
         std::thread::sleep(Duration::from_millis(10));
     }
+    drop((config, events));
+    drop(node);
+    ipc::cleanup_after_client(instance);
     Ok(())
 }

@@ -148,7 +148,8 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .map(|e| events::to_json(e, &session.axes, session.t0_ns))
         .collect();
     drop(session);
-    let leftovers = ipc::remove_instance(&instance);
+    // A client (status, events, inject) may be finishing: give it a second to go.
+    let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
 
     let mut report = match outcome {
         Ok(r) => r,

@@ -1,11 +1,17 @@
 //! `supervisor status`: what the processes of a running instance report about themselves,
-//! their cycle counts, overruns and wake-up latency percentiles since they started.
+//! their cycle counts, overruns and wake-up latency percentiles since they started, the
+//! servo layer's state (power, settled, a latched fault, every drive's CiA 402 state) and the
+//! drives' sense-to-command latency.
 
 use latency::report::Summary;
 use runtime::ipc::{self, Sub};
 use runtime::rt::policy_name;
 use serde_json::{Map, Value, json};
-use shm_schema::{InstanceName, LatencyHistogramV1, ProcState, ProcessStatusV1, Role, ServiceId};
+use shm_schema::drive::servo_status as st;
+use shm_schema::{
+    CellConfigV2, InstanceName, LatencyHistogramV1, Power, ProcState, ProcessStatusV1, Role,
+    ServiceId, ServoStateV2, str_of,
+};
 use std::time::{Duration, Instant};
 
 /// How long `status` listens for the processes' publications (the latency histogram comes
@@ -23,9 +29,22 @@ pub struct Seen {
     pub latency: Option<Box<LatencyHistogramV1>>,
 }
 
+/// Everything `status` read.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    /// The processes that published a status.
+    pub processes: Vec<Seen>,
+    /// Servo's latest state.
+    pub servo: Option<ServoStateV2>,
+    /// The cell configuration (axis names and units).
+    pub cell: Option<Box<CellConfigV2>>,
+    /// The drives' sense-to-command latency since they started.
+    pub sense_to_command: Option<Box<LatencyHistogramV1>>,
+}
+
 /// Reads the status and latency of every process of `instance`. Errors when nothing of the
 /// instance is running.
-pub fn read(instance: &InstanceName) -> Result<Vec<Seen>, String> {
+pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     ipc::quiet_iceoryx2_log();
     let live = ipc::live_node_pids(instance).unwrap_or_default();
     if live.is_empty() {
@@ -43,6 +62,13 @@ pub fn read(instance: &InstanceName) -> Result<Vec<Seen>, String> {
             .map_err(f)?;
         ports.push((role, status, latency));
     }
+    let servo_sub =
+        Sub::<ServoStateV2>::new(&node, instance, ServiceId::ServoState, 4).map_err(f)?;
+    let cell_sub =
+        Sub::<CellConfigV2>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+    let sense_sub =
+        Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::SenseToCommand, 1).map_err(f)?;
+    let (mut servo, mut cell, mut sense) = (None, None, None);
     let mut seen: Vec<(
         Role,
         Option<ProcessStatusV1>,
@@ -58,13 +84,26 @@ pub fn read(instance: &InstanceName) -> Result<Vec<Seen>, String> {
                 *l = Some(Box::new(x));
             }
         }
-        if seen.iter().all(|(_, s, l)| s.is_some() && l.is_some()) {
+        if let Some(x) = servo_sub.latest() {
+            servo = Some(x);
+        }
+        if let Some(x) = cell_sub.latest() {
+            cell = Some(Box::new(x));
+        }
+        if let Some(x) = sense_sub.latest() {
+            sense = Some(Box::new(x));
+        }
+        if seen.iter().all(|(_, s, l)| s.is_some() && l.is_some())
+            && servo.is_some()
+            && sense.is_some()
+        {
             break;
         }
         std::thread::sleep(Duration::from_millis(10));
     }
-    drop(ports);
+    drop((ports, servo_sub, cell_sub, sense_sub));
     drop(node);
+    ipc::cleanup_after_client(instance);
     let out: Vec<Seen> = seen
         .into_iter()
         .filter_map(|(role, s, latency)| {
@@ -81,7 +120,12 @@ pub fn read(instance: &InstanceName) -> Result<Vec<Seen>, String> {
             LISTEN.as_millis()
         ));
     }
-    Ok(out)
+    Ok(Snapshot {
+        processes: out,
+        servo,
+        cell,
+        sense_to_command: sense,
+    })
 }
 
 fn state_name(state: u32) -> &'static str {
@@ -94,10 +138,57 @@ fn state_name(state: u32) -> &'static str {
     }
 }
 
+fn power_name(v: u8) -> &'static str {
+    Power::from_u8(v).map_or("?", Power::name)
+}
+
+fn drive_state(sw: u16) -> &'static str {
+    cia402::State::from_statusword(sw).map_or("?", cia402::State::name)
+}
+
+/// Servo's state as JSON: the arm and every axis.
+fn servo_json(s: &ServoStateV2, cell: Option<&CellConfigV2>) -> Value {
+    let names: Vec<String> = (0..s.axes as usize)
+        .map(|i| cell.map_or(format!("{i}"), |c| str_of(&c.axis[i].name).to_string()))
+        .collect();
+    let mut axes = Map::new();
+    for (i, n) in names.iter().enumerate() {
+        axes.insert(
+            n.clone(),
+            json!({
+                "power": power_name(s.axis_power[i]),
+                "drive_state": drive_state(s.statusword[i]),
+                "statusword": s.statusword[i],
+                "settled": s.settled_axes & (1 << i) != 0,
+                "position": s.act_position[i],
+                "following_error": s.following_error[i],
+            }),
+        );
+    }
+    let fault = (s.status & st::FAULT_LATCHED != 0).then(|| {
+        json!({
+            "code": s.fault_code,
+            "name": shm_schema::event::info(s.fault_code).map_or("unknown", |i| i.name),
+            "axis": names.get(s.fault_axis as usize),
+            "value": s.fault_value,
+            "limit": s.fault_limit,
+        })
+    });
+    json!({
+        "power": power_name(s.power),
+        "initialized": s.status & st::INITIALIZED != 0,
+        "enabled": s.status & st::ENABLED != 0,
+        "settled": s.status & st::SETTLED != 0,
+        "estop": fault.is_some(),
+        "fault": fault,
+        "axes": axes,
+    })
+}
+
 /// The JSON object of `supervisor status --json`.
-pub fn to_json(instance: &InstanceName, seen: &[Seen]) -> Value {
+pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
     let mut procs = Map::new();
-    for p in seen {
+    for p in &snap.processes {
         let s = &p.status;
         procs.insert(
             p.role.name().into(),
@@ -117,11 +208,17 @@ pub fn to_json(instance: &InstanceName, seen: &[Seen]) -> Value {
             }),
         );
     }
-    json!({"instance": instance.as_str(), "processes": procs})
+    json!({
+        "instance": instance.as_str(),
+        "processes": procs,
+        "servo": snap.servo.as_ref().map(|s| servo_json(s, snap.cell.as_deref())),
+        "sense_to_command_us": snap.sense_to_command.as_ref().filter(|h| h.count > 0).map(|h| Summary::of(h).to_json()),
+    })
 }
 
 /// The table of `supervisor status`.
-pub fn human(instance: &InstanceName, seen: &[Seen]) -> String {
+pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
+    let seen = &snap.processes;
     let mut out = format!(
         "instance {instance}: wake-up latency since each process started (µs)\n\
          process    pid      state     policy       prio    cycles  overruns       p50       p99     p99.9    p99.99       max\n"
@@ -147,6 +244,53 @@ pub fn human(instance: &InstanceName, seen: &[Seen]) -> String {
                 );
             }
             None => out += "  (no latency histogram published)\n",
+        }
+    }
+    if let Some(h) = snap.sense_to_command.as_ref().filter(|h| h.count > 0) {
+        let m = Summary::of(h);
+        out += &format!(
+            "sense to command (encoder sample to the drives applying its command): p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs\n",
+            m.p50_us, m.p99_us, m.max_us
+        );
+    }
+    if let Some(s) = &snap.servo {
+        let v = servo_json(s, snap.cell.as_deref());
+        out += &format!(
+            "arm: {}{}{}\n",
+            v["power"].as_str().unwrap_or("?"),
+            if s.status & st::SETTLED != 0 {
+                ", settled"
+            } else {
+                ""
+            },
+            match &v["fault"] {
+                Value::Null => String::new(),
+                f => format!(
+                    ", e-stop: {} latched{} (value {}, limit {}); reset, then enable",
+                    f["name"].as_str().unwrap_or("?"),
+                    f["axis"]
+                        .as_str()
+                        .map_or(String::new(), |a| format!(" on axis {a}")),
+                    f["value"],
+                    f["limit"]
+                ),
+            }
+        );
+        if let Some(axes) = v["axes"].as_object() {
+            for (name, a) in axes {
+                out += &format!(
+                    "  axis {name:<8} {:<10} {:<24} position {:>10.4}  following error {:>8.4}{}\n",
+                    a["power"].as_str().unwrap_or("?"),
+                    a["drive_state"].as_str().unwrap_or("?"),
+                    a["position"].as_f64().unwrap_or(f64::NAN),
+                    a["following_error"].as_f64().unwrap_or(f64::NAN),
+                    if a["settled"] == true {
+                        "  settled"
+                    } else {
+                        ""
+                    }
+                );
+            }
         }
     }
     out

@@ -4,15 +4,16 @@
 //! `J dv/dt = u − b v`, held constant over each period (zero-order hold, integrated exactly).
 //! Servo's loop (CST, CSV's outer loop) samples the position every servo period `T` and its
 //! effort acts one period later (the machine applies the command at its next cycle: the
-//! sense-to-command latency of the default phases). The drive's own loop (CSP, CSV) runs at
-//! every integration step without delay. The loop is stable when every eigenvalue of its
+//! sense-to-command latency of the default phases). The drive's own loop runs at every
+//! integration step without delay: in CSP its position loop, in CSV its velocity loop (CSV's
+//! outer position loop in servo is not modelled). The loop is stable when every eigenvalue of its
 //! discrete state matrix lies inside the unit circle; a configuration whose matrix has a
 //! spectral radius of 1 or more is refused, with the radius. This is what caught an x inertia
 //! of `1e-300`: accepted before, it made the simulation produce NaN.
 
 use super::Axis;
 use cia402::Mode;
-use nalgebra::{Matrix3, Matrix4};
+use nalgebra::{Matrix2, Matrix3, Matrix4};
 
 /// Exact zero-order-hold integration of `J dv/dt = u − b v` over `t`: the coefficients of
 /// `p' = p + c_pv v + c_pu u`, `v' = a v + c_vu u`.
@@ -61,13 +62,15 @@ fn radius3(m: &Matrix3<f64>) -> f64 {
 /// Spectral radius of servo's loop (CST): state `[p, v, I, u_prev]`, reference 0.
 pub fn servo_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
     let (a, c_pv, c_pu, c_vu) = zoh(j, b, t);
-    // u_new = −kp p − kd v + I', I' = I − ki T p.
+    // u_new = −kp p − kd v + I', I' = I − ki T p. Without integral action the integrator
+    // state stays 0 (it is not a mode of the loop).
+    let keep = if ki == 0.0 { 0.0 } else { 1.0 };
     #[rustfmt::skip]
     let m = Matrix4::new(
         1.0, c_pv, 0.0, c_pu,
         0.0, a, 0.0, c_vu,
-        -ki * t, 0.0, 1.0, 0.0,
-        -kp - ki * t, -kd, 1.0, 0.0,
+        -ki * t, 0.0, keep, 0.0,
+        -kp - ki * t, -kd, keep, 0.0,
     );
     radius4(&m)
 }
@@ -76,14 +79,37 @@ pub fn servo_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
 pub fn drive_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
     let (a, c_pv, c_pu, c_vu) = zoh(j, b, t);
     // u = −kp p − kd v + I', I' = I − ki T p, applied in the same step.
-    let u = [-kp - ki * t, -kd, 1.0];
+    let keep = if ki == 0.0 { 0.0 } else { 1.0 };
+    let u = [-kp - ki * t, -kd, keep];
     #[rustfmt::skip]
     let m = Matrix3::new(
         1.0 + c_pu * u[0], c_pv + c_pu * u[1], c_pu * u[2],
         c_vu * u[0], a + c_vu * u[1], c_vu * u[2],
-        -ki * t, 0.0, 1.0,
+        -ki * t, 0.0, keep,
     );
     radius3(&m)
+}
+
+/// Spectral radius of a drive's velocity loop (CSV), without delay: state `[v, I]`, with
+/// `u = −kd v + I'` and `I' = I − ki T v` (the position integrates the velocity and is not a
+/// mode of this loop).
+pub fn velocity_radius(ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
+    let (a, _, _, c_vu) = zoh(j, b, t);
+    let keep = if ki == 0.0 { 0.0 } else { 1.0 };
+    let m = Matrix2::new(a + c_vu * (-kd - ki * t), c_vu * keep, -ki * t, keep);
+    if m.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
+    m.complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, |r: f64, v| {
+            if v.is_finite() {
+                r.max(v)
+            } else {
+                f64::INFINITY
+            }
+        })
 }
 
 /// Checks the loops of `a` in `mode`; the error says which loop, the radius and what to
@@ -94,25 +120,19 @@ pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> 
     let unstable = |what: &str, r: f64, period_s: f64, gains: &str| {
         format!(
             "axis {}: sim inertia {} makes {what} unstable at its {:.0} µs period (spectral \
-             radius {r:.3e} ≥ 1, linearised with viscous {b}): raise the inertia or lower {gains}",
+             radius {} ≥ 1, linearised with viscous {}): raise the inertia or lower {gains}",
             a.name,
-            j,
-            period_s * 1e6
+            num(j),
+            period_s * 1e6,
+            num(r),
+            num(b)
         )
     };
-    if b * machine_step_s / j >= 1.0 || !(b * machine_step_s / j).is_finite() {
-        return Err(format!(
-            "axis {}: sim viscous {b} over inertia {j} reverses the velocity within one \
-             integration step ({:.1} µs): raise the inertia, lower viscous or add substeps",
-            a.name,
-            machine_step_s * 1e6
-        ));
-    }
     match mode {
         Mode::Csp => {
             let d = &a.drive;
             let r = drive_radius(d.kp, d.ki, d.kd, j, b, machine_step_s);
-            if !(r < 1.0) {
+            if !inside_unit_circle(r) {
                 return Err(unstable(
                     "the drive's position loop",
                     r,
@@ -123,9 +143,8 @@ pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> 
         }
         Mode::Csv => {
             let d = &a.drive;
-            // The drive's velocity loop alone: u = −kd v + I, I' = I − ki T v.
-            let r = drive_radius(0.0, 0.0, d.kd, j, b, machine_step_s);
-            if !(r < 1.0) {
+            let r = velocity_radius(d.ki, d.kd, j, b, machine_step_s);
+            if !inside_unit_circle(r) {
                 return Err(unstable(
                     "the drive's velocity loop",
                     r,
@@ -136,7 +155,7 @@ pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> 
         }
         _ => {
             let r = servo_radius(g.kp, g.ki, g.kd, j, b, servo_period_s);
-            if !(r < 1.0) {
+            if !inside_unit_circle(r) {
                 return Err(unstable(
                     "servo's position loop",
                     r,
@@ -146,7 +165,31 @@ pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> 
             }
         }
     }
+    if !inside_unit_circle(b * machine_step_s / j) {
+        return Err(format!(
+            "axis {}: sim viscous {} over inertia {} reverses the velocity within one \
+             integration step ({:.1} µs): raise the inertia, lower viscous or add substeps",
+            a.name,
+            num(b),
+            num(j),
+            machine_step_s * 1e6
+        ));
+    }
     Ok(())
+}
+
+/// True when `r` is a number below 1 (NaN is not).
+fn inside_unit_circle(r: f64) -> bool {
+    r < 1.0
+}
+
+/// A number as a person writes it: `0.008`, `1e-300`, `3.2e296`.
+fn num(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e6).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
 }
 
 #[cfg(test)]
@@ -163,6 +206,13 @@ mod tests {
         assert!(servo_radius(125.0, 1000.0, 1.4, 1e-300, 0.02, 1e-3) >= 1.0);
         // Far too much velocity gain for the inertia: kd T / J = 5.
         assert!(servo_radius(1.0, 0.0, 40.0, 0.008, 0.0, 1e-3) >= 1.0);
+    }
+
+    #[test]
+    fn a_velocity_loop_is_judged_without_the_position_integrator() {
+        assert!(velocity_radius(10.0, 2.0, 0.008, 0.02, 250e-6) < 1.0);
+        assert!(velocity_radius(0.0, 2.0, 0.008, 0.0, 250e-6) < 1.0);
+        assert!(velocity_radius(0.0, 2.0, 1e-6, 0.0, 250e-6) >= 1.0);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 
 mod cell;
 mod closed_loop;
+mod drives;
 mod latency;
 mod loop_sim;
 mod no_alloc;

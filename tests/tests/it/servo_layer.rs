@@ -139,7 +139,8 @@ fn servo_does_not_follow_setpoints_unless_enabled() {
 #[test]
 fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
     // (what, configuration change, setpoint x and x velocity relative to the start, code)
-    let cases: [(&str, (&str, &str), f64, f64, u32); 5] = [
+    type Case<'a> = (&'a str, (&'a str, &'a str), f64, f64, u32);
+    let cases: [Case; 5] = [
         (
             "range",
             ("max = 200.0", "max = 40.005"),
@@ -399,8 +400,8 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     let mut max_fe = [0.0f64; 3];
     for _ in 0..2000 {
         let s = lp.step();
-        for i in 0..3 {
-            max_fe[i] = max_fe[i].max(s.following_error[i].abs());
+        for (m, e) in max_fe.iter_mut().zip(&s.following_error) {
+            *m = m.max(e.abs());
         }
     }
     let s = lp.state;
@@ -408,8 +409,8 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     assert_ne!(s.status & st::ENABLED, 0);
     assert_ne!(s.status & st::SETPOINT_STALE, 0);
     assert!(lp.codes().contains(&code::SETPOINT_STALE));
-    for i in 0..3 {
-        assert!(max_fe[i] < 0.5, "axis {i}: following error {}", max_fe[i]);
+    for (i, fe) in max_fe.iter().enumerate() {
+        assert!(*fe < 0.5, "axis {i}: following error {fe}");
         assert_eq!(s.cmd_velocity[i], 0.0);
     }
     // At rest, and no drift: another 5 s change nothing beyond the in-position band.

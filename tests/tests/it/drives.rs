@@ -1,0 +1,210 @@
+//! The drive boundary across the real processes: a configured drive fault cuts power and fails
+//! the run with its events; a fault injected from another shell is reported as it happens; an
+//! absurd axis is refused before anything starts; CSP axes follow the triangle.
+
+use integration_tests::{assert_clean, bin, instance, json_of, pids_with, run_with_watchdog};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const WATCHDOG: Duration = Duration::from_secs(180);
+
+fn examples() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
+}
+
+fn supervisor() -> Command {
+    Command::new(bin("supervisor"))
+}
+
+fn write(test: &str, name: &str, content: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rtc-{}-{test}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let p = dir.join(name);
+    std::fs::write(&p, content).expect("write");
+    p
+}
+
+fn default_config() -> String {
+    std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default")
+}
+
+fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json::Value> {
+    j["events"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no events in {j}"))
+        .iter()
+        .filter(|e| e["name"] == name)
+        .collect()
+}
+
+#[test]
+fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
+    let inst = instance("inject-cfg");
+    let cfg = default_config().replace(
+        "substeps = 4 ",
+        "substeps = 4\n\n[[drives.inject]]\naxis = \"y\"\nfault = \"over-current\"\nat = 2.0\n\n#",
+    );
+    let cfg = write("inject-cfg", "cell.toml", &cfg);
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--json", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("servo cut power: drive-reports-fault on axis y"),
+        "{err}"
+    );
+    // Printed as they happened, and in the report.
+    assert!(err.contains("fault-injected axis y"), "{err}");
+    let j = json_of(&out);
+    assert_eq!(j["ok"], false);
+    let fault = events_named(&j, "drive-fault");
+    assert!(
+        fault.iter().any(|e| e["axis"] == "y"
+            && e["value"].as_f64() == Some(0x2310 as f64)
+            && e["source"] == "machine"),
+        "{j}"
+    );
+    let cut = events_named(&j, "power-cut");
+    assert_eq!(cut.len(), 1, "{j}");
+    assert_eq!(cut[0]["source"], "servo");
+    // Every axis lost power: the drive of y by its fault reaction (13), the others by
+    // servo's quick stop (11).
+    let transitions = events_named(&j, "drive-transition");
+    for (axis, number) in [("y", 13), ("x", 11), ("theta", 11)] {
+        assert!(
+            transitions
+                .iter()
+                .any(|e| e["axis"] == axis && e["value"].as_f64() == Some(number as f64)),
+            "{axis}: transition {number} missing in {transitions:?}"
+        );
+    }
+    assert!(pids_with(&["--instance", &inst]).is_empty());
+    assert_clean(&inst);
+}
+
+#[test]
+fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
+    let inst = instance("inject-cmd");
+    let mut run = supervisor()
+        .args(["run", "--instance", &inst])
+        .arg(examples().join("triangle.prog"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn supervisor");
+    // Wait until the arm is enabled, reading the instance's events from this shell.
+    let start = Instant::now();
+    loop {
+        assert!(start.elapsed() < WATCHDOG, "the cell never enabled");
+        let status = supervisor()
+            .args(["status", "--json", "--instance", &inst])
+            .output()
+            .expect("status");
+        let text = String::from_utf8_lossy(&status.stdout);
+        if text.contains("\"power\":\"enabled\"") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let out = supervisor()
+        .args(["inject", "--instance", &inst, "--axis", "x", "encoder-loss"])
+        .output()
+        .expect("inject");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = {
+        let start = Instant::now();
+        while run.try_wait().expect("wait").is_none() {
+            assert!(start.elapsed() < WATCHDOG, "run did not end");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        run.wait_with_output().expect("output")
+    };
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("servo cut power: feedback-not-finite on axis x"),
+        "{err}"
+    );
+    assert!(err.contains("supervisor-action axis x"), "{err}");
+    // A bad injection is refused by name and changes nothing.
+    let bad = supervisor()
+        .args(["inject", "--instance", &inst, "--axis", "w", "over-current"])
+        .output()
+        .expect("inject");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&bad.stderr)
+            .contains("--axis \"w\": the cell has axes x, y, theta")
+    );
+    assert_clean(&inst);
+}
+
+#[test]
+fn an_absurd_inertia_is_refused_before_anything_starts() {
+    let inst = instance("inertia");
+    let cfg = default_config().replacen("inertia = 0.008", "inertia = 1e-300", 1);
+    let cfg = write("inertia", "cell.toml", &cfg);
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    );
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(
+            "cell.toml:32:9: axis x: sim inertia 1e-300 makes servo's position loop unstable"
+        ),
+        "{err}"
+    );
+    assert!(pids_with(&["--instance", &inst]).is_empty());
+    assert_clean(&inst);
+}
+
+#[test]
+fn csp_axes_follow_the_triangle_on_the_real_processes() {
+    let inst = instance("csp");
+    let mut cfg = default_config();
+    for (axis, gains) in [
+        ("x", "kp = 300.0, ki = 2000.0, kd = 2.5"),
+        ("y", "kp = 190.0, ki = 1200.0, kd = 1.6"),
+        ("theta", "kp = 13.0, ki = 80.0, kd = 0.11"),
+    ] {
+        let at = cfg.find(&format!("name = \"{axis}\"")).expect("axis");
+        let sim = at + cfg[at..].find("sim = {").expect("sim");
+        cfg.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
+    }
+    let cfg = write("csp", "cell.toml", &cfg);
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--json", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j = json_of(&out);
+    for (axis, want) in [("x", 40.0), ("y", 40.0), ("theta", 0.0)] {
+        let got = j["final_position"][axis].as_f64().expect("final");
+        assert!((got - want).abs() <= 0.01, "{axis}: {got}");
+        assert!(j["max_following_error"][axis].as_f64().expect("fe") < 1.0);
+    }
+    assert!(j["sense_to_command_us"]["p50_us"].as_f64().expect("sense") > 0.0);
+    assert_clean(&inst);
+}
