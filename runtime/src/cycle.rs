@@ -56,8 +56,9 @@ pub struct CycleClock {
     extra_ns: Option<u64>,
     overrun_pending: bool,
     stats: CycleStatsV1,
-    // Boxed: 30 KB, allocated once by `new`, never resized.
+    // Boxed: 30 KB each, allocated once by `new`, never resized.
     histogram: Box<LatencyHistogramV1>,
+    exec_histogram: Box<LatencyHistogramV1>,
 }
 
 impl CycleClock {
@@ -79,6 +80,7 @@ impl CycleClock {
                 ..CycleStatsV1::default()
             },
             histogram: Box::new(LatencyHistogramV1::new()),
+            exec_histogram: Box::new(LatencyHistogramV1::new()),
         };
         clock.next_ns = clock.grid_after(now + period_ns);
         clock
@@ -103,6 +105,11 @@ impl CycleClock {
     /// Wake-up latency of every cycle so far (its `stamp_ns` is the latest wake-up).
     pub fn histogram(&self) -> &LatencyHistogramV1 {
         &self.histogram
+    }
+
+    /// Execution time (wake-up to end of work) of every finished cycle so far.
+    pub fn exec_histogram(&self) -> &LatencyHistogramV1 {
+        &self.exec_histogram
     }
 
     /// Asks for one extra wake-up at `t` if it falls before the next grid deadline (and after
@@ -188,6 +195,8 @@ impl CycleClock {
         let s = &mut self.stats;
         s.exec_ns = end.saturating_sub(wake.actual_ns);
         s.max_exec_ns = s.max_exec_ns.max(s.exec_ns);
+        self.exec_histogram.record(s.exec_ns);
+        self.exec_histogram.stamp_ns = end;
         if end > self.next_ns {
             // The late cycle completed; skip every period it ran into (CS9: the next cycle
             // is cancelled) and flag it for the next cycle.
@@ -222,6 +231,8 @@ mod tests {
         assert_eq!(c.next_deadline_ns(), d + P);
         assert_eq!(c.stats().overruns, 0);
         assert_eq!(c.stats().exec_ns, 80_000);
+        assert_eq!(c.exec_histogram().count, 1);
+        assert_eq!(c.exec_histogram().max_ns, 80_000);
         assert!(!c.woke(d + P, true, d + P).overrun_flag);
         let h = c.histogram();
         assert_eq!((h.count, h.min_ns, h.max_ns), (2, 0, 20_000));

@@ -161,6 +161,7 @@ fn run_inner<T: Task>(
     let status_pub = Pub::<ProcessStatusV1>::new(&ctx.node, &instance, ServiceId::Status(role))?;
     let latency_pub =
         Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(role))?;
+    let exec_pub = Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::ExecTime(role))?;
     let mut events = EventSink::new(&ctx.node, &instance, role as u32)?;
     let mut queue = EventQueue::default();
     let mut task = build(&ctx)?;
@@ -217,6 +218,7 @@ fn run_inner<T: Task>(
         status_pub.send(&status);
         if status.stats.cycles.is_multiple_of(latency_every) {
             latency_pub.send(clock.histogram());
+            exec_pub.send(clock.exec_histogram());
         }
         if let Some(e) = overruns.check(wake.actual_ns, clock.stats().overruns) {
             queue.push(e);
@@ -229,6 +231,7 @@ fn run_inner<T: Task>(
     status.state = ProcState::Stopping as u32;
     status_pub.send(&status);
     latency_pub.send(clock.histogram());
+    exec_pub.send(clock.exec_histogram());
     let h = clock.histogram();
     let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
     tracing::info!(

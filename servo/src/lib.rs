@@ -27,10 +27,13 @@
 //! the latch once no drive is in Fault and the feedback is valid; otherwise it is refused.
 //! **No drive ever re-enables by itself**: power comes back only through reset, then enable.
 //!
-//! **Reference.** Each cycle the latest trajgen setpoint is extrapolated to now (position,
-//! velocity and acceleration: trajgen's trajectory is a function of real time, so a servo
-//! faster than trajgen gets a smooth reference and a late setpoint costs nothing), for at most
-//! the setpoint timeout. After that the setpoint is stale (trajgen stalled or died): the
+//! **Reference.** Each cycle the latest trajgen setpoint is extrapolated to now (constant
+//! acceleration, the velocity never beyond vmax: trajgen's trajectory is a function of real
+//! time, so a servo faster than trajgen gets a smooth reference and a late setpoint costs
+//! nothing), for at most the setpoint timeout. When trajgen was late, the next setpoint differs
+//! a little from the extrapolation; that difference is blended out over two trajgen periods
+//! (a cubic offset), so the command never steps (a large difference is left to command
+//! validation). After that the setpoint is stale (trajgen stalled or died): the
 //! reference decelerates to rest at the axis' stop deceleration and holds, and only a new
 //! setpoint that starts where it holds is taken again. The first setpoint of a source (after
 //! enabling, after a stale spell, after trajgen restarted) must start where servo holds, or
@@ -64,8 +67,8 @@ pub struct Params {
     pub period_s: f64,
     /// Longest extrapolation of a setpoint (s); then the reference comes to rest.
     pub max_extrapolation_s: f64,
-    /// Longest extrapolation with the setpoint's acceleration (s): two trajgen periods.
-    pub accel_horizon_s: f64,
+    /// How long a late setpoint's small difference is blended out (s): two trajgen periods.
+    pub rejoin_s: f64,
     /// Drive feedback older than this cuts power while powered (ns).
     pub feedback_timeout_ns: u64,
     /// Longest enabling sequence (ns).
@@ -82,7 +85,7 @@ impl Params {
             axis: cell.axis,
             period_s: cell.process[Role::Servo.index()].period_ns as f64 * 1e-9,
             max_extrapolation_s: cell.setpoint_timeout_ns as f64 * 1e-9,
-            accel_horizon_s: 2.0 * cell.process[Role::Trajgen.index()].period_ns as f64 * 1e-9,
+            rejoin_s: 2.0 * cell.process[Role::Trajgen.index()].period_ns as f64 * 1e-9,
             feedback_timeout_ns: cell.feedback_timeout_ns,
             enable_timeout_ns: cell.enable_timeout_ns,
             settle_time_ns: cell.settle_time_ns,
@@ -124,8 +127,59 @@ pub struct Controller {
     feedback_new_ns: u64,
     stale_setpoint: bool,
     jump_reported: bool,
+    rejoin: Rejoin,
     last_ns: u64,
+    /// Real time since the previous cycle (s).
+    elapsed_s: f64,
     seq: u64,
+}
+
+/// The setpoint `sp` of axis `i` extrapolated `h` seconds: constant acceleration, the velocity
+/// never beyond `vmax` (trajgen's never is). Returns position, velocity, acceleration.
+fn extrapolate(sp: &SetpointV1, i: usize, h: f64, vmax: f64) -> (f64, f64, f64) {
+    let (p, v, a) = (sp.position[i], sp.velocity[i], sp.acceleration[i]);
+    let v_end = v + a * h;
+    if v_end.abs() <= vmax || a == 0.0 {
+        return (p + v * h + 0.5 * a * h * h, v_end, a);
+    }
+    let lim = vmax.copysign(v_end);
+    let t1 = ((lim - v) / a).clamp(0.0, h);
+    (p + v * t1 + 0.5 * a * t1 * t1 + lim * (h - t1), lim, 0.0)
+}
+
+/// A re-join in progress: an offset of the reference from the newest setpoint's
+/// extrapolation that starts at (`p0`, `v0`) and goes to 0 along a cubic (Hermite) curve over
+/// `duration_s`, so taking a late setpoint never steps the command.
+#[derive(Clone, Copy, Debug, Default)]
+struct Rejoin {
+    start_ns: u64,
+    duration_s: f64,
+    p0: [f64; MAX_AXES],
+    v0: [f64; MAX_AXES],
+}
+
+impl Rejoin {
+    /// The offset (position, velocity) per axis at `now_ns`.
+    fn offset(&self, now_ns: u64) -> ([f64; MAX_AXES], [f64; MAX_AXES]) {
+        let mut p = [0.0; MAX_AXES];
+        let mut v = [0.0; MAX_AXES];
+        let t = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
+        if self.duration_s <= 0.0 || t >= self.duration_s {
+            return (p, v);
+        }
+        let d = self.duration_s;
+        let s = t / d;
+        let (h00, h10) = (
+            2.0 * s * s * s - 3.0 * s * s + 1.0,
+            s * s * s - 2.0 * s * s + s,
+        );
+        let (d00, d10) = (6.0 * s * s - 6.0 * s, 3.0 * s * s - 4.0 * s + 1.0);
+        for i in 0..MAX_AXES {
+            p[i] = h00 * self.p0[i] + h10 * d * self.v0[i];
+            v[i] = (d00 * self.p0[i]) / d + d10 * self.v0[i];
+        }
+        (p, v)
+    }
 }
 
 fn axis_name(a: &AxisConfigV2) -> &str {
@@ -158,7 +212,9 @@ impl Controller {
             feedback_new_ns: 0,
             stale_setpoint: false,
             jump_reported: false,
+            rejoin: Rejoin::default(),
             last_ns: 0,
+            elapsed_s: 0.0,
             seq: 0,
         }
     }
@@ -331,13 +387,12 @@ impl Controller {
         if let Some(sp) = self.setpoint {
             let h = (now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9;
             if h <= self.p.max_extrapolation_s {
-                let h = h.max(0.0);
-                let ha = h.min(self.p.accel_horizon_s);
+                let (off_p, off_v) = self.rejoin.offset(now_ns);
                 for i in 0..n {
-                    let a = sp.acceleration[i];
-                    pos[i] = sp.position[i] + sp.velocity[i] * h + a * ha * (h - 0.5 * ha);
-                    vel[i] = sp.velocity[i] + a * ha;
-                    acc[i] = if h <= self.p.accel_horizon_s { a } else { 0.0 };
+                    let (p, v, a) = extrapolate(&sp, i, h.max(0.0), self.p.axis[i].vmax);
+                    pos[i] = p + off_p[i];
+                    vel[i] = v + off_v[i];
+                    acc[i] = a;
                 }
                 self.stale_setpoint = false;
                 return (pos, vel, acc);
@@ -372,10 +427,45 @@ impl Controller {
         (pos, vel, acc)
     }
 
+    /// Before taking `sp` from the same source: the reference it gives now differs from the
+    /// one the held setpoint (and a re-join in progress) gives by the extrapolation's error
+    /// over the time trajgen was late. A small difference (within the in-position band and 5 %
+    /// of vmax) is blended out over two trajgen periods; a larger one is left for command
+    /// validation to judge (it is a step, not a late setpoint).
+    fn rejoin_to(&mut self, sp: &SetpointV1, now_ns: u64) {
+        let Some(prev) = self.setpoint else {
+            self.rejoin = Rejoin::default();
+            return;
+        };
+        let (off_p, off_v) = self.rejoin.offset(now_ns);
+        let age = |s: &SetpointV1| ((now_ns as i128 - s.stamp_ns as i128) as f64 * 1e-9).max(0.0);
+        let mut d_p = [0.0; MAX_AXES];
+        let mut d_v = [0.0; MAX_AXES];
+        let mut small = true;
+        for i in 0..self.p.axes {
+            let a = &self.p.axis[i];
+            let (po, vo, _) = extrapolate(&prev, i, age(&prev), a.vmax);
+            let (pn, vn, _) = extrapolate(sp, i, age(sp), a.vmax);
+            d_p[i] = po + off_p[i] - pn;
+            d_v[i] = vo + off_v[i] - vn;
+            small &= d_p[i].abs() <= a.in_position && d_v[i].abs() <= 0.05 * a.vmax;
+        }
+        self.rejoin = if small {
+            Rejoin {
+                start_ns: now_ns,
+                duration_s: self.p.rejoin_s,
+                p0: d_p,
+                v0: d_v,
+            }
+        } else {
+            Rejoin::default()
+        };
+    }
+
     /// A setpoint from a new source (the first one, one after a stale spell, or one whose
     /// stamp goes back: trajgen restarted) must start where servo holds: within the
-    /// in-position band plus what the axis can move in 1.5 cycles. Returns the offending axis
-    /// and distance. Setpoints of the same source are checked by command validation instead
+    /// in-position band plus what the axis can move in 1.5 cycles, and at the reference's
+    /// velocity within one velocity step. Returns the offending axis and distance. Setpoints of the same source are checked by command validation instead
     /// (a step too large cuts power).
     fn jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
         if self
@@ -386,12 +476,14 @@ impl Controller {
         }
         let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9)
             .clamp(0.0, self.p.max_extrapolation_s);
-        (0..self.p.axes)
-            .map(|i| {
-                let at_now = sp.position[i] + sp.velocity[i] * age;
-                (i, (at_now - self.ref_pos[i]).abs())
-            })
-            .find(|&(i, d)| d > self.start_tolerance(i, dt))
+        let scale = (dt / self.p.period_s).max(1.0);
+        (0..self.p.axes).find_map(|i| {
+            let at_now = sp.position[i] + sp.velocity[i] * age;
+            let d = (at_now - self.ref_pos[i]).abs();
+            let dv = (sp.velocity[i] - self.ref_vel[i]).abs();
+            (d > self.start_tolerance(i, dt) || dv > self.p.axis[i].velocity_step_limit * scale)
+                .then_some((i, d))
+        })
     }
 
     /// How far a new source's first setpoint may lie from where servo holds: what the axis
@@ -408,9 +500,10 @@ impl Controller {
         &self,
         pos: &[f64; MAX_AXES],
         vel: &[f64; MAX_AXES],
-        dt: f64,
     ) -> Option<(Latched, &'static str)> {
-        let scale = (dt / self.p.period_s).max(1.0);
+        // A late cycle is not a step: the limits scale with the real time since the
+        // previous cycle (never below one period).
+        let scale = (self.elapsed_s / self.p.period_s).max(1.0);
         for i in 0..self.p.axes {
             let a = &self.p.axis[i];
             let at = |code, value, limit| Latched {
@@ -470,11 +563,14 @@ impl Controller {
     ) -> (DriveCommandV2, ServoStateV2) {
         let n = self.p.axes;
         self.seq += 1;
-        let dt = if self.last_ns == 0 {
+        // The real time since the previous cycle (command validation scales its step limits
+        // by it), and the same bounded to 5 periods for the integrators.
+        self.elapsed_s = if self.last_ns == 0 {
             self.p.period_s
         } else {
-            ((now_ns.saturating_sub(self.last_ns)) as f64 * 1e-9).min(5.0 * self.p.period_s)
+            now_ns.saturating_sub(self.last_ns) as f64 * 1e-9
         };
+        let dt = self.elapsed_s.min(5.0 * self.p.period_s);
         self.last_ns = now_ns;
         let mut out = Out {
             cmd: DriveCommandV2 {
@@ -658,6 +754,7 @@ impl Controller {
                     }
                 }
                 None => {
+                    self.rejoin_to(sp, now_ns);
                     self.setpoint = Some(*sp);
                     self.jump_reported = false;
                 }
@@ -672,7 +769,7 @@ impl Controller {
                 st::NO_SETPOINT
             };
         }
-        if let Some((l, what)) = self.validate(&pos, &vel, dt) {
+        if let Some((l, what)) = self.validate(&pos, &vel) {
             let nb = if l.axis >= 0 {
                 self.p.axis[l.axis as usize].name
             } else {

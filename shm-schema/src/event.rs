@@ -179,6 +179,9 @@ pub mod code {
     pub const REQUEST_REFUSED: u32 = 213;
     /// A drive left Operation enabled on its own; value: its statusword.
     pub const DRIVE_LOST_ENABLE: u32 = 214;
+    /// trajgen refused a motion command and stopped the axes on their current target;
+    /// value: the command's program line, limit: trajgen's fault code.
+    pub const MOTION_COMMAND_REFUSED: u32 = 215;
 
     /// The enabling sequence started.
     pub const ENABLING: u32 = 301;
@@ -349,6 +352,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Error,
         unit: "statusword",
         meaning: "A drive left Operation enabled without being asked. Power is cut on every axis and the fault latched until reset.",
+    },
+    CodeInfo {
+        code: code::MOTION_COMMAND_REFUSED,
+        name: "motion-command-refused",
+        severity: Severity::Error,
+        unit: "program line (limit: trajgen fault code)",
+        meaning: "trajgen refused a motion command (axis count, a target outside the limits, a malformed or lost command, a full queue; the text says which): the queue is emptied and the axes stop on their current target.",
     },
     CodeInfo {
         code: code::ENABLING,

@@ -87,6 +87,19 @@ pub mod trajgen_fault {
     pub const QUEUE_OVERFLOW: u32 = 4;
     /// A command's sequence number skipped (a command was lost).
     pub const SEQUENCE_GAP: u32 = 5;
+
+    /// What a fault code means, in words.
+    pub fn text(code: u32) -> &'static str {
+        match code {
+            NONE => "no fault",
+            AXES_MISMATCH => "the command's axis count differs from the cell's",
+            TARGET_OUT_OF_LIMITS => "the target lies outside the axis limits",
+            BAD_COMMAND => "the command is malformed",
+            QUEUE_OVERFLOW => "its command queue overflowed",
+            SEQUENCE_GAP => "a command was lost (sequence gap)",
+            _ => "unknown fault",
+        }
+    }
 }
 
 /// The reference trajgen publishes on `<i>/trajgen/setpoint` every cycle.

@@ -207,6 +207,10 @@ pub enum ServiceId {
     /// `<i>/<role>/latency`: [`crate::LatencyHistogramV1`], the wake-up latency histogram of
     /// every real-time process since its start, about every 100 ms and once more on stopping.
     Latency(crate::Role),
+    /// `<i>/<role>/exec_time`: [`crate::LatencyHistogramV1`] of the execution time (wake-up
+    /// to end of work) of every cycle of a real-time process since its start, published with
+    /// the latency histogram.
+    ExecTime(crate::Role),
     /// `<i>/trajgen/setpoint` (event service): trajgen notifies it after each setpoint
     /// publish, so a consumer may block until a setpoint arrives instead of polling.
     SetpointReady,
@@ -245,6 +249,7 @@ impl ServiceId {
             Self::FieldbusOutput => "iobridge/output",
             Self::Status(role) => role.status_suffix(),
             Self::Latency(role) => role.latency_suffix(),
+            Self::ExecTime(role) => role.exec_time_suffix(),
             Self::SetpointReady => "trajgen/setpoint",
         }
     }
@@ -281,7 +286,7 @@ impl ServiceId {
                 ..base
             },
             // 30 KB a sample: keep few. A late observer gets the newest at once.
-            Self::Latency(_) | Self::SenseToCommand => Qos {
+            Self::Latency(_) | Self::ExecTime(_) | Self::SenseToCommand => Qos {
                 history: 1,
                 subscriber_max_buffer: 2,
                 max_subscribers: 4,

@@ -53,6 +53,15 @@ impl Role {
         }
     }
 
+    pub(crate) fn exec_time_suffix(self) -> &'static str {
+        match self {
+            Self::Trajgen => "trajgen/exec_time",
+            Self::Servo => "servo/exec_time",
+            Self::Iobridge => "iobridge/exec_time",
+            Self::Machine => "machine/exec_time",
+        }
+    }
+
     pub(crate) fn latency_suffix(self) -> &'static str {
         match self {
             Self::Trajgen => "trajgen/latency",

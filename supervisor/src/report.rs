@@ -34,6 +34,9 @@ pub struct ProcessReport {
     /// Wake-up latency percentiles over the whole run, from the process' own histogram.
     #[serde(skip)]
     pub wakeup_latency: Option<Summary>,
+    /// Execution time percentiles over the whole run, from the process' own histogram.
+    #[serde(skip)]
+    pub exec_time: Option<Summary>,
 }
 
 impl ProcessReport {
@@ -59,16 +62,21 @@ impl ProcessReport {
             max_exec_us: s.stats.max_exec_ns as f64 * 1e-3,
             cpu_s,
             wakeup_latency: None,
+            exec_time: None,
         }
     }
 
-    /// As JSON: every field, and `wakeup_latency_us` with the percentiles.
+    /// As JSON: every field, and `wakeup_latency_us` and `exec_time_us` with the percentiles.
     pub fn to_json(&self) -> Value {
         let mut v = serde_json::to_value(self).unwrap_or(Value::Null);
         if let Some(o) = v.as_object_mut() {
             o.insert(
                 "wakeup_latency_us".into(),
                 self.wakeup_latency.map_or(Value::Null, |m| m.to_json()),
+            );
+            o.insert(
+                "exec_time_us".into(),
+                self.exec_time.map_or(Value::Null, |m| m.to_json()),
             );
         }
         v
@@ -256,11 +264,11 @@ impl Report {
             "  trace              {} setpoints, {} lost\n",
             self.setpoints, self.lost_setpoints
         );
-        s += "  process    pid      policy       prio  period   cycles   overruns  wake-up µs: p50    p99  p99.9      max  max exec   cpu\n";
+        s += "  process    pid      policy       prio  period   cycles   overruns  wake-up µs: p50    p99  p99.9      max  exec µs p99     max   cpu\n";
         for p in &self.processes {
             let m = p.wakeup_latency.unwrap_or_default();
             s += &format!(
-                "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>16.1} {:>6.1} {:>6.1} {:>8.1}  {:>6.0} µs  {}\n",
+                "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>16.1} {:>6.1} {:>6.1} {:>8.1}  {:>11.1} {:>7.0}   {}\n",
                 p.name,
                 p.pid,
                 p.policy,
@@ -272,6 +280,7 @@ impl Report {
                 m.p99_us,
                 m.p99_9_us,
                 p.max_wakeup_latency_us,
+                p.exec_time.map_or(f64::NAN, |e| e.p99_us),
                 p.max_exec_us,
                 p.cpu_s.map_or("-".to_string(), |c| format!("{c:.2} s"))
             );

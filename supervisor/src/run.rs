@@ -141,6 +141,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     session.take_events();
     let statuses = session.statuses;
     let latencies = std::mem::take(&mut session.latencies);
+    let exec_times = std::mem::take(&mut session.exec_times);
     let sense_to_command = session.sense_to_command.take();
     let events: Vec<serde_json::Value> = session
         .events
@@ -170,6 +171,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         p.wakeup_latency = latencies[role.index()]
             .as_deref()
             .map(latency::report::Summary::of);
+        p.exec_time = exec_times[role.index()]
+            .as_deref()
+            .filter(|h| h.count > 0)
+            .map(latency::report::Summary::of);
         report.processes.push(p);
     }
     if let Some((role, why)) = stop_problems.first() {
@@ -194,6 +199,7 @@ struct Session {
     children: Children,
     statuses: [Option<ProcessStatusV1>; 4],
     latencies: [Option<Box<LatencyHistogramV1>>; 4],
+    exec_times: [Option<Box<LatencyHistogramV1>>; 4],
     sense_to_command: Option<Box<LatencyHistogramV1>>,
     /// Every event of the run, in the order they arrived.
     events: Vec<EventV1>,
@@ -212,6 +218,7 @@ struct Session {
     image_sub: Sub<FieldbusImageV1>,
     status_subs: Vec<(Role, Sub<ProcessStatusV1>)>,
     latency_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
+    exec_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
 }
 
@@ -231,7 +238,12 @@ impl Session {
         let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
         let mut status_subs = Vec::new();
         let mut latency_subs = Vec::new();
+        let mut exec_subs = Vec::new();
         for role in Role::ALL {
+            exec_subs.push((
+                role,
+                Sub::new(&node, i, ServiceId::ExecTime(role), 1).map_err(f)?,
+            ));
             status_subs.push((
                 role,
                 Sub::new(&node, i, ServiceId::Status(role), 64).map_err(f)?,
@@ -254,6 +266,7 @@ impl Session {
             children,
             statuses: [None; 4],
             latencies: Default::default(),
+            exec_times: Default::default(),
             sense_to_command: None,
             events: Vec::new(),
             axes: Axes::of_cell(&cell),
@@ -270,6 +283,7 @@ impl Session {
             image_sub,
             status_subs,
             latency_subs,
+            exec_subs,
             _node: node,
         })
     }
@@ -280,6 +294,11 @@ impl Session {
         for (role, sub) in &self.latency_subs {
             if let Some(h) = sub.latest() {
                 self.latencies[role.index()] = Some(Box::new(h));
+            }
+        }
+        for (role, sub) in &self.exec_subs {
+            if let Some(h) = sub.latest() {
+                self.exec_times[role.index()] = Some(Box::new(h));
             }
         }
         if let Some(h) = self.sense_sub.latest() {
@@ -636,14 +655,7 @@ impl Session {
 }
 
 fn trajgen_fault_text(sp: &SetpointV1, program: &std::path::Path) -> String {
-    let why = match sp.fault {
-        trajgen_fault::AXES_MISMATCH => "the command's axis count differs from the cell's",
-        trajgen_fault::TARGET_OUT_OF_LIMITS => "the target lies outside the axis limits",
-        trajgen_fault::BAD_COMMAND => "the command is malformed",
-        trajgen_fault::QUEUE_OVERFLOW => "its command queue overflowed",
-        trajgen_fault::SEQUENCE_GAP => "a command was lost (sequence gap)",
-        _ => "unknown fault",
-    };
+    let why = trajgen_fault::text(sp.fault);
     format!(
         "trajgen refused {}:{}: {why} (fault {}); the axes stopped",
         program.display(),

@@ -27,6 +27,8 @@ pub struct Seen {
     pub status: ProcessStatusV1,
     /// Its latest latency histogram, if it publishes one.
     pub latency: Option<Box<LatencyHistogramV1>>,
+    /// Its latest execution-time histogram, if it publishes one.
+    pub exec_time: Option<Box<LatencyHistogramV1>>,
 }
 
 /// Everything `status` read.
@@ -60,7 +62,9 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
             Sub::<ProcessStatusV1>::new(&node, instance, ServiceId::Status(role), 4).map_err(f)?;
         let latency = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::Latency(role), 1)
             .map_err(f)?;
-        ports.push((role, status, latency));
+        let exec = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::ExecTime(role), 1)
+            .map_err(f)?;
+        ports.push((role, status, latency, exec));
     }
     let servo_sub =
         Sub::<ServoStateV2>::new(&node, instance, ServiceId::ServoState, 4).map_err(f)?;
@@ -69,19 +73,28 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     let sense_sub =
         Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::SenseToCommand, 1).map_err(f)?;
     let (mut servo, mut cell, mut sense) = (None, None, None);
-    let mut seen: Vec<(
-        Role,
-        Option<ProcessStatusV1>,
-        Option<Box<LatencyHistogramV1>>,
-    )> = Role::ALL.iter().map(|r| (*r, None, None)).collect();
+    let mut seen: Vec<Seen> = Role::ALL
+        .iter()
+        .map(|r| Seen {
+            role: *r,
+            status: ProcessStatusV1::default(),
+            latency: None,
+            exec_time: None,
+        })
+        .collect();
+    let mut heard = [false; 4];
     let start = Instant::now();
     while start.elapsed() < LISTEN {
-        for ((_, status, latency), (_, s, l)) in ports.iter().zip(seen.iter_mut()) {
+        for (k, ((_, status, latency, exec), p)) in ports.iter().zip(seen.iter_mut()).enumerate() {
             if let Some(x) = status.latest() {
-                *s = Some(x);
+                p.status = x;
+                heard[k] = true;
             }
             if let Some(x) = latency.latest() {
-                *l = Some(Box::new(x));
+                p.latency = Some(Box::new(x));
+            }
+            if let Some(x) = exec.latest() {
+                p.exec_time = Some(Box::new(x));
             }
         }
         if let Some(x) = servo_sub.latest() {
@@ -93,7 +106,10 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
         if let Some(x) = sense_sub.latest() {
             sense = Some(Box::new(x));
         }
-        if seen.iter().all(|(_, s, l)| s.is_some() && l.is_some())
+        if heard.iter().all(|h| *h)
+            && seen
+                .iter()
+                .all(|p| p.latency.is_some() && p.exec_time.is_some())
             && servo.is_some()
             && sense.is_some()
         {
@@ -106,13 +122,8 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     ipc::cleanup_after_client(instance);
     let out: Vec<Seen> = seen
         .into_iter()
-        .filter_map(|(role, s, latency)| {
-            s.map(|status| Seen {
-                role,
-                status,
-                latency,
-            })
-        })
+        .zip(heard)
+        .filter_map(|(p, h)| h.then_some(p))
         .collect();
     if out.is_empty() {
         return Err(format!(
@@ -205,6 +216,7 @@ pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
                 "skipped": s.stats.skipped,
                 "max_exec_us": s.stats.max_exec_ns as f64 * 1e-3,
                 "wakeup_latency_us": p.latency.as_ref().map(|h| Summary::of(h).to_json()),
+                "exec_time_us": p.exec_time.as_ref().filter(|h| h.count > 0).map(|h| Summary::of(h).to_json()),
             }),
         );
     }

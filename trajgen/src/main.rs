@@ -3,8 +3,10 @@
 use runtime::cycle::{CycleClock, Wake};
 use runtime::ipc::{Notifier, Pub, Sub};
 use runtime::process::{self, Context, SetupError, Task};
-use shm_schema::EventQueue;
 use shm_schema::drive::servo_status;
+use shm_schema::event::code;
+use shm_schema::motion::trajgen_fault;
+use shm_schema::{EventQueue, EventV1};
 use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV2, SetpointV1};
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
@@ -19,6 +21,8 @@ struct Trajgen {
     /// Wakes event-driven consumers after each setpoint (none in the default cell: servo
     /// runs on its own phase of the shared grid).
     ready: Notifier,
+    /// The fault last reported as an event.
+    reported_fault: u32,
 }
 
 impl Trajgen {
@@ -31,6 +35,7 @@ impl Trajgen {
             servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 4)?,
             setpoints: Pub::new(&ctx.node, i, ServiceId::Setpoint)?,
             ready: Notifier::new(&ctx.node, i, ServiceId::SetpointReady)?,
+            reported_fault: trajgen_fault::NONE,
         })
     }
 }
@@ -38,7 +43,7 @@ impl Trajgen {
 impl Task for Trajgen {
     /// # Real-time
     /// IPC calls, then [`Generator::step`]; nothing else.
-    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock, _events: &mut EventQueue) {
+    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock, events: &mut EventQueue) {
         // Servo's commanded position, once servo has drive feedback.
         let servo = self
             .servo
@@ -67,6 +72,19 @@ impl Task for Trajgen {
         }
         let sp = generator.step(wake.actual_ns);
         self.setpoints.send(&sp);
+        if sp.fault != self.reported_fault {
+            self.reported_fault = sp.fault;
+            if sp.fault != trajgen_fault::NONE {
+                events.push(EventV1::new(
+                    wake.actual_ns,
+                    code::MOTION_COMMAND_REFUSED,
+                    -1,
+                    sp.fault_line as f64,
+                    sp.fault as f64,
+                    &[trajgen_fault::text(sp.fault)],
+                ));
+            }
+        }
         self.ready.notify();
         // Read the next command at exactly t = T1 - t_acc, not at the next period.
         if let Some(t) = generator.next_transition_ns() {

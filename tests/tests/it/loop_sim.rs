@@ -81,6 +81,20 @@ impl Loop {
         state
     }
 
+    /// `cycles` periods in which only the machine runs (servo stalled): it applies the last
+    /// command it got.
+    pub fn servo_stalls(&mut self, cycles: u64) {
+        for _ in 0..cycles {
+            let fb = self
+                .machine
+                .cycle(self.now, self.cmd.as_ref(), None, &mut self.queue);
+            self.fb = Some(fb);
+            self.now += self.period;
+        }
+        self.events.extend_from_slice(self.queue.as_slice());
+        self.queue.clear();
+    }
+
     pub fn step(&mut self) -> ServoStateV2 {
         self.step_with(None, None, None)
     }

@@ -429,3 +429,75 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     }
     assert_ne!(lp.state.status & st::SETTLED, 0);
 }
+
+#[test]
+fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
+    // trajgen silent for 30 ms in the middle of an acceleration and for 40 ms later (host
+    // stalls of its CPU, below the 50 ms setpoint timeout): the next setpoint differs from
+    // servo's extrapolation; the command must not step.
+    let cfg = crate::closed_loop::at_rate(250);
+    let cell = cfg.to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
+    for c in motion_program::parse("MOVE(140,90,90)\nEND", 3)
+        .expect("parses")
+        .to_commands(1, 1)
+    {
+        g.push_command(&c);
+    }
+    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
+    let mut prev = lp.state;
+    for k in 0..8000u64 {
+        let silent = (1000..1120).contains(&k) || (3000..3160).contains(&k);
+        let sp = (k % tg == 0 && !silent).then(|| g.step(lp.now + 100_000));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
+        if k > 10 {
+            for i in 0..3 {
+                max_dp[i] = max_dp[i].max((s.cmd_position[i] - prev.cmd_position[i]).abs());
+                max_dv[i] = max_dv[i].max((s.cmd_velocity[i] - prev.cmd_velocity[i]).abs());
+            }
+        }
+        prev = s;
+    }
+    for (i, a) in cell.axes().iter().enumerate() {
+        assert!(
+            max_dp[i] <= a.position_step_limit,
+            "axis {i}: step {}",
+            max_dp[i]
+        );
+        assert!(
+            max_dv[i] <= a.velocity_step_limit,
+            "axis {i}: velocity step {}",
+            max_dv[i]
+        );
+    }
+}
+
+#[test]
+fn a_late_servo_cycle_is_not_a_step() {
+    // Servo itself stalls 3 ms (12 periods at 4 kHz) with the axes at full speed: the command
+    // moves 48 µm in one cycle, which the real elapsed time explains; nothing is refused.
+    let cell = crate::closed_loop::at_rate(250).to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
+    for c in motion_program::parse("MOVE(140,90,90)\nEND", 3)
+        .expect("parses")
+        .to_commands(1, 1)
+    {
+        g.push_command(&c);
+    }
+    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    for k in 0..6000u64 {
+        if k == 4000 {
+            assert!(lp.state.cmd_velocity[0] > 15.0);
+            lp.servo_stalls(12);
+        }
+        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
+    }
+}
