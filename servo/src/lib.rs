@@ -128,6 +128,12 @@ pub struct Controller {
     stale_setpoint: bool,
     jump_reported: bool,
     rejoin: Rejoin,
+    /// Tuning offsets of the reference (axis unit).
+    tune_offset: [f64; MAX_AXES],
+    /// The offset of this axis changed this cycle: its position step is the requested one.
+    tune_step: [bool; MAX_AXES],
+    /// The tuning offsets the reference of the last cycle includes.
+    applied_offset: [f64; MAX_AXES],
     last_ns: u64,
     /// Real time since the previous cycle (s).
     elapsed_s: f64,
@@ -213,6 +219,9 @@ impl Controller {
             stale_setpoint: false,
             jump_reported: false,
             rejoin: Rejoin::default(),
+            tune_offset: [0.0; MAX_AXES],
+            tune_step: [false; MAX_AXES],
+            applied_offset: [0.0; MAX_AXES],
             last_ns: 0,
             elapsed_s: 0.0,
             seq: 0,
@@ -254,6 +263,8 @@ impl Controller {
     fn set_power(&mut self, p: Power, now_ns: u64) {
         self.power = p;
         self.power_since_ns = now_ns;
+        self.tune_offset = [0.0; MAX_AXES];
+        self.applied_offset = [0.0; MAX_AXES];
     }
 
     /// Takes a request (seed 001: it takes effect in this cycle).
@@ -298,7 +309,48 @@ impl Controller {
                     self.fault_reset = [FaultReset::new(); MAX_AXES];
                 }
             }
+            Some(RequestKind::Step) => match self.step_refusal(r) {
+                Some(why) => refuse(why, events),
+                None => {
+                    let i = r.axis as usize;
+                    self.tune_step[i] = true;
+                    self.tune_offset[i] = r.value;
+                    events.push(EventV1::new(
+                        now_ns,
+                        code::TUNE_STEP,
+                        i as i32,
+                        r.value,
+                        0.0,
+                        &[],
+                    ));
+                }
+            },
             None => refuse("unknown request kind", events),
+        }
+    }
+
+    /// Why a `Step` request cannot be taken now, if it cannot.
+    fn step_refusal(&self, r: &ServoRequestV1) -> Option<&'static str> {
+        let i = r.axis as usize;
+        if i >= self.p.axes {
+            return Some("step refused: no such axis");
+        }
+        let a = &self.p.axis[i];
+        let at_rest = self.ref_vel[..self.p.axes].iter().all(|v| *v == 0.0)
+            && self
+                .setpoint
+                .is_none_or(|sp| sp.velocity[..self.p.axes].iter().all(|v| *v == 0.0));
+        let target = self.ref_pos[i] - self.tune_offset[i] + r.value;
+        if self.power != Power::Enabled || self.latched.is_some() {
+            Some("step refused: the arm is not enabled")
+        } else if !at_rest {
+            Some("step refused: the axes are moving")
+        } else if !(r.value.is_finite() && r.value.abs() <= a.following_error_limit / 2.0) {
+            Some("step refused: larger than half the following-error limit")
+        } else if target < a.min || target > a.max {
+            Some("step refused: it would leave the axis range")
+        } else {
+            None
         }
     }
 
@@ -390,11 +442,12 @@ impl Controller {
                 let (off_p, off_v) = self.rejoin.offset(now_ns);
                 for i in 0..n {
                     let (p, v, a) = extrapolate(&sp, i, h.max(0.0), self.p.axis[i].vmax);
-                    pos[i] = p + off_p[i];
+                    pos[i] = p + off_p[i] + self.tune_offset[i];
                     vel[i] = v + off_v[i];
                     acc[i] = a;
                 }
                 self.stale_setpoint = false;
+                self.applied_offset = self.tune_offset;
                 return (pos, vel, acc);
             }
             // Stale: trajgen stalled or died. Come to rest from here; only a setpoint that
@@ -420,10 +473,12 @@ impl Controller {
             } else {
                 v - dv * v.signum()
             };
-            pos[i] = self.ref_pos[i] + 0.5 * (v + v_new) * dt;
+            pos[i] = self.ref_pos[i] + 0.5 * (v + v_new) * dt + self.tune_offset[i]
+                - self.applied_offset[i];
             vel[i] = v_new;
             acc[i] = (v_new - v) / dt.max(1e-9);
         }
+        self.applied_offset = self.tune_offset;
         (pos, vel, acc)
     }
 
@@ -527,7 +582,8 @@ impl Controller {
                 return Some((l, "velocity"));
             }
             let step = pos[i] - self.ref_pos[i];
-            if step.abs() > a.position_step_limit * scale {
+            // A requested tuning step is the one step let through (bounded when requested).
+            if !self.tune_step[i] && step.abs() > a.position_step_limit * scale {
                 let l = at(
                     code::POSITION_STEP_OVER_LIMIT,
                     step / scale,
@@ -769,7 +825,9 @@ impl Controller {
                 st::NO_SETPOINT
             };
         }
-        if let Some((l, what)) = self.validate(&pos, &vel) {
+        let validation = self.validate(&pos, &vel);
+        self.tune_step = [false; MAX_AXES];
+        if let Some((l, what)) = validation {
             let nb = if l.axis >= 0 {
                 self.p.axis[l.axis as usize].name
             } else {

@@ -212,12 +212,18 @@ pub enum RequestKind {
     /// Clear a latched fault (and reset the drives' faults) if its cause is gone. Power
     /// stays off: an enable must follow.
     Reset = 3,
+    /// Commissioning: offset the reference of `axis` by `value` (axis unit) from the next
+    /// cycle, a step; 0 removes the offset (a step back). Taken only while enabled, at rest,
+    /// with |value| at most half the axis' following-error limit and the result within its
+    /// range: the one position step command validation lets through. Any power change or
+    /// fault clears the offset.
+    Step = 4,
 }
 
 impl RequestKind {
     /// Decodes the wire value.
     pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Enable, Self::Disable, Self::Reset]
+        [Self::Enable, Self::Disable, Self::Reset, Self::Step]
             .into_iter()
             .find(|k| *k as u32 == v)
     }
@@ -233,8 +239,10 @@ pub struct ServoRequestV1 {
     pub seq: u64,
     /// [`RequestKind`] as `u32`.
     pub kind: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// Axis index (`Step`); 0 otherwise.
+    pub axis: u32,
+    /// The step (`Step`, axis unit); 0 otherwise.
+    pub value: f64,
 }
 
 /// Faults the simulated drives can be told to raise.

@@ -195,6 +195,8 @@ pub mod code {
     pub const POWER_CUT: u32 = 305;
     /// A latched fault was cleared by a reset request.
     pub const FAULT_CLEARED: u32 = 306;
+    /// A tuning step offset the reference of an axis; value: the offset (axis unit).
+    pub const TUNE_STEP: u32 = 307;
 
     /// A burst of overruns; value: overruns since the previous such event.
     pub const OVERRUN_BURST: u32 = 401;
@@ -401,6 +403,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Info,
         unit: "event code",
         meaning: "A reset request cleared the latched fault whose code is the value. Power stays off until an enable request.",
+    },
+    CodeInfo {
+        code: code::TUNE_STEP,
+        name: "tune-step",
+        severity: Severity::Info,
+        unit: "axis unit",
+        meaning: "A `Step` request (`supervisor tune`) offset the reference of the axis by the value (0: the offset removed); servo took it as the one position step command validation lets through.",
     },
     CodeInfo {
         code: code::OVERRUN_BURST,

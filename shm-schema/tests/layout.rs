@@ -146,7 +146,8 @@ fn layouts() -> Vec<Layout> {
         layout!(ServoRequestV1 {
             seq: "uint64_t" = 8,
             kind: "uint32_t" = 4,
-            reserved: "uint32_t" = 4,
+            axis: "uint32_t" = 4,
+            value: "double" = 8,
         }),
         layout!(DriveCommandV2 {
             seq: "uint64_t" = 8,

@@ -9,3 +9,4 @@ pub mod launch;
 pub mod report;
 pub mod run;
 pub mod status;
+pub mod tune;

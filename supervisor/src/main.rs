@@ -104,6 +104,31 @@ enum Cmd {
         #[arg(long, short = 'q')]
         quiet: bool,
     },
+    /// Commissioning: start the cell, step one axis (and optionally move it out and back),
+    /// report rise time, overshoot, settling time and peak following error, stop the cell.
+    Tune {
+        /// Axis name.
+        #[arg(long)]
+        axis: String,
+        /// Step amplitude (axis unit; at most half the axis' following-error limit).
+        #[arg(long, allow_hyphen_values = true)]
+        step: f64,
+        /// Also move the axis this far and back at its vmax (axis unit).
+        #[arg(long, allow_hyphen_values = true)]
+        ramp: Option<f64>,
+        /// Cell configuration (TOML); without it, the embedded Gantry UBA cell.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Instance name.
+        #[arg(long, default_value = "tune")]
+        instance: String,
+        /// Print one JSON object on stdout instead of the summary.
+        #[arg(long)]
+        json: bool,
+        /// Write a PNG of command, position and effort.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+    },
     /// Print the events of a running instance as they happen (docs/events.md).
     Events {
         /// Instance name.
@@ -214,6 +239,61 @@ fn main() -> ExitCode {
                 Err(e) => {
                     eprintln!("latency-peer: {e}");
                     ExitCode::FAILURE
+                }
+            }
+        }
+        Cmd::Tune {
+            axis,
+            step,
+            ramp,
+            config,
+            instance,
+            json,
+            plot,
+        } => {
+            let opts = supervisor::tune::TuneOptions {
+                config,
+                instance,
+                axis,
+                step,
+                ramp,
+                plot: plot.clone(),
+                progress: !json,
+            };
+            match supervisor::tune::tune(&opts) {
+                Ok(report) => {
+                    if let Some(path) = &plot {
+                        match report.plot().and_then(|png| {
+                            std::fs::write(path, png)
+                                .map_err(|e| format!("{}: {e}", path.display()))
+                        }) {
+                            Ok(()) => {}
+                            Err(e) => {
+                                eprintln!("error: {e}");
+                                return ExitCode::FAILURE;
+                            }
+                        }
+                    }
+                    if json {
+                        println!("{}", report.to_json());
+                    } else {
+                        print!("{}", report.human());
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    if json {
+                        println!(
+                            "{}",
+                            serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
+                        );
+                    }
+                    ExitCode::from(match e {
+                        RunError::Input(_) => 2,
+                        RunError::Failed { .. } => 1,
+                        RunError::Interrupted => 130,
+                    })
                 }
             }
         }

@@ -87,7 +87,7 @@ impl std::fmt::Display for RunError {
     }
 }
 
-const TICK: Duration = Duration::from_millis(10);
+pub(crate) const TICK: Duration = Duration::from_millis(10);
 
 /// Runs a program; see the module documentation.
 pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
@@ -107,26 +107,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         })?;
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    signals::install()
-        .map_err(|e| RunError::failed(format!("cannot install signal handlers: {e}")))?;
-
-    ipc::quiet_iceoryx2_log();
-    let _ = ipc::remove_dead_nodes(&instance);
-    let live = ipc::live_node_pids(&instance).unwrap_or_default();
-    if !live.is_empty() {
-        return Err(RunError::Input(format!(
-            "instance {instance} is in use by process(es) {live:?}; choose another --instance"
-        )));
-    }
-
-    let mut session = match Session::open(&cfg, instance, opts.progress) {
-        Ok(s) => s,
-        Err(e) => {
-            // Whatever was started is stopped (Children's drop); remove what it created.
-            ipc::remove_instance(&instance);
-            return Err(e);
-        }
-    };
+    let mut session = open_cell(&cfg, instance, opts.progress)?;
     let outcome = session.drive(&cfg, &program, &src, opts);
     let cpu: Vec<Option<f64>> = session
         .children
@@ -193,10 +174,34 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     Ok(report)
 }
 
-/// The supervisor's ports and the processes of one run.
-struct Session {
+/// Starts the cell of `cfg` on `instance`: signal handlers, a refusal if the instance is in
+/// use, the services, the configuration, every process. Whatever a failure started is stopped
+/// and removed.
+pub(crate) fn open_cell(
+    cfg: &Config,
     instance: InstanceName,
-    children: Children,
+    print_events: bool,
+) -> Result<Session, RunError> {
+    signals::install()
+        .map_err(|e| RunError::failed(format!("cannot install signal handlers: {e}")))?;
+    ipc::quiet_iceoryx2_log();
+    let _ = ipc::remove_dead_nodes(&instance);
+    let live = ipc::live_node_pids(&instance).unwrap_or_default();
+    if !live.is_empty() {
+        return Err(RunError::Input(format!(
+            "instance {instance} is in use by process(es) {live:?}; choose another --instance"
+        )));
+    }
+    Session::open(cfg, instance, print_events).inspect_err(|_| {
+        // Whatever was started is stopped (Children's drop); remove what it created.
+        ipc::remove_instance(&instance);
+    })
+}
+
+/// The supervisor's ports and the processes of one run.
+pub(crate) struct Session {
+    instance: InstanceName,
+    pub(crate) children: Children,
     statuses: [Option<ProcessStatusV1>; 4],
     latencies: [Option<Box<LatencyHistogramV1>>; 4],
     exec_times: [Option<Box<LatencyHistogramV1>>; 4],
@@ -209,12 +214,12 @@ struct Session {
     request_seq: u64,
     // Field order is drop order: ports before the node.
     config_pub: Pub<CellConfigV2>,
-    command_pub: Pub<MotionCommandV1>,
+    pub(crate) command_pub: Pub<MotionCommandV1>,
     request_pub: Pub<ServoRequestV1>,
     events_sub: Sub<EventV1>,
     sense_sub: Sub<LatencyHistogramV1>,
-    setpoint_sub: Sub<SetpointV1>,
-    servo_sub: Sub<ServoStateV2>,
+    pub(crate) setpoint_sub: Sub<SetpointV1>,
+    pub(crate) servo_sub: Sub<ServoStateV2>,
     image_sub: Sub<FieldbusImageV1>,
     status_subs: Vec<(Role, Sub<ProcessStatusV1>)>,
     latency_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
@@ -306,8 +311,33 @@ impl Session {
         }
     }
 
+    /// Stops every process and removes the instance; fails if a process would not stop or
+    /// something of the instance is left. Returns the run's events as JSON.
+    pub(crate) fn close(mut self) -> Result<Vec<serde_json::Value>, RunError> {
+        let stop_problems = self.children.stop_all();
+        self.take_events();
+        let events = self
+            .events
+            .iter()
+            .map(|e| events::to_json(e, &self.axes, self.t0_ns))
+            .collect();
+        let instance = self.instance;
+        drop(self);
+        let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
+        if let Some((role, why)) = stop_problems.first() {
+            return Err(RunError::failed(format!("{} {why}", role.name())));
+        }
+        if !leftovers.is_empty() {
+            return Err(RunError::failed(format!(
+                "iceoryx2 resources left behind: {}",
+                leftovers.join(", ")
+            )));
+        }
+        Ok(events)
+    }
+
     /// Takes the events that arrived, printing them as they happen.
-    fn take_events(&mut self) {
+    pub(crate) fn take_events(&mut self) {
         while let Some(e) = self.events_sub.next() {
             if self.print_events {
                 eprintln!("{}", events::line(&e, &self.axes, self.t0_ns));
@@ -317,12 +347,23 @@ impl Session {
     }
 
     /// Asks servo for `kind` (it takes effect in servo's next cycle).
-    fn request(&mut self, kind: RequestKind) -> Result<(), RunError> {
+    pub(crate) fn request(&mut self, kind: RequestKind) -> Result<(), RunError> {
+        self.request_with(kind, 0, 0.0)
+    }
+
+    /// Asks servo for `kind` with an axis and a value (a tuning step).
+    pub(crate) fn request_with(
+        &mut self,
+        kind: RequestKind,
+        axis: u32,
+        value: f64,
+    ) -> Result<(), RunError> {
         self.request_seq += 1;
         let r = ServoRequestV1 {
             seq: self.request_seq,
             kind: kind as u32,
-            reserved: 0,
+            axis,
+            value,
         };
         if self.request_pub.send(&r) {
             Ok(())
@@ -334,7 +375,7 @@ impl Session {
     }
 
     /// The latched fault servo reports, in words, with the event that explains it.
-    fn fault_text(&self, cfg: &Config, s: &ServoStateV2) -> String {
+    pub(crate) fn fault_text(&self, cfg: &Config, s: &ServoStateV2) -> String {
         let cause = self
             .events
             .iter()
@@ -353,7 +394,7 @@ impl Session {
     }
 
     /// Fails if a process exited or stopped cycling; refreshes the statuses.
-    fn check_health(
+    pub(crate) fn check_health(
         &mut self,
         cfg: &Config,
         beats: &mut [(u64, Instant); 4],
@@ -399,26 +440,21 @@ impl Session {
         Ok(())
     }
 
-    fn drive(
+    /// Startup: every process cyclic, trajgen publishing, the drives initialized; then an
+    /// enable request, and a setpoint from after the arm is enabled (trajgen starts where
+    /// servo holds). Returns that setpoint.
+    pub(crate) fn startup(
         &mut self,
         cfg: &Config,
-        program: &Program,
-        src: &str,
-        opts: &RunOptions,
-    ) -> Result<Report, RunError> {
-        let n = cfg.axis.len();
-        let mut beats = [(0u64, Instant::now()); 4];
-
-        // Startup: every process cyclic, trajgen publishing, the drives initialized; then
-        // an enable request, and a setpoint from after the arm is enabled (trajgen starts
-        // where servo holds).
+        beats: &mut [(u64, Instant); 4],
+    ) -> Result<SetpointV1, RunError> {
         let start = Instant::now();
         let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
         let (mut last_sp, mut last_servo) = (None::<SetpointV1>, None::<ServoStateV2>);
         let mut enable_sent = false;
         let mut enabled_at: Option<u64> = None;
         loop {
-            self.check_health(cfg, &mut beats)?;
+            self.check_health(cfg, beats)?;
             if let Some(s) = self.setpoint_sub.latest() {
                 last_sp = Some(s);
             }
@@ -473,7 +509,19 @@ impl Session {
             }
             std::thread::sleep(TICK);
         }
-        let start_sp = last_sp.expect("checked above");
+        Ok(last_sp.expect("checked above"))
+    }
+
+    fn drive(
+        &mut self,
+        cfg: &Config,
+        program: &Program,
+        src: &str,
+        opts: &RunOptions,
+    ) -> Result<Report, RunError> {
+        let n = cfg.axis.len();
+        let mut beats = [(0u64, Instant::now()); 4];
+        let start_sp = self.startup(cfg, &mut beats)?;
         let start_pos: Vec<f64> = start_sp.position[..n].to_vec();
         let vmax: Vec<f64> = cfg.axis.iter().map(|a| a.vmax).collect();
         let predicted =

@@ -208,3 +208,78 @@ fn csp_axes_follow_the_triangle_on_the_real_processes() {
     assert!(j["sense_to_command_us"]["p50_us"].as_f64().expect("sense") > 0.0);
     assert_clean(&inst);
 }
+
+#[test]
+fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
+    let inst = instance("tune");
+    let png = std::env::temp_dir().join(format!("{inst}.png"));
+    let out = run_with_watchdog(
+        supervisor()
+            .args([
+                "tune",
+                "--json",
+                "--instance",
+                &inst,
+                "--axis",
+                "y",
+                "--step",
+                "-0.2",
+                "--ramp",
+                "5",
+                "--plot",
+            ])
+            .arg(&png),
+        WATCHDOG,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j = json_of(&out);
+    let f = &j["step_response"];
+    let rise = f["rise_s"].as_f64().expect("the axis rose");
+    assert!(rise > 0.0, "{j}");
+    assert!(f["settling_s"].as_f64().expect("it settled") >= rise, "{j}");
+    assert!(
+        f["overshoot_pct"].as_f64().expect("overshoot") < 50.0,
+        "{j}"
+    );
+    assert!((f["peak_following_error"].as_f64().expect("fe") - 0.2).abs() < 0.01);
+    let ramp = j["ramp"]["peak_following_error"].as_f64().expect("ramp");
+    assert!(ramp > 0.0 && ramp < 1.0, "{j}");
+    assert!(
+        events_named(&j, "tune-step").len() == 2,
+        "step and step back: {j}"
+    );
+    let bytes = std::fs::read(&png).expect("plot written");
+    assert_eq!(&bytes[1..4], b"PNG");
+    let _ = std::fs::remove_file(&png);
+    assert_clean(&inst);
+
+    // Bad requests are refused by name before anything starts.
+    for (args, want) in [
+        (
+            vec!["--axis", "y", "--step", "0.8"],
+            "at most half the following-error limit",
+        ),
+        (
+            vec!["--axis", "w", "--step", "0.1"],
+            "--axis \"w\": the cell has axes x, y, theta",
+        ),
+        (
+            vec!["--axis", "x", "--step", "0.1", "--ramp", "500"],
+            "would leave its range",
+        ),
+    ] {
+        let out = supervisor()
+            .args(["tune", "--instance", &inst])
+            .args(&args)
+            .output()
+            .expect("tune");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    assert_clean(&inst);
+}

@@ -63,7 +63,8 @@ impl Loop {
             ServoRequestV1 {
                 seq: self.request_seq,
                 kind: k as u32,
-                reserved: 0,
+                axis: 0,
+                value: 0.0,
             }
         });
         let (cmd, state) = self.servo.cycle(

@@ -25,7 +25,8 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
     let enable = shm_schema::ServoRequestV1 {
         seq: 1,
         kind: shm_schema::RequestKind::Enable as u32,
-        reserved: 0,
+        axis: 0,
+        value: 0.0,
     };
     let mut q = shm_schema::EventQueue::default();
     let mut events = 0;

@@ -501,3 +501,44 @@ fn a_late_servo_cycle_is_not_a_step() {
         assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
     }
 }
+
+#[test]
+fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let step = |lp: &mut Loop, seq: u64, value: f64| {
+        let r = shm_schema::ServoRequestV1 {
+            seq,
+            kind: RequestKind::Step as u32,
+            axis: 0,
+            value,
+        };
+        let fb = lp.fb;
+        let mut q = shm_schema::EventQueue::default();
+        let s = lp
+            .servo
+            .cycle(lp.now + 300_000, Some(&r), None, fb.as_ref(), &mut q)
+            .1;
+        lp.events.extend_from_slice(q.as_slice());
+        s
+    };
+    // Too large: refused, nothing moves.
+    let s = step(&mut lp, 100, 0.6);
+    assert_eq!(s.cmd_position[0], 40.0);
+    assert!(
+        lp.events.iter().any(|e| e.code == code::REQUEST_REFUSED
+            && e.text().contains("half the following-error limit"))
+    );
+    // Within the limit: the command steps at once, with no fault, and the axis follows.
+    let s = step(&mut lp, 101, 0.4);
+    assert!(
+        (s.cmd_position[0] - 40.4).abs() < 1e-12,
+        "{}",
+        s.cmd_position[0]
+    );
+    assert_eq!(s.status & st::FAULT_LATCHED, 0);
+    let s = lp.until(None, 2000, |s| s.status & st::SETTLED != 0);
+    assert!((s.act_position[0] - 40.4).abs() <= 0.01);
+    assert!(lp.codes().contains(&code::TUNE_STEP));
+}
