@@ -283,3 +283,41 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
     }
     assert_clean(&inst);
 }
+
+#[test]
+fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
+    let inst = instance("4khz");
+    let cfg = default_config()
+        .replace(
+            "period_us = 1000\nphase_us = 100",
+            "period_us = 250\nphase_us = 25",
+        )
+        .replace(
+            "period_us = 1000\nphase_us = 400",
+            "period_us = 250\nphase_us = 100",
+        );
+    let cfg = write("4khz", "cell.toml", &cfg);
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--json", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j = json_of(&out);
+    assert_eq!(j["processes"]["servo"]["period_us"].as_f64(), Some(250.0));
+    for (axis, want) in [("x", 40.0), ("y", 40.0), ("theta", 0.0)] {
+        let got = j["final_position"][axis].as_f64().expect("final");
+        assert!((got - want).abs() <= 0.01, "{axis}: {got}");
+        assert!(j["max_following_error"][axis].as_f64().expect("fe") < 1.0);
+    }
+    // The drives measured it (its figures belong to the benchmark, not to a test).
+    let s2c = j["sense_to_command_us"]["p50_us"].as_f64().expect("sense");
+    assert!(s2c > 0.0, "{s2c}");
+    assert_clean(&inst);
+}
