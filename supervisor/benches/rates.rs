@@ -211,9 +211,13 @@ fn main() {
         );
     }
     for (a, name) in AXES.iter().enumerate() {
-        println!(
-            "  {name:<9} peak following error {:.2}",
-            fast.fe[a] / slow.fe[a]
-        );
+        if slow.fe[a] > 0.0 {
+            println!(
+                "  {name:<9} peak following error {:.2}",
+                fast.fe[a] / slow.fe[a]
+            );
+        } else {
+            println!("  {name:<9} peak following error — (the axis does not move)");
+        }
     }
 }
