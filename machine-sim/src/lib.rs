@@ -795,9 +795,8 @@ mod tests {
         assert_eq!(fb.error_code[0], error_code::PARAMETER);
     }
 
-    #[test]
-    fn in_csp_the_drive_closes_the_loop_on_its_target() {
-        let mut m = Machine::new(&cell(Mode::Csp));
+    /// Steps a fresh machine to Operation enabled in CSP; the next cycle's number.
+    fn enabled_csp(m: &mut Machine) -> u64 {
         let mut k = 1;
         for w in [0, cw::SHUTDOWN, cw::SWITCH_ON_CMD, cw::ENABLE_OPERATION_CMD] {
             let mut q = EventQueue::default();
@@ -809,6 +808,13 @@ mod tests {
             );
             k += 1;
         }
+        k
+    }
+
+    #[test]
+    fn in_csp_the_drive_closes_the_loop_on_its_target() {
+        let mut m = Machine::new(&cell(Mode::Csp));
+        let k = enabled_csp(&mut m);
         let mut fb = DriveFeedbackV2::default();
         let mut q = EventQueue::default();
         for j in 0..2000 {
@@ -849,17 +855,7 @@ mod tests {
         c.axis[0].effort_limit = 100.0;
         (c.axis[0].drive_kp, c.axis[0].drive_kd) = (300.0, 2.5);
         let mut m = Machine::new(&c);
-        let mut k = 1;
-        for w in [0, cw::SHUTDOWN, cw::SWITCH_ON_CMD, cw::ENABLE_OPERATION_CMD] {
-            let mut q = EventQueue::default();
-            m.cycle(
-                k * MS,
-                Some(&command(k, w, Mode::Csp, 0.0, 0.0)),
-                None,
-                &mut q,
-            );
-            k += 1;
-        }
+        let k = enabled_csp(&mut m);
         let mut q = EventQueue::default();
         for j in 0..500 {
             m.cycle(

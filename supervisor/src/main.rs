@@ -166,6 +166,23 @@ enum Cmd {
     },
 }
 
+/// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
+/// status: 2 bad input, 1 failed, 130 interrupted.
+fn run_failed(e: &RunError, json: bool) -> ExitCode {
+    eprintln!("error: {e}");
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
+        );
+    }
+    ExitCode::from(match e {
+        RunError::Input(_) => 2,
+        RunError::Failed { .. } => 1,
+        RunError::Interrupted => 130,
+    })
+}
+
 fn main() -> ExitCode {
     runtime::process::init_logging();
     match Cli::parse().cmd {
@@ -281,20 +298,7 @@ fn main() -> ExitCode {
                     }
                     ExitCode::SUCCESS
                 }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    if json {
-                        println!(
-                            "{}",
-                            serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
-                        );
-                    }
-                    ExitCode::from(match e {
-                        RunError::Input(_) => 2,
-                        RunError::Failed { .. } => 1,
-                        RunError::Interrupted => 130,
-                    })
-                }
+                Err(e) => run_failed(&e, json),
             }
         }
         Cmd::Events {
@@ -374,20 +378,7 @@ fn main() -> ExitCode {
                     }
                     ExitCode::SUCCESS
                 }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    if json {
-                        println!(
-                            "{}",
-                            serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
-                        );
-                    }
-                    ExitCode::from(match e {
-                        RunError::Input(_) => 2,
-                        RunError::Failed { .. } => 1,
-                        RunError::Interrupted => 130,
-                    })
-                }
+                Err(e) => run_failed(&e, json),
             }
         }
     }

@@ -31,6 +31,25 @@ pub fn bin_dir() -> &'static Path {
     })
 }
 
+/// The repository's `examples/` folder.
+pub fn examples() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
+}
+
+/// The supervisor binary, as a command to add arguments to.
+pub fn supervisor() -> Command {
+    Command::new(bin("supervisor"))
+}
+
+/// Writes `content` to a file `name` in a scratch folder of `test` and returns its path.
+pub fn scratch(test: &str, name: &str, content: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rtc-{}-{test}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let p = dir.join(name);
+    std::fs::write(&p, content).expect("write");
+    p
+}
+
 /// A binary of the workspace.
 pub fn bin(name: &str) -> PathBuf {
     bin_dir().join(name)

@@ -13,7 +13,7 @@
 
 use super::Axis;
 use cia402::Mode;
-use nalgebra::{Matrix2, Matrix3, Matrix4};
+use nalgebra::DMatrix;
 
 /// Exact zero-order-hold integration of `J dv/dt = u − b v` over `t`: the coefficients of
 /// `p' = p + c_pv v + c_pu u`, `v' = a v + c_vu u`.
@@ -27,27 +27,14 @@ fn zoh(j: f64, b: f64, t: f64) -> (f64, f64, f64, f64) {
     }
 }
 
-fn radius4(m: &Matrix4<f64>) -> f64 {
-    if m.iter().any(|v| !v.is_finite()) {
+/// The largest eigenvalue modulus of the `n`×`n` matrix `rows` (row-major); infinite when an
+/// entry or an eigenvalue is not finite (an absurd configuration makes huge entries).
+fn radius(n: usize, rows: &[f64]) -> f64 {
+    if rows.iter().any(|v| !v.is_finite()) {
         return f64::INFINITY;
     }
-    m.complex_eigenvalues()
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, |r: f64, v| {
-            if v.is_finite() {
-                r.max(v)
-            } else {
-                f64::INFINITY
-            }
-        })
-}
-
-fn radius3(m: &Matrix3<f64>) -> f64 {
-    if m.iter().any(|v| !v.is_finite()) {
-        return f64::INFINITY;
-    }
-    m.complex_eigenvalues()
+    DMatrix::from_row_slice(n, n, rows)
+        .complex_eigenvalues()
         .iter()
         .map(|z| z.norm())
         .fold(0.0, |r: f64, v| {
@@ -66,13 +53,13 @@ pub fn servo_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
     // state stays 0 (it is not a mode of the loop).
     let keep = if ki == 0.0 { 0.0 } else { 1.0 };
     #[rustfmt::skip]
-    let m = Matrix4::new(
+    let m = [
         1.0, c_pv, 0.0, c_pu,
         0.0, a, 0.0, c_vu,
         -ki * t, 0.0, keep, 0.0,
         -kp - ki * t, -kd, keep, 0.0,
-    );
-    radius4(&m)
+    ];
+    radius(4, &m)
 }
 
 /// Spectral radius of a drive's own loop (CSP), without delay: state `[p, v, I]`.
@@ -82,12 +69,12 @@ pub fn drive_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
     let keep = if ki == 0.0 { 0.0 } else { 1.0 };
     let u = [-kp - ki * t, -kd, keep];
     #[rustfmt::skip]
-    let m = Matrix3::new(
+    let m = [
         1.0 + c_pu * u[0], c_pv + c_pu * u[1], c_pu * u[2],
         c_vu * u[0], a + c_vu * u[1], c_vu * u[2],
         -ki * t, 0.0, keep,
-    );
-    radius3(&m)
+    ];
+    radius(3, &m)
 }
 
 /// Spectral radius of a drive's velocity loop (CSV), without delay: state `[v, I]`, with
@@ -96,20 +83,7 @@ pub fn drive_radius(kp: f64, ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
 pub fn velocity_radius(ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
     let (a, _, _, c_vu) = zoh(j, b, t);
     let keep = if ki == 0.0 { 0.0 } else { 1.0 };
-    let m = Matrix2::new(a + c_vu * (-kd - ki * t), c_vu * keep, -ki * t, keep);
-    if m.iter().any(|v| !v.is_finite()) {
-        return f64::INFINITY;
-    }
-    m.complex_eigenvalues()
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, |r: f64, v| {
-            if v.is_finite() {
-                r.max(v)
-            } else {
-                f64::INFINITY
-            }
-        })
+    radius(2, &[a + c_vu * (-kd - ki * t), c_vu * keep, -ki * t, keep])
 }
 
 /// Checks the loops of `a` in `mode`; the error says which loop, the radius and what to

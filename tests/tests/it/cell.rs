@@ -1,27 +1,14 @@
 //! The whole cell as separate real-time processes, each test on its own instance.
 
-use integration_tests::{assert_clean, bin, instance, json_of, pids_with, run_with_watchdog};
+use integration_tests::{
+    assert_clean, bin, examples, instance, json_of, pids_with, run_with_watchdog, scratch,
+    supervisor,
+};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
 
 const WATCHDOG: Duration = Duration::from_secs(180);
-
-fn examples() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
-}
-
-fn supervisor() -> Command {
-    Command::new(bin("supervisor"))
-}
-
-fn scratch(test: &str, name: &str, content: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rtc-{}-{test}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let p = dir.join(name);
-    std::fs::write(&p, content).expect("write");
-    p
-}
 
 /// Runs the triangle on `inst` with the configuration file `cfg`.
 fn run_triangle_with(inst: &str, cfg: &Path) -> std::process::Output {

@@ -2,27 +2,39 @@
 //! the run with its events; a fault injected from another shell is reported as it happens; an
 //! absurd axis is refused before anything starts; CSP axes follow the triangle.
 
-use integration_tests::{assert_clean, bin, instance, json_of, pids_with, run_with_watchdog};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use integration_tests::{
+    assert_clean, examples, instance, json_of, pids_with, run_with_watchdog, scratch, supervisor,
+};
+use std::path::Path;
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 const WATCHDOG: Duration = Duration::from_secs(180);
 
-fn examples() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
+/// Runs the triangle with the configuration file `cfg` on `inst`, `--json`; it must succeed.
+fn triangle_json(inst: &str, cfg: &Path) -> serde_json::Value {
+    let out = run_with_watchdog(
+        supervisor()
+            .args(["run", "--json", "--instance", inst, "--config"])
+            .arg(cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    json_of(&out)
 }
 
-fn supervisor() -> Command {
-    Command::new(bin("supervisor"))
-}
-
-fn write(test: &str, name: &str, content: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rtc-{}-{test}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let p = dir.join(name);
-    std::fs::write(&p, content).expect("write");
-    p
+/// The run ended on the triangle's start, every axis within the following-error limit.
+fn on_target(j: &serde_json::Value) {
+    for (axis, want) in [("x", 40.0), ("y", 40.0), ("theta", 0.0)] {
+        let got = j["final_position"][axis].as_f64().expect("final");
+        assert!((got - want).abs() <= 0.01, "{axis}: {got}");
+        assert!(j["max_following_error"][axis].as_f64().expect("fe") < 1.0);
+    }
 }
 
 fn default_config() -> String {
@@ -45,7 +57,7 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         "substeps = 4 ",
         "substeps = 4\n\n[[drives.inject]]\naxis = \"y\"\nfault = \"over-current\"\nat = 2.0\n\n#",
     );
-    let cfg = write("inject-cfg", "cell.toml", &cfg);
+    let cfg = scratch("inject-cfg", "cell.toml", &cfg);
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--json", "--instance", &inst, "--config"])
@@ -153,7 +165,7 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
 fn an_absurd_inertia_is_refused_before_anything_starts() {
     let inst = instance("inertia");
     let cfg = default_config().replacen("inertia = 0.008", "inertia = 1e-300", 1);
-    let cfg = write("inertia", "cell.toml", &cfg);
+    let cfg = scratch("inertia", "cell.toml", &cfg);
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--instance", &inst, "--config"])
@@ -186,25 +198,9 @@ fn csp_axes_follow_the_triangle_on_the_real_processes() {
         let sim = at + cfg[at..].find("sim = {").expect("sim");
         cfg.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
     }
-    let cfg = write("csp", "cell.toml", &cfg);
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j = json_of(&out);
-    for (axis, want) in [("x", 40.0), ("y", 40.0), ("theta", 0.0)] {
-        let got = j["final_position"][axis].as_f64().expect("final");
-        assert!((got - want).abs() <= 0.01, "{axis}: {got}");
-        assert!(j["max_following_error"][axis].as_f64().expect("fe") < 1.0);
-    }
+    let cfg = scratch("csp", "cell.toml", &cfg);
+    let j = triangle_json(&inst, &cfg);
+    on_target(&j);
     assert!(j["sense_to_command_us"]["p50_us"].as_f64().expect("sense") > 0.0);
     assert_clean(&inst);
 }
@@ -296,26 +292,10 @@ fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
             "period_us = 1000\nphase_us = 400",
             "period_us = 250\nphase_us = 100",
         );
-    let cfg = write("4khz", "cell.toml", &cfg);
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j = json_of(&out);
+    let cfg = scratch("4khz", "cell.toml", &cfg);
+    let j = triangle_json(&inst, &cfg);
     assert_eq!(j["processes"]["servo"]["period_us"].as_f64(), Some(250.0));
-    for (axis, want) in [("x", 40.0), ("y", 40.0), ("theta", 0.0)] {
-        let got = j["final_position"][axis].as_f64().expect("final");
-        assert!((got - want).abs() <= 0.01, "{axis}: {got}");
-        assert!(j["max_following_error"][axis].as_f64().expect("fe") < 1.0);
-    }
+    on_target(&j);
     // The drives measured it (its figures belong to the benchmark, not to a test).
     let s2c = j["sense_to_command_us"]["p50_us"].as_f64().expect("sense");
     assert!(s2c > 0.0, "{s2c}");

@@ -17,6 +17,18 @@ fn cfg_with(from: &str, to: &str) -> Config {
     Config::parse(&src.replacen(from, to, 1), "test").expect("valid")
 }
 
+/// A trajectory generator at the default start with `program` queued.
+fn generator(cell: &shm_schema::CellConfigV2, program: &str) -> Generator {
+    let mut g = Generator::new(Params::from_cell(cell), &[40.0, 40.0, 0.0]);
+    for c in motion_program::parse(program, 3)
+        .expect("parses")
+        .to_commands(1, 1)
+    {
+        g.push_command(&c);
+    }
+    g
+}
+
 fn states(lp: &Loop) -> Vec<State> {
     let fb = lp.fb.expect("feedback");
     (0..3)
@@ -212,13 +224,7 @@ fn a_following_error_latches_like_a_device_estop() {
     let cell = cfg.to_shm();
     let mut lp = Loop::new(&cell);
     lp.enable();
-    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
-    for c in motion_program::parse("MOVE(140,40,0)\nEND", 3)
-        .expect("parses")
-        .to_commands(1, 1)
-    {
-        g.push_command(&c);
-    }
+    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
     let mut latched = false;
     for k in 0..20_000u64 {
         let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
@@ -379,13 +385,7 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     let cell = Config::default_cell().to_shm();
     let mut lp = Loop::new(&cell);
     lp.enable();
-    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
-    for c in motion_program::parse("MOVE(140,90,90)\nEND", 3)
-        .expect("parses")
-        .to_commands(1, 1)
-    {
-        g.push_command(&c);
-    }
+    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
     let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
     // 2 s of motion at full speed, then trajgen dies.
     for k in 0..2000 {
@@ -439,13 +439,7 @@ fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
     let cell = cfg.to_shm();
     let mut lp = Loop::new(&cell);
     lp.enable();
-    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
-    for c in motion_program::parse("MOVE(140,90,90)\nEND", 3)
-        .expect("parses")
-        .to_commands(1, 1)
-    {
-        g.push_command(&c);
-    }
+    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
     let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
     let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
     let mut prev = lp.state;
@@ -483,13 +477,7 @@ fn a_late_servo_cycle_is_not_a_step() {
     let cell = crate::closed_loop::at_rate(250).to_shm();
     let mut lp = Loop::new(&cell);
     lp.enable();
-    let mut g = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
-    for c in motion_program::parse("MOVE(140,90,90)\nEND", 3)
-        .expect("parses")
-        .to_commands(1, 1)
-    {
-        g.push_command(&c);
-    }
+    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
     let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
     for k in 0..6000u64 {
         if k == 4000 {
