@@ -22,7 +22,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
     CellConfigV2, EventV1, FieldbusImageV1, InstanceName, LatencyHistogramV1, MAX_AXES,
-    MotionCommandV1, MotionState, ProcState, ProcessStatusV1, RequestKind, Role, ServiceId,
+    MotionCommandV1, MotionState, Power, ProcState, ProcessStatusV1, RequestKind, Role, ServiceId,
     ServoRequestV1, ServoStateV2, SetpointV1,
 };
 use std::io::{IsTerminal, Write};
@@ -161,17 +161,37 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     if let Some((role, why)) = stop_problems.first() {
         return Err(RunError::failed(format!("{} {why}", role.name())));
     }
-    if !leftovers.is_empty() {
-        return Err(RunError::failed(format!(
-            "iceoryx2 resources left behind: {}",
-            leftovers.join(", ")
-        )));
+    if let Some(e) = leftover_error(&instance, &leftovers) {
+        return Err(e);
     }
     if let Some(path) = &opts.trace {
         write_trace(path, &report)
             .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
     }
     Ok(report)
+}
+
+/// What is left of `instance` after its processes stopped is a failure, unless a client
+/// (a tool of another shell: `status`, `events`, a foreign process) still holds it: then the
+/// client's files are its own, and a warning names it (the next run of the instance, or the
+/// client's own exit, removes them).
+fn leftover_error(instance: &InstanceName, leftovers: &[String]) -> Option<RunError> {
+    if leftovers.is_empty() {
+        return None;
+    }
+    let clients = ipc::live_node_pids(instance).unwrap_or_default();
+    if clients.is_empty() {
+        return Some(RunError::failed(format!(
+            "iceoryx2 resources left behind: {}",
+            leftovers.join(", ")
+        )));
+    }
+    tracing::warn!(
+        "instance {instance}: {} iceoryx2 file(s) are still held by client process(es) {clients:?}; \
+         they go when those clients exit or with the next run of the instance",
+        leftovers.len()
+    );
+    None
 }
 
 /// Starts the cell of `cfg` on `instance`: signal handlers, a refusal if the instance is in
@@ -327,13 +347,10 @@ impl Session {
         if let Some((role, why)) = stop_problems.first() {
             return Err(RunError::failed(format!("{} {why}", role.name())));
         }
-        if !leftovers.is_empty() {
-            return Err(RunError::failed(format!(
-                "iceoryx2 resources left behind: {}",
-                leftovers.join(", ")
-            )));
+        match leftover_error(&instance, &leftovers) {
+            Some(e) => Err(e),
+            None => Ok(events),
         }
-        Ok(events)
     }
 
     /// Takes the events that arrived, printing them as they happen.
@@ -589,6 +606,14 @@ impl Session {
                 if s.status & st::FAULT_LATCHED != 0 {
                     self.take_events();
                     return Err(RunError::failed(self.fault_text(cfg, &s)));
+                }
+                if s.power != Power::Enabled as u8 {
+                    self.take_events();
+                    return Err(RunError::failed(format!(
+                        "the arm is no longer enabled (servo power {}): a disable request from \
+                         another client stopped the run",
+                        Power::from_u8(s.power).map_or("?", Power::name)
+                    )));
                 }
                 if s.status & st::SETPOINT_JUMP != 0 {
                     self.take_events();

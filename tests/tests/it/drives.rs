@@ -301,3 +301,71 @@ fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
     assert!(s2c > 0.0, "{s2c}");
     assert_clean(&inst);
 }
+
+#[test]
+fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
+    use runtime::ipc::{self, Pub, Sub};
+    use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV2};
+    let inst = instance("disable");
+    let mut run = supervisor()
+        .args(["run", "--instance", &inst])
+        .arg(examples().join("triangle.prog"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn supervisor");
+    // Connect once the cell is up (an instance with a live client is refused by `run`).
+    let name = InstanceName::new(&inst).expect("instance");
+    let start = Instant::now();
+    while ipc::live_node_pids(&name).unwrap_or_default().len() < 5 {
+        assert!(start.elapsed() < WATCHDOG, "the cell never came up");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let node = ipc::node(&name, "test-client").expect("node");
+    let requests = Pub::<ServoRequestV1>::new(&node, &name, ServiceId::ServoRequest).expect("pub");
+    let state = Sub::<ServoStateV2>::new(&node, &name, ServiceId::ServoState, 64).expect("sub");
+    // Wait until the arm is enabled and moving, then ask servo to disable it.
+    loop {
+        assert!(start.elapsed() < WATCHDOG, "the arm never moved");
+        if state
+            .latest()
+            .is_some_and(|s| s.cmd_velocity[0].abs() > 1.0)
+        {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let seq = 1_000_000 + u64::from(std::process::id());
+    requests.update_connections();
+    assert!(requests.send(&ServoRequestV1 {
+        seq,
+        kind: RequestKind::Disable as u32,
+        axis: 0,
+        value: 0.0,
+    }));
+    // Servo echoes the request and goes disabling, then disabled.
+    let mut echoed = false;
+    while !echoed {
+        assert!(start.elapsed() < WATCHDOG, "servo never took the request");
+        echoed = state.latest().is_some_and(|s| s.request_seq == seq);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let out = {
+        while run.try_wait().expect("wait").is_none() {
+            assert!(start.elapsed() < WATCHDOG, "run did not end");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        run.wait_with_output().expect("output")
+    };
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("the arm is no longer enabled") && err.contains("disabling"),
+        "{err}"
+    );
+    // This test's node outlived the run: the files of the instance go with the last client.
+    drop((requests, state));
+    drop(node);
+    ipc::cleanup_after_client(&name);
+    assert_clean(&inst);
+}
