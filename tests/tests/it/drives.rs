@@ -37,6 +37,27 @@ fn on_target(j: &serde_json::Value) {
     }
 }
 
+/// `supervisor run` of the triangle on `inst`, in the background, its stderr captured.
+fn triangle_in_background(inst: &str) -> std::process::Child {
+    supervisor()
+        .args(["run", "--instance", inst])
+        .arg(examples().join("triangle.prog"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn supervisor")
+}
+
+/// Waits (under the watchdog) for a background run to end.
+fn wait_for(mut run: std::process::Child) -> std::process::Output {
+    let start = Instant::now();
+    while run.try_wait().expect("wait").is_none() {
+        assert!(start.elapsed() < WATCHDOG, "run did not end");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    run.wait_with_output().expect("output")
+}
+
 fn default_config() -> String {
     std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default")
 }
@@ -103,13 +124,7 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
 #[test]
 fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
     let inst = instance("inject-cmd");
-    let mut run = supervisor()
-        .args(["run", "--instance", &inst])
-        .arg(examples().join("triangle.prog"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn supervisor");
+    let run = triangle_in_background(&inst);
     // Wait until the arm is enabled, reading the instance's events from this shell.
     let start = Instant::now();
     loop {
@@ -133,14 +148,7 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let out = {
-        let start = Instant::now();
-        while run.try_wait().expect("wait").is_none() {
-            assert!(start.elapsed() < WATCHDOG, "run did not end");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        run.wait_with_output().expect("output")
-    };
+    let out = wait_for(run);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
@@ -307,13 +315,7 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
     use runtime::ipc::{self, Pub, Sub};
     use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV2};
     let inst = instance("disable");
-    let mut run = supervisor()
-        .args(["run", "--instance", &inst])
-        .arg(examples().join("triangle.prog"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn supervisor");
+    let run = triangle_in_background(&inst);
     // Connect once the cell is up (an instance with a live client is refused by `run`).
     let name = InstanceName::new(&inst).expect("instance");
     let start = Instant::now();
@@ -350,13 +352,7 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
         echoed = state.latest().is_some_and(|s| s.request_seq == seq);
         std::thread::sleep(Duration::from_millis(5));
     }
-    let out = {
-        while run.try_wait().expect("wait").is_none() {
-            assert!(start.elapsed() < WATCHDOG, "run did not end");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        run.wait_with_output().expect("output")
-    };
+    let out = wait_for(run);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
