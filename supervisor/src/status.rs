@@ -233,7 +233,7 @@ pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
     let seen = &snap.processes;
     let mut out = format!(
         "instance {instance}: wake-up latency since each process started (µs)\n\
-         process    pid      state     policy       prio    cycles  overruns       p50       p99     p99.9    p99.99       max\n"
+         process    pid      state     policy       prio    cycles  overruns       p50       p99     p99.9    p99.99       max  exec p99\n"
     );
     for p in seen {
         let s = &p.status;
@@ -250,9 +250,14 @@ pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
         match &p.latency {
             Some(h) => {
                 let m = Summary::of(h);
+                let exec = p
+                    .exec_time
+                    .as_ref()
+                    .filter(|h| h.count > 0)
+                    .map_or("-".to_string(), |h| format!("{:.1}", Summary::of(h).p99_us));
                 out += &format!(
-                    "  {:>8.1}  {:>8.1}  {:>8.1}  {:>8.1}  {:>8.1}\n",
-                    m.p50_us, m.p99_us, m.p99_9_us, m.p99_99_us, m.max_us
+                    "  {:>8.1}  {:>8.1}  {:>8.1}  {:>8.1}  {:>8.1}  {:>8}\n",
+                    m.p50_us, m.p99_us, m.p99_9_us, m.p99_99_us, m.max_us, exec
                 );
             }
             None => out += "  (no latency histogram published)\n",

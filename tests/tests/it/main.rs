@@ -1,6 +1,8 @@
-//! One integration-test binary (as ripgrep does): `cell` runs the real processes,
-//! `closed_loop` runs servo and the machine model in-process, `latency` runs the latency tool
-//! and `supervisor status`, `no_alloc` proves the cycle code allocation-free.
+//! One integration-test binary (as ripgrep does): `cell` and `drives` run the real processes
+//! (the triangle, bad input, killed processes; drive faults, injections, CSP, 4 kHz, tune),
+//! `loop_sim` puts servo and the machine model in one process for `closed_loop` and
+//! `servo_layer`, `latency` runs the latency tool and `supervisor status`, `no_alloc` proves
+//! the cycle code allocation-free.
 
 mod cell;
 mod closed_loop;
