@@ -507,7 +507,7 @@ impl Machine {
             }
         }
 
-        let elapsed = ((now_ns - self.last_ns) as f64 * 1e-9).min(MAX_STEP_S);
+        let elapsed = (now_ns.saturating_sub(self.last_ns) as f64 * 1e-9).min(MAX_STEP_S);
         self.last_ns = now_ns;
         // The integration step keeps its nominal size: a late cycle runs more steps, so the
         // drive's own loop (CSP, CSV) never integrates a host stall in one stride.

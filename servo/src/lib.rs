@@ -734,7 +734,8 @@ impl Controller {
             let faulted = states
                 .iter()
                 .any(|s| matches!(s, Some(State::Fault | State::FaultReactionActive)));
-            let valid = (0..self.p.axes).all(|i| fb.position[i].is_finite());
+            let fresh = now_ns.saturating_sub(self.feedback_new_ns) <= self.p.feedback_timeout_ns;
+            let valid = fresh && (0..self.p.axes).all(|i| fb.position[i].is_finite());
             if !faulted && valid {
                 let l = self.latched.take();
                 self.resetting_since = None;
@@ -751,7 +752,7 @@ impl Controller {
                 let why = if faulted {
                     "reset refused: a drive is still in Fault (its fault condition persists)"
                 } else {
-                    "reset refused: the feedback is still not valid"
+                    "reset refused: the drive feedback is still stale or not a number"
                 };
                 events.push(EventV1::new(
                     now_ns,

@@ -378,6 +378,29 @@ fn servo_notices_stale_feedback_and_cuts_power() {
             .iter()
             .all(|w| *w == cw::QUICK_STOP_CMD)
     );
+    // A reset while the feedback is still stale is refused; the fault stays latched.
+    let reset = shm_schema::ServoRequestV1 {
+        seq: 9,
+        kind: RequestKind::Reset as u32,
+        axis: 0,
+        value: 0.0,
+    };
+    let mut q = shm_schema::EventQueue::default();
+    let mut s = lp.state;
+    let (mut refused, mut cleared) = (false, false);
+    for k in 0..700u64 {
+        let r = (k == 0).then_some(&reset);
+        s = lp
+            .servo
+            .cycle(lp.now + (202 + k) * MS, r, None, fb.as_ref(), &mut q)
+            .1;
+        refused |= q.as_slice().iter().any(|e| e.code == code::REQUEST_REFUSED);
+        cleared |= q.as_slice().iter().any(|e| e.code == code::FAULT_CLEARED);
+        q.clear();
+    }
+    assert!(refused && !cleared, "refused {refused}, cleared {cleared}");
+    assert_ne!(s.status & st::FAULT_LATCHED, 0);
+    assert_eq!(s.fault_code, code::FEEDBACK_STALE);
 }
 
 #[test]
