@@ -390,9 +390,10 @@ impl Machine {
         }
     }
 
-    /// One machine cycle at `now_ns`: take the newest command and fault injection (if any
-    /// arrived), run the drives' watchdog and state machines, integrate the time since the
-    /// last cycle, sample the encoders. Events go to `events`.
+    /// One machine cycle at `now_ns`: integrate the time since the last cycle under the
+    /// drives' previous state and targets, then take the newest command and fault injection
+    /// (if any arrived; they act from now on), run the drives' watchdog and state machines,
+    /// sample the encoders. Events go to `events`.
     ///
     /// # Real-time
     /// Arithmetic and copies only; no allocation.
@@ -408,6 +409,41 @@ impl Machine {
             self.last_cmd_ns = now_ns;
         }
         let period_ns = now_ns.saturating_sub(self.last_ns).max(1);
+        // First the time that passed since the last cycle, under what the drives were
+        // doing then (their state, mode and targets): a command takes effect from the cycle
+        // that receives it on, never retroactively, so the plant sees the real
+        // sense-to-command delay.
+        let elapsed = (now_ns.saturating_sub(self.last_ns) as f64 * 1e-9).min(MAX_STEP_S);
+        // The integration step keeps its nominal size: a late cycle runs more steps, so the
+        // drive's own loop (CSP, CSV) never integrates a host stall in one stride.
+        let nominal = self.period_s / self.substeps as f64;
+        let steps = ((elapsed / nominal).ceil() as u32).max(self.substeps);
+        let dt = elapsed / steps as f64;
+        let dt_ns = (dt * 1e9) as u64;
+        for k in 0..steps {
+            let t_ns = self.last_ns + k as u64 * dt_ns;
+            for i in 0..self.axes {
+                let (d, a) = (&mut self.drive[i], &mut self.axis[i]);
+                match d.state() {
+                    State::OperationEnabled => {
+                        let u = d.demand(a, t_ns, dt);
+                        d.effort = u.clamp(-a.effort_limit, a.effort_limit);
+                        a.step(d.effort, dt, false);
+                    }
+                    State::QuickStopActive | State::FaultReactionActive => {
+                        d.effort = 0.0;
+                        a.ramp_down(d.quick_stop_decel, dt);
+                    }
+                    // Power stage off: the holding brake locks the axis.
+                    _ => {
+                        d.effort = 0.0;
+                        a.step(0.0, dt, true);
+                    }
+                }
+            }
+        }
+        self.last_ns = now_ns;
+
         // 0x6061 shows the mode requested by the previous command: a mode change takes
         // effect one drive cycle after it arrives. A mode the drive does not support is not
         // taken.
@@ -502,37 +538,6 @@ impl Machine {
                     d.integral = 0.0;
                     if d.first_enabled_ns == 0 {
                         d.first_enabled_ns = now_ns;
-                    }
-                }
-            }
-        }
-
-        let elapsed = (now_ns.saturating_sub(self.last_ns) as f64 * 1e-9).min(MAX_STEP_S);
-        self.last_ns = now_ns;
-        // The integration step keeps its nominal size: a late cycle runs more steps, so the
-        // drive's own loop (CSP, CSV) never integrates a host stall in one stride.
-        let nominal = self.period_s / self.substeps as f64;
-        let steps = ((elapsed / nominal).ceil() as u32).max(self.substeps);
-        let dt = elapsed / steps as f64;
-        let dt_ns = (dt * 1e9) as u64;
-        for k in 0..steps {
-            let t_ns = now_ns + k as u64 * dt_ns;
-            for i in 0..self.axes {
-                let (d, a) = (&mut self.drive[i], &mut self.axis[i]);
-                match d.state() {
-                    State::OperationEnabled => {
-                        let u = d.demand(a, t_ns, dt);
-                        d.effort = u.clamp(-a.effort_limit, a.effort_limit);
-                        a.step(d.effort, dt, false);
-                    }
-                    State::QuickStopActive | State::FaultReactionActive => {
-                        d.effort = 0.0;
-                        a.ramp_down(d.quick_stop_decel, dt);
-                    }
-                    // Power stage off: the holding brake locks the axis.
-                    _ => {
-                        d.effort = 0.0;
-                        a.step(0.0, dt, true);
                     }
                 }
             }
@@ -713,6 +718,9 @@ mod tests {
         let k = enabled(&mut m);
         let (fb, _) = at(&mut m, k, cw::ENABLE_OPERATION_CMD, 5.0);
         assert_eq!(fb.mode_display[0], Mode::Cst as i8);
+        // A command acts from the cycle that takes it on, never on the time before it.
+        assert_eq!((fb.velocity[0], fb.torque[0]), (0.0, 0.0));
+        let (fb, _) = at(&mut m, k + 1, cw::ENABLE_OPERATION_CMD, 5.0);
         assert!(fb.velocity[0] > 0.0 && fb.torque[0] == 5.0);
     }
 
