@@ -736,7 +736,13 @@ impl Controller {
                 .any(|s| matches!(s, Some(State::Fault | State::FaultReactionActive)));
             let fresh = now_ns.saturating_sub(self.feedback_new_ns) <= self.p.feedback_timeout_ns;
             let valid = fresh && (0..self.p.axes).all(|i| fb.position[i].is_finite());
-            if !faulted && valid {
+            // The cut must have run its course first: every drive stopped and without power
+            // (a reset never cancels a quick stop or a fault reaction under way).
+            let stopped = states
+                .iter()
+                .all(|s| s.is_some_and(|s| !s.power_stage_on()))
+                && (0..self.p.axes).all(|i| fb.velocity[i] == 0.0);
+            if !faulted && valid && stopped {
                 let l = self.latched.take();
                 self.resetting_since = None;
                 events.push(EventV1::new(
@@ -751,8 +757,10 @@ impl Controller {
                 self.resetting_since = None;
                 let why = if faulted {
                     "reset refused: a drive is still in Fault (its fault condition persists)"
-                } else {
+                } else if !valid {
                     "reset refused: the drive feedback is still stale or not a number"
+                } else {
+                    "reset refused: the drives are still stopping"
                 };
                 events.push(EventV1::new(
                     now_ns,
@@ -778,6 +786,9 @@ impl Controller {
         events: &mut EventQueue,
     ) {
         let n = self.p.axes;
+        // Should this cycle latch a fault and return early, the drives still get a sane
+        // target (the last reference), never 0.
+        out.cmd.target_position[..n].copy_from_slice(&self.ref_pos[..n]);
         if let Some(sp) = new_setpoint {
             let finite = (0..n).all(|i| {
                 sp.position[i].is_finite()

@@ -199,6 +199,9 @@ fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
         }
         let sp = setpoint(&lp, 50, 40.0 + dx, vx);
         let s = lp.step_with(None, Some(&sp), None);
+        // The cycle that latches still sends the last good targets, never 0.
+        let cmd = lp.cmd.expect("command");
+        assert_eq!(cmd.target_position[..3], [40.0, 40.0, 0.0], "{what}");
         assert_ne!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
         assert_eq!(s.fault_code, want, "{what}");
         let e = lp
@@ -552,4 +555,50 @@ fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit
     let s = lp.until(None, 2000, |s| s.status & st::SETTLED != 0);
     assert!((s.act_position[0] - 40.4).abs() <= 0.01);
     assert!(lp.codes().contains(&code::TUNE_STEP));
+}
+
+#[test]
+fn a_reset_never_cancels_a_quick_stop_under_way() {
+    // A following error at speed cuts power; a reset sent at once waits until every drive
+    // has stopped (the quick-stop ramp ran its course) and is without power.
+    let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
+    let cell = cfg.to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+    let mut k = 0u64;
+    loop {
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        if s.status & st::FAULT_LATCHED != 0 {
+            break;
+        }
+        k += 1;
+        assert!(k < 20_000, "no fault");
+    }
+    assert!(
+        lp.machine.axes()[0].velocity.abs() > 1.0,
+        "moving when power was cut"
+    );
+    let s = lp.step_with(Some(RequestKind::Reset), None, None);
+    assert_ne!(
+        s.status & st::FAULT_LATCHED,
+        0,
+        "not cleared while x still ramps down"
+    );
+    let s = lp.until(None, 2000, |s| s.status & st::FAULT_LATCHED == 0);
+    assert!(lp.machine.axes().iter().all(|a| a.velocity == 0.0));
+    assert!(
+        (0..3).all(|i| {
+            State::from_statusword(s.statusword[i]).is_some_and(|s| !s.power_stage_on())
+        })
+    );
+    // The ramp ran: x went through Quick stop active (11), then Switch on disabled (12).
+    let x: Vec<f64> = lp
+        .events
+        .iter()
+        .filter(|e| e.code == code::DRIVE_TRANSITION && e.axis == 0)
+        .map(|e| e.value)
+        .collect();
+    assert!(x.ends_with(&[11.0, 12.0]), "{x:?}");
 }
