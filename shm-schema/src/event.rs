@@ -423,7 +423,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "supervisor-action",
         severity: Severity::Info,
         unit: "",
-        meaning: "The supervisor acted (a request to servo, a fault injection); the text says what.",
+        meaning: "The supervisor or one of its tools acted (a fault injection); the text says what. Best effort: a tool publishes it from a port it has just opened, and a subscriber can miss it; the effect (e.g. `fault-injected` from the drives) is what to rely on.",
     },
 ];
 

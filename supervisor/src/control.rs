@@ -1,72 +1,155 @@
 //! One-shot commands to a running instance: fault injection into the simulated drives.
 
-use crate::config::{Config, FAULT_NAMES, fault_code};
+use crate::config::{FAULT_NAMES, fault_code};
 use runtime::events::EventSink;
-use runtime::ipc::{self, Pub};
+use runtime::ipc::{self, Pub, Sub};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
-use shm_schema::{EventV1, FaultInjectionV1, InstanceName, ServiceId};
-use std::time::Duration;
+use shm_schema::{CellConfigV2, EventV1, FaultInjectionV1, InstanceName, Role, ServiceId, str_of};
+use std::time::{Duration, Instant};
 
-/// `supervisor inject`: raises (or clears) `fault` on `axis` of the running `instance`.
+/// How long `inject` waits for the running cell's configuration and for the drives'
+/// acknowledgement.
+const PATIENCE: Duration = Duration::from_secs(2);
+
+/// Why `inject` failed.
+#[derive(Debug)]
+pub enum ControlError {
+    /// Bad input (instance, axis, fault name) or no such instance: nothing was sent. Exit 2.
+    Input(String),
+    /// Sent, but the drives did not take it. Exit 1.
+    Failed(String),
+}
+
+impl std::fmt::Display for ControlError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Input(m) | Self::Failed(m) => f.write_str(m),
+        }
+    }
+}
+
+/// `supervisor inject`: raises (or clears) `fault` on `axis` of the running `instance`, and
+/// waits until the drives report it (`fault-injected`), resending while they have not.
 pub fn inject(
     instance: &str,
-    config: Option<&std::path::Path>,
     axis: &str,
     fault: &str,
     clear: bool,
-) -> Result<String, String> {
+) -> Result<String, ControlError> {
+    let bad = ControlError::Input;
     let instance =
-        InstanceName::new(instance).map_err(|e| format!("--instance {instance:?}: {e}"))?;
-    let cfg = Config::load(config).map_err(|e| e.to_string())?;
-    let index = cfg
-        .axis
-        .iter()
-        .position(|a| a.name == axis)
-        .ok_or_else(|| {
-            let names: Vec<&str> = cfg.axis.iter().map(|a| a.name.as_str()).collect();
-            format!("--axis {axis:?}: the cell has axes {}", names.join(", "))
-        })?;
-    let code_of =
-        fault_code(fault).ok_or_else(|| format!("fault {fault:?} is not one of {FAULT_NAMES}"))?;
+        InstanceName::new(instance).map_err(|e| bad(format!("--instance {instance:?}: {e}")))?;
+    let code_of = fault_code(fault)
+        .ok_or_else(|| bad(format!("fault {fault:?} is not one of {FAULT_NAMES}")))?;
     ipc::quiet_iceoryx2_log();
     if ipc::live_node_pids(&instance)
         .unwrap_or_default()
         .is_empty()
     {
-        return Err(format!("no process of instance {instance} is running"));
+        return Err(bad(format!("no process of instance {instance} is running")));
     }
-    let f = |e: ipc::IpcError| e.to_string();
+    let f = |e: ipc::IpcError| ControlError::Failed(e.to_string());
     let node = ipc::node(&instance, &format!("inject-{}", std::process::id())).map_err(f)?;
-    let port =
-        Pub::<FaultInjectionV1>::new(&node, &instance, ServiceId::FaultInjection).map_err(f)?;
-    let mut events = EventSink::new(&node, &instance, SOURCE_SUPERVISOR).map_err(f)?;
-    // Let the drives' subscriber see the new publisher before sending.
-    std::thread::sleep(Duration::from_millis(50));
-    let sample = FaultInjectionV1 {
-        // Unique per sender and increasing: the time.
-        seq: runtime::time::now_ns(),
-        axis: index as u32,
-        code: code_of,
-        active: u16::from(!clear),
-    };
-    if !port.send(&sample) {
-        return Err("the drives' injection service refused the sample".into());
-    }
-    let what = if clear { "cleared" } else { "injected" };
-    events.emit(EventV1::new(
-        runtime::time::now_ns(),
-        code::SUPERVISOR_ACTION,
-        index as i32,
-        code_of as f64,
-        0.0,
-        &[what, " ", fault],
-    ));
-    // Keep the ports until the drives have taken it (their next cycle).
-    std::thread::sleep(Duration::from_millis(50));
-    drop((port, events));
+    let result = (|| {
+        // The axes of the cell that runs, not of a file: the configuration it published.
+        let config =
+            Sub::<CellConfigV2>::new(&node, &instance, ServiceId::CellConfig, 1).map_err(f)?;
+        let start = Instant::now();
+        let cell = loop {
+            if let Some(c) = config.latest() {
+                break c;
+            }
+            if start.elapsed() > PATIENCE {
+                return Err(ControlError::Failed(format!(
+                    "instance {instance} published no cell configuration within {} s",
+                    PATIENCE.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let names: Vec<&str> = cell.axes().iter().map(|a| str_of(&a.name)).collect();
+        let index = names.iter().position(|n| *n == axis).ok_or_else(|| {
+            ControlError::Input(format!(
+                "--axis {axis:?}: the cell has axes {}",
+                names.join(", ")
+            ))
+        })?;
+        let port =
+            Pub::<FaultInjectionV1>::new(&node, &instance, ServiceId::FaultInjection).map_err(f)?;
+        let acks = Sub::<EventV1>::new(&node, &instance, ServiceId::Events, 256).map_err(f)?;
+        let mut events = EventSink::new(&node, &instance, SOURCE_SUPERVISOR).map_err(f)?;
+        let sample = FaultInjectionV1 {
+            // Unique per sender and increasing: the time.
+            seq: runtime::time::now_ns(),
+            axis: index as u32,
+            code: code_of,
+            active: u16::from(!clear),
+        };
+        let want = if clear { 0.0 } else { f64::from(code_of) };
+        let what = if clear { "cleared" } else { "injected" };
+        // Announced first (the fault may end a run before its acknowledgement arrives), and
+        // only once this tool's own subscriber has received the announcement: then the
+        // subscribers that were there before it (the supervisor's) have it too. A sample of a
+        // brand-new publisher can be lost while its connections settle; it is sent again.
+        let announce = EventV1::new(
+            runtime::time::now_ns(),
+            code::SUPERVISOR_ACTION,
+            index as i32,
+            f64::from(code_of),
+            0.0,
+            &[if clear { "clearing " } else { "injecting " }, fault],
+        );
+        let start = Instant::now();
+        let mut heard = false;
+        while !heard && start.elapsed() < PATIENCE {
+            events.connect();
+            events.emit(announce);
+            let sent = Instant::now();
+            while !heard && sent.elapsed() < Duration::from_millis(100) {
+                while let Some(e) = acks.next() {
+                    heard |= e.source == SOURCE_SUPERVISOR
+                        && e.code == code::SUPERVISOR_ACTION
+                        && e.stamp_ns == announce.stamp_ns;
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
+        let start = Instant::now();
+        let mut sent_at: Option<Instant> = None;
+        loop {
+            // (Re)send until the drives answer: a sample sent before their subscriber saw this
+            // publisher is lost (history 0); the same `seq` is taken once.
+            if sent_at.is_none_or(|t| t.elapsed() > Duration::from_millis(100)) {
+                port.update_connections();
+                if !port.send(&sample) {
+                    return Err(ControlError::Failed(
+                        "the drives' injection service refused the sample".into(),
+                    ));
+                }
+                sent_at = Some(Instant::now());
+            }
+            while let Some(e) = acks.next() {
+                if e.code == code::FAULT_INJECTED
+                    && e.source == Role::Machine as u32
+                    && e.axis == index as i32
+                    && e.value == want
+                {
+                    return Ok(format!(
+                        "{what} {fault} on axis {axis} of instance {instance}"
+                    ));
+                }
+            }
+            if start.elapsed() > PATIENCE {
+                return Err(ControlError::Failed(format!(
+                    "the drives of instance {instance} did not report the injection within {} s \
+                     (is its machine the simulated one?)",
+                    PATIENCE.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    })();
     drop(node);
     ipc::cleanup_after_client(&instance);
-    Ok(format!(
-        "{what} {fault} on axis {axis} of instance {instance}"
-    ))
+    result
 }

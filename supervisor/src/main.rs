@@ -154,9 +154,6 @@ enum Cmd {
         /// Clear the condition instead of raising it.
         #[arg(long)]
         clear: bool,
-        /// Cell configuration the instance runs (for the axis names); default the embedded one.
-        #[arg(long)]
-        config: Option<PathBuf>,
     },
     /// The sending side of a latency hop (started by `supervisor latency`).
     #[command(hide = true, name = "latency-peer")]
@@ -320,19 +317,19 @@ fn main() -> ExitCode {
             axis,
             fault,
             clear,
-            config,
-        } => {
-            match supervisor::control::inject(&instance, config.as_deref(), &axis, &fault, clear) {
-                Ok(msg) => {
-                    println!("{msg}");
-                    ExitCode::SUCCESS
-                }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    ExitCode::from(2)
-                }
+        } => match supervisor::control::inject(&instance, &axis, &fault, clear) {
+            Ok(msg) => {
+                println!("{msg}");
+                ExitCode::SUCCESS
             }
-        }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(match e {
+                    supervisor::control::ControlError::Input(_) => 2,
+                    supervisor::control::ControlError::Failed(_) => 1,
+                })
+            }
+        },
         Cmd::DefaultConfig => {
             print!("{DEFAULT_TOML}");
             ExitCode::SUCCESS
