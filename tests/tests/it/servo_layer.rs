@@ -568,7 +568,7 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
     let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
     let mut k = 0u64;
     loop {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000));
         let s = lp.step_with(None, sp.as_ref(), None);
         if s.status & st::FAULT_LATCHED != 0 {
             break;
