@@ -155,6 +155,8 @@ pub struct Drive {
     condition: u16,
     /// A configured fault is present.
     configured_active: bool,
+    /// The requested mode is not supported (reported once).
+    mode_refused: bool,
 }
 
 impl Drive {
@@ -183,6 +185,7 @@ impl Drive {
             first_enabled_ns: 0,
             condition: 0,
             configured_active: false,
+            mode_refused: false,
         }
     }
 
@@ -240,6 +243,8 @@ pub struct Machine {
     last_cmd_ns: u64,
     last_inject_seq: u64,
     watchdog_tripped: bool,
+    /// A command for another number of axes was refused (reported once).
+    axes_refused: bool,
     last_ns: u64,
     seq: u64,
 }
@@ -277,6 +282,7 @@ impl Machine {
             last_cmd_ns: 0,
             last_inject_seq: 0,
             watchdog_tripped: false,
+            axes_refused: false,
             last_ns: 0,
             seq: 0,
         }
@@ -370,8 +376,8 @@ impl Machine {
             .iter()
             .filter(|f| f.code != 0 && f.axis as usize == i)
             .find(|f| {
-                let from = d.first_enabled_ns + f.at_ns;
-                now_ns >= from && now_ns < from + f.duration_ns.max(period_ns)
+                let from = d.first_enabled_ns.saturating_add(f.at_ns);
+                now_ns >= from && now_ns < from.saturating_add(f.duration_ns.max(period_ns))
             })
             .map_or(0, |f| f.code as u16)
     }
@@ -447,15 +453,40 @@ impl Machine {
         // 0x6061 shows the mode requested by the previous command: a mode change takes
         // effect one drive cycle after it arrives. A mode the drive does not support is not
         // taken.
-        for d in &mut self.drive[..self.axes] {
+        for (i, d) in self.drive[..self.axes].iter_mut().enumerate() {
             if Mode::from_i8(d.mode_request).is_some() {
                 d.mode_display = d.mode_request;
+                d.mode_refused = false;
+            } else if !d.mode_refused {
+                d.mode_refused = true;
+                events.push(EventV1::new(
+                    now_ns,
+                    code::DRIVE_COMMAND_REFUSED,
+                    i as i32,
+                    f64::from(d.mode_request),
+                    0.0,
+                    &[name_of(&self.names, i), ": mode of operation not supported"],
+                ));
             }
         }
         let mut sense_to_command_ns = 0;
         if let Some(c) = command.filter(|c| c.seq != self.last_cmd_seq) {
-            sense_to_command_ns = self.take_command(now_ns, c, events);
-            self.watchdog_tripped = false;
+            if c.axes as usize == self.axes {
+                sense_to_command_ns = self.take_command(now_ns, c, events);
+                self.watchdog_tripped = false;
+                self.axes_refused = false;
+            } else if !self.axes_refused {
+                // A command for another machine: not taken (the watchdog keeps counting).
+                self.axes_refused = true;
+                events.push(EventV1::new(
+                    now_ns,
+                    code::DRIVE_COMMAND_REFUSED,
+                    -1,
+                    f64::from(c.axes),
+                    self.axes as f64,
+                    &["command for another number of axes"],
+                ));
+            }
         }
         if let Some(f) = injection.filter(|f| f.seq != self.last_inject_seq) {
             self.take_injection(now_ns, f, events);
@@ -786,6 +817,40 @@ mod tests {
         let (fb, _) = at(&mut m, k + 4, cw::FAULT_RESET_CMD, 0.0);
         assert_eq!(state(&fb), State::SwitchOnDisabled);
         assert!(fb.position[0].is_finite());
+    }
+
+    #[test]
+    fn commands_for_another_machine_or_an_unsupported_mode_are_refused_with_an_event() {
+        let mut m = Machine::new(&cell(Mode::Cst));
+        let k = enabled(&mut m);
+        let mut c = command(k, cw::ENABLE_OPERATION_CMD, Mode::Cst, 5.0, 0.0);
+        c.axes = 2;
+        let mut q = EventQueue::default();
+        m.cycle(k * MS, Some(&c), None, &mut q);
+        let fb = m.cycle((k + 1) * MS, Some(&c), None, &mut q);
+        assert_eq!(fb.torque[0], 0.0, "not taken");
+        let refused: Vec<_> = q
+            .as_slice()
+            .iter()
+            .filter(|e| e.code == code::DRIVE_COMMAND_REFUSED)
+            .collect();
+        assert_eq!(refused.len(), 1, "reported once");
+        assert_eq!((refused[0].value, refused[0].limit), (2.0, 1.0));
+        let mut c = command(k + 2, cw::ENABLE_OPERATION_CMD, Mode::Cst, 0.0, 0.0);
+        c.mode[0] = 4; // profile torque: not supported
+        let mut q = EventQueue::default();
+        m.cycle((k + 2) * MS, Some(&c), None, &mut q);
+        let fb = m.cycle((k + 3) * MS, Some(&c), None, &mut q);
+        assert_eq!(
+            fb.mode_display[0],
+            Mode::Cst as i8,
+            "the mode in effect stays"
+        );
+        assert!(
+            q.as_slice()
+                .iter()
+                .any(|e| e.code == code::DRIVE_COMMAND_REFUSED && e.value == 4.0)
+        );
     }
 
     #[test]

@@ -10,6 +10,7 @@ pub struct EventSink {
     port: Pub<EventV1>,
     source: u32,
     seq: u64,
+    dropped_reported: u64,
 }
 
 impl EventSink {
@@ -20,6 +21,7 @@ impl EventSink {
             port: Pub::new(node, instance, ServiceId::Events)?,
             source,
             seq: 0,
+            dropped_reported: 0,
         })
     }
 
@@ -47,6 +49,19 @@ impl EventSink {
     pub fn drain(&mut self, q: &mut EventQueue) {
         for e in q.as_slice() {
             self.emit(*e);
+        }
+        if q.dropped > self.dropped_reported {
+            let new = q.dropped - self.dropped_reported;
+            self.dropped_reported = q.dropped;
+            let stamp = q.as_slice().last().map_or(0, |e| e.stamp_ns);
+            self.emit(EventV1::new(
+                stamp,
+                shm_schema::event::code::EVENTS_DROPPED,
+                -1,
+                new as f64,
+                shm_schema::event::EVENT_QUEUE_CAP as f64,
+                &["a cycle queued more events than its queue holds"],
+            ));
         }
         q.clear();
     }

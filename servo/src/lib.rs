@@ -361,6 +361,16 @@ impl Controller {
             self.feedback_seq = fb.seq;
             self.feedback_new_ns = now_ns;
         }
+        if fb.axes as usize != n {
+            let l = Latched {
+                code: code::FEEDBACK_MISMATCH,
+                axis: -1,
+                value: f64::from(fb.axes),
+                limit: n as f64,
+            };
+            self.latch(now_ns, l, &["the drives report another number of axes"], ev);
+            return false;
+        }
         for i in 0..n {
             let bad = [fb.position[i], fb.velocity[i], fb.torque[i]]
                 .iter()
@@ -412,6 +422,16 @@ impl Controller {
                     let why = cia402::error_code::name(fb.error_code[i]);
                     self.latch(now_ns, l, &[name, ": ", why], ev);
                 }
+            } else if self.power == Power::Enabled
+                && fb.mode_display[i] as i32 != self.p.axis[i].mode
+            {
+                let l = Latched {
+                    code: code::FEEDBACK_MISMATCH,
+                    axis: i as i32,
+                    value: f64::from(fb.mode_display[i]),
+                    limit: f64::from(self.p.axis[i].mode),
+                };
+                self.latch(now_ns, l, &[name, ": the drive runs another mode"], ev);
             } else if self.power == Power::Enabled && s != Some(State::OperationEnabled) {
                 let l = Latched {
                     code: code::DRIVE_LOST_ENABLE,
@@ -702,7 +722,11 @@ impl Controller {
     ) {
         let all = |f: fn(State) -> bool| states.iter().all(|s| s.is_some_and(f));
         match self.power {
-            Power::Enabling if all(|s| s == State::OperationEnabled) => {
+            Power::Enabling
+                if all(|s| s == State::OperationEnabled)
+                    && (0..self.p.axes)
+                        .all(|i| fb.mode_display[i] as i32 == self.p.axis[i].mode) =>
+            {
                 let took = now_ns.saturating_sub(self.power_since_ns) as f64 * 1e-9;
                 self.set_power(Power::Enabled, now_ns);
                 self.setpoint = None;
@@ -715,13 +739,18 @@ impl Controller {
             {
                 let took = now_ns.saturating_sub(self.power_since_ns) as f64 * 1e-9;
                 self.set_power(Power::Disabling, now_ns);
+                let why = if all(|s| s == State::OperationEnabled) {
+                    "a drive does not run the configured mode of operation (0x6061)"
+                } else {
+                    "a drive did not reach Operation enabled"
+                };
                 events.push(EventV1::new(
                     now_ns,
                     code::ENABLE_TIMEOUT,
                     -1,
                     took,
                     self.p.enable_timeout_ns as f64 * 1e-9,
-                    &["a drive did not reach Operation enabled"],
+                    &[why],
                 ));
             }
             Power::Disabling if all(|s| !s.power_stage_on()) => {

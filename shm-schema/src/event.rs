@@ -179,6 +179,9 @@ pub mod code {
     pub const REQUEST_REFUSED: u32 = 213;
     /// A drive left Operation enabled on its own; value: its statusword.
     pub const DRIVE_LOST_ENABLE: u32 = 214;
+    /// The drives' feedback does not match the cell: its axis count, or a drive's mode
+    /// display while enabled; value: what it reports, limit: what the cell expects.
+    pub const FEEDBACK_MISMATCH: u32 = 216;
     /// trajgen refused a motion command and stopped the axes on their current target;
     /// value: the command's program line, limit: trajgen's fault code.
     pub const MOTION_COMMAND_REFUSED: u32 = 215;
@@ -200,6 +203,9 @@ pub mod code {
 
     /// A burst of overruns; value: overruns since the previous such event.
     pub const OVERRUN_BURST: u32 = 401;
+    /// A cycle queued more events than its queue holds; value: events lost, limit: the
+    /// queue's capacity.
+    pub const EVENTS_DROPPED: u32 = 402;
 
     /// The supervisor sent a request or a command on the user's behalf.
     pub const SUPERVISOR_ACTION: u32 = 501;
@@ -255,7 +261,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "drive-command-refused",
         severity: Severity::Error,
         unit: "mode",
-        meaning: "A drive refused a command whose target is not a finite number: it keeps its last valid target and faults (0x6320, parameter error). A mode of operation it does not support is not taken: 0x6061 keeps showing the mode in effect.",
+        meaning: "A drive refused a command: a target that is not a finite number (it keeps its last valid target and faults: 0x6320, parameter error; value: the requested mode), a mode of operation it does not support (not taken: 0x6061 keeps showing the mode in effect; value: that mode), or a command for another number of axes (not taken at all; value: its axis count, limit: the drives'). Reported once until a valid command arrives.",
     },
     CodeInfo {
         code: code::POSITION_OUT_OF_RANGE,
@@ -363,6 +369,13 @@ pub const CODES: &[CodeInfo] = &[
         meaning: "trajgen refused a motion command (axis count, a target outside the limits, a malformed or lost command, a full queue; the text says which): the queue is emptied and the axes stop on their current target.",
     },
     CodeInfo {
+        code: code::FEEDBACK_MISMATCH,
+        name: "feedback-mismatch",
+        severity: Severity::Error,
+        unit: "axis count, or mode of operation",
+        meaning: "The drives' feedback is not the cell's: it carries another number of axes, or a drive's mode of operation display (0x6061) is not the mode the axis is configured for while the arm is enabled (or when enabling would complete). Servo cannot trust it: power is cut and the fault latched until reset.",
+    },
+    CodeInfo {
         code: code::ENABLING,
         name: "enabling",
         severity: Severity::Info,
@@ -417,6 +430,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Warning,
         unit: "overruns",
         meaning: "A process' cycle ran past its next deadline (the CS9 overrun rule); value: overruns since the previous such event of the process (at most one event per second).",
+    },
+    CodeInfo {
+        code: code::EVENTS_DROPPED,
+        name: "events-dropped",
+        severity: Severity::Warning,
+        unit: "events (limit: the queue's capacity)",
+        meaning: "A process' cycle queued more events than its fixed queue holds; the value says how many were lost since the previous such event.",
     },
     CodeInfo {
         code: code::SUPERVISOR_ACTION,

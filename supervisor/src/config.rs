@@ -614,10 +614,10 @@ impl Config {
                     format!("inject: fault {:?} is not one of {FAULT_NAMES}", f.fault),
                 );
             }
-            if !(non_negative(f.at) && non_negative(f.duration)) {
+            if !(non_negative(f.at) && non_negative(f.duration) && f.at + f.duration <= 1e6) {
                 return bad(
                     at("at"),
-                    "inject: at and duration must be 0 s or more".into(),
+                    "inject: at and duration must be 0 s or more, together at most 1e6 s".into(),
                 );
             }
         }

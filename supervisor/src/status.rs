@@ -159,8 +159,12 @@ fn drive_state(sw: u16) -> &'static str {
 
 /// Servo's state as JSON: the arm and every axis.
 fn servo_json(s: &ServoStateV2, cell: Option<&CellConfigV2>) -> Value {
-    let names: Vec<String> = (0..s.axes as usize)
-        .map(|i| cell.map_or(format!("{i}"), |c| str_of(&c.axis[i].name).to_string()))
+    let n = (s.axes as usize).min(shm_schema::MAX_AXES);
+    let names: Vec<String> = (0..n)
+        .map(|i| match cell {
+            Some(c) if i < c.axes as usize => str_of(&c.axis[i].name).to_string(),
+            _ => format!("axis {i}"),
+        })
         .collect();
     let mut axes = Map::new();
     for (i, n) in names.iter().enumerate() {

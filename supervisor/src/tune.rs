@@ -189,7 +189,17 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     let mut session = open_cell(&cfg, instance, opts.progress)?;
     let measured = measure(&mut session, &cfg, i, opts);
     let closed = session.close();
-    let (samples, start, ramp) = measured?;
+    let (samples, start, ramp) = match (measured, &closed) {
+        (Ok(m), _) => m,
+        // A failed session still reports its events.
+        (Err(RunError::Failed { message, .. }), Ok(events)) => {
+            return Err(RunError::Failed {
+                message,
+                events: events.clone(),
+            });
+        }
+        (Err(e), _) => return Err(e),
+    };
     let events = closed?;
     Ok(TuneReport {
         instance: instance.to_string(),

@@ -602,3 +602,35 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
         .collect();
     assert!(x.ends_with(&[11.0, 12.0]), "{x:?}");
 }
+
+#[test]
+fn feedback_that_is_not_the_cells_latches() {
+    // A drives' process for another machine (2 axes for a 3-axis cell) is refused at once.
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut fb = lp.fb.expect("feedback");
+    fb.axes = 2;
+    fb.seq += 1;
+    let mut q = shm_schema::EventQueue::default();
+    let s = lp
+        .servo
+        .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
+        .1;
+    assert_eq!(
+        (s.fault_code, s.fault_value, s.fault_limit),
+        (code::FEEDBACK_MISMATCH, 2.0, 3.0)
+    );
+    // A drive that runs another mode than configured (CSP for a CST axis) while enabled.
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut fb = lp.fb.expect("feedback");
+    fb.mode_display[1] = cia402::Mode::Csp as i8;
+    fb.seq += 1;
+    let s = lp
+        .servo
+        .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
+        .1;
+    assert_eq!((s.fault_code, s.fault_axis), (code::FEEDBACK_MISMATCH, 1));
+    assert_eq!((s.fault_value, s.fault_limit), (8.0, 10.0));
+}
