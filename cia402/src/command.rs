@@ -65,6 +65,9 @@ impl Command {
 ///
 /// So 0x0000 and 0x0004 are Disable voltage, 0x0002 and 0x0003 Quick stop, 0x0006 and 0x000E
 /// Shutdown. Bits 4-6 and 8-15 (mode-specific, halt, manufacturer) never change the command.
+///
+/// # Real-time
+/// Constant time, no allocation, no system call: called in every cycle.
 pub const fn decode(controlword: u16) -> Option<Command> {
     if set(controlword, cw::FAULT_RESET) {
         None

@@ -88,6 +88,9 @@ impl Device {
     ///    see [`crate`]'s transition table. A word that is not a listed command for the
     ///    current state is ignored; in Quick stop active the stop also ends by itself
     ///    (12) when the option returns to Switch on disabled.
+    ///
+    /// # Real-time
+    /// Constant time, no allocation, no system call: called in every cycle.
     pub fn step(&mut self, controlword: u16, c: Conditions) -> Option<Transition> {
         let reset_edge = self.track_reset_bit(controlword);
         let (number, to) = self.next(controlword, reset_edge, c)?;

@@ -16,6 +16,9 @@ use crate::{State, cw};
 ///
 /// Never a fault reset: a drive never re-enables by itself after a fault; the master resets
 /// it deliberately ([`FaultReset`]).
+///
+/// # Real-time
+/// Constant time, no allocation, no system call: called in every cycle.
 pub const fn enable_step(s: State) -> u16 {
     match s {
         State::SwitchOnDisabled => cw::SHUTDOWN,
@@ -41,6 +44,9 @@ pub const fn enable_step(s: State) -> u16 {
 ///
 /// Repeated, it settles every drive that is not faulted in Ready to switch on, power stage
 /// off, one Switch on away from high voltage.
+///
+/// # Real-time
+/// Constant time, no allocation, no system call: called in every cycle.
 pub const fn disable_step(s: State) -> u16 {
     match s {
         State::OperationEnabled
@@ -79,6 +85,9 @@ impl FaultReset {
     /// The controlword to write this cycle, given the state the drive reports: 0x0000 on the
     /// first call, then [`cw::FAULT_RESET_CMD`] while `s` is Fault, [`cw::DISABLE_VOLTAGE`]
     /// otherwise (also while the fault reaction still runs: the edge comes once in Fault).
+    ///
+    /// # Real-time
+    /// Constant time, no allocation, no system call: called in every cycle.
     pub fn controlword(&mut self, s: State) -> u16 {
         if !self.low_sent {
             self.low_sent = true;

@@ -75,6 +75,9 @@ impl State {
     /// enabled, warning, remote, target reached, mode-specific and vendor bits, and bit 5 in the
     /// 0x004F states) are ignored. `None` for a word that matches no state (the masks are
     /// disjoint, so at most one matches).
+    ///
+    /// # Real-time
+    /// Constant time, no allocation, no system call: called in every cycle.
     pub fn from_statusword(sw: u16) -> Option<State> {
         State::ALL
             .into_iter()

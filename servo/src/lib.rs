@@ -128,6 +128,9 @@ pub struct Controller {
     stale_setpoint: bool,
     jump_reported: bool,
     rejoin: Rejoin,
+    /// A disable request found the arm enabled: the reference comes to rest before power
+    /// goes off.
+    stopping: bool,
     /// Tuning offsets of the reference (axis unit).
     tune_offset: [f64; MAX_AXES],
     /// The offset of this axis changed this cycle: its position step is the requested one.
@@ -219,6 +222,7 @@ impl Controller {
             stale_setpoint: false,
             jump_reported: false,
             rejoin: Rejoin::default(),
+            stopping: false,
             tune_offset: [0.0; MAX_AXES],
             tune_step: [false; MAX_AXES],
             applied_offset: [0.0; MAX_AXES],
@@ -245,6 +249,7 @@ impl Controller {
         }
         self.latched = Some(l);
         self.resetting_since = None;
+        self.stopping = false;
         events.push(EventV1::new(now_ns, l.code, l.axis, l.value, l.limit, text));
         events.push(EventV1::new(
             now_ns,
@@ -263,8 +268,11 @@ impl Controller {
     fn set_power(&mut self, p: Power, now_ns: u64) {
         self.power = p;
         self.power_since_ns = now_ns;
-        self.tune_offset = [0.0; MAX_AXES];
-        self.applied_offset = [0.0; MAX_AXES];
+        if p != Power::Disabling {
+            // Not while disabling: the reference still holds the offset as it comes to rest.
+            self.tune_offset = [0.0; MAX_AXES];
+            self.applied_offset = [0.0; MAX_AXES];
+        }
     }
 
     /// Takes a request (seed 001: it takes effect in this cycle).
@@ -299,6 +307,10 @@ impl Controller {
             }
             Some(RequestKind::Disable) => {
                 if matches!(self.power, Power::Enabling | Power::Enabled) {
+                    // An enabled arm first comes to rest along its path (the setpoint is
+                    // dropped, the reference decelerates), then powers down (Shutdown).
+                    self.stopping = self.power == Power::Enabled;
+                    self.setpoint = None;
                     self.set_power(Power::Disabling, now_ns);
                     events.push(EventV1::new(now_ns, code::DISABLING, -1, 0.0, 0.0, &[]));
                 }
@@ -689,7 +701,16 @@ impl Controller {
             core::array::from_fn(|i| State::from_statusword(fb.statusword[i]));
         self.advance_power(now_ns, &states[..n], fb, events);
 
-        if self.power == Power::Enabled && feedback_ok {
+        if self.stopping && self.latched.is_none() && feedback_ok {
+            // Disabling at speed: the reference comes to rest first, power stays on.
+            self.follow(now_ns, dt, None, fb, &mut out, events);
+            let at_rest = (0..n).all(|i| {
+                self.ref_vel[i] == 0.0 && fb.velocity[i].abs() <= self.p.axis[i].settle_velocity
+            });
+            if at_rest {
+                self.stopping = false;
+            }
+        } else if self.power == Power::Enabled && feedback_ok {
             self.follow(now_ns, dt, new_setpoint, fb, &mut out, events);
         } else {
             // Not following: the reference is where the axes are (bumpless enable; a CSP
@@ -944,6 +965,8 @@ impl Controller {
             } else {
                 match self.power {
                     Power::Enabling | Power::Enabled => enable_step(s),
+                    // Still bringing the axes to rest: keep the drives enabled.
+                    Power::Disabling if self.stopping => enable_step(s),
                     Power::Disabling | Power::Disabled => disable_step(s),
                 }
             };

@@ -634,3 +634,44 @@ fn feedback_that_is_not_the_cells_latches() {
     assert_eq!((s.fault_code, s.fault_axis), (code::FEEDBACK_MISMATCH, 1));
     assert_eq!((s.fault_value, s.fault_limit), (8.0, 10.0));
 }
+
+#[test]
+fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
+    for k in 0..2000u64 {
+        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000));
+        lp.step_with(None, sp.as_ref(), None);
+    }
+    let v0 = lp.state.cmd_velocity[0];
+    assert!(v0 > 10.0, "moving at {v0}");
+    let s = lp.step_with(Some(RequestKind::Disable), None, None);
+    assert_eq!(s.power, Power::Disabling as u8);
+    assert!(
+        s.controlword[..3]
+            .iter()
+            .all(|w| *w == cw::ENABLE_OPERATION_CMD)
+    );
+    // Power stays on while the reference decelerates; Shutdown only at rest.
+    let mut cycles = 0u64;
+    let mut max_fe = 0.0f64;
+    loop {
+        let s = lp.step();
+        max_fe = max_fe.max(s.following_error[0].abs());
+        if s.controlword[0] == cw::SHUTDOWN {
+            assert!(lp.machine.axes()[0].velocity.abs() <= 0.1, "still moving");
+            break;
+        }
+        cycles += 1;
+        assert!(cycles < 5000, "never powered down");
+    }
+    // From v0 at vmax / t_acc: about t_acc.
+    let ramp_s = cycles as f64 * 1e-3;
+    assert!(ramp_s > 0.8 * v0 / (16.0 / 0.525), "{ramp_s} s");
+    assert!(max_fe < 0.5, "{max_fe}");
+    let s = lp.until(None, 100, |s| s.power == Power::Disabled as u8);
+    assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
+    assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
+}
