@@ -433,7 +433,7 @@ impl Machine {
                 match d.state() {
                     State::OperationEnabled => {
                         let u = d.demand(a, t_ns, dt);
-                        d.effort = u.clamp(-a.effort_limit, a.effort_limit);
+                        d.effort = shm_schema::bound(u, -a.effort_limit, a.effort_limit);
                         a.step(d.effort, dt, false);
                     }
                     State::QuickStopActive | State::FaultReactionActive => {

@@ -53,7 +53,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
     AxisConfigV2, CellConfigV2, DriveCommandV2, DriveFeedbackV2, EventV1, MAX_AXES, Power,
-    RequestKind, Role, ServoRequestV1, ServoStateV2, SetpointV1, str_of,
+    RequestKind, Role, ServoRequestV1, ServoStateV2, SetpointV1, bound, str_of,
 };
 
 /// Parameters of the controller.
@@ -143,16 +143,21 @@ pub struct Controller {
     seq: u64,
 }
 
-/// The setpoint `sp` of axis `i` extrapolated `h` seconds: constant acceleration, the velocity
-/// never beyond `vmax` (trajgen's never is). Returns position, velocity, acceleration.
+/// The setpoint `sp` of axis `i` extrapolated `h` seconds (back in time when negative):
+/// constant acceleration, forward never beyond `vmax` (trajgen's velocity never is). Returns
+/// position, velocity, acceleration.
+///
+/// # Real-time
+/// Arithmetic only; never panics (no clamp with crossed bounds).
 fn extrapolate(sp: &SetpointV1, i: usize, h: f64, vmax: f64) -> (f64, f64, f64) {
     let (p, v, a) = (sp.position[i], sp.velocity[i], sp.acceleration[i]);
     let v_end = v + a * h;
-    if v_end.abs() <= vmax || a == 0.0 {
+    // Backwards (h < 0, a setpoint newer than servo's cycle) the trajectory was within vmax.
+    if v_end.abs() <= vmax || a == 0.0 || h <= 0.0 {
         return (p + v * h + 0.5 * a * h * h, v_end, a);
     }
     let lim = vmax.copysign(v_end);
-    let t1 = ((lim - v) / a).clamp(0.0, h);
+    let t1 = bound((lim - v) / a, 0.0, h);
     (p + v * t1 + 0.5 * a * t1 * t1 + lim * (h - t1), lim, 0.0)
 }
 
@@ -473,7 +478,7 @@ impl Controller {
             if h <= self.p.max_extrapolation_s {
                 let (off_p, off_v) = self.rejoin.offset(now_ns);
                 for i in 0..n {
-                    let (p, v, a) = extrapolate(&sp, i, h.max(0.0), self.p.axis[i].vmax);
+                    let (p, v, a) = extrapolate(&sp, i, self.bounded_age(h), self.p.axis[i].vmax);
                     pos[i] = p + off_p[i] + self.tune_offset[i];
                     vel[i] = v + off_v[i];
                     acc[i] = a;
@@ -525,7 +530,8 @@ impl Controller {
             return;
         };
         let (off_p, off_v) = self.rejoin.offset(now_ns);
-        let age = |s: &SetpointV1| ((now_ns as i128 - s.stamp_ns as i128) as f64 * 1e-9).max(0.0);
+        let age =
+            |s: &SetpointV1| self.bounded_age((now_ns as i128 - s.stamp_ns as i128) as f64 * 1e-9);
         let mut d_p = [0.0; MAX_AXES];
         let mut d_v = [0.0; MAX_AXES];
         let mut small = true;
@@ -549,6 +555,15 @@ impl Controller {
         };
     }
 
+    /// The age of a setpoint at servo's time, as used to evaluate it. It can be negative: servo
+    /// takes its time when it wakes, and a host stall between that and reading the setpoint
+    /// lets trajgen publish one stamped after it; servo then evaluates the trajectory back at
+    /// its own time (clamping to the setpoint's stamp would step the reference ahead by the
+    /// stall). Bounded by the setpoint timeout either way.
+    fn bounded_age(&self, h: f64) -> f64 {
+        bound(h, -self.p.max_extrapolation_s, self.p.max_extrapolation_s)
+    }
+
     /// A setpoint from a new source (the first one, one after a stale spell, or one whose
     /// stamp goes back: trajgen restarted) must start where servo holds: within the
     /// in-position band plus what the axis can move in 1.5 cycles, and at the reference's
@@ -561,8 +576,7 @@ impl Controller {
         {
             return None;
         }
-        let age = ((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9)
-            .clamp(0.0, self.p.max_extrapolation_s);
+        let age = self.bounded_age((now_ns as i128 - sp.stamp_ns as i128) as f64 * 1e-9);
         let scale = (dt / self.p.period_s).max(1.0);
         (0..self.p.axes).find_map(|i| {
             let at_now = sp.position[i] + sp.velocity[i] * age;
@@ -921,12 +935,15 @@ impl Controller {
                     out.state.effort[i] = fb.torque[i];
                 }
                 _ => {
-                    self.integral[i] = (self.integral[i] + g.ki * e * dt)
-                        .clamp(-g.integral_limit, g.integral_limit);
+                    self.integral[i] = bound(
+                        self.integral[i] + g.ki * e * dt,
+                        -g.integral_limit,
+                        g.integral_limit,
+                    );
                     let u = g.kp * e + self.integral[i] + g.kd * ev + ff;
                     let limit = g.effort_limit;
                     out.cmd.target_position[i] = pos[i];
-                    out.cmd.target_torque[i] = u.clamp(-limit, limit);
+                    out.cmd.target_torque[i] = bound(u, -limit, limit);
                     out.state.effort[i] = out.cmd.target_torque[i];
                 }
             }

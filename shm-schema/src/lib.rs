@@ -46,6 +46,13 @@ pub fn fixed_str<const N: usize>(s: &str) -> [u8; N] {
     out
 }
 
+/// `v` bounded to `[lo, hi]` without `f64::clamp`'s panic on crossed or NaN bounds (a real-time
+/// process must not abort on a bad value): NaN bounds are ignored, crossed ones give `hi`.
+#[inline]
+pub fn bound(v: f64, lo: f64, hi: f64) -> f64 {
+    v.max(lo).min(hi)
+}
+
 /// Reads a NUL-padded byte field back as text; invalid UTF-8 reads as `"?"`.
 pub fn str_of(bytes: &[u8]) -> &str {
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
@@ -55,6 +62,15 @@ pub fn str_of(bytes: &[u8]) -> &str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bound_never_panics() {
+        assert_eq!(bound(5.0, -1.0, 1.0), 1.0);
+        assert_eq!(bound(-5.0, -1.0, 1.0), -1.0);
+        assert_eq!(bound(0.5, f64::NAN, 1.0), 0.5);
+        assert_eq!(bound(0.5, 1.0, -1.0), -1.0);
+        assert!(bound(f64::NAN, -1.0, 1.0).is_finite());
+    }
 
     #[test]
     fn fixed_strings_round_trip_and_truncate() {

@@ -675,3 +675,23 @@ fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
     assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
     assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
 }
+
+#[test]
+fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
+    // Servo takes its time when it wakes; a host stall before it reads the setpoint lets
+    // trajgen publish one stamped 6 ms later. At 16 mm/s, taking it at its stamp would step
+    // the command 0.1 mm in one cycle (found at 4 kHz on this VM); servo evaluates it back at
+    // its own time instead.
+    let cell = crate::closed_loop::at_rate(250).to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    for k in 0..12_000u64 {
+        // One setpoint from the future of servo's cycle, at full speed.
+        let ahead = if k == 10_000 { 6_000_000 } else { 0 };
+        let sp = (k % tg == 0 || k == 10_000).then(|| g.step(lp.now + 100_000 + ahead));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
+    }
+}
