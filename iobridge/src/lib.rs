@@ -22,9 +22,11 @@ pub fn milli_units(v: f64) -> i32 {
     if !v.is_finite() {
         return IMAGE_INVALID;
     }
-    (v * 1000.0)
-        .round()
-        .clamp(IMAGE_INVALID as f64 + 1.0, i32::MAX as f64) as i32
+    shm_schema::bound(
+        (v * 1000.0).round(),
+        IMAGE_INVALID as f64 + 1.0,
+        i32::MAX as f64,
+    ) as i32
 }
 
 /// Writes the output image for `state` at `now_ns`.

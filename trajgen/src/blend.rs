@@ -55,7 +55,7 @@ impl Segment {
     #[inline]
     pub fn eval(&self, t: f64) -> (Axes, Axes) {
         let tau = self.t_acc;
-        let t = t.clamp(-tau, self.transition_time());
+        let t = shm_schema::bound(t, -tau, self.transition_time());
         let dc = self.c - self.b;
         if t < tau {
             let da = self.a - self.b;
@@ -73,7 +73,7 @@ impl Segment {
     #[inline]
     pub fn accel(&self, t: f64) -> Axes {
         let tau = self.t_acc;
-        let t = t.clamp(-tau, self.transition_time());
+        let t = shm_schema::bound(t, -tau, self.transition_time());
         if t < tau {
             let h = (t + tau) / (2.0 * tau);
             let k = (self.c - self.b) * (tau / self.t1) + (self.a - self.b);
