@@ -5,6 +5,7 @@
 use integration_tests::{
     assert_clean, examples, instance, json_of, pids_with, run_with_watchdog, scratch, supervisor,
 };
+use shm_schema::drive::servo_status as st;
 use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
@@ -39,9 +40,17 @@ fn on_target(j: &serde_json::Value) {
 
 /// `supervisor run` of the triangle on `inst`, in the background, its stderr captured.
 fn triangle_in_background(inst: &str) -> std::process::Child {
-    supervisor()
-        .args(["run", "--instance", inst])
-        .arg(examples().join("triangle.prog"))
+    triangle_in_background_with(inst, None)
+}
+
+/// The same with a configuration file.
+fn triangle_in_background_with(inst: &str, cfg: Option<&Path>) -> std::process::Child {
+    let mut cmd = supervisor();
+    cmd.args(["run", "--instance", inst]);
+    if let Some(c) = cfg {
+        cmd.arg("--config").arg(c);
+    }
+    cmd.arg(examples().join("triangle.prog"))
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -369,5 +378,166 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
     drop((requests, state));
     drop(node);
     ipc::cleanup_after_client(&name);
+    assert_clean(&inst);
+}
+
+/// The default cell with a supervisor heartbeat of 5 s, so a test can stall one process for
+/// a while without the supervisor ending the run first.
+fn patient_config(test: &str) -> std::path::PathBuf {
+    let cfg = default_config();
+    assert!(cfg.contains("heartbeat_timeout = 1.0"));
+    scratch(
+        test,
+        "cell.toml",
+        &cfg.replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 5.0", 1),
+    )
+}
+
+/// Pid of `role`'s process of the run on `inst`, by its program's name (the supervisor's own
+/// command line may hold the role's name too), waiting for it under the watchdog.
+fn pid_of(role: &str, inst: &str) -> i32 {
+    let start = Instant::now();
+    loop {
+        let pids: Vec<i32> = pids_with(&["--instance", inst])
+            .into_iter()
+            .filter(|pid| {
+                std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| {
+                    let argv0 = c.split(|b| *b == 0).next().unwrap_or_default();
+                    Path::new(std::str::from_utf8(argv0).unwrap_or_default())
+                        .file_name()
+                        .is_some_and(|n| n == role)
+                })
+            })
+            .collect();
+        if let [pid] = pids[..] {
+            return pid;
+        }
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "{role} of {inst} not found: {pids:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Waits until servo of `inst` follows a motion (x faster than 1 mm/s); returns the port.
+fn until_moving(
+    node: &iceoryx2::prelude::Node<runtime::ipc::Ipc>,
+    name: &shm_schema::InstanceName,
+) -> runtime::ipc::Sub<shm_schema::ServoStateV2> {
+    let state = runtime::ipc::Sub::<shm_schema::ServoStateV2>::new(
+        node,
+        name,
+        shm_schema::ServiceId::ServoState,
+        1024,
+    )
+    .expect("sub");
+    let start = Instant::now();
+    while !state
+        .latest()
+        .is_some_and(|s| s.cmd_velocity[0].abs() > 1.0)
+    {
+        assert!(start.elapsed() < WATCHDOG, "the arm never moved");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    state
+}
+
+/// Connects a node to `inst` once its cell is up (a run refuses an instance in use).
+fn client_of(
+    inst: &str,
+) -> (
+    shm_schema::InstanceName,
+    iceoryx2::prelude::Node<runtime::ipc::Ipc>,
+) {
+    let name = shm_schema::InstanceName::new(inst).expect("instance");
+    let start = Instant::now();
+    while runtime::ipc::live_node_pids(&name)
+        .unwrap_or_default()
+        .len()
+        < 5
+    {
+        assert!(start.elapsed() < WATCHDOG, "the cell never came up");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let node = runtime::ipc::node(&name, "test-client").expect("node");
+    (name, node)
+}
+
+#[test]
+fn servo_cuts_power_when_the_drives_process_stalls() {
+    let inst = instance("stall-machine");
+    let run = triangle_in_background_with(&inst, Some(&patient_config("stall-machine")));
+    let (name, node) = client_of(&inst);
+    let state = until_moving(&node, &name);
+    // The drives' process stops (as a hung fieldbus would): its feedback stops coming.
+    let machine = pid_of("machine-sim", &inst);
+    // SAFETY: kill(2) on a process this test's supervisor started.
+    unsafe { libc::kill(machine, libc::SIGSTOP) };
+    let start = Instant::now();
+    let mut latched = None;
+    while latched.is_none() {
+        assert!(start.elapsed() < WATCHDOG, "servo never noticed");
+        latched = std::iter::from_fn(|| state.next()).find(|s| s.status & st::FAULT_LATCHED != 0);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // SAFETY: as above.
+    unsafe { libc::kill(machine, libc::SIGCONT) };
+    let s = latched.expect("latched");
+    assert_eq!(s.fault_code, shm_schema::event::code::FEEDBACK_STALE);
+    assert!(s.fault_value > s.fault_limit, "{s:?}");
+    let out = wait_for(run);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("servo cut power: feedback-stale"), "{err}");
+    drop(state);
+    drop(node);
+    runtime::ipc::cleanup_after_client(&name);
+    assert_clean(&inst);
+}
+
+#[test]
+fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
+    let inst = instance("stall-trajgen");
+    let run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
+    let (name, node) = client_of(&inst);
+    let state = until_moving(&node, &name);
+    // trajgen stops publishing in the middle of a move; servo must bring the axes to rest
+    // along their path and hold, enabled, with nothing latched. (The supervisor ends the run
+    // after its heartbeat timeout, here 5 s.)
+    let trajgen = pid_of("trajgen", &inst);
+    // SAFETY: kill(2) on a process this test's supervisor started.
+    unsafe { libc::kill(trajgen, libc::SIGSTOP) };
+    let start = Instant::now();
+    let mut log = Vec::new();
+    loop {
+        assert!(start.elapsed() < WATCHDOG, "servo never came to rest");
+        while let Some(s) = state.next() {
+            log.push(s);
+        }
+        if log
+            .last()
+            .is_some_and(|s| s.status & st::SETPOINT_STALE != 0 && s.cmd_velocity[..3] == [0.0; 3])
+        {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // SAFETY: as above.
+    unsafe { libc::kill(trajgen, libc::SIGCONT) };
+    assert!(
+        log.iter().all(|s| s.status & st::FAULT_LATCHED == 0),
+        "servo cut power"
+    );
+    let last = log.last().expect("states");
+    assert_ne!(last.status & st::ENABLED, 0);
+    for i in 0..3 {
+        assert!(log.iter().all(|s| s.following_error[i].abs() < 1.0));
+    }
+    let out = wait_for(run);
+    assert_eq!(out.status.code(), Some(1));
+    drop(state);
+    drop(node);
+    runtime::ipc::cleanup_after_client(&name);
     assert_clean(&inst);
 }
