@@ -194,11 +194,6 @@ impl Drive {
         self.device.state()
     }
 
-    /// The fault condition present in the latest cycle (0: none).
-    pub fn condition(&self) -> u16 {
-        self.condition
-    }
-
     /// The effort its loop asks for at `t_ns` (before the effort limit).
     fn demand(&mut self, axis: &Axis, t_ns: u64, dt: f64) -> f64 {
         match Mode::from_i8(self.mode_display) {

@@ -7,8 +7,9 @@
 //! An enable request (`<i>/servo/request`) starts the enabling sequence in the next cycle:
 //! every drive is stepped Shutdown → Switch on → Enable operation ([`cia402::enable_step`]);
 //! the arm is enabled when every axis is in Operation enabled, and an error if that takes
-//! longer than the enable timeout. A disable request starts the disabling sequence
-//! (Shutdown: transition 8) and aborts a pending enable. Servo follows setpoints only while
+//! longer than the enable timeout. A disable request starts the disabling sequence and aborts
+//! a pending enable: an enabled arm first comes to rest along its path, then the drives take
+//! Shutdown (transition 8). Servo follows setpoints only while
 //! enabled; otherwise its reference follows the measured position (bumpless enable: the
 //! drives' targets equal the actual position, the integrators are cleared).
 //!
@@ -24,7 +25,8 @@
 //! - a drive in Fault, or a drive leaving Operation enabled without being asked.
 //!
 //! A reset request resets the drives' faults (bit 7 edge, [`cia402::FaultReset`]) and clears
-//! the latch once no drive is in Fault and the feedback is valid; otherwise it is refused.
+//! the latch once the cut has run its course (every drive at rest and without power, none in
+//! Fault) and the feedback is fresh and valid; otherwise it is refused.
 //! **No drive ever re-enables by itself**: power comes back only through reset, then enable.
 //!
 //! **Reference.** Each cycle the latest trajgen setpoint is extrapolated to now (constant
@@ -110,6 +112,9 @@ pub struct Latched {
 #[derive(Clone, Debug)]
 pub struct Controller {
     p: Params,
+    /// Each axis' configured mode of operation, as sent (0x6060) and decoded (set-up).
+    mode_word: [i8; MAX_AXES],
+    mode: [Option<Mode>; MAX_AXES],
     power: Power,
     power_since_ns: u64,
     latched: Option<Latched>,
@@ -196,10 +201,6 @@ impl Rejoin {
     }
 }
 
-fn axis_name(a: &AxisConfigV2) -> &str {
-    str_of(&a.name)
-}
-
 /// What one cycle decided for the drives and for servo's state (internal).
 struct Out {
     cmd: DriveCommandV2,
@@ -209,8 +210,11 @@ struct Out {
 impl Controller {
     /// A controller that has seen nothing yet: the arm disabled.
     pub fn new(p: Params) -> Self {
+        let mode_word = core::array::from_fn(|i| p.axis[i].mode as i8);
         Self {
             p,
+            mode_word,
+            mode: mode_word.map(Mode::from_i8),
             power: Power::Disabled,
             power_since_ns: 0,
             latched: None,
@@ -235,16 +239,6 @@ impl Controller {
             elapsed_s: 0.0,
             seq: 0,
         }
-    }
-
-    /// The arm's power state.
-    pub fn power(&self) -> Power {
-        self.power
-    }
-
-    /// The latched fault, if any.
-    pub fn latched(&self) -> Option<Latched> {
-        self.latched
     }
 
     /// Latches a fault (the first cause wins), cuts power and reports both.
@@ -439,9 +433,7 @@ impl Controller {
                     let why = cia402::error_code::name(fb.error_code[i]);
                     self.latch(now_ns, l, &[name, ": ", why], ev);
                 }
-            } else if self.power == Power::Enabled
-                && fb.mode_display[i] as i32 != self.p.axis[i].mode
-            {
+            } else if self.power == Power::Enabled && fb.mode_display[i] != self.mode_word[i] {
                 let l = Latched {
                     code: code::FEEDBACK_MISMATCH,
                     axis: i as i32,
@@ -567,8 +559,9 @@ impl Controller {
     /// A setpoint from a new source (the first one, one after a stale spell, or one whose
     /// stamp goes back: trajgen restarted) must start where servo holds: within the
     /// in-position band plus what the axis can move in 1.5 cycles, and at the reference's
-    /// velocity within one velocity step. Returns the offending axis and distance. Setpoints of the same source are checked by command validation instead
-    /// (a step too large cuts power).
+    /// velocity within one velocity step. Returns the offending axis and distance. Setpoints
+    /// of the same source are checked by command validation instead (a step too large cuts
+    /// power).
     fn jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
         if self
             .setpoint
@@ -689,9 +682,7 @@ impl Controller {
                 ..Default::default()
             },
         };
-        for i in 0..n {
-            out.cmd.mode[i] = self.p.axis[i].mode as i8;
-        }
+        out.cmd.mode[..n].copy_from_slice(&self.mode_word[..n]);
         let Some(fb) = feedback else {
             out.state.status = st::NO_FEEDBACK;
             if let Some(r) = request.filter(|r| r.seq != self.request_seq) {
@@ -759,8 +750,7 @@ impl Controller {
         match self.power {
             Power::Enabling
                 if all(|s| s == State::OperationEnabled)
-                    && (0..self.p.axes)
-                        .all(|i| fb.mode_display[i] as i32 == self.p.axis[i].mode) =>
+                    && fb.mode_display[..self.p.axes] == self.mode_word[..self.p.axes] =>
             {
                 let took = now_ns.saturating_sub(self.power_since_ns) as f64 * 1e-9;
                 self.set_power(Power::Enabled, now_ns);
@@ -881,7 +871,7 @@ impl Controller {
                             i as i32,
                             d,
                             self.start_tolerance(i, dt),
-                            &[axis_name(a), ": setpoint refused, servo holds"],
+                            &[str_of(&a.name), ": setpoint refused, servo holds"],
                         ));
                     }
                 }
@@ -921,7 +911,7 @@ impl Controller {
             let ev = vel[i] - fb.velocity[i];
             let ff = g.kvff * vel[i] + g.kaff * acc[i];
             out.state.following_error[i] = e;
-            match Mode::from_i8(g.mode as i8) {
+            match self.mode[i] {
                 Some(Mode::Csp) => {
                     out.cmd.target_position[i] = pos[i];
                     out.cmd.velocity_offset[i] = vel[i];
@@ -954,7 +944,7 @@ impl Controller {
                     value: e,
                     limit: g.following_error_limit,
                 };
-                self.latch(now_ns, l, &[axis_name(&g), ": following error"], events);
+                self.latch(now_ns, l, &[str_of(&g.name), ": following error"], events);
             }
         }
         out.state.cmd_position = pos;

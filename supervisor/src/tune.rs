@@ -216,6 +216,35 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
 
 type Measured = (Vec<Sample>, f64, Option<RampFigures>);
 
+/// Longest wait for servo to take a step, or for the axes to settle.
+const PATIENCE: Duration = Duration::from_secs(3);
+
+/// Reads servo's states as they come, for at most `limit`, handing each to `stop` until it
+/// returns true (then true). Fails on a process failure or a latched fault.
+fn watch(
+    session: &mut Session,
+    cfg: &Config,
+    beats: &mut [(u64, Instant); 4],
+    limit: Duration,
+    mut stop: impl FnMut(&ServoStateV2) -> bool,
+) -> Result<bool, RunError> {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        session.check_health(cfg, beats)?;
+        while let Some(s) = session.servo_sub.next() {
+            if s.status & st::FAULT_LATCHED != 0 {
+                session.take_events();
+                return Err(RunError::failed(session.fault_text(cfg, &s)));
+            }
+            if stop(&s) {
+                return Ok(true);
+            }
+        }
+        std::thread::sleep(TICK);
+    }
+    Ok(false)
+}
+
 /// Waits (at most `limit`) until servo says the arm is settled; records every servo state on
 /// the way into `log` when given. Returns the settled state.
 fn until_settled(
@@ -225,24 +254,17 @@ fn until_settled(
     limit: Duration,
     mut log: Option<&mut Vec<ServoStateV2>>,
 ) -> Result<Option<ServoStateV2>, RunError> {
-    let start = Instant::now();
-    while start.elapsed() < limit {
-        session.check_health(cfg, beats)?;
-        while let Some(s) = session.servo_sub.next() {
-            if s.status & st::FAULT_LATCHED != 0 {
-                session.take_events();
-                return Err(RunError::failed(session.fault_text(cfg, &s)));
-            }
-            if let Some(l) = log.as_deref_mut() {
-                l.push(s);
-            }
-            if s.status & st::SETTLED != 0 {
-                return Ok(Some(s));
-            }
+    let mut settled = None;
+    watch(session, cfg, beats, limit, |s| {
+        if let Some(l) = log.as_deref_mut() {
+            l.push(*s);
         }
-        std::thread::sleep(TICK);
-    }
-    Ok(None)
+        if s.status & st::SETTLED != 0 {
+            settled = Some(*s);
+        }
+        settled.is_some()
+    })?;
+    Ok(settled)
 }
 
 fn measure(
@@ -253,7 +275,7 @@ fn measure(
 ) -> Result<Measured, RunError> {
     let mut beats = [(0u64, Instant::now()); 4];
     let start_sp = session.startup(cfg, &mut beats)?;
-    let settled = until_settled(session, cfg, &mut beats, Duration::from_secs(3), None)?
+    let settled = until_settled(session, cfg, &mut beats, PATIENCE, None)?
         .ok_or_else(|| RunError::failed("the axes did not settle after enabling"))?;
     let start = settled.cmd_position[i];
 
@@ -261,37 +283,24 @@ fn measure(
     session.request_with(RequestKind::Step, i as u32, opts.step)?;
     let mut log = Vec::new();
     // Skip the cycles before servo took the request.
-    let t_req = Instant::now();
-    while t_req.elapsed() < Duration::from_secs(3) && log.is_empty() {
-        session.check_health(cfg, &mut beats)?;
-        while let Some(s) = session.servo_sub.next() {
-            if (s.cmd_position[i] - start).abs() > opts.step.abs() / 2.0 {
-                log.push(s);
-            }
+    let taken = watch(session, cfg, &mut beats, PATIENCE, |s| {
+        let stepped = (s.cmd_position[i] - start).abs() > opts.step.abs() / 2.0;
+        if stepped {
+            log.push(*s);
         }
-        std::thread::sleep(TICK);
-    }
-    if log.is_empty() {
+        stepped
+    })?;
+    if !taken {
         session.take_events();
         return Err(RunError::failed(
             "servo did not take the step (see the request-refused event)",
         ));
     }
-    until_settled(
-        session,
-        cfg,
-        &mut beats,
-        Duration::from_secs(3),
-        Some(&mut log),
-    )?;
-    let extra = Instant::now();
-    while extra.elapsed() < Duration::from_millis(300) {
-        session.check_health(cfg, &mut beats)?;
-        while let Some(s) = session.servo_sub.next() {
-            log.push(s);
-        }
-        std::thread::sleep(TICK);
-    }
+    until_settled(session, cfg, &mut beats, PATIENCE, Some(&mut log))?;
+    watch(session, cfg, &mut beats, Duration::from_millis(300), |s| {
+        log.push(*s);
+        false
+    })?;
     let t0 = log[0].stamp_ns;
     let samples: Vec<Sample> = log
         .iter()
@@ -305,19 +314,13 @@ fn measure(
     session.request_with(RequestKind::Step, i as u32, 0.0)?;
     // Servo's states queued before it took the step back still say "settled": wait for the
     // command to return first.
-    let back = Instant::now();
-    let mut returned = false;
-    while !returned && back.elapsed() < Duration::from_secs(3) {
-        session.check_health(cfg, &mut beats)?;
-        while let Some(s) = session.servo_sub.next() {
-            returned |= (s.cmd_position[i] - start).abs() < opts.step.abs() / 2.0;
-        }
-        std::thread::sleep(TICK);
-    }
+    let returned = watch(session, cfg, &mut beats, PATIENCE, |s| {
+        (s.cmd_position[i] - start).abs() < opts.step.abs() / 2.0
+    })?;
     if !returned {
         return Err(RunError::failed("servo did not take the step back"));
     }
-    until_settled(session, cfg, &mut beats, Duration::from_secs(3), None)?
+    until_settled(session, cfg, &mut beats, PATIENCE, None)?
         .ok_or_else(|| RunError::failed("the axis did not settle after the step back"))?;
 
     let ramp = match opts.ramp {
@@ -391,7 +394,7 @@ fn ramp(
         std::thread::sleep(TICK);
     }
     let mut log = Vec::new();
-    let settled = until_settled(session, cfg, beats, Duration::from_secs(3), Some(&mut log))?;
+    let settled = until_settled(session, cfg, beats, PATIENCE, Some(&mut log))?;
     for s in &log {
         peak = peak.max(s.following_error[i].abs());
     }

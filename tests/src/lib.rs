@@ -36,6 +36,40 @@ pub fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
 }
 
+/// The default cell's configuration (`examples/gantry-uba.toml`) as text.
+pub fn default_cell() -> String {
+    std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("the default cell")
+}
+
+/// The default cell with the machine and servo at `period_us`, their phases scaled (a tenth
+/// and two fifths of the period, as 100 µs and 400 µs are of 1 ms).
+pub fn cell_at_rate(period_us: u64) -> String {
+    default_cell()
+        .replace(
+            "period_us = 1000\nphase_us = 100",
+            &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
+        )
+        .replace(
+            "period_us = 1000\nphase_us = 400",
+            &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
+        )
+}
+
+/// The default cell with every axis in CSP: the drives close the loop with their own gains.
+pub fn cell_in_csp() -> String {
+    let mut src = default_cell();
+    for (axis, gains) in [
+        ("x", "kp = 300.0, ki = 2000.0, kd = 2.5"),
+        ("y", "kp = 190.0, ki = 1200.0, kd = 1.6"),
+        ("theta", "kp = 13.0, ki = 80.0, kd = 0.11"),
+    ] {
+        let at = src.find(&format!("name = \"{axis}\"")).expect("axis");
+        let sim = at + src[at..].find("sim = {").expect("sim");
+        src.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
+    }
+    src
+}
+
 /// The supervisor binary, as a command to add arguments to.
 pub fn supervisor() -> Command {
     Command::new(bin("supervisor"))

@@ -90,9 +90,30 @@ pub fn velocity_radius(ki: f64, kd: f64, j: f64, b: f64, t: f64) -> f64 {
 /// change.
 pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> Result<(), String> {
     let (j, b) = (a.sim.inertia, a.sim.viscous);
-    let g = &a.servo;
-    let unstable = |what: &str, r: f64, period_s: f64, gains: &str| {
-        format!(
+    let (d, g) = (&a.drive, &a.servo);
+    // The loop that closes the position (or velocity) of this axis, its radius and period.
+    let (what, r, period_s, gains) = match mode {
+        Mode::Csp => (
+            "the drive's position loop",
+            drive_radius(d.kp, d.ki, d.kd, j, b, machine_step_s),
+            machine_step_s,
+            "drive kp, ki, kd",
+        ),
+        Mode::Csv => (
+            "the drive's velocity loop",
+            velocity_radius(d.ki, d.kd, j, b, machine_step_s),
+            machine_step_s,
+            "drive kd",
+        ),
+        _ => (
+            "servo's position loop",
+            servo_radius(g.kp, g.ki, g.kd, j, b, servo_period_s),
+            servo_period_s,
+            "servo kp, ki, kd",
+        ),
+    };
+    if !inside_unit_circle(r) {
+        return Err(format!(
             "axis {}: sim inertia {} makes {what} unstable at its {:.0} µs period (spectral \
              radius {} ≥ 1, linearised with viscous {}): raise the inertia or lower {gains}",
             a.name,
@@ -100,44 +121,7 @@ pub fn check(a: &Axis, mode: Mode, servo_period_s: f64, machine_step_s: f64) -> 
             period_s * 1e6,
             num(r),
             num(b)
-        )
-    };
-    match mode {
-        Mode::Csp => {
-            let d = &a.drive;
-            let r = drive_radius(d.kp, d.ki, d.kd, j, b, machine_step_s);
-            if !inside_unit_circle(r) {
-                return Err(unstable(
-                    "the drive's position loop",
-                    r,
-                    machine_step_s,
-                    "drive kp, ki, kd",
-                ));
-            }
-        }
-        Mode::Csv => {
-            let d = &a.drive;
-            let r = velocity_radius(d.ki, d.kd, j, b, machine_step_s);
-            if !inside_unit_circle(r) {
-                return Err(unstable(
-                    "the drive's velocity loop",
-                    r,
-                    machine_step_s,
-                    "drive kd",
-                ));
-            }
-        }
-        _ => {
-            let r = servo_radius(g.kp, g.ki, g.kd, j, b, servo_period_s);
-            if !inside_unit_circle(r) {
-                return Err(unstable(
-                    "servo's position loop",
-                    r,
-                    servo_period_s,
-                    "servo kp, ki, kd",
-                ));
-            }
-        }
+        ));
     }
     if !inside_unit_circle(b * machine_step_s / j) {
         return Err(format!(

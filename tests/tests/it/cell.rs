@@ -23,7 +23,7 @@ fn run_triangle_with(inst: &str, cfg: &Path) -> std::process::Output {
 
 /// The default configuration with `from` replaced by `to`, written for `test`.
 fn config_with(test: &str, from: &str, to: &str) -> PathBuf {
-    let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
+    let default = integration_tests::default_cell();
     assert!(
         default.contains(from),
         "{from:?} not in the default configuration"
@@ -214,7 +214,7 @@ fn a_target_outside_the_limits_is_refused_before_anything_moves() {
 #[test]
 fn a_bad_config_names_file_line_and_reason() {
     let inst = instance("badcfg");
-    let default = std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default");
+    let default = integration_tests::default_cell();
     let line = default
         .lines()
         .position(|l| l.starts_with("t_acc"))

@@ -68,28 +68,6 @@ fn triangle(cfg: &Config) -> [f64; 3] {
     max_fe
 }
 
-/// The default cell with every axis in CSP, the drives' own gains set.
-pub fn csp_config(servo_period_us: u64) -> Config {
-    let mut src = supervisor::config::DEFAULT_TOML.to_string();
-    for (axis, gains) in [
-        ("x", "kp = 300.0, ki = 2000.0, kd = 2.5"),
-        ("y", "kp = 190.0, ki = 1200.0, kd = 1.6"),
-        ("theta", "kp = 13.0, ki = 80.0, kd = 0.11"),
-    ] {
-        let at = src.find(&format!("name = \"{axis}\"")).expect("axis");
-        let sim = at + src[at..].find("sim = {").expect("sim");
-        src.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
-    }
-    let src = src.replace(
-        "period_us = 1000\nphase_us = 400",
-        &format!(
-            "period_us = {servo_period_us}\nphase_us = {}",
-            servo_period_us * 2 / 5
-        ),
-    );
-    Config::parse(&src, "csp").expect("valid csp config")
-}
-
 #[test]
 fn the_default_gains_follow_the_triangle_and_settle() {
     let cfg = Config::default_cell();
@@ -106,7 +84,7 @@ fn the_default_gains_follow_the_triangle_and_settle() {
 
 #[test]
 fn csp_axes_follow_the_triangle_with_the_drives_closing_the_loop() {
-    let cfg = csp_config(1000);
+    let cfg = Config::parse(&integration_tests::cell_in_csp(), "csp").expect("valid csp config");
     let fe = triangle(&cfg);
     for (i, a) in cfg.axis.iter().enumerate() {
         assert!(
@@ -118,18 +96,9 @@ fn csp_axes_follow_the_triangle_with_the_drives_closing_the_loop() {
     }
 }
 
-/// The default cell with the machine and servo at `period_us`, their phases scaled.
+/// The default cell with the machine and servo at `period_us`.
 pub fn at_rate(period_us: u64) -> Config {
-    let src = supervisor::config::DEFAULT_TOML
-        .replace(
-            "period_us = 1000\nphase_us = 100",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 400",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
-        );
-    Config::parse(&src, "rate").expect("valid")
+    Config::parse(&integration_tests::cell_at_rate(period_us), "rate").expect("valid")
 }
 
 #[test]

@@ -67,10 +67,6 @@ fn wait_for(mut run: std::process::Child) -> std::process::Output {
     run.wait_with_output().expect("output")
 }
 
-fn default_config() -> String {
-    std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("default")
-}
-
 fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json::Value> {
     j["events"]
         .as_array()
@@ -83,7 +79,7 @@ fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json:
 #[test]
 fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
     let inst = instance("inject-cfg");
-    let cfg = default_config().replace(
+    let cfg = integration_tests::default_cell().replace(
         "substeps = 4 ",
         "substeps = 4\n\n[[drives.inject]]\naxis = \"y\"\nfault = \"over-current\"\nat = 2.0\n\n#",
     );
@@ -187,7 +183,7 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
 #[test]
 fn an_absurd_inertia_is_refused_before_anything_starts() {
     let inst = instance("inertia");
-    let cfg = default_config().replacen("inertia = 0.008", "inertia = 1e-300", 1);
+    let cfg = integration_tests::default_cell().replacen("inertia = 0.008", "inertia = 1e-300", 1);
     let cfg = scratch("inertia", "cell.toml", &cfg);
     let out = run_with_watchdog(
         supervisor()
@@ -211,16 +207,7 @@ fn an_absurd_inertia_is_refused_before_anything_starts() {
 #[test]
 fn csp_axes_follow_the_triangle_on_the_real_processes() {
     let inst = instance("csp");
-    let mut cfg = default_config();
-    for (axis, gains) in [
-        ("x", "kp = 300.0, ki = 2000.0, kd = 2.5"),
-        ("y", "kp = 190.0, ki = 1200.0, kd = 1.6"),
-        ("theta", "kp = 13.0, ki = 80.0, kd = 0.11"),
-    ] {
-        let at = cfg.find(&format!("name = \"{axis}\"")).expect("axis");
-        let sim = at + cfg[at..].find("sim = {").expect("sim");
-        cfg.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
-    }
+    let cfg = integration_tests::cell_in_csp();
     let cfg = scratch("csp", "cell.toml", &cfg);
     let j = triangle_json(&inst, &cfg);
     on_target(&j);
@@ -306,15 +293,7 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
 #[test]
 fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
     let inst = instance("4khz");
-    let cfg = default_config()
-        .replace(
-            "period_us = 1000\nphase_us = 100",
-            "period_us = 250\nphase_us = 25",
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 400",
-            "period_us = 250\nphase_us = 100",
-        );
+    let cfg = integration_tests::cell_at_rate(250);
     let cfg = scratch("4khz", "cell.toml", &cfg);
     let j = triangle_json(&inst, &cfg);
     assert_eq!(j["processes"]["servo"]["period_us"].as_f64(), Some(250.0));
@@ -384,7 +363,7 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
 /// The default cell with a supervisor heartbeat of 5 s, so a test can stall one process for
 /// a while without the supervisor ending the run first.
 fn patient_config(test: &str) -> std::path::PathBuf {
-    let cfg = default_config();
+    let cfg = integration_tests::default_cell();
     assert!(cfg.contains("heartbeat_timeout = 1.0"));
     scratch(
         test,
