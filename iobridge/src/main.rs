@@ -1,37 +1,40 @@
 //! `iobridge`: the IO bridge process. See the crate documentation.
 
 use iobridge::write_image;
-use runtime::cycle::{CycleClock, Wake};
+use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
-use runtime::process::{self, Context, SetupError, Task};
-use shm_schema::EventQueue;
-use shm_schema::{FieldbusImageV1, Role, ServiceId, ServoStateV2};
+use runtime::process::{self, Context, Cycle, SetupError, Task};
+use shm_schema::{FieldbusImageV1, ServiceId, ServoStateV2};
 use std::process::ExitCode;
 
 struct Bridge {
     seq: u64,
     servo: Sub<ServoStateV2>,
     last: Option<ServoStateV2>,
+    /// Servo's states arrive every servo period.
+    servo_fresh: Freshness,
     output: Pub<FieldbusImageV1>,
 }
 
 impl Task for Bridge {
     /// # Real-time
     /// IPC calls and [`write_image`]; nothing else.
-    fn cycle(&mut self, wake: &Wake, _clock: &mut CycleClock, _events: &mut EventQueue) {
+    fn cycle(&mut self, cx: &mut Cycle<'_>) {
+        let now = cx.now_ns();
         if let Some(s) = self.servo.latest() {
             self.last = Some(s);
         }
+        cx.pending_overruns(self.servo_fresh.check(now, self.last.map(|s| s.stamp_ns)));
         if let Some(s) = &self.last {
             self.seq += 1;
-            self.output.send(&write_image(self.seq, wake.actual_ns, s));
+            self.output.send(&write_image(self.seq, now, s));
         }
     }
 }
 
 fn main() -> ExitCode {
     process::run(
-        Role::Iobridge,
+        "iobridge",
         "fieldbus output image with measurement timestamps",
         |ctx: &Context| {
             let i = &ctx.instance;
@@ -39,6 +42,9 @@ fn main() -> ExitCode {
                 seq: 0,
                 servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
                 last: None,
+                servo_fresh: Freshness::new(
+                    ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
+                ),
                 output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
             })
         },

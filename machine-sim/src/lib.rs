@@ -31,7 +31,7 @@
 use cia402::{Conditions, Device, Mode, QuickStopOption, State, error_code};
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
-    AxisConfigV2, CellConfigV2, DriveCommandV2, DriveFeedbackV2, EventV1, FaultInjectionV1,
+    AxisConfigV2, CellConfigV3, DriveCommandV2, DriveFeedbackV2, EventV1, FaultInjectionV1,
     MAX_AXES, str_of,
 };
 
@@ -252,7 +252,8 @@ fn name_of(names: &[[u8; 16]; MAX_AXES], i: usize) -> &str {
 impl Machine {
     /// The machine of `cell`, at rest at the axes' start positions, every drive in Not ready
     /// to switch on.
-    pub fn new(cell: &CellConfigV2) -> Self {
+    /// The machine of `cell`, cycling every `period_ns`.
+    pub fn new(cell: &CellConfigV3, period_ns: u64) -> Self {
         let idle = AxisConfigV2::default();
         let mut axis = [Axis::from_config(&idle); MAX_AXES];
         let mut drive = [Drive::new(&idle); MAX_AXES];
@@ -268,8 +269,7 @@ impl Machine {
             drive,
             names,
             substeps: cell.machine_substeps.max(1),
-            period_s: (cell.process[shm_schema::Role::Machine.index()].period_ns as f64 * 1e-9)
-                .max(1e-6),
+            period_s: (period_ns as f64 * 1e-9).max(1e-6),
             timeout_ns: cell.drive_command_timeout_ns,
             inject: cell.inject,
             controlword: [0; MAX_AXES],
@@ -281,6 +281,13 @@ impl Machine {
             last_ns: 0,
             seq: 0,
         }
+    }
+
+    /// True while a drive has its power stage on (it may produce torque).
+    pub fn powered(&self) -> bool {
+        self.drive[..self.axes]
+            .iter()
+            .any(|d| d.device.state().power_stage_on())
     }
 
     /// The axes (for tests).
@@ -660,14 +667,13 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn cell(mode: Mode) -> CellConfigV2 {
-        let mut c = CellConfigV2 {
+    fn cell(mode: Mode) -> CellConfigV3 {
+        let mut c = CellConfigV3 {
             axes: 1,
             machine_substeps: 4,
             drive_command_timeout_ns: 20 * MS,
             ..Default::default()
         };
-        c.process[shm_schema::Role::Machine.index()].period_ns = MS;
         c.axis[0] = AxisConfigV2 {
             name: shm_schema::fixed_str("x"),
             inertia: 0.01,
@@ -731,7 +737,7 @@ mod tests {
 
     #[test]
     fn a_drive_steps_through_the_states_only_when_asked() {
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let (fb, q) = at(&mut m, 1, cw::ENABLE_OPERATION_CMD, 5.0);
         // Transition 1 by itself; 0x0F in Switch on disabled does nothing.
         assert_eq!(state(&fb), State::SwitchOnDisabled);
@@ -740,7 +746,7 @@ mod tests {
         let (fb, _) = at(&mut m, 2, cw::ENABLE_OPERATION_CMD, 5.0);
         assert_eq!(state(&fb), State::SwitchOnDisabled);
         assert_eq!(fb.position[0], 0.0, "no torque without Operation enabled");
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let k = enabled(&mut m);
         let (fb, _) = at(&mut m, k, cw::ENABLE_OPERATION_CMD, 5.0);
         assert_eq!(fb.mode_display[0], Mode::Cst as i8);
@@ -752,7 +758,7 @@ mod tests {
 
     #[test]
     fn a_silent_master_faults_the_drive_and_it_never_re_enables_by_itself() {
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let k = enabled(&mut m);
         at(&mut m, k, cw::ENABLE_OPERATION_CMD, 0.5);
         // No new command for 60 ms (> 20 ms): fault 0xFF01, ramp, Fault.
@@ -780,7 +786,7 @@ mod tests {
 
     #[test]
     fn an_injected_encoder_loss_faults_and_reset_waits_for_the_condition_to_clear() {
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let k = enabled(&mut m);
         let mut q = EventQueue::default();
         let inject = |seq, active| FaultInjectionV1 {
@@ -816,7 +822,7 @@ mod tests {
 
     #[test]
     fn commands_for_another_machine_or_an_unsupported_mode_are_refused_with_an_event() {
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let k = enabled(&mut m);
         let mut c = command(k, cw::ENABLE_OPERATION_CMD, Mode::Cst, 5.0, 0.0);
         c.axes = 2;
@@ -850,7 +856,7 @@ mod tests {
 
     #[test]
     fn a_target_that_is_not_finite_is_refused_and_faults_the_drive() {
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let k = enabled(&mut m);
         let (fb, q) = at(&mut m, k, cw::ENABLE_OPERATION_CMD, f64::NAN);
         assert_eq!(state(&fb), State::FaultReactionActive);
@@ -881,7 +887,7 @@ mod tests {
 
     #[test]
     fn in_csp_the_drive_closes_the_loop_on_its_target() {
-        let mut m = Machine::new(&cell(Mode::Csp));
+        let mut m = Machine::new(&cell(Mode::Csp), MS);
         let k = enabled_csp(&mut m);
         let mut fb = DriveFeedbackV2::default();
         let mut q = EventQueue::default();
@@ -900,8 +906,8 @@ mod tests {
 
     #[test]
     fn a_late_cycle_integrates_the_time_that_really_passed() {
-        let mut a = Machine::new(&cell(Mode::Cst));
-        let mut b = Machine::new(&cell(Mode::Cst));
+        let mut a = Machine::new(&cell(Mode::Cst), MS);
+        let mut b = Machine::new(&cell(Mode::Cst), MS);
         let ka = enabled(&mut a);
         let kb = enabled(&mut b);
         assert_eq!(ka, kb);
@@ -922,7 +928,7 @@ mod tests {
         c.axis[0].inertia = 0.008;
         c.axis[0].effort_limit = 100.0;
         (c.axis[0].drive_kp, c.axis[0].drive_kd) = (300.0, 2.5);
-        let mut m = Machine::new(&c);
+        let mut m = Machine::new(&c, MS);
         let k = enabled_csp(&mut m);
         let mut q = EventQueue::default();
         for j in 0..500 {
@@ -947,7 +953,7 @@ mod tests {
 
     #[test]
     fn the_sense_to_command_latency_is_measured_from_the_sample() {
-        let mut m = Machine::new(&cell(Mode::Cst));
+        let mut m = Machine::new(&cell(Mode::Cst), MS);
         let mut q = EventQueue::default();
         let mut c = command(1, 0, Mode::Cst, 0.0, 0.0);
         c.feedback_stamp_ns = 7 * MS + 100_000;

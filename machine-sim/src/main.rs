@@ -1,12 +1,11 @@
 //! `machine-sim`: the simulated machine process. See the crate documentation.
 
 use machine_sim::Machine;
-use runtime::cycle::{CycleClock, Wake};
+use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
-use runtime::process::{self, Context, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
+use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
 use shm_schema::{
-    DriveCommandV2, DriveFeedbackV2, EventQueue, FaultInjectionV1, LatencyHistogramV1, Role,
-    ServiceId,
+    DriveCommandV2, DriveFeedbackV2, EventQueue, FaultInjectionV1, LatencyHistogramV1, ServiceId,
 };
 use std::process::ExitCode;
 
@@ -15,6 +14,9 @@ struct Sim {
     /// Sense-to-command latency of every applied command since start.
     sense_to_command: Box<LatencyHistogramV1>,
     last_published_ns: u64,
+    /// Servo's commands arrive every servo period.
+    command_fresh: Freshness,
+    last_command_ns: Option<u64>,
     commands: Sub<DriveCommandV2>,
     injections: Sub<FaultInjectionV1>,
     feedback: Pub<DriveFeedbackV2>,
@@ -32,18 +34,26 @@ impl Sim {
 impl Task for Sim {
     /// # Real-time
     /// IPC calls, [`Machine::cycle`] and a histogram record; nothing else.
-    fn cycle(&mut self, wake: &Wake, _clock: &mut CycleClock, events: &mut EventQueue) {
+    fn cycle(&mut self, cx: &mut Cycle<'_>) {
+        let now = cx.now_ns();
         let cmd = self.commands.latest();
+        if let Some(c) = &cmd {
+            self.last_command_ns = Some(c.stamp_ns);
+        }
+        cx.pending_overruns(self.command_fresh.check(now, self.last_command_ns));
         let inject = self.injections.next();
         let fb = self
             .machine
-            .cycle(wake.actual_ns, cmd.as_ref(), inject.as_ref(), events);
+            .cycle(now, cmd.as_ref(), inject.as_ref(), cx.events);
+        // Safe (for leaving, for an e-stop) once no drive has its power stage on: servo
+        // disabled them, or their watchdog did.
+        cx.set_safe(!self.machine.powered());
         self.feedback.send(&fb);
         if fb.sense_to_command_ns > 0 {
             self.sense_to_command.record(fb.sense_to_command_ns);
         }
-        if wake.actual_ns.saturating_sub(self.last_published_ns) >= LATENCY_PUBLISH_INTERVAL_NS {
-            self.publish_latency(wake.actual_ns);
+        if now.saturating_sub(self.last_published_ns) >= LATENCY_PUBLISH_INTERVAL_NS {
+            self.publish_latency(now);
         }
     }
 
@@ -54,14 +64,18 @@ impl Task for Sim {
 
 fn main() -> ExitCode {
     process::run(
-        Role::Machine,
+        "machine",
         "simulated CiA 402 drives and mechanics",
         |ctx: &Context| {
             let i = &ctx.instance;
             Ok::<_, SetupError>(Sim {
-                machine: Machine::new(&ctx.cell),
+                machine: Machine::new(&ctx.cell, ctx.own.period_ns),
                 sense_to_command: Box::default(),
                 last_published_ns: 0,
+                command_fresh: Freshness::new(
+                    ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
+                ),
+                last_command_ns: None,
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,

@@ -21,6 +21,7 @@ use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use shm_schema::{InstanceName, ServiceId};
 use std::fmt::Debug;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The iceoryx2 service flavour of every port: [`RtIpc`].
 pub type Ipc = RtIpc;
@@ -158,6 +159,23 @@ where
         .map_err(|e| err(format!("service {name}"), e))
 }
 
+/// IPC calls of this process that failed (a loan, a send, a receive), for seed 002's
+/// transport detector: none is dropped silently.
+static TRANSPORT_ERRORS: AtomicU64 = AtomicU64::new(0);
+
+/// The number of failed IPC calls of this process so far.
+///
+/// # Real-time
+/// One atomic load.
+pub fn transport_errors() -> u64 {
+    TRANSPORT_ERRORS.load(Ordering::Relaxed)
+}
+
+#[inline]
+fn transport_error() {
+    TRANSPORT_ERRORS.fetch_add(1, Ordering::Relaxed);
+}
+
 /// A typed publisher of one service.
 pub struct Pub<T: Debug + ZeroCopySend + Copy + 'static> {
     port: Publisher<Ipc, T, ()>,
@@ -186,10 +204,14 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Pub<T> {
     /// documentation).
     #[inline]
     pub fn send(&self, value: &T) -> bool {
-        match self.port.loan_uninit() {
+        let ok = match self.port.loan_uninit() {
             Ok(sample) => sample.write_payload(*value).send().is_ok(),
             Err(_) => false,
+        };
+        if !ok {
+            transport_error();
         }
+        ok
     }
 
     /// Delivers history to subscribers that connected since the last send.
@@ -238,10 +260,16 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
     #[inline]
     pub fn latest(&self) -> Option<T> {
         let mut last = None;
-        while let Ok(Some(sample)) = self.port.receive() {
-            last = Some(*sample.payload());
+        loop {
+            match self.port.receive() {
+                Ok(Some(sample)) => last = Some(*sample.payload()),
+                Ok(None) => return last,
+                Err(_) => {
+                    transport_error();
+                    return last;
+                }
+            }
         }
-        last
     }
 
     /// Takes the oldest unread sample.
@@ -252,7 +280,11 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
     pub fn next(&self) -> Option<T> {
         match self.port.receive() {
             Ok(Some(sample)) => Some(*sample.payload()),
-            _ => None,
+            Ok(None) => None,
+            Err(_) => {
+                transport_error();
+                None
+            }
         }
     }
 }

@@ -6,6 +6,8 @@
 //!   the CS9 overrun rule and the cycle statistics every process publishes.
 //! - [`ipc`]: iceoryx2 nodes and typed ports for the services of `shm-schema`.
 //! - [`events`]: a process' publisher of events.
+//! - [`estop`]: the cell's e-stop as a process sees it in its cycle (seed 002).
+//! - [`health`]: seed 002's health detectors (leaky buckets).
 //! - [`process`]: the skeleton every real-time process runs: arguments, cell configuration,
 //!   set-up, then the cycle until SIGTERM.
 //!
@@ -15,7 +17,9 @@
 
 pub mod alloc_count;
 pub mod cycle;
+pub mod estop;
 pub mod events;
+pub mod health;
 pub mod ipc;
 pub mod process;
 pub mod rt;

@@ -2,18 +2,25 @@
 //!
 //! `main` of trajgen, servo, machine-sim and iobridge is one call to [`run`]:
 //!
-//! 1. arguments: `--instance NAME` (default `gantry`);
+//! 1. arguments: `--instance NAME` (default `gantry`), `--name NAME` (the process' entry in
+//!    the cell's process table; default the binary's own name);
 //! 2. SIGTERM/SIGINT handler, iceoryx2 node;
-//! 3. the cell configuration from `<i>/cell/config` (published by the supervisor);
+//! 3. the cell configuration from `<i>/cell/config` (published by the supervisor), and the
+//!    process' own entry in its process table, found by name;
 //! 4. the task's own set-up (`build`: opens ports, preallocates, validates) — may fail;
-//! 5. real-time set-up ([`crate::rt::setup`]) with the role's priority and CPU;
-//! 6. the cycle until SIGTERM: wait, [`Task::cycle`], publish [`ProcessStatusV1`], finish;
-//!    about every 100 ms, and once more on stopping, publish the wake-up latency histogram
-//!    ([`LatencyHistogramV1`] on `<i>/<role>/latency`);
-//! 7. a clean exit that removes the process' iceoryx2 resources.
+//! 5. real-time set-up ([`crate::rt::setup`]) with the entry's priority and CPU;
+//! 6. the cycle: wait; read the e-stop ([`EstopWatch::poll`]); [`Task::cycle`]; the health
+//!    detectors ([`Health`]); publish [`ProcessStatusV2`]; about every 100 ms the wake-up
+//!    latency and execution-time histograms;
+//! 7. on SIGTERM, or when the supervisor stops beating: the cycle goes on with an e-stop
+//!    reaction until the task is safe (servo: axes at rest, drives disabled), at most the
+//!    cell's e-stop stop time and a second; then a clean exit that removes the process'
+//!    iceoryx2 resources.
 
 use crate::cycle::{CycleClock, WaitError, Wake};
+use crate::estop::{EstopView, EstopWatch};
 use crate::events::EventSink;
+use crate::health::Health;
 use crate::ipc::{self, Ipc, Pub, Sub};
 use crate::rt::{self, RtRequest};
 use crate::signals;
@@ -21,8 +28,8 @@ use crate::time::now_ns;
 use iceoryx2::prelude::Node;
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV2, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
-    ProcessStatusV1, Role, ServiceId,
+    CellConfigV3, EstopOrigin, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
+    ProcessConfigV2, ProcessName, ProcessStatusV2, ServiceId, estop_seen,
 };
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -39,65 +46,123 @@ pub const OVERRUN_EVENT_INTERVAL_NS: u64 = 1_000_000_000;
 /// How long a process waits for the cell configuration before giving up.
 pub const CONFIG_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// Beyond the cell's e-stop stop time, how long a leaving process waits for its task to be
+/// safe before it exits anyway (ns).
+pub const LEAVE_GRACE_NS: u64 = 1_000_000_000;
+
 /// Everything a task's set-up may use.
 #[derive(Debug)]
 pub struct Context {
     /// Instance the process belongs to.
     pub instance: InstanceName,
-    /// Role of the process.
-    pub role: Role,
+    /// The process' name (its entry in the process table).
+    pub name: ProcessName,
+    /// Its index in the process table (the source of its events).
+    pub index: usize,
+    /// Its entry: period, phase, priority, CPU, e-stop reaction.
+    pub own: ProcessConfigV2,
     /// The process' iceoryx2 node; open ports with [`Pub::new`] and [`Sub::new`].
     pub node: Node<Ipc>,
     /// The validated cell configuration.
-    pub cell: CellConfigV2,
+    pub cell: CellConfigV3,
+}
+
+/// What one cycle gets from the runtime and gives back to it.
+#[derive(Debug)]
+pub struct Cycle<'a> {
+    /// The wake-up that started the cycle.
+    pub wake: &'a Wake,
+    /// The clock, to ask for an extra wake-up.
+    pub clock: &'a mut CycleClock,
+    /// Events to publish after the cycle.
+    pub events: &'a mut EventQueue,
+    /// The e-stop, as read at the start of this cycle.
+    pub estop: EstopView,
+    raise: Option<(EstopOrigin, u32, [u8; shm_schema::estop::REASON_LEN])>,
+    pending: u64,
+    safe: bool,
+}
+
+impl Cycle<'_> {
+    /// The cycle's wake-up time (ns, `CLOCK_MONOTONIC`).
+    pub fn now_ns(&self) -> u64 {
+        self.wake.actual_ns
+    }
+
+    /// Raises an e-stop from this process (published after the cycle; this process reacts
+    /// from its next cycle on). `code` is the cause's event code.
+    ///
+    /// # Real-time
+    /// Copies only.
+    pub fn raise_estop(&mut self, origin: EstopOrigin, code: u32, parts: &[&str]) {
+        if self.raise.is_none() {
+            self.raise = Some((origin, code, shm_schema::event::text_of(parts)));
+        }
+    }
+
+    /// Counts `n` pending-sequence overruns (samples that did not arrive by this cycle).
+    pub fn pending_overruns(&mut self, n: u64) {
+        self.pending += n;
+    }
+
+    /// Whether the task's e-stop reaction is complete this cycle (default: true; servo says
+    /// false until the axes are at rest and the drives disabled).
+    pub fn set_safe(&mut self, safe: bool) {
+        self.safe = safe;
+    }
 }
 
 /// The periodic work of a process.
 pub trait Task {
-    /// One cycle, started by `wake`. May ask `clock` for an extra wake-up, and queue events
-    /// in `events` (the runtime publishes them on `<i>/events` after the cycle).
+    /// One cycle. May ask `cx.clock` for an extra wake-up, queue events, raise an e-stop,
+    /// count pending-sequence overruns, and must react to `cx.estop.react`.
     ///
     /// # Real-time
     /// Implementations allocate nothing of their own, take no lock, log nothing, and make no
     /// system call but IPC calls.
-    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock, events: &mut EventQueue);
+    fn cycle(&mut self, cx: &mut Cycle<'_>);
 
     /// The process' fault code for its status (0 for none).
     fn fault(&self) -> u32 {
         0
     }
 
-    /// Called once when the cycle ends (a stop was requested), before the last status.
+    /// Called once when the cycle ends, before the last status.
     fn stop(&mut self, _now_ns: u64, _events: &mut EventQueue) {}
 }
 
 /// Error type of a task's set-up.
 pub type SetupError = Box<dyn std::error::Error + Send + Sync>;
 
-/// Runs a real-time process; see the module documentation. Exit code 0 after a requested
-/// stop, 1 after a set-up failure, 2 on bad arguments.
+/// Runs a real-time process; see the module documentation. `default_name` is its name in the
+/// process table unless `--name` says otherwise. Exit code 0 after a requested stop, 1 after a
+/// set-up failure or when the supervisor was lost, 2 on bad arguments.
 pub fn run<T: Task>(
-    role: Role,
+    default_name: &str,
     about: &str,
     build: impl FnOnce(&Context) -> Result<T, SetupError>,
 ) -> ExitCode {
     init_logging();
-    let instance = match parse_args(role, about) {
-        Ok(Some(i)) => i,
+    let (instance, name) = match parse_args(default_name, about) {
+        Ok(Some(a)) => a,
         Ok(None) => return ExitCode::SUCCESS,
         Err(msg) => {
             eprintln!(
-                "{}: {msg}\nusage: {} [--instance NAME]",
-                role.name(),
-                role.name()
+                "{default_name}: {msg}\nusage: {default_name} [--instance NAME] [--name NAME]"
             );
             return ExitCode::from(2);
         }
     };
-    match run_inner(role, instance, build) {
-        Ok(()) => ExitCode::SUCCESS,
+    match run_inner(name, instance, build) {
+        Ok(Exit::Stopped) => ExitCode::SUCCESS,
+        Ok(Exit::SupervisorLost) => {
+            tracing::error!(
+                "{name} ({instance}): the supervisor stopped beating; left after bringing the process to a safe stop"
+            );
+            ExitCode::FAILURE
+        }
         Err(e) => {
-            tracing::error!("{} ({instance}): {e}", role.name());
+            tracing::error!("{name} ({instance}): {e}");
             ExitCode::FAILURE
         }
     }
@@ -116,79 +181,103 @@ pub fn init_logging() {
     ipc::quiet_iceoryx2_log();
 }
 
-fn parse_args(role: Role, about: &str) -> Result<Option<InstanceName>, String> {
+fn parse_args(
+    default_name: &str,
+    about: &str,
+) -> Result<Option<(InstanceName, ProcessName)>, String> {
     let mut instance = DEFAULT_INSTANCE.to_string();
+    let mut name = default_name.to_string();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--instance" => instance = args.next().ok_or("--instance needs a NAME")?,
             s if s.starts_with("--instance=") => instance = s["--instance=".len()..].to_string(),
+            "--name" => name = args.next().ok_or("--name needs a NAME")?,
+            s if s.starts_with("--name=") => name = s["--name=".len()..].to_string(),
             "-h" | "--help" => {
                 println!(
-                    "{} — {about}\n\nusage: {} [--instance NAME]\n\nStarted by `supervisor run`; \
-                     reads its settings from the cell configuration the supervisor publishes \
-                     for instance NAME (default {DEFAULT_INSTANCE}).",
-                    role.name(),
-                    role.name()
+                    "{default_name} — {about}\n\nusage: {default_name} [--instance NAME] [--name NAME]\n\n\
+                     Started by the supervisor; reads its settings from the cell configuration \
+                     the supervisor publishes for instance NAME (default {DEFAULT_INSTANCE}), in the \
+                     process table entry called NAME (default {default_name})."
                 );
                 return Ok(None);
             }
             other => return Err(format!("unknown argument {other:?}")),
         }
     }
-    InstanceName::new(&instance)
-        .map(Some)
-        .map_err(|e| e.to_string())
+    let instance = InstanceName::new(&instance).map_err(|e| e.to_string())?;
+    let name = ProcessName::new(&name).map_err(|e| format!("--name {name:?}: {e}"))?;
+    Ok(Some((instance, name)))
+}
+
+enum Exit {
+    Stopped,
+    SupervisorLost,
 }
 
 fn run_inner<T: Task>(
-    role: Role,
+    name: ProcessName,
     instance: InstanceName,
     build: impl FnOnce(&Context) -> Result<T, SetupError>,
-) -> Result<(), SetupError> {
+) -> Result<Exit, SetupError> {
     signals::install()?;
-    let node = ipc::node(&instance, role.name())?;
+    let node = ipc::node(&instance, name.as_str())?;
     let Some(cell) = wait_for_cell_config(&node, &instance)? else {
-        return Ok(()); // stopped before the cell configuration arrived: nothing to do
+        return Ok(Exit::Stopped); // stopped before the cell configuration arrived
     };
-    let pc = cell.process[role.index()];
+    let Some((index, own)) = cell.process_named(name.as_str()).map(|(i, p)| (i, *p)) else {
+        return Err(format!(
+            "the cell configuration has no process called {name:?} (its process table: {})",
+            cell.processes()
+                .iter()
+                .map(|p| shm_schema::str_of(&p.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+        .into());
+    };
     let ctx = Context {
         instance,
-        role,
+        name,
+        index,
+        own,
         node,
         cell,
     };
-    let status_pub = Pub::<ProcessStatusV1>::new(&ctx.node, &instance, ServiceId::Status(role))?;
+    let status_pub = Pub::<ProcessStatusV2>::new(&ctx.node, &instance, ServiceId::Status(name))?;
     let latency_pub =
-        Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(role))?;
-    let exec_pub = Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::ExecTime(role))?;
-    let mut events = EventSink::new(&ctx.node, &instance, role as u32)?;
+        Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(name))?;
+    let exec_pub = Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::ExecTime(name))?;
+    let mut events = EventSink::new(&ctx.node, &instance, index as u32)?;
+    let mut estop = EstopWatch::new(&ctx.node, &instance, &ctx.cell, index, now_ns())?;
     let mut queue = EventQueue::default();
     let mut task = build(&ctx)?;
     // Connect to the subscribers that exist now (the supervisor's), so the first event in the
     // cycle does not pay for it.
     events.connect();
+    estop.connect();
 
     let (report, _rt_guard) = rt::setup(RtRequest {
-        priority: pc.priority,
-        cpu: usize::try_from(pc.cpu).ok(),
+        priority: own.priority,
+        cpu: usize::try_from(own.cpu).ok(),
     });
-    let mut status = ProcessStatusV1 {
+    let mut status = ProcessStatusV2 {
         pid: std::process::id(),
-        role: role as u32,
+        index: index as u32,
         state: ProcState::Starting as u32,
         policy: report.policy,
         priority: report.priority,
         cpu: report.cpu,
         rt_flags: report.flags,
-        ..ProcessStatusV1::default()
+        name: name.field(),
+        ..ProcessStatusV2::default()
     };
     status_pub.send(&status);
     tracing::info!(
-        "{} ({instance}) cyclic: period {} µs, phase {} µs, {} priority {}{}",
-        role.name(),
-        pc.period_ns / 1000,
-        pc.phase_ns / 1000,
+        "{name} ({instance}) cyclic: period {} µs, phase {} µs, {} priority {}{}",
+        own.period_ns / 1000,
+        own.phase_ns / 1000,
         rt::policy_name(report.policy),
         report.priority,
         if report.cpu >= 0 {
@@ -198,12 +287,19 @@ fn run_inner<T: Task>(
         }
     );
 
-    let mut clock = CycleClock::new(pc.period_ns, pc.phase_ns, now_ns());
-    let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(pc.period_ns).max(1);
+    let start_ns = now_ns();
+    let mut clock = CycleClock::new(own.period_ns, own.phase_ns, start_ns);
+    let mut health = Health::new(&ctx.cell.health, own.period_ns, start_ns);
+    let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
+    let leave_limit_ns = ctx.cell.estop_stop_time_ns.saturating_add(LEAVE_GRACE_NS);
     let mut overruns = OverrunReporter::default();
+    let mut skipped = 0u64;
+    let mut transport = ipc::transport_errors();
+    let mut leaving_since: Option<u64> = None;
+    let mut safe_reported = false;
     status.state = ProcState::Cyclic as u32;
     // The cycle. Nothing in this loop allocates, locks or logs (see `Task::cycle`).
-    while !signals::stop_requested() {
+    loop {
         let wake = match clock.wait() {
             Ok(w) => w,
             Err(WaitError::Interrupted) => continue,
@@ -211,20 +307,121 @@ fn run_inner<T: Task>(
                 return Err(format!("clock_nanosleep failed: errno {e}").into());
             }
         };
-        task.cycle(&wake, &mut clock, &mut queue);
-        status.stamp_ns = wake.actual_ns;
+        let now = wake.actual_ns;
+        if signals::stop_requested() {
+            estop.leave(now);
+        }
+        if estop.poll(now, &mut queue) {
+            health.restart(now);
+            safe_reported = false;
+        }
+        if (signals::stop_requested() || estop.supervisor_lost()) && leaving_since.is_none() {
+            leaving_since = Some(now);
+            status.state = ProcState::Stopping as u32;
+        }
+        let mut cx = Cycle {
+            wake: &wake,
+            clock: &mut clock,
+            events: &mut queue,
+            estop: *estop.view(),
+            raise: None,
+            pending: 0,
+            safe: true,
+        };
+        task.cycle(&mut cx);
+        let (raise, mut pending, safe) = (cx.raise, cx.pending, cx.safe);
+        if let Some((origin, cause, reason)) = raise
+            && !estop.raised()
+        {
+            estop.raise(
+                now,
+                origin,
+                cause,
+                &[shm_schema::str_of(&reason)],
+                &mut queue,
+            );
+        }
+        // Periods this process skipped: its outputs missed that many syncs.
+        let s = clock.stats().skipped;
+        pending += s - skipped;
+        skipped = s;
+        let t = ipc::transport_errors();
+        let expired = health.cycle(now, wake.latency_ns(), pending, t - transport);
+        transport = t;
+        if let Some(d) = expired
+            && !estop.view().latched
+        {
+            let b = match d {
+                crate::health::Detector::PendingSequence => &health.pending,
+                crate::health::Detector::Transport => &health.transport,
+                crate::health::Detector::ThreadOffset => &health.offset,
+            };
+            let r = b.report(now);
+            queue.push(EventV1::new(
+                now,
+                code::HEALTH_EXPIRED,
+                -1,
+                f64::from(r.level),
+                f64::from(r.limit),
+                &[d.name(), " expired"],
+            ));
+            estop.raise(
+                now,
+                EstopOrigin::Host,
+                code::HEALTH_EXPIRED,
+                &[d.name(), " expired in ", name.as_str()],
+                &mut queue,
+            );
+        }
+        let view = *estop.view();
+        if view.latched && view.react.is_some() && safe && !safe_reported {
+            safe_reported = true;
+            queue.push(EventV1::new(
+                now,
+                code::ESTOP_SAFE,
+                -1,
+                now.saturating_sub(view.since_ns) as f64 * 1e-9,
+                0.0,
+                &["e-stop reaction complete"],
+            ));
+        }
+        status.stamp_ns = now;
         status.fault = task.fault();
         status.stats = *clock.stats();
+        status.pending_sequence = health.pending.report(now);
+        status.transport = health.transport.report(now);
+        status.thread_offset = health.offset.report(now);
+        status.estop = (if view.latched { estop_seen::LATCHED } else { 0 })
+            | (if view.react.is_some() {
+                estop_seen::REACTING
+            } else {
+                0
+            })
+            | (if view.react.is_some() && safe {
+                estop_seen::SAFE
+            } else {
+                0
+            })
+            | (if estop.raised() {
+                estop_seen::RAISED
+            } else {
+                0
+            });
         status_pub.send(&status);
         if status.stats.cycles.is_multiple_of(latency_every) {
             latency_pub.send(clock.histogram());
             exec_pub.send(clock.exec_histogram());
         }
-        if let Some(e) = overruns.check(wake.actual_ns, clock.stats().overruns) {
+        if let Some(e) = overruns.check(now, clock.stats().overruns) {
             queue.push(e);
         }
         events.drain(&mut queue);
         clock.finish(&wake, now_ns());
+        if let Some(since) = leaving_since
+            && (safe || now.saturating_sub(since) > leave_limit_ns)
+        {
+            break;
+        }
     }
     task.stop(now_ns(), &mut queue);
     events.drain(&mut queue);
@@ -235,9 +432,8 @@ fn run_inner<T: Task>(
     let h = clock.histogram();
     let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
     tracing::info!(
-        "{} ({instance}) stopped after {} cycles, {} overruns; wake-up latency p50 {:.1} µs, \
+        "{name} ({instance}) stopped after {} cycles, {} overruns; wake-up latency p50 {:.1} µs, \
          p99 {:.1} µs, p99.9 {:.1} µs, max {:.1} µs",
-        role.name(),
         clock.stats().cycles,
         clock.stats().overruns,
         us(h.percentile(1, 2)),
@@ -245,7 +441,11 @@ fn run_inner<T: Task>(
         us(h.percentile(999, 1000)),
         us(Some(h.max_ns)),
     );
-    Ok(())
+    Ok(if estop.supervisor_lost() && !signals::stop_requested() {
+        Exit::SupervisorLost
+    } else {
+        Exit::Stopped
+    })
 }
 
 /// Turns the overrun counter into events: one at the first overrun of a burst, then at most
@@ -288,8 +488,8 @@ impl OverrunReporter {
 fn wait_for_cell_config(
     node: &Node<Ipc>,
     instance: &InstanceName,
-) -> Result<Option<CellConfigV2>, SetupError> {
-    let sub = Sub::<CellConfigV2>::new(node, instance, ServiceId::CellConfig, 1)?;
+) -> Result<Option<CellConfigV3>, SetupError> {
+    let sub = Sub::<CellConfigV3>::new(node, instance, ServiceId::CellConfig, 1)?;
     let start = Instant::now();
     loop {
         if let Some(cell) = sub.latest() {
@@ -301,7 +501,7 @@ fn wait_for_cell_config(
         }
         if start.elapsed() > CONFIG_TIMEOUT {
             return Err(format!(
-                "no cell configuration on {} after {} s: is `supervisor run --instance {instance}` running?",
+                "no cell configuration on {} after {} s: is `supervisor up --instance {instance}` running?",
                 instance.service(ServiceId::CellConfig),
                 CONFIG_TIMEOUT.as_secs()
             )
@@ -312,7 +512,7 @@ fn wait_for_cell_config(
 }
 
 /// Checks what a process relies on; the supervisor validated everything else.
-pub fn validate_cell(cell: &CellConfigV2) -> Result<(), String> {
+pub fn validate_cell(cell: &CellConfigV3) -> Result<(), String> {
     if cell.axes == 0 || cell.axes as usize > shm_schema::MAX_AXES {
         return Err(format!(
             "cell configuration has {} axes, 1..={} allowed",
@@ -320,11 +520,18 @@ pub fn validate_cell(cell: &CellConfigV2) -> Result<(), String> {
             shm_schema::MAX_AXES
         ));
     }
-    for role in Role::ALL {
-        if cell.process[role.index()].period_ns == 0 {
+    if cell.process_count == 0 || cell.process_count as usize > shm_schema::MAX_PROCESSES {
+        return Err(format!(
+            "cell configuration has {} processes, 1..={} allowed",
+            cell.process_count,
+            shm_schema::MAX_PROCESSES
+        ));
+    }
+    for p in cell.processes() {
+        if p.period_ns == 0 {
             return Err(format!(
                 "cell configuration: period of {} is 0",
-                role.name()
+                shm_schema::str_of(&p.name)
             ));
         }
     }

@@ -54,8 +54,8 @@ use cia402::{FaultReset, Mode, State, cw, disable_step, enable_step};
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
-    AxisConfigV2, CellConfigV2, DriveCommandV2, DriveFeedbackV2, EventV1, MAX_AXES, Power,
-    RequestKind, Role, ServoRequestV1, ServoStateV2, SetpointV1, bound, str_of,
+    AxisConfigV2, CellConfigV3, DriveCommandV2, DriveFeedbackV2, EstopReaction, EventV1, MAX_AXES,
+    Power, RequestKind, ServoRequestV1, ServoStateV2, SetpointV1, bound, str_of,
 };
 
 /// Parameters of the controller.
@@ -77,17 +77,22 @@ pub struct Params {
     pub enable_timeout_ns: u64,
     /// Time within tolerance to be settled (ns).
     pub settle_time_ns: u64,
+    /// On an e-stop every axis comes from its vmax to rest within this time (s).
+    pub estop_stop_time_s: f64,
 }
 
 impl Params {
-    /// From the cell configuration.
-    pub fn from_cell(cell: &CellConfigV2) -> Self {
+    /// From the cell configuration, for a servo of period `period_ns`. The setpoints' period
+    /// is that of the process called `trajgen` (four servo periods without one).
+    pub fn from_cell(cell: &CellConfigV3, period_ns: u64) -> Self {
+        let trajgen_ns = cell.period_of("trajgen").unwrap_or(4 * period_ns);
         Self {
             axes: cell.axes as usize,
             axis: cell.axis,
-            period_s: cell.process[Role::Servo.index()].period_ns as f64 * 1e-9,
+            period_s: period_ns as f64 * 1e-9,
             max_extrapolation_s: cell.setpoint_timeout_ns as f64 * 1e-9,
-            rejoin_s: 2.0 * cell.process[Role::Trajgen.index()].period_ns as f64 * 1e-9,
+            rejoin_s: 2.0 * trajgen_ns as f64 * 1e-9,
+            estop_stop_time_s: cell.estop_stop_time_ns as f64 * 1e-9,
             feedback_timeout_ns: cell.feedback_timeout_ns,
             enable_timeout_ns: cell.enable_timeout_ns,
             settle_time_ns: cell.settle_time_ns,
@@ -136,6 +141,10 @@ pub struct Controller {
     /// A disable request found the arm enabled: the reference comes to rest before power
     /// goes off.
     stopping: bool,
+    /// The e-stop this process reacts to, as the runtime read it.
+    estop: Option<EstopReaction>,
+    /// Every axis' measured velocity within its settle velocity (latest feedback).
+    measured_at_rest: bool,
     /// Tuning offsets of the reference (axis unit).
     tune_offset: [f64; MAX_AXES],
     /// The offset of this axis changed this cycle: its position step is the requested one.
@@ -232,12 +241,79 @@ impl Controller {
             jump_reported: false,
             rejoin: Rejoin::default(),
             stopping: false,
+            estop: None,
+            measured_at_rest: true,
             tune_offset: [0.0; MAX_AXES],
             tune_step: [false; MAX_AXES],
             applied_offset: [0.0; MAX_AXES],
             last_ns: 0,
             elapsed_s: 0.0,
             seq: 0,
+        }
+    }
+
+    /// The e-stop this cycle, as the runtime read it (call before [`Controller::cycle`]).
+    /// `Stop`: the axes come to rest at the e-stop deceleration (from vmax to rest within the
+    /// e-stop stop time, never slower than the axis' stop deceleration), then the drives are
+    /// disabled; `Hold`: they come to rest the same way and stay enabled, holding. Either way
+    /// no setpoint is followed and no enable or step is taken until the e-stop is reset
+    /// (`None`); after a `Stop`, power returns only through an enable request.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn set_estop(
+        &mut self,
+        now_ns: u64,
+        react: Option<EstopReaction>,
+        events: &mut EventQueue,
+    ) {
+        let react = react.filter(|r| *r != EstopReaction::Ignore);
+        if react == self.estop {
+            return;
+        }
+        if react.is_some() {
+            self.setpoint = None;
+        }
+        if react == Some(EstopReaction::Stop)
+            && matches!(self.power, Power::Enabling | Power::Enabled)
+        {
+            self.stopping = self.power == Power::Enabled && self.latched.is_none();
+            self.set_power(Power::Disabling, now_ns);
+            events.push(EventV1::new(
+                now_ns,
+                code::DISABLING,
+                -1,
+                0.0,
+                0.0,
+                &["e-stop"],
+            ));
+        }
+        self.estop = react;
+    }
+
+    /// True when the e-stop reaction is complete: the axes at rest (reference and measured)
+    /// and, unless holding, every drive disabled.
+    pub fn estop_safe(&self) -> bool {
+        let at_rest =
+            self.measured_at_rest && self.ref_vel[..self.p.axes].iter().all(|v| *v == 0.0);
+        match self.estop {
+            Some(EstopReaction::Hold) => at_rest || self.power == Power::Disabled,
+            _ => self.power == Power::Disabled && self.measured_at_rest,
+        }
+    }
+
+    /// The latched fault, if any.
+    pub fn latched(&self) -> Option<Latched> {
+        self.latched
+    }
+
+    /// The deceleration that brings axis `i` to rest when no setpoint is followed.
+    fn stop_deceleration(&self, i: usize) -> f64 {
+        let a = &self.p.axis[i];
+        if self.estop.is_some() && self.p.estop_stop_time_s > 0.0 {
+            a.stop_deceleration.max(a.vmax / self.p.estop_stop_time_s)
+        } else {
+            a.stop_deceleration
         }
     }
 
@@ -295,7 +371,9 @@ impl Controller {
         };
         match RequestKind::from_u32(r.kind) {
             Some(RequestKind::Enable) => {
-                if self.latched.is_some() {
+                if self.estop.is_some() {
+                    refuse("enable refused: the e-stop is latched, reset first", events);
+                } else if self.latched.is_some() {
                     refuse("enable refused: a fault is latched, reset first", events);
                 } else if !feedback_ok {
                     refuse("enable refused: no valid drive feedback", events);
@@ -352,7 +430,7 @@ impl Controller {
                 .setpoint
                 .is_none_or(|sp| sp.velocity[..self.p.axes].iter().all(|v| *v == 0.0));
         let target = self.ref_pos[i] - self.tune_offset[i] + r.value;
-        if self.power != Power::Enabled || self.latched.is_some() {
+        if self.power != Power::Enabled || self.latched.is_some() || self.estop.is_some() {
             Some("step refused: the arm is not enabled")
         } else if !at_rest {
             Some("step refused: the axes are moving")
@@ -496,7 +574,7 @@ impl Controller {
         }
         for i in 0..n {
             let v = self.ref_vel[i];
-            let dv = self.p.axis[i].stop_deceleration * dt;
+            let dv = self.stop_deceleration(i) * dt;
             let v_new = if v.abs() <= dv {
                 0.0
             } else {
@@ -699,6 +777,8 @@ impl Controller {
         out.state.statusword = fb.statusword;
 
         let feedback_ok = self.check_feedback(now_ns, fb, events);
+        self.measured_at_rest =
+            (0..n).all(|i| fb.velocity[i].abs() <= self.p.axis[i].settle_velocity);
         if let Some(r) = request.filter(|r| r.seq != self.request_seq) {
             self.request(now_ns, r, feedback_ok, events);
         }
@@ -716,7 +796,9 @@ impl Controller {
                 self.stopping = false;
             }
         } else if self.power == Power::Enabled && feedback_ok {
-            self.follow(now_ns, dt, new_setpoint, fb, &mut out, events);
+            // Under an e-stop that holds, no setpoint is taken: the reference comes to rest.
+            let sp = new_setpoint.filter(|_| self.estop.is_none());
+            self.follow(now_ns, dt, sp, fb, &mut out, events);
         } else {
             // Not following: the reference is where the axes are (bumpless enable; a CSP
             // drive gets its actual position as target), the integrators are cleared.

@@ -1,19 +1,22 @@
 //! The cell configuration as every process reads it from `<i>/cell/config`.
 //!
 //! The supervisor loads the TOML file (or the embedded default), validates it and publishes
-//! this once, with history 1. A process reads its own `process[role]` entry and the axes; it
-//! needs no TOML parser, so a process in any language can take part.
+//! this once, with history 1. A process finds its own entry of the process table by its name
+//! (`--name`), and reads the axes; it needs no TOML parser, so a process in any language can
+//! take part.
 
 use crate::MAX_AXES;
-use crate::status::ROLE_COUNT;
+use crate::status::{MAX_PROCESSES, PROCESS_NAME_LEN, ProcessName};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
-/// Real-time settings of one process.
+/// One entry of the process table: a process' name and its real-time settings.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("rtc::ProcessConfigV1")]
-pub struct ProcessConfigV1 {
+#[type_name("rtc::ProcessConfigV2")]
+pub struct ProcessConfigV2 {
+    /// The process' name, NUL-padded (`"servo"`): see [`ProcessName`].
+    pub name: [u8; PROCESS_NAME_LEN],
     /// Cycle period (ns).
     pub period_ns: u64,
     /// Offset of the cycle's deadlines from multiples of the period (ns), to order the
@@ -23,6 +26,73 @@ pub struct ProcessConfigV1 {
     pub priority: i32,
     /// CPU to pin the process to, -1 for none.
     pub cpu: i32,
+    /// Its reaction to a propagated e-stop (seed 002's `network_estop_config`):
+    /// [`EstopReaction`] as `u32`.
+    pub network_estop_config: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
+}
+
+/// A process' reaction to an e-stop it did not raise itself (`network_estop_config`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum EstopReaction {
+    /// Its safe reaction: servo brakes the axes to rest within the e-stop stop time and
+    /// disables the drives; trajgen drops the program; iobridge sets its outputs to their safe
+    /// values. The default.
+    Stop = 0,
+    /// servo brakes the axes to rest and holds them, drives enabled (a stop of category 2);
+    /// any other process reacts as with `Stop`.
+    Hold = 1,
+    /// No reaction: the process sees the e-stop and goes on (a logger, a monitor).
+    Ignore = 2,
+}
+
+impl EstopReaction {
+    /// Every reaction.
+    pub const ALL: [Self; 3] = [Self::Stop, Self::Hold, Self::Ignore];
+
+    /// Decodes the wire value.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| *r as u32 == v)
+    }
+
+    /// The configuration's spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Stop => "stop",
+            Self::Hold => "hold",
+            Self::Ignore => "ignore",
+        }
+    }
+}
+
+/// Seed 002's health detectors (`[health_config]`), the same for every process of the cell.
+/// Each is a leaky bucket: +1 per overrun, -1 per leak time; it expires (a host e-stop naming
+/// the detector and the process) when the count reaches `percent_limit` % of the process'
+/// rate (cycles per second).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::HealthConfigV1")]
+pub struct HealthConfigV1 {
+    /// `pending_sequence_overrun_percent_limit` (%).
+    pub pending_sequence_overrun_percent_limit: f64,
+    /// `pending_sequence_overrun_leak_time_s` (s).
+    pub pending_sequence_overrun_leak_time_s: f64,
+    /// `pending_sequence_overrun_start_snooze_s` (s).
+    pub pending_sequence_overrun_start_snooze_s: f64,
+    /// `transport_overrun_percent_limit` (%).
+    pub transport_overrun_percent_limit: f64,
+    /// `transport_overrun_leak_time_s` (s).
+    pub transport_overrun_leak_time_s: f64,
+    /// `thread_offset_variance_percent` (% of the period): a wake-up later than this counts.
+    pub thread_offset_variance_percent: f64,
+    /// `thread_offset_variance_overrun_percent_limit` (%).
+    pub thread_offset_variance_overrun_percent_limit: f64,
+    /// `thread_offset_variance_overrun_leak_time_s` (s).
+    pub thread_offset_variance_overrun_leak_time_s: f64,
+    /// `thread_offset_variance_start_snooze_s` (s).
+    pub thread_offset_variance_start_snooze_s: f64,
 }
 
 /// One axis: limits, command validation, servo gains, the drive and the simulated mechanics.
@@ -111,14 +181,14 @@ pub struct ConfiguredFaultV1 {
     pub code: u32,
 }
 
-/// Capacity of [`CellConfigV2::inject`].
+/// Capacity of [`CellConfigV3::inject`].
 pub const MAX_CONFIGURED_FAULTS: usize = 4;
 
 /// The whole cell.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("rtc::CellConfigV2")]
-pub struct CellConfigV2 {
+#[type_name("rtc::CellConfigV3")]
+pub struct CellConfigV3 {
     /// Number of axes in use, 1..=[`MAX_AXES`].
     pub axes: u32,
     /// Integration steps of the simulated machine per machine cycle.
@@ -136,17 +206,60 @@ pub struct CellConfigV2 {
     pub enable_timeout_ns: u64,
     /// Time the axes must stay within their tolerances to be settled (ns).
     pub settle_time_ns: u64,
-    /// Real-time settings per process, indexed by [`crate::Role`].
-    pub process: [ProcessConfigV1; ROLE_COUNT],
+    /// On an e-stop, servo brings every axis from its vmax to rest within this time, then
+    /// disables the drives (ns).
+    pub estop_stop_time_ns: u64,
+    /// A process whose supervisor has not beaten for this long reacts as to an e-stop of the
+    /// host, brings the axes to rest and exits (ns).
+    pub supervisor_timeout_ns: u64,
+    /// Seed 002's `propagate_estop`: 1 when a process' own e-stop is propagated to every
+    /// process, 0 when only that process reacts.
+    pub propagate_estop: u32,
+    /// Seed 002's `propagate_external_estop`: 1 when a user's e-stop (`supervisor estop`, an
+    /// e-stop input) is propagated even with `propagate_estop` 0.
+    pub propagate_external_estop: u32,
+    /// Entries of `process` in use.
+    pub process_count: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
+    /// The health detectors.
+    pub health: HealthConfigV1,
+    /// The process table, in start order; the first `process_count` are in use.
+    pub process: [ProcessConfigV2; MAX_PROCESSES],
     /// Axes; the first `axes` are in use.
     pub axis: [AxisConfigV2; MAX_AXES],
     /// Configured fault injections; entries with `code` 0 are unused.
     pub inject: [ConfiguredFaultV1; MAX_CONFIGURED_FAULTS],
 }
 
-impl CellConfigV2 {
+impl CellConfigV3 {
     /// The axes in use.
     pub fn axes(&self) -> &[AxisConfigV2] {
         &self.axis[..(self.axes as usize).min(MAX_AXES)]
+    }
+
+    /// The process table entries in use.
+    pub fn processes(&self) -> &[ProcessConfigV2] {
+        &self.process[..(self.process_count as usize).min(MAX_PROCESSES)]
+    }
+
+    /// Index and entry of the process called `name`.
+    pub fn process_named(&self, name: &str) -> Option<(usize, &ProcessConfigV2)> {
+        self.processes()
+            .iter()
+            .enumerate()
+            .find(|(_, p)| crate::str_of(&p.name) == name)
+    }
+
+    /// The period of the process called `name` (ns), if the table has one.
+    pub fn period_of(&self, name: &str) -> Option<u64> {
+        self.process_named(name).map(|(_, p)| p.period_ns)
+    }
+
+    /// The name of process `index`, if it is a valid one.
+    pub fn process_name(&self, index: usize) -> Option<ProcessName> {
+        self.processes()
+            .get(index)
+            .and_then(|p| ProcessName::from_field(&p.name))
     }
 }

@@ -59,7 +59,8 @@ pub struct EventV1 {
     pub value: f64,
     /// The limit it was compared with (same unit), 0 when there is none.
     pub limit: f64,
-    /// Source process: a [`crate::Role`] as `u32`, or [`SOURCE_SUPERVISOR`].
+    /// Source: the index of the process in the cell configuration's process table, or
+    /// [`SOURCE_SUPERVISOR`] for the supervisor and the user's tools.
     pub source: u32,
     /// [`Severity`] as `u32`.
     pub severity: u32,
@@ -101,22 +102,7 @@ impl EventV1 {
         limit: f64,
         parts: &[&str],
     ) -> Self {
-        let mut text = [0u8; EVENT_TEXT_LEN];
-        let mut at = 0;
-        for p in parts {
-            for &b in p.as_bytes() {
-                if at + 1 >= EVENT_TEXT_LEN {
-                    break;
-                }
-                text[at] = b;
-                at += 1;
-            }
-        }
-        // Never cut a UTF-8 character in half.
-        while at > 0 && core::str::from_utf8(&text[..at]).is_err() {
-            at -= 1;
-            text[at] = 0;
-        }
+        let text = text_of(parts);
         Self {
             seq: 0,
             stamp_ns,
@@ -134,6 +120,30 @@ impl EventV1 {
     pub fn text(&self) -> &str {
         crate::str_of(&self.text)
     }
+}
+
+/// `parts` joined into a NUL-padded field of `N` bytes, truncated so that it ends in NUL and
+/// never cuts a UTF-8 character in half.
+///
+/// # Real-time
+/// Copies only; no allocation.
+pub fn text_of<const N: usize>(parts: &[&str]) -> [u8; N] {
+    let mut text = [0u8; N];
+    let mut at = 0;
+    'outer: for p in parts {
+        for &b in p.as_bytes() {
+            if at + 1 >= N {
+                break 'outer;
+            }
+            text[at] = b;
+            at += 1;
+        }
+    }
+    while at > 0 && core::str::from_utf8(&text[..at]).is_err() {
+        at -= 1;
+        text[at] = 0;
+    }
+    text
 }
 
 /// Event codes. Hundreds group them: 1xx drives (device side), 2xx servo refusals and
@@ -209,6 +219,23 @@ pub mod code {
 
     /// The supervisor sent a request or a command on the user's behalf.
     pub const SUPERVISOR_ACTION: u32 = 501;
+    /// A process of the cell died or stopped cycling; value: its exit code or -1.
+    pub const PROCESS_LOST: u32 = 502;
+    /// A process of the cell was started again by its restart policy; value: restarts so far.
+    pub const PROCESS_RESTARTED: u32 = 503;
+
+    /// An e-stop was raised; value: its origin (1 device, 2 external, 3 host), limit: the
+    /// cause's event code.
+    pub const ESTOP_RAISED: u32 = 601;
+    /// The e-stop was reset; value: resets so far.
+    pub const ESTOP_RESET: u32 = 602;
+    /// A process completed its e-stop reaction (servo: axes at rest, drives disabled or
+    /// holding); value: time from the e-stop to this (s).
+    pub const ESTOP_SAFE: u32 = 603;
+    /// A health detector expired; value: its count, limit: its limit.
+    pub const HEALTH_EXPIRED: u32 = 604;
+    /// The supervisor's heartbeat stopped; value: its age (s), limit: the timeout (s).
+    pub const SUPERVISOR_LOST: u32 = 605;
 }
 
 /// What a code means, for documents and reports.
@@ -444,6 +471,55 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Info,
         unit: "",
         meaning: "The supervisor or one of its tools acted (a fault injection); the text says what. Best effort: a tool publishes it from a port it has just opened, and a subscriber can miss it; the effect (e.g. `fault-injected` from the drives) is what to rely on.",
+    },
+    CodeInfo {
+        code: code::PROCESS_LOST,
+        name: "process-lost",
+        severity: Severity::Error,
+        unit: "exit code (-1: killed by a signal or stalled)",
+        meaning: "A process of the cell exited or stopped cycling (its status did not advance for `heartbeat_timeout`); the text names it and why. An unrecoverable host e-stop follows: every process reacts, whatever `propagate_estop` says. A reset is refused until the process is cyclic again (its restart policy, or `supervisor restart`).",
+    },
+    CodeInfo {
+        code: code::PROCESS_RESTARTED,
+        name: "process-restarted",
+        severity: Severity::Warning,
+        unit: "restarts of this process so far",
+        meaning: "The supervisor started a process again after it was lost (`restart = \"on-failure\"`, or `supervisor restart`); the e-stop stays latched until `supervisor reset`.",
+    },
+    CodeInfo {
+        code: code::ESTOP_RAISED,
+        name: "estop-raised",
+        severity: Severity::Error,
+        unit: "origin: 1 device, 2 external, 3 host (limit: the cause's code)",
+        meaning: "A process, the user or the host raised the e-stop (seed 002); the text is the reason. It is latched in every process that reads it in its cycle, and each process whose propagation rules and `network_estop_config` say so reacts: servo brings the axes to rest within `estop_stop_time` and disables the drives, trajgen drops the program, iobridge sets its outputs to their safe values. Cleared only by `supervisor reset`.",
+    },
+    CodeInfo {
+        code: code::ESTOP_RESET,
+        name: "estop-reset",
+        severity: Severity::Info,
+        unit: "resets so far",
+        meaning: "`supervisor reset` cleared the e-stop and servo's latched faults; the drives stay disabled until `supervisor start`.",
+    },
+    CodeInfo {
+        code: code::ESTOP_SAFE,
+        name: "estop-safe",
+        severity: Severity::Info,
+        unit: "s",
+        meaning: "A process completed its e-stop reaction; the value is the time from the e-stop's raising to this cycle (for servo: from the request to every axis at rest and its drive disabled).",
+    },
+    CodeInfo {
+        code: code::HEALTH_EXPIRED,
+        name: "health-expired",
+        severity: Severity::Error,
+        unit: "counts",
+        meaning: "A health detector of seed 002 (pending_sequence_overrun, transport_overrun, thread_offset_variance; the text names it) reached its limit in the process named as the source: an unrecoverable host e-stop follows. docs/operations.md says how to tune `[health_config]`.",
+    },
+    CodeInfo {
+        code: code::SUPERVISOR_LOST,
+        name: "supervisor-lost",
+        severity: Severity::Error,
+        unit: "s",
+        meaning: "A process has not seen the supervisor's heartbeat for `supervisor_timeout`: it reacts as to a host e-stop (servo brings the axes to rest and disables the drives) and exits, so no cell runs headless.",
     },
 ];
 

@@ -17,22 +17,28 @@
 
 pub mod config;
 pub mod drive;
+pub mod estop;
 pub mod event;
 pub mod latency;
 pub mod motion;
 pub mod names;
 pub mod status;
 
-pub use config::{AxisConfigV2, CellConfigV2, ConfiguredFaultV1, ProcessConfigV1};
+pub use config::{
+    AxisConfigV2, CellConfigV3, ConfiguredFaultV1, EstopReaction, HealthConfigV1, ProcessConfigV2,
+};
 pub use drive::{
     DriveCommandV2, DriveFeedbackV2, FaultInjectionV1, FieldbusImageV1, Power, RequestKind,
     ServoRequestV1, ServoStateV2,
 };
+pub use estop::{EstopKind, EstopOrigin, EstopV1};
 pub use event::{EventQueue, EventV1, Severity};
 pub use latency::LatencyHistogramV1;
 pub use motion::{CommandKind, MotionCommandV1, MotionState, SetpointV1};
 pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};
-pub use status::{CycleStatsV1, ProcState, ProcessStatusV1, Role};
+pub use status::{
+    CycleStatsV1, DetectorV1, MAX_PROCESSES, ProcState, ProcessName, ProcessStatusV2, estop_seen,
+};
 
 /// Capacity of every per-axis array in a shared payload. A cell uses the first `axes` entries.
 pub const MAX_AXES: usize = 8;

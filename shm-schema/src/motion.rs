@@ -87,6 +87,8 @@ pub mod trajgen_fault {
     pub const QUEUE_OVERFLOW: u32 = 4;
     /// A command's sequence number skipped (a command was lost).
     pub const SEQUENCE_GAP: u32 = 5;
+    /// An e-stop dropped the program; the reference rests where servo brought the axes.
+    pub const ESTOP: u32 = 6;
 
     /// What a fault code means, in words.
     pub fn text(code: u32) -> &'static str {
@@ -97,6 +99,7 @@ pub mod trajgen_fault {
             BAD_COMMAND => "the command is malformed",
             QUEUE_OVERFLOW => "its command queue overflowed",
             SEQUENCE_GAP => "a command was lost (sequence gap)",
+            ESTOP => "an e-stop dropped the program",
             _ => "unknown fault",
         }
     }

@@ -174,7 +174,7 @@ impl fmt::Display for ServiceNameBuf {
 /// their payload layouts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ServiceId {
-    /// `<i>/cell/config`: [`crate::CellConfigV2`], published once by the supervisor with
+    /// `<i>/cell/config`: [`crate::CellConfigV3`], published once by the supervisor with
     /// history 1, so a process that starts later still receives it.
     CellConfig,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV1`], a client (the supervisor) to trajgen.
@@ -201,16 +201,22 @@ pub enum ServiceId {
     Events,
     /// `<i>/iobridge/output`: [`crate::FieldbusImageV1`], the fieldbus output image.
     FieldbusOutput,
-    /// `<i>/<role>/status`: [`crate::ProcessStatusV1`], every real-time process to the
+    /// `<i>/<name>/status`: [`crate::ProcessStatusV2`], every real-time process to the
     /// supervisor, every cycle.
-    Status(crate::Role),
-    /// `<i>/<role>/latency`: [`crate::LatencyHistogramV1`], the wake-up latency histogram of
+    Status(crate::ProcessName),
+    /// `<i>/<name>/latency`: [`crate::LatencyHistogramV1`], the wake-up latency histogram of
     /// every real-time process since its start, about every 100 ms and once more on stopping.
-    Latency(crate::Role),
-    /// `<i>/<role>/exec_time`: [`crate::LatencyHistogramV1`] of the execution time (wake-up
+    Latency(crate::ProcessName),
+    /// `<i>/<name>/exec_time`: [`crate::LatencyHistogramV1`] of the execution time (wake-up
     /// to end of work) of every cycle of a real-time process since its start, published with
     /// the latency histogram.
-    ExecTime(crate::Role),
+    ExecTime(crate::ProcessName),
+    /// `<i>/estop`: [`crate::EstopV1`], any process, the supervisor and a user's tool to every
+    /// process: e-stop triggers and resets, read by every real-time process in its cycle.
+    Estop,
+    /// `<i>/host/state`: [`crate::estop::HostStateV1`], the supervisor's heartbeat and the
+    /// latched e-stop, every supervisor tick, history 1.
+    HostState,
     /// `<i>/trajgen/setpoint` (event service): trajgen notifies it after each setpoint
     /// publish, so a consumer may block until a setpoint arrives instead of polling.
     SetpointReady,
@@ -234,7 +240,19 @@ pub struct Qos {
 
 impl ServiceId {
     /// The part of the service name after `<instance>/`.
-    pub fn suffix(self) -> &'static str {
+    pub fn suffix(self) -> ServiceNameBuf {
+        let mut buf = ServiceNameBuf::default();
+        // Cannot overflow: a process name has at most 15 bytes.
+        let _ = match self {
+            Self::Status(name) => write!(buf, "{name}/status"),
+            Self::Latency(name) => write!(buf, "{name}/latency"),
+            Self::ExecTime(name) => write!(buf, "{name}/exec_time"),
+            fixed => buf.write_str(fixed.fixed_suffix()),
+        };
+        buf
+    }
+
+    fn fixed_suffix(self) -> &'static str {
         match self {
             Self::CellConfig => "cell/config",
             Self::MotionCommand => "trajgen/command",
@@ -247,9 +265,9 @@ impl ServiceId {
             Self::SenseToCommand => "machine/sense_to_command",
             Self::Events => "events",
             Self::FieldbusOutput => "iobridge/output",
-            Self::Status(role) => role.status_suffix(),
-            Self::Latency(role) => role.latency_suffix(),
-            Self::ExecTime(role) => role.exec_time_suffix(),
+            Self::Estop => "estop",
+            Self::HostState => "host/state",
+            Self::Status(_) | Self::Latency(_) | Self::ExecTime(_) => "",
             Self::SetpointReady => "trajgen/setpoint",
         }
     }
@@ -278,11 +296,28 @@ impl ServiceId {
             },
             // Every process writes events, and the supervisor; several tools may read them.
             Self::Events => Qos {
-                max_publishers: 16,
+                max_publishers: 32,
+                max_subscribers: 16,
+                max_nodes: 40,
                 ..base
             },
             Self::ServoRequest | Self::FaultInjection => Qos {
                 max_publishers: 8,
+                ..base
+            },
+            // Every process, the supervisor and the user's tools may raise an e-stop.
+            Self::Estop => Qos {
+                max_publishers: 32,
+                max_subscribers: 24,
+                max_nodes: 40,
+                ..base
+            },
+            // A process started late gets the latched state at once.
+            Self::HostState => Qos {
+                history: 1,
+                max_publishers: 1,
+                max_subscribers: 24,
+                max_nodes: 32,
                 ..base
             },
             // 30 KB a sample: keep few. A late observer gets the newest at once.
@@ -300,7 +335,7 @@ impl ServiceId {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Role;
+    use crate::ProcessName;
 
     #[test]
     fn instance_names_are_validated() {
@@ -327,7 +362,8 @@ mod tests {
             "t1/trajgen/setpoint"
         );
         assert_eq!(
-            i.service(ServiceId::Status(Role::Servo)).as_str(),
+            i.service(ServiceId::Status(ProcessName::new("servo").expect("valid")))
+                .as_str(),
             "t1/servo/status"
         );
         assert_eq!(i.shm_prefix().as_str(), "iox2_t1_");
@@ -335,10 +371,10 @@ mod tests {
         let long = InstanceName::new(&"z".repeat(MAX_INSTANCE_LEN)).expect("valid");
         for id in [
             ServiceId::DriveCommand,
-            ServiceId::Status(Role::Machine),
-            ServiceId::Latency(Role::Iobridge),
+            ServiceId::Status(ProcessName::new("machine").expect("valid")),
+            ServiceId::Latency(ProcessName::new("abcdefghijklmno").expect("valid")),
         ] {
-            assert!(long.service(id).as_str().ends_with(id.suffix()));
+            assert!(long.service(id).as_str().ends_with(id.suffix().as_str()));
         }
         assert!(long.root_dir().as_str().ends_with('/'));
     }

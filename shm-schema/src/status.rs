@@ -1,74 +1,85 @@
-//! Process roles and the status every real-time process publishes each cycle.
+//! Process names and the status every real-time process publishes each cycle.
 
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
-/// The processes of a cell. The value is the index into [`crate::CellConfigV2::process`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u32)]
-pub enum Role {
-    /// Trajectory generator.
-    Trajgen = 0,
-    /// Axis position loops.
-    Servo = 1,
-    /// Fieldbus data.
-    Iobridge = 2,
-    /// The machine: simulated drives and mechanics (a real drive interface later).
-    Machine = 3,
+/// Most processes a cell runs (entries of [`crate::CellConfigV3::process`]).
+pub const MAX_PROCESSES: usize = 16;
+
+/// Bytes of a process name.
+pub const PROCESS_NAME_LEN: usize = 16;
+
+/// A process' name: 1 to 15 of `[a-z0-9_-]`, starting with a letter. It names the process'
+/// entry in the cell configuration and its services (`<i>/<name>/status`, ...).
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub struct ProcessName {
+    bytes: [u8; PROCESS_NAME_LEN],
 }
 
-/// Number of [`Role`]s.
-pub const ROLE_COUNT: usize = 4;
+/// Why a process name was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProcessNameError {
+    /// Empty, or longer than 15 bytes.
+    Length(usize),
+    /// A character outside `[a-z0-9_-]`, or a first character that is not a letter.
+    BadChar(char),
+}
 
-impl Role {
-    /// Every role, in start order (the machine first: servo needs its feedback).
-    pub const ALL: [Role; ROLE_COUNT] = [Role::Machine, Role::Servo, Role::Trajgen, Role::Iobridge];
-
-    /// The role's name, as used in service names and the configuration (`[process.<name>]`).
-    pub fn name(self) -> &'static str {
+impl core::fmt::Display for ProcessNameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::Trajgen => "trajgen",
-            Self::Servo => "servo",
-            Self::Iobridge => "iobridge",
-            Self::Machine => "machine",
+            Self::Length(n) => write!(f, "a process name has 1 to 15 bytes, not {n}"),
+            Self::BadChar(c) => write!(
+                f,
+                "a process name is a lower-case letter followed by [a-z0-9_-]; {c:?} is not allowed"
+            ),
         }
     }
+}
 
-    /// The role with this name.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|r| r.name() == name)
-    }
-
-    /// Index into per-role arrays.
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    pub(crate) fn status_suffix(self) -> &'static str {
-        match self {
-            Self::Trajgen => "trajgen/status",
-            Self::Servo => "servo/status",
-            Self::Iobridge => "iobridge/status",
-            Self::Machine => "machine/status",
+impl ProcessName {
+    /// Validates `name`.
+    pub fn new(name: &str) -> Result<Self, ProcessNameError> {
+        if name.is_empty() || name.len() >= PROCESS_NAME_LEN {
+            return Err(ProcessNameError::Length(name.len()));
         }
+        for (i, c) in name.chars().enumerate() {
+            let ok =
+                c.is_ascii_lowercase() || (i > 0 && (c.is_ascii_digit() || c == '_' || c == '-'));
+            if !ok {
+                return Err(ProcessNameError::BadChar(c));
+            }
+        }
+        Ok(Self {
+            bytes: crate::fixed_str(name),
+        })
     }
 
-    pub(crate) fn exec_time_suffix(self) -> &'static str {
-        match self {
-            Self::Trajgen => "trajgen/exec_time",
-            Self::Servo => "servo/exec_time",
-            Self::Iobridge => "iobridge/exec_time",
-            Self::Machine => "machine/exec_time",
-        }
+    /// Reads a NUL-padded name field of a payload; `None` if it is not a valid name.
+    pub fn from_field(field: &[u8; PROCESS_NAME_LEN]) -> Option<Self> {
+        Self::new(crate::str_of(field)).ok()
     }
 
-    pub(crate) fn latency_suffix(self) -> &'static str {
-        match self {
-            Self::Trajgen => "trajgen/latency",
-            Self::Servo => "servo/latency",
-            Self::Iobridge => "iobridge/latency",
-            Self::Machine => "machine/latency",
-        }
+    /// The name as text.
+    pub fn as_str(&self) -> &str {
+        crate::str_of(&self.bytes)
+    }
+
+    /// The NUL-padded field of a payload.
+    pub fn field(&self) -> [u8; PROCESS_NAME_LEN] {
+        self.bytes
+    }
+}
+
+impl core::fmt::Debug for ProcessName {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{:?}", self.as_str())
+    }
+}
+
+impl core::fmt::Display for ProcessName {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.as_str())
     }
 }
 
@@ -138,15 +149,41 @@ pub mod rt_flags {
     pub const AFFINITY: u32 = 8;
 }
 
-/// What every real-time process publishes on `<i>/<role>/status` each cycle.
+/// One health detector of seed 002 (a leaky bucket), as a process reports it.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("rtc::ProcessStatusV1")]
-pub struct ProcessStatusV1 {
+#[type_name("rtc::DetectorV1")]
+pub struct DetectorV1 {
+    /// The bucket's count now: +1 per overrun, -1 per leak time.
+    pub level: f32,
+    /// The count at which it expires (a host e-stop); 0 while snoozed after a start.
+    pub limit: f32,
+    /// Overruns counted since the process started.
+    pub total: u64,
+}
+
+/// Bits of [`ProcessStatusV2::estop`].
+pub mod estop_seen {
+    /// The cell's e-stop is latched (any source), as this process read it in its own cycle.
+    pub const LATCHED: u32 = 1;
+    /// This process reacts to it (propagation rules and its `network_estop_config`).
+    pub const REACTING: u32 = 2;
+    /// Its reaction is complete (servo: axes at rest and drives disabled; trajgen: program
+    /// dropped; iobridge: outputs at their safe values).
+    pub const SAFE: u32 = 4;
+    /// This process raised an e-stop itself (a device e-stop), since the last reset.
+    pub const RAISED: u32 = 8;
+}
+
+/// What every real-time process publishes on `<i>/<name>/status` each cycle.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::ProcessStatusV2")]
+pub struct ProcessStatusV2 {
     /// Operating-system process id.
     pub pid: u32,
-    /// [`Role`] as `u32`.
-    pub role: u32,
+    /// Index of the process in the cell configuration's process table.
+    pub index: u32,
     /// [`ProcState`] as `u32`.
     pub state: u32,
     /// Scheduling policy in effect: 0 `SCHED_OTHER`, 1 `SCHED_FIFO`, 2 `SCHED_RR`.
@@ -157,10 +194,22 @@ pub struct ProcessStatusV1 {
     pub cpu: i32,
     /// [`rt_flags`] bits.
     pub rt_flags: u32,
-    /// Fault code of the process, 0 for none (meaning per role; see `docs/services.md`).
+    /// Fault code of the process, 0 for none (meaning per process; see `docs/services.md`).
     pub fault: u32,
     /// Wake-up time of the cycle that published this (ns, `CLOCK_MONOTONIC`).
     pub stamp_ns: u64,
     /// Cycle timing.
     pub stats: CycleStatsV1,
+    /// The process' name, NUL-padded.
+    pub name: [u8; PROCESS_NAME_LEN],
+    /// Pending-sequence overruns: a sample that did not reach its consumer by the next cycle.
+    pub pending_sequence: DetectorV1,
+    /// Transport overruns: an IPC call that failed, a sample lost.
+    pub transport: DetectorV1,
+    /// Thread offset variance: a wake-up later than the configured share of the period.
+    pub thread_offset: DetectorV1,
+    /// [`estop_seen`] bits.
+    pub estop: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
 }

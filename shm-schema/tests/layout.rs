@@ -5,6 +5,7 @@
 
 use core::mem::{offset_of, size_of};
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use shm_schema::estop::HostStateV1;
 use shm_schema::*;
 
 struct Layout {
@@ -30,7 +31,7 @@ const A: usize = MAX_AXES;
 
 fn layouts() -> Vec<Layout> {
     vec![
-        layout!(CellConfigV2 {
+        layout!(CellConfigV3 {
             axes: "uint32_t" = 4,
             machine_substeps: "uint32_t" = 4,
             t_acc_s: "double" = 8,
@@ -39,15 +40,36 @@ fn layouts() -> Vec<Layout> {
             feedback_timeout_ns: "uint64_t" = 8,
             enable_timeout_ns: "uint64_t" = 8,
             settle_time_ns: "uint64_t" = 8,
-            process: "ProcessConfigV1[4]" = 4 * size_of::<ProcessConfigV1>(),
+            estop_stop_time_ns: "uint64_t" = 8,
+            supervisor_timeout_ns: "uint64_t" = 8,
+            propagate_estop: "uint32_t" = 4,
+            propagate_external_estop: "uint32_t" = 4,
+            process_count: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+            health: "HealthConfigV1" = size_of::<HealthConfigV1>(),
+            process: "ProcessConfigV2[16]" = MAX_PROCESSES * size_of::<ProcessConfigV2>(),
             axis: "AxisConfigV2[8]" = A * size_of::<AxisConfigV2>(),
             inject: "ConfiguredFaultV1[4]" = 4 * size_of::<ConfiguredFaultV1>(),
         }),
-        layout!(ProcessConfigV1 {
+        layout!(ProcessConfigV2 {
+            name: "char[16]" = 16,
             period_ns: "uint64_t" = 8,
             phase_ns: "uint64_t" = 8,
             priority: "int32_t" = 4,
-            cpu: "int32_t" = 4
+            cpu: "int32_t" = 4,
+            network_estop_config: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+        }),
+        layout!(HealthConfigV1 {
+            pending_sequence_overrun_percent_limit: "double" = 8,
+            pending_sequence_overrun_leak_time_s: "double" = 8,
+            pending_sequence_overrun_start_snooze_s: "double" = 8,
+            transport_overrun_percent_limit: "double" = 8,
+            transport_overrun_leak_time_s: "double" = 8,
+            thread_offset_variance_percent: "double" = 8,
+            thread_offset_variance_overrun_percent_limit: "double" = 8,
+            thread_offset_variance_overrun_leak_time_s: "double" = 8,
+            thread_offset_variance_start_snooze_s: "double" = 8,
         }),
         layout!(AxisConfigV2 {
             name: "char[16]" = 16,
@@ -205,9 +227,25 @@ fn layouts() -> Vec<Layout> {
             axes: "uint32_t" = 4,
             image: "uint8_t[64]" = 64,
         }),
-        layout!(ProcessStatusV1 {
+        layout!(EstopV1 {
+            stamp_ns: "uint64_t" = 8,
+            kind: "uint32_t" = 4,
+            origin: "uint32_t" = 4,
+            source: "uint32_t" = 4,
+            code: "uint32_t" = 4,
+            reason: "char[64]" = 64,
+        }),
+        layout!(HostStateV1 {
+            stamp_ns: "uint64_t" = 8,
+            beat: "uint64_t" = 8,
+            resets: "uint64_t" = 8,
             pid: "uint32_t" = 4,
-            role: "uint32_t" = 4,
+            estop: "uint32_t" = 4,
+            cause: "EstopV1" = size_of::<EstopV1>(),
+        }),
+        layout!(ProcessStatusV2 {
+            pid: "uint32_t" = 4,
+            index: "uint32_t" = 4,
             state: "uint32_t" = 4,
             policy: "uint32_t" = 4,
             priority: "int32_t" = 4,
@@ -216,6 +254,17 @@ fn layouts() -> Vec<Layout> {
             fault: "uint32_t" = 4,
             stamp_ns: "uint64_t" = 8,
             stats: "CycleStatsV1" = size_of::<CycleStatsV1>(),
+            name: "char[16]" = 16,
+            pending_sequence: "DetectorV1" = size_of::<DetectorV1>(),
+            transport: "DetectorV1" = size_of::<DetectorV1>(),
+            thread_offset: "DetectorV1" = size_of::<DetectorV1>(),
+            estop: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+        }),
+        layout!(DetectorV1 {
+            level: "float" = 4,
+            limit: "float" = 4,
+            total: "uint64_t" = 8,
         }),
         layout!(LatencyHistogramV1 {
             count: "uint64_t" = 8,

@@ -5,9 +5,9 @@
 use serde::Deserialize;
 use shm_schema::config::MAX_CONFIGURED_FAULTS;
 use shm_schema::drive::injected;
-use shm_schema::status::ROLE_COUNT;
 use shm_schema::{
-    AxisConfigV2, CellConfigV2, ConfiguredFaultV1, MAX_AXES, ProcessConfigV1, Role, fixed_str,
+    AxisConfigV2, CellConfigV3, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
+    MAX_PROCESSES, ProcessConfigV2, ProcessName, fixed_str,
 };
 use std::fmt;
 use std::ops::Range;
@@ -73,6 +73,14 @@ pub struct Motion {
     /// Default 0.05.
     #[serde(default = "default_setpoint_timeout")]
     pub setpoint_timeout: f64,
+    /// On an e-stop, servo brings every axis from its vmax to rest within this time, then
+    /// disables the drives (s). Default 0.5.
+    #[serde(default = "default_estop_stop_time")]
+    pub estop_stop_time: f64,
+}
+
+fn default_estop_stop_time() -> f64 {
+    0.5
 }
 
 fn default_setpoint_timeout() -> f64 {
@@ -328,11 +336,28 @@ pub fn mode_of(name: &str) -> Option<cia402::Mode> {
     }
 }
 
-/// `[process.<role>]`.
+/// The processes the cell needs by name: their services carry the cell's data (the others
+/// of a table are the user's own).
+pub const REQUIRED_PROCESSES: [&str; 3] = ["machine", "servo", "trajgen"];
+
+/// What the supervisor does when a process dies (`restart`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RestartPolicy {
+    /// Leave it dead: the e-stop stays until `supervisor restart` and `reset`.
+    Never,
+    /// Start it again after a back-off (doubling from `[supervisor] restart_backoff`), at most
+    /// `restart_limit` times in a row.
+    OnFailure,
+}
+
+/// One `[[process]]` entry.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Process {
-    /// Program and arguments; `{instance}` is replaced.
+    /// Its name: a lower-case letter, then up to 14 of `[a-z0-9_-]`.
+    pub name: String,
+    /// Program and arguments; `{instance}` and `{name}` are replaced.
     pub command: Vec<String>,
     /// Cycle period (µs).
     pub period_us: u64,
@@ -344,30 +369,182 @@ pub struct Process {
     /// CPU to pin to. Default: none.
     #[serde(default)]
     pub cpu: Option<i32>,
+    /// `"never"` or `"on-failure"` (default).
+    #[serde(default = "default_restart")]
+    pub restart: RestartPolicy,
+    /// Its reaction to an e-stop it did not raise (seed 002): `"stop"` (default), `"hold"`,
+    /// `"ignore"`.
+    #[serde(default = "default_reaction")]
+    pub network_estop_config: String,
 }
 
-/// `[process]`.
-#[derive(Clone, Debug, Deserialize)]
+fn default_restart() -> RestartPolicy {
+    RestartPolicy::OnFailure
+}
+fn default_reaction() -> String {
+    "stop".into()
+}
+
+impl Process {
+    /// The period (s).
+    pub fn period_s(&self) -> f64 {
+        self.period_us as f64 * 1e-6
+    }
+}
+
+/// `[behaviour]`: seed 002's e-stop propagation.
+#[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Processes {
-    /// The trajectory generator.
-    pub trajgen: Process,
-    /// The position loops.
-    pub servo: Process,
-    /// The IO bridge.
-    pub iobridge: Process,
-    /// The machine (simulated).
-    pub machine: Process,
+pub struct Behaviour {
+    /// A process' own e-stop is propagated to every process. Default true.
+    #[serde(default = "yes")]
+    pub propagate_estop: bool,
+    /// A user's e-stop (`supervisor estop`, an e-stop input) is propagated even when
+    /// `propagate_estop` is false. Default false.
+    #[serde(default)]
+    pub propagate_external_estop: bool,
 }
 
-impl Processes {
-    /// The process of `role`.
-    pub fn get(&self, role: Role) -> &Process {
-        match role {
-            Role::Trajgen => &self.trajgen,
-            Role::Servo => &self.servo,
-            Role::Iobridge => &self.iobridge,
-            Role::Machine => &self.machine,
+fn yes() -> bool {
+    true
+}
+
+impl Default for Behaviour {
+    fn default() -> Self {
+        Self {
+            propagate_estop: true,
+            propagate_external_estop: false,
+        }
+    }
+}
+
+/// `[health_config]`: seed 002's detectors, with the seed's keys and defaults.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HealthSettings {
+    /// % of the process' rate. Default 1.
+    #[serde(default = "d_1")]
+    pub pending_sequence_overrun_percent_limit: f64,
+    /// s. Default 0.25.
+    #[serde(default = "d_quarter")]
+    pub pending_sequence_overrun_leak_time_s: f64,
+    /// s. Default 1.
+    #[serde(default = "d_1")]
+    pub pending_sequence_overrun_start_snooze_s: f64,
+    /// % of the process' rate. Default 0.5.
+    #[serde(default = "d_half")]
+    pub transport_overrun_percent_limit: f64,
+    /// s. Default 0.25.
+    #[serde(default = "d_quarter")]
+    pub transport_overrun_leak_time_s: f64,
+    /// % of the period (up to 1000). Default 1.
+    #[serde(default = "d_1")]
+    pub thread_offset_variance_percent: f64,
+    /// % of the process' rate. Default 5.
+    #[serde(default = "d_5")]
+    pub thread_offset_variance_overrun_percent_limit: f64,
+    /// s. Default 0.25.
+    #[serde(default = "d_quarter")]
+    pub thread_offset_variance_overrun_leak_time_s: f64,
+    /// s. Default 2.
+    #[serde(default = "d_2")]
+    pub thread_offset_variance_start_snooze_s: f64,
+}
+
+fn d_half() -> f64 {
+    0.5
+}
+fn d_quarter() -> f64 {
+    0.25
+}
+fn d_1() -> f64 {
+    1.0
+}
+fn d_2() -> f64 {
+    2.0
+}
+fn d_5() -> f64 {
+    5.0
+}
+
+impl Default for HealthSettings {
+    fn default() -> Self {
+        Self {
+            pending_sequence_overrun_percent_limit: 1.0,
+            pending_sequence_overrun_leak_time_s: 0.25,
+            pending_sequence_overrun_start_snooze_s: 1.0,
+            transport_overrun_percent_limit: 0.5,
+            transport_overrun_leak_time_s: 0.25,
+            thread_offset_variance_percent: 1.0,
+            thread_offset_variance_overrun_percent_limit: 5.0,
+            thread_offset_variance_overrun_leak_time_s: 0.25,
+            thread_offset_variance_start_snooze_s: 2.0,
+        }
+    }
+}
+
+impl HealthSettings {
+    fn entries(&self) -> [(&'static str, f64); 9] {
+        [
+            (
+                "pending_sequence_overrun_percent_limit",
+                self.pending_sequence_overrun_percent_limit,
+            ),
+            (
+                "pending_sequence_overrun_leak_time_s",
+                self.pending_sequence_overrun_leak_time_s,
+            ),
+            (
+                "pending_sequence_overrun_start_snooze_s",
+                self.pending_sequence_overrun_start_snooze_s,
+            ),
+            (
+                "transport_overrun_percent_limit",
+                self.transport_overrun_percent_limit,
+            ),
+            (
+                "transport_overrun_leak_time_s",
+                self.transport_overrun_leak_time_s,
+            ),
+            (
+                "thread_offset_variance_percent",
+                self.thread_offset_variance_percent,
+            ),
+            (
+                "thread_offset_variance_overrun_percent_limit",
+                self.thread_offset_variance_overrun_percent_limit,
+            ),
+            (
+                "thread_offset_variance_overrun_leak_time_s",
+                self.thread_offset_variance_overrun_leak_time_s,
+            ),
+            (
+                "thread_offset_variance_start_snooze_s",
+                self.thread_offset_variance_start_snooze_s,
+            ),
+        ]
+    }
+}
+
+/// The reaction called `name` in the configuration.
+pub fn reaction_of(name: &str) -> Option<EstopReaction> {
+    EstopReaction::ALL.into_iter().find(|r| r.name() == name)
+}
+
+impl HealthSettings {
+    fn to_shm(self) -> HealthConfigV1 {
+        HealthConfigV1 {
+            pending_sequence_overrun_percent_limit: self.pending_sequence_overrun_percent_limit,
+            pending_sequence_overrun_leak_time_s: self.pending_sequence_overrun_leak_time_s,
+            pending_sequence_overrun_start_snooze_s: self.pending_sequence_overrun_start_snooze_s,
+            transport_overrun_percent_limit: self.transport_overrun_percent_limit,
+            transport_overrun_leak_time_s: self.transport_overrun_leak_time_s,
+            thread_offset_variance_percent: self.thread_offset_variance_percent,
+            thread_offset_variance_overrun_percent_limit: self
+                .thread_offset_variance_overrun_percent_limit,
+            thread_offset_variance_overrun_leak_time_s: self
+                .thread_offset_variance_overrun_leak_time_s,
+            thread_offset_variance_start_snooze_s: self.thread_offset_variance_start_snooze_s,
         }
     }
 }
@@ -385,6 +562,27 @@ pub struct SupervisorSettings {
     /// s
     #[serde(default = "default_stop")]
     pub stop_timeout: f64,
+    /// A process that has not seen the supervisor's heartbeat this long brings the axes to
+    /// rest and exits (s). Default 0.5.
+    #[serde(default = "default_supervisor_timeout")]
+    pub supervisor_timeout: f64,
+    /// Wait before the first restart of a process; doubles with each restart in a row (s).
+    /// Default 0.5.
+    #[serde(default = "default_backoff")]
+    pub restart_backoff: f64,
+    /// Restarts in a row after which a process is left dead. Default 3.
+    #[serde(default = "default_restart_limit")]
+    pub restart_limit: u32,
+}
+
+fn default_supervisor_timeout() -> f64 {
+    0.5
+}
+fn default_backoff() -> f64 {
+    0.5
+}
+fn default_restart_limit() -> u32 {
+    3
 }
 
 fn default_startup() -> f64 {
@@ -403,6 +601,9 @@ impl Default for SupervisorSettings {
             startup_timeout: default_startup(),
             heartbeat_timeout: default_heartbeat(),
             stop_timeout: default_stop(),
+            supervisor_timeout: default_supervisor_timeout(),
+            restart_backoff: default_backoff(),
+            restart_limit: default_restart_limit(),
         }
     }
 }
@@ -420,8 +621,14 @@ pub struct Config {
     pub drives: Drives,
     /// `[[axis]]`
     pub axis: Vec<Axis>,
-    /// `[process.*]`
-    pub process: Processes,
+    /// `[[process]]`, in start order.
+    pub process: Vec<Process>,
+    /// `[behaviour]`
+    #[serde(default)]
+    pub behaviour: Behaviour,
+    /// `[health_config]`
+    #[serde(default)]
+    pub health_config: HealthSettings,
     /// `[supervisor]`
     #[serde(default)]
     pub supervisor: SupervisorSettings,
@@ -473,6 +680,25 @@ fn line_col(src: &str, offset: usize) -> (usize, usize) {
 }
 
 impl Config {
+    /// Parses and validates `src` (named `file` in messages), and checks that every process'
+    /// program can be started (what `run`, `up` and `check-config` load).
+    pub fn parse_and_find_programs(src: &str, file: &str) -> Result<Self, ConfigError> {
+        let cfg = Self::parse(src, file)?;
+        for (j, p) in cfg.process.iter().enumerate() {
+            if let Err(why) = crate::launch::find_program(&p.command[0]) {
+                let path = [Seg::Key("process"), Seg::Index(j), Seg::Key("command")];
+                let (line, col) = locate(src, &path).map_or((0, 0), |s| line_col(src, s.start));
+                return Err(ConfigError {
+                    file: file.into(),
+                    line,
+                    col,
+                    message: format!("process {}: {why}", p.name),
+                });
+            }
+        }
+        Ok(cfg)
+    }
+
     /// Parses and validates `src` (named `file` in messages).
     pub fn parse(src: &str, file: &str) -> Result<Self, ConfigError> {
         let cfg: Config = toml::from_str(src).map_err(|e| {
@@ -502,10 +728,11 @@ impl Config {
             .expect("the embedded default configuration is valid")
     }
 
-    /// Loads `path`, or the embedded default for `None`.
+    /// Loads `path`, or the embedded default for `None`, and checks that every process'
+    /// program can be started.
     pub fn load(path: Option<&std::path::Path>) -> Result<Self, ConfigError> {
         match path {
-            None => Self::parse(DEFAULT_TOML, DEFAULT_NAME),
+            None => Self::parse_and_find_programs(DEFAULT_TOML, DEFAULT_NAME),
             Some(p) => {
                 let file = p.display().to_string();
                 let src = std::fs::read_to_string(p).map_err(|e| ConfigError {
@@ -514,7 +741,7 @@ impl Config {
                     col: 0,
                     message: format!("cannot read: {e}"),
                 })?;
-                Self::parse(&src, &file)
+                Self::parse_and_find_programs(&src, &file)
             }
         }
     }
@@ -544,7 +771,10 @@ impl Config {
                 "settle_timeout must be positive".into(),
             );
         }
-        let trajgen_period_s = self.process.trajgen.period_us as f64 * 1e-6;
+        if let Some(e) = self.validate_processes() {
+            return Err(e);
+        }
+        let trajgen_period_s = self.period_s("trajgen");
         if !(m.setpoint_timeout.is_finite() && m.setpoint_timeout >= 2.0 * trajgen_period_s) {
             return bad(
                 vec![K("motion"), K("setpoint_timeout")],
@@ -555,7 +785,7 @@ impl Config {
                 ),
             );
         }
-        let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
+        let servo_period_s = self.period_s("servo");
         if !(self.drives.command_timeout.is_finite()
             && self.drives.command_timeout >= 3.0 * servo_period_s)
         {
@@ -574,7 +804,7 @@ impl Config {
                 "substeps must be 1..=1000".into(),
             );
         }
-        let machine_period_s = self.process.machine.period_us as f64 * 1e-6;
+        let machine_period_s = self.period_s("machine");
         for (k, v, min) in [
             (
                 "feedback_timeout",
@@ -737,7 +967,7 @@ impl Config {
                     format!("axis {}: settle_velocity = {v} must be positive", a.name),
                 );
             }
-            let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
+            let servo_period_s = self.period_s("servo");
             let t_acc = self.motion.t_acc;
             for (k, v) in [
                 ("velocity", a.velocity_limit()),
@@ -826,79 +1056,140 @@ impl Config {
                     ),
                 );
             }
-            let machine_step_s =
-                self.process.machine.period_us as f64 * 1e-6 / self.drives.substeps.max(1) as f64;
+            let machine_step_s = self.period_s("machine") / self.drives.substeps.max(1) as f64;
             if let Err(why) = stability::check(a, mode, servo_period_s, machine_step_s) {
                 return bad(vec![K("axis"), Idx(i), K("sim"), K("inertia")], why);
             }
         }
 
-        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) as i32;
-        for role in Role::ALL {
-            let p = self.process.get(role);
-            let at = |k: &'static str| vec![K("process"), K(role.name()), K(k)];
-            if p.command.is_empty() || p.command[0].is_empty() {
+        let s = &self.supervisor;
+        for (k, v, lo, hi) in [
+            ("startup_timeout", s.startup_timeout, 0.1, 600.0),
+            ("heartbeat_timeout", s.heartbeat_timeout, 0.01, 60.0),
+            ("stop_timeout", s.stop_timeout, 0.1, 60.0),
+            ("supervisor_timeout", s.supervisor_timeout, 0.05, 60.0),
+            ("restart_backoff", s.restart_backoff, 0.0, 60.0),
+        ] {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
                 return bad(
-                    at("command"),
-                    format!("process {}: command is empty", role.name()),
-                );
-            }
-            if !(50..=1_000_000).contains(&p.period_us) {
-                return bad(
-                    at("period_us"),
-                    format!(
-                        "process {}: period_us = {} must be 50..=1000000",
-                        role.name(),
-                        p.period_us
-                    ),
-                );
-            }
-            if p.phase_us >= p.period_us {
-                return bad(
-                    at("phase_us"),
-                    format!(
-                        "process {}: phase_us must be smaller than period_us",
-                        role.name()
-                    ),
-                );
-            }
-            if !(0..=99).contains(&p.priority) {
-                return bad(
-                    at("priority"),
-                    format!(
-                        "process {}: priority {} must be 0..=99 (0: SCHED_OTHER)",
-                        role.name(),
-                        p.priority
-                    ),
-                );
-            }
-            if let Some(cpu) = p.cpu
-                && !(0..cpus).contains(&cpu)
-            {
-                return bad(
-                    at("cpu"),
-                    format!(
-                        "process {}: cpu {cpu} does not exist (this machine has CPUs 0..{})",
-                        role.name(),
-                        cpus - 1
-                    ),
+                    vec![K("supervisor"), K(k)],
+                    format!("{k} = {v} s must be {lo}..={hi} s"),
                 );
             }
         }
-        let s = &self.supervisor;
-        for (k, v) in [
-            ("startup_timeout", s.startup_timeout),
-            ("heartbeat_timeout", s.heartbeat_timeout),
-            ("stop_timeout", s.stop_timeout),
-        ] {
-            if !positive(v) {
+        if s.restart_limit > 1000 {
+            return bad(
+                vec![K("supervisor"), K("restart_limit")],
+                format!("restart_limit = {} must be 0..=1000", s.restart_limit),
+            );
+        }
+        for (k, v) in self.health_config.entries() {
+            let hi = match k {
+                "thread_offset_variance_percent" => 1000.0,
+                _ if k.ends_with("_s") => 3600.0,
+                _ => 100.0,
+            };
+            if !(v.is_finite() && v >= 0.0 && v <= hi) {
                 return bad(
-                    vec![K("supervisor"), K(k)],
-                    format!("{k} = {v} s must be positive"),
+                    vec![K("health_config"), K(k)],
+                    format!("{k} = {v} must be 0..={hi}"),
                 );
             }
         }
         Ok(())
+    }
+
+    /// The period of the process called `name` (s); one of [`REQUIRED_PROCESSES`] always is.
+    pub fn period_s(&self, name: &str) -> f64 {
+        self.process_named(name).map_or(1e-3, Process::period_s)
+    }
+
+    /// The `[[process]]` entry called `name`.
+    pub fn process_named(&self, name: &str) -> Option<&Process> {
+        self.process.iter().find(|p| p.name == name)
+    }
+
+    /// The process table: names, commands, periods, priorities, CPUs, policies.
+    fn validate_processes(&self) -> Option<(Vec<Seg>, String)> {
+        use Seg::{Index as Idx, Key as K};
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) as i32;
+        if self.process.is_empty() || self.process.len() > MAX_PROCESSES {
+            return Some((
+                vec![K("process")],
+                format!(
+                    "the cell has {} processes; 1..={MAX_PROCESSES} allowed",
+                    self.process.len()
+                ),
+            ));
+        }
+        for (j, p) in self.process.iter().enumerate() {
+            let at = |k: &'static str| vec![K("process"), Idx(j), K(k)];
+            let name = &p.name;
+            if let Err(e) = ProcessName::new(name) {
+                return Some((at("name"), format!("process name {name:?}: {e}")));
+            }
+            if self.process[..j].iter().any(|q| q.name == *name) {
+                return Some((at("name"), format!("process name {name:?} is used twice")));
+            }
+            if p.command.is_empty() || p.command[0].is_empty() {
+                return Some((at("command"), format!("process {name}: command is empty")));
+            }
+            if !(50..=1_000_000).contains(&p.period_us) {
+                return Some((
+                    at("period_us"),
+                    format!(
+                        "process {name}: period_us = {} must be 50..=1000000",
+                        p.period_us
+                    ),
+                ));
+            }
+            if p.phase_us >= p.period_us {
+                return Some((
+                    at("phase_us"),
+                    format!("process {name}: phase_us must be smaller than period_us"),
+                ));
+            }
+            if !(0..=99).contains(&p.priority) {
+                return Some((
+                    at("priority"),
+                    format!(
+                        "process {name}: priority {} must be 0..=99 (0: SCHED_OTHER)",
+                        p.priority
+                    ),
+                ));
+            }
+            if let Some(cpu) = p.cpu
+                && !(0..cpus).contains(&cpu)
+            {
+                return Some((
+                    at("cpu"),
+                    format!(
+                        "process {name}: cpu {cpu} does not exist (this machine has CPUs 0..{})",
+                        cpus - 1
+                    ),
+                ));
+            }
+            if reaction_of(&p.network_estop_config).is_none() {
+                return Some((
+                    at("network_estop_config"),
+                    format!(
+                        "process {name}: network_estop_config {:?} is not one of \"stop\", \"hold\", \"ignore\"",
+                        p.network_estop_config
+                    ),
+                ));
+            }
+        }
+        for required in REQUIRED_PROCESSES {
+            if self.process_named(required).is_none() {
+                return Some((
+                    vec![K("process")],
+                    format!(
+                        "the cell needs a process called {required:?} (its services carry the cell's data)"
+                    ),
+                ));
+            }
+        }
+        None
     }
 
     /// The axes as the motion language needs them.
@@ -916,9 +1207,9 @@ impl Config {
     }
 
     /// The configuration as every process reads it from shared memory.
-    pub fn to_shm(&self) -> CellConfigV2 {
+    pub fn to_shm(&self) -> CellConfigV3 {
         let ns = |s: f64| (s * 1e9) as u64;
-        let mut c = CellConfigV2 {
+        let mut c = CellConfigV3 {
             axes: self.axis.len() as u32,
             machine_substeps: self.drives.substeps,
             t_acc_s: self.motion.t_acc,
@@ -927,7 +1218,14 @@ impl Config {
             feedback_timeout_ns: ns(self.drives.feedback_timeout),
             enable_timeout_ns: ns(self.drives.enable_timeout),
             settle_time_ns: ns(self.motion.settle_time),
-            process: [ProcessConfigV1::default(); ROLE_COUNT],
+            estop_stop_time_ns: ns(self.motion.estop_stop_time),
+            supervisor_timeout_ns: ns(self.supervisor.supervisor_timeout),
+            propagate_estop: u32::from(self.behaviour.propagate_estop),
+            propagate_external_estop: u32::from(self.behaviour.propagate_external_estop),
+            process_count: self.process.len() as u32,
+            reserved: 0,
+            health: self.health_config.to_shm(),
+            process: [ProcessConfigV2::default(); MAX_PROCESSES],
             axis: [AxisConfigV2::default(); MAX_AXES],
             inject: [ConfiguredFaultV1::default(); MAX_CONFIGURED_FAULTS],
         };
@@ -939,15 +1237,18 @@ impl Config {
                 code: fault_code(&f.fault).unwrap_or(0) as u32,
             };
         }
-        let servo_period_s = self.process.servo.period_us as f64 * 1e-6;
+        let servo_period_s = self.period_s("servo");
         let t_acc = self.motion.t_acc;
-        for role in Role::ALL {
-            let p = self.process.get(role);
-            c.process[role.index()] = ProcessConfigV1 {
+        for (j, p) in self.process.iter().enumerate() {
+            c.process[j] = ProcessConfigV2 {
+                name: fixed_str(&p.name),
                 period_ns: p.period_us * 1000,
                 phase_ns: p.phase_us * 1000,
                 priority: p.priority,
                 cpu: p.cpu.unwrap_or(-1),
+                network_estop_config: reaction_of(&p.network_estop_config)
+                    .unwrap_or(EstopReaction::Stop) as u32,
+                reserved: 0,
             };
         }
         for (i, a) in self.axis.iter().enumerate() {
@@ -997,14 +1298,16 @@ mod tests {
         let c = Config::default_cell();
         let names: Vec<_> = c.axis.iter().map(|a| a.name.as_str()).collect();
         assert_eq!(names, ["x", "y", "theta"]);
+        let prio = |n: &str| c.process_named(n).expect("present").priority;
         assert!(
-            c.process.trajgen.priority > c.process.servo.priority,
+            prio("trajgen") > prio("servo"),
             "trajgen above servo (seed 003)"
         );
         let shm = c.to_shm();
         assert_eq!(shm.axes, 3);
         assert_eq!(shm_schema::str_of(&shm.axis[2].unit), "deg");
-        assert_eq!(shm.process[Role::Servo.index()].period_ns, 1_000_000);
+        assert_eq!(shm.period_of("servo"), Some(1_000_000));
+        assert_eq!(shm.processes().len(), 4);
     }
 
     /// Data-driven: replace `from` by `to` in the default file; the error must read `want`.
@@ -1093,9 +1396,34 @@ mod tests {
             &format!("cell.toml:{kp}:11: axis theta: servo kp = -5.45 must be 0 or more"),
         );
         check(
-            "[process.iobridge]\n",
-            "[process.iobridgee]\n",
-            "cell.toml:",
+            "name = \"iobridge\"",
+            "name = \"servo\"",
+            &(src_line(line_of("name = \"iobridge\"")) + "process name \"servo\" is used twice"),
+        );
+        check(
+            "name = \"trajgen\"",
+            "name = \"Trajgen\"",
+            &(src_line(line_of("name = \"trajgen\""))
+                + "process name \"Trajgen\": a process name is a lower-case letter"),
+        );
+        check("name = \"trajgen\"", "name = \"planner\"", "cell.toml:");
+        check(
+            "priority = 60",
+            "priority = 60\nnetwork_estop_config = \"pause\"",
+            &(src_line(line_of("priority = 60") + 1)
+                + "process iobridge: network_estop_config \"pause\" is not one of"),
+        );
+        check(
+            "stop_timeout = 3.0",
+            "stop_timeout = 1e20",
+            &(src_line(line_of("stop_timeout = 3.0"))
+                + "stop_timeout = 100000000000000000000 s must be 0.1..=60 s"),
+        );
+        check(
+            "thread_offset_variance_percent = 50.0",
+            "thread_offset_variance_percent = -1.0",
+            &(src_line(line_of("thread_offset_variance_percent"))
+                + "thread_offset_variance_percent = -1 must be 0..=1000"),
         );
         check(
             "period_us = 4000\nphase_us = 600",

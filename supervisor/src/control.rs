@@ -4,7 +4,7 @@ use crate::config::{FAULT_NAMES, fault_code};
 use runtime::events::EventSink;
 use runtime::ipc::{self, Pub, Sub};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
-use shm_schema::{CellConfigV2, EventV1, FaultInjectionV1, InstanceName, Role, ServiceId, str_of};
+use shm_schema::{CellConfigV3, EventV1, FaultInjectionV1, InstanceName, ServiceId, str_of};
 use std::time::{Duration, Instant};
 
 /// How long `inject` waits for the running cell's configuration and for the drives'
@@ -53,7 +53,7 @@ pub fn inject(
     let result = (|| {
         // The axes of the cell that runs, not of a file: the configuration it published.
         let config =
-            Sub::<CellConfigV2>::new(&node, &instance, ServiceId::CellConfig, 1).map_err(f)?;
+            Sub::<CellConfigV3>::new(&node, &instance, ServiceId::CellConfig, 1).map_err(f)?;
         let start = Instant::now();
         let cell = loop {
             if let Some(c) = config.latest() {
@@ -74,6 +74,7 @@ pub fn inject(
                 names.join(", ")
             ))
         })?;
+        let machine = cell.process_named("machine").map(|(k, _)| k);
         let port =
             Pub::<FaultInjectionV1>::new(&node, &instance, ServiceId::FaultInjection).map_err(f)?;
         let acks = Sub::<EventV1>::new(&node, &instance, ServiceId::Events, 256).map_err(f)?;
@@ -130,7 +131,7 @@ pub fn inject(
             }
             while let Some(e) = acks.next() {
                 if e.code == code::FAULT_INJECTED
-                    && e.source == Role::Machine as u32
+                    && Some(e.source as usize) == machine
                     && e.axis == index as i32
                     && e.value == want
                 {

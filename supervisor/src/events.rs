@@ -5,42 +5,50 @@ use runtime::ipc::{self, Sub};
 use runtime::signals;
 use serde_json::{Value, json};
 use shm_schema::event::{self, CodeInfo, SOURCE_SUPERVISOR};
-use shm_schema::{CellConfigV2, EventV1, InstanceName, Role, ServiceId, Severity, str_of};
+use shm_schema::{CellConfigV3, EventV1, InstanceName, ServiceId, Severity, str_of};
 use std::time::Duration;
 
-/// Axis names and units, to name an event's axis and the unit of its value.
+/// Axis names and units, to name an event's axis and the unit of its value, and the process
+/// names, to name its source.
 #[derive(Clone, Debug, Default)]
 pub struct Axes {
     /// (name, unit) per axis index.
     pub axes: Vec<(String, String)>,
+    /// Process names by index in the process table.
+    pub processes: Vec<String>,
 }
 
 impl Axes {
     /// From the configuration every process reads.
-    pub fn of_cell(cell: &CellConfigV2) -> Self {
+    pub fn of_cell(cell: &CellConfigV3) -> Self {
         Self {
             axes: cell
                 .axes()
                 .iter()
                 .map(|a| (str_of(&a.name).to_string(), str_of(&a.unit).to_string()))
                 .collect(),
+            processes: cell
+                .processes()
+                .iter()
+                .map(|p| str_of(&p.name).to_string())
+                .collect(),
         }
+    }
+
+    /// The name of an event's source.
+    pub fn source_name(&self, source: u32) -> String {
+        if source == SOURCE_SUPERVISOR {
+            return "supervisor".into();
+        }
+        self.processes
+            .get(source as usize)
+            .cloned()
+            .unwrap_or_else(|| format!("source {source}"))
     }
 
     fn get(&self, axis: i32) -> Option<&(String, String)> {
         usize::try_from(axis).ok().and_then(|i| self.axes.get(i))
     }
-}
-
-/// The name of an event's source.
-pub fn source_name(source: u32) -> String {
-    if source == SOURCE_SUPERVISOR {
-        return "supervisor".into();
-    }
-    Role::ALL
-        .iter()
-        .find(|r| **r as u32 == source)
-        .map_or_else(|| format!("source {source}"), |r| r.name().to_string())
 }
 
 /// A value in the unit its code gives it.
@@ -70,7 +78,7 @@ pub fn line(e: &EventV1, axes: &Axes, t0_ns: u64) -> String {
         .map_or(("", ""), |(n, u)| (n.as_str(), u.as_str()));
     let mut s = format!(
         "[{t:9.3} s] {sev:<7} {:<9} {}",
-        source_name(e.source),
+        axes.source_name(e.source),
         info.map_or_else(|| format!("code {}", e.code), |i| i.name.to_string())
     );
     if !axis.is_empty() {
@@ -95,7 +103,7 @@ pub fn to_json(e: &EventV1, axes: &Axes, t0_ns: u64) -> Value {
     json!({
         "t_s": (e.stamp_ns as i128 - t0_ns as i128) as f64 * 1e-9,
         "stamp_ns": e.stamp_ns,
-        "source": source_name(e.source),
+        "source": axes.source_name(e.source),
         "seq": e.seq,
         "severity": Severity::from_u32(e.severity).map_or("?", Severity::name),
         "code": e.code,
@@ -117,7 +125,7 @@ pub fn follow(instance: &InstanceName, forever: bool, json: bool) -> Result<(), 
     signals::install().map_err(|e| format!("cannot install signal handlers: {e}"))?;
     let f = |e: ipc::IpcError| e.to_string();
     let node = ipc::node(instance, &format!("events-{}", std::process::id())).map_err(f)?;
-    let config = Sub::<CellConfigV2>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+    let config = Sub::<CellConfigV3>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
     let events = Sub::<EventV1>::new(&node, instance, ServiceId::Events, 1024).map_err(f)?;
     let mut axes = Axes::default();
     let t0 = runtime::time::now_ns();

@@ -1,11 +1,16 @@
 //! Starting and stopping the cell's processes.
 //!
 //! Each process is started from its configured command line, so any of them can be replaced
-//! by another program. [`Children`] stops whatever is still running when it is dropped, so no
-//! error path leaves a process behind.
+//! by another program. Each runs in a process group of its own (so whatever it starts in the
+//! background is stopped with it) and gets SIGTERM when the supervisor dies (the parent-death
+//! signal; its runtime then brings the axes to rest and exits). [`Children`] stops whatever is
+//! still running when it is dropped, so no error path leaves a process behind.
 
-use crate::config::Config;
-use shm_schema::{InstanceName, Role};
+use crate::config::Process;
+use nix::sys::signal::{Signal, killpg};
+use nix::unistd::Pid;
+use shm_schema::InstanceName;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -13,8 +18,10 @@ use std::time::{Duration, Instant};
 /// A running process of the cell.
 #[derive(Debug)]
 pub struct Running {
-    /// Its role.
-    pub role: Role,
+    /// Its name in the process table.
+    pub name: String,
+    /// Its index in the process table.
+    pub index: usize,
     child: Child,
 }
 
@@ -32,21 +39,38 @@ pub struct Children {
     stop_timeout: Duration,
 }
 
-/// Where a bare command name is looked for first: the supervisor's own folder.
-fn resolve(program: &str) -> PathBuf {
+/// The file a command's program runs: a path as given, or a bare name looked up next to the
+/// supervisor binary, then in `PATH`. An error says why none fits.
+pub fn find_program(program: &str) -> Result<PathBuf, String> {
+    let executable = |p: &Path| {
+        use std::os::unix::fs::PermissionsExt;
+        p.metadata()
+            .is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
+    };
     if program.contains('/') {
-        return PathBuf::from(program);
+        let p = PathBuf::from(program);
+        return if executable(&p) {
+            Ok(p)
+        } else if p.exists() {
+            Err(format!("{program} is not an executable file"))
+        } else {
+            Err(format!("{program} does not exist"))
+        };
     }
-    if let Some(dir) = std::env::current_exe()
+    let own_dir = std::env::current_exe()
         .ok()
-        .and_then(|p| p.parent().map(Path::to_path_buf))
-    {
-        let candidate = dir.join(program);
-        if candidate.is_file() {
-            return candidate;
-        }
-    }
-    PathBuf::from(program) // PATH lookup by the OS
+        .and_then(|p| p.parent().map(Path::to_path_buf));
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    own_dir
+        .into_iter()
+        .chain(std::env::split_paths(&path))
+        .map(|d| d.join(program))
+        .find(|p| executable(p))
+        .ok_or_else(|| {
+            format!(
+                "{program:?} is neither next to the supervisor nor in PATH (or is not executable)"
+            )
+        })
 }
 
 impl Children {
@@ -58,34 +82,51 @@ impl Children {
         }
     }
 
-    /// Starts the process of `role` as configured. Children inherit stderr; their log level
-    /// defaults to warnings (`RTC_LOG` overrides).
+    /// Starts process `index` of the table, `p`, as configured (`command` overrides its
+    /// command line). Children inherit stderr; their log level defaults to warnings (`RTC_LOG`
+    /// overrides).
     pub fn spawn(
         &mut self,
-        cfg: &Config,
-        role: Role,
+        p: &Process,
+        index: usize,
+        command: Option<&[String]>,
         instance: &InstanceName,
     ) -> Result<u32, String> {
-        let command: Vec<String> = cfg
-            .process
-            .get(role)
-            .command
+        let command: Vec<String> = command
+            .unwrap_or(&p.command)
             .iter()
-            .map(|a| a.replace("{instance}", instance.as_str()))
+            .map(|a| {
+                a.replace("{instance}", instance.as_str())
+                    .replace("{name}", &p.name)
+            })
             .collect();
-        let program = resolve(&command[0]);
+        let Some(first) = command.first() else {
+            return Err(format!("process {}: empty command", p.name));
+        };
+        let program = find_program(first).map_err(|e| format!("cannot start {}: {e}", p.name))?;
         let mut cmd = Command::new(&program);
         cmd.args(&command[1..])
             .stdin(Stdio::null())
-            .stdout(Stdio::null());
+            .stdout(Stdio::null())
+            .process_group(0);
+        // SAFETY: between fork and exec only async-signal-safe calls: prctl(PR_SET_PDEATHSIG).
+        unsafe {
+            cmd.pre_exec(|| {
+                nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
+            });
+        }
         if std::env::var_os("RTC_LOG").is_none() {
             cmd.env("RTC_LOG", "warn");
         }
         let child = cmd
             .spawn()
-            .map_err(|e| format!("cannot start {} ({}): {e}", role.name(), program.display()))?;
+            .map_err(|e| format!("cannot start {} ({}): {e}", p.name, program.display()))?;
         let pid = child.id();
-        self.procs.push(Running { role, child });
+        self.procs.push(Running {
+            name: p.name.clone(),
+            index,
+            child,
+        });
         Ok(pid)
     }
 
@@ -94,43 +135,55 @@ impl Children {
         self.procs.iter()
     }
 
-    /// The first process that has exited, with its exit status.
-    pub fn exited(&mut self) -> Option<(Role, u32, ExitStatus)> {
-        for p in &mut self.procs {
-            if let Ok(Some(status)) = p.child.try_wait() {
-                return Some((p.role, p.child.id(), status));
-            }
-        }
-        None
+    /// The first process that has exited, with its exit status; it is no longer a child.
+    pub fn exited(&mut self) -> Option<(Running, ExitStatus)> {
+        let k = self
+            .procs
+            .iter_mut()
+            .position(|p| matches!(p.child.try_wait(), Ok(Some(_))))?;
+        let mut p = self.procs.remove(k);
+        let status = p.child.wait().ok()?;
+        // Whatever it started in its group goes with it.
+        let _ = killpg(Pid::from_raw(p.child.id() as i32), Signal::SIGKILL);
+        Some((p, status))
     }
 
-    /// Stops every process in reverse start order: SIGTERM, then SIGKILL after the stop
-    /// timeout. Returns the roles that did not exit cleanly (status 0) with a description.
-    pub fn stop_all(&mut self) -> Vec<(Role, String)> {
+    /// Stops every process in reverse start order: SIGTERM to its group, then SIGKILL after
+    /// the stop timeout; `tick` runs every few milliseconds meanwhile (the supervisor's
+    /// heartbeat). Returns the processes that did not exit cleanly (status 0) with a
+    /// description.
+    pub fn stop_all(&mut self, tick: &mut dyn FnMut()) -> Vec<(String, String)> {
         let mut problems = Vec::new();
         while let Some(mut p) = self.procs.pop() {
-            if let Some(problem) = stop_one(&mut p, self.stop_timeout) {
-                problems.push((p.role, problem));
+            if let Some(problem) = stop_one(&mut p, self.stop_timeout, tick) {
+                problems.push((p.name.clone(), problem));
             }
         }
         problems
     }
 }
 
-fn stop_one(p: &mut Running, timeout: Duration) -> Option<String> {
+fn stop_one(p: &mut Running, timeout: Duration, tick: &mut dyn FnMut()) -> Option<String> {
+    let group = Pid::from_raw(p.child.id() as i32);
     if let Ok(Some(status)) = p.child.try_wait() {
+        let _ = killpg(group, Signal::SIGKILL);
         return (!status.success()).then(|| format!("had already exited ({status})"));
     }
-    // SAFETY: plain kill(2) on our own child's pid.
-    unsafe { libc::kill(p.child.id() as i32, libc::SIGTERM) };
+    let _ = killpg(group, Signal::SIGTERM);
     let deadline = Instant::now() + timeout;
     loop {
         match p.child.try_wait() {
-            Ok(Some(status)) if status.success() => return None,
-            Ok(Some(status)) => return Some(format!("exited with {status} after SIGTERM")),
-            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(5)),
+            Ok(Some(status)) => {
+                // Anything it left in its group goes too.
+                let _ = killpg(group, Signal::SIGKILL);
+                return (!status.success()).then(|| format!("exited with {status} after SIGTERM"));
+            }
+            Ok(None) if Instant::now() < deadline => {
+                tick();
+                std::thread::sleep(Duration::from_millis(5));
+            }
             _ => {
-                let _ = p.child.kill();
+                let _ = killpg(group, Signal::SIGKILL);
                 let _ = p.child.wait();
                 return Some(format!(
                     "did not stop within {:.1} s of SIGTERM and was killed",
@@ -143,7 +196,7 @@ fn stop_one(p: &mut Running, timeout: Duration) -> Option<String> {
 
 impl Drop for Children {
     fn drop(&mut self) {
-        self.stop_all();
+        self.stop_all(&mut || {});
     }
 }
 

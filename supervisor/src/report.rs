@@ -4,12 +4,12 @@ use latency::report::Summary;
 use runtime::rt::policy_name;
 use serde::Serialize;
 use serde_json::{Map, Value, json};
-use shm_schema::{MAX_AXES, ProcessStatusV1, Role};
+use shm_schema::{MAX_AXES, ProcessStatusV2};
 
 /// One process' figures.
 #[derive(Clone, Debug, Serialize)]
 pub struct ProcessReport {
-    /// Role name.
+    /// Process name.
     pub name: String,
     /// Process id.
     pub pid: u32,
@@ -42,15 +42,15 @@ pub struct ProcessReport {
 impl ProcessReport {
     /// From the last status a process published.
     pub fn new(
-        role: Role,
+        name: &str,
         pid: u32,
         policy: u32,
         priority: i32,
-        s: &ProcessStatusV1,
+        s: &ProcessStatusV2,
         cpu_s: Option<f64>,
     ) -> Self {
         Self {
-            name: role.name().into(),
+            name: name.into(),
             pid,
             policy: policy_name(policy).into(),
             priority,

@@ -19,11 +19,12 @@ use runtime::ipc::{self, Pub, Sub};
 use runtime::rt::sched_of;
 use runtime::signals;
 use shm_schema::drive::servo_status as st;
+use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    CellConfigV2, EventV1, FieldbusImageV1, InstanceName, LatencyHistogramV1, MAX_AXES,
-    MotionCommandV1, MotionState, Power, ProcState, ProcessStatusV1, RequestKind, Role, ServiceId,
-    ServoRequestV1, ServoStateV2, SetpointV1,
+    CellConfigV3, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName, LatencyHistogramV1,
+    MAX_AXES, MotionCommandV1, MotionState, Power, ProcState, ProcessName, ProcessStatusV2,
+    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, str_of,
 };
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -114,13 +115,19 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .iter()
         .map(|p| cpu_seconds(p.pid()))
         .collect();
-    let pids: Vec<(Role, u32)> = session.children.iter().map(|p| (p.role, p.pid())).collect();
-    let sched: Vec<Option<(u32, i32)>> =
-        pids.iter().map(|(_, pid)| sched_of(*pid as i32)).collect();
+    let pids: Vec<(usize, String, u32)> = session
+        .children
+        .iter()
+        .map(|p| (p.index, p.name.clone(), p.pid()))
+        .collect();
+    let sched: Vec<Option<(u32, i32)>> = pids
+        .iter()
+        .map(|(_, _, pid)| sched_of(*pid as i32))
+        .collect();
     session.refresh_latency();
-    let stop_problems = session.children.stop_all();
+    let stop_problems = session.stop_children();
     session.take_events();
-    let statuses = session.statuses;
+    let statuses = std::mem::take(&mut session.statuses);
     let latencies = std::mem::take(&mut session.latencies);
     let exec_times = std::mem::take(&mut session.exec_times);
     let sense_to_command = session.sense_to_command.take();
@@ -145,21 +152,21 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .as_deref()
         .filter(|h| h.count > 0)
         .map(latency::report::Summary::of);
-    for (i, (role, pid)) in pids.iter().enumerate() {
-        let status = statuses[role.index()].unwrap_or_default();
+    for (i, (index, name, pid)) in pids.iter().enumerate() {
+        let status = statuses[*index].unwrap_or_default();
         let (policy, priority) = sched[i].unwrap_or((status.policy, status.priority));
-        let mut p = ProcessReport::new(*role, *pid, policy, priority, &status, cpu[i]);
-        p.wakeup_latency = latencies[role.index()]
+        let mut p = ProcessReport::new(name, *pid, policy, priority, &status, cpu[i]);
+        p.wakeup_latency = latencies[*index]
             .as_deref()
             .map(latency::report::Summary::of);
-        p.exec_time = exec_times[role.index()]
+        p.exec_time = exec_times[*index]
             .as_deref()
             .filter(|h| h.count > 0)
             .map(latency::report::Summary::of);
         report.processes.push(p);
     }
-    if let Some((role, why)) = stop_problems.first() {
-        return Err(RunError::failed(format!("{} {why}", role.name())));
+    if let Some((name, why)) = stop_problems.first() {
+        return Err(RunError::failed(format!("{name} {why}")));
     }
     if let Some(e) = leftover_error(&instance, &leftovers) {
         return Err(e);
@@ -222,9 +229,16 @@ pub(crate) fn open_cell(
 pub(crate) struct Session {
     instance: InstanceName,
     pub(crate) children: Children,
-    statuses: [Option<ProcessStatusV1>; 4],
-    latencies: [Option<Box<LatencyHistogramV1>>; 4],
-    exec_times: [Option<Box<LatencyHistogramV1>>; 4],
+    /// Per process of the table: its latest status, latency and execution-time histograms.
+    statuses: Vec<Option<ProcessStatusV2>>,
+    latencies: Vec<Option<Box<LatencyHistogramV1>>>,
+    exec_times: Vec<Option<Box<LatencyHistogramV1>>>,
+    /// Per process: the cycle count last seen and when it last advanced.
+    beats: Vec<(u64, Instant)>,
+    names: Vec<String>,
+    /// The first e-stop trigger seen, and when.
+    estop: Option<(EstopV1, Instant)>,
+    host: HostStateV1,
     sense_to_command: Option<Box<LatencyHistogramV1>>,
     /// Every event of the run, in the order they arrived.
     events: Vec<EventV1>,
@@ -233,17 +247,19 @@ pub(crate) struct Session {
     print_events: bool,
     request_seq: u64,
     // Field order is drop order: ports before the node.
-    config_pub: Pub<CellConfigV2>,
+    config_pub: Pub<CellConfigV3>,
     pub(crate) command_pub: Pub<MotionCommandV1>,
     request_pub: Pub<ServoRequestV1>,
     events_sub: Sub<EventV1>,
+    estop_sub: Sub<EstopV1>,
+    host_pub: Pub<HostStateV1>,
     sense_sub: Sub<LatencyHistogramV1>,
     pub(crate) setpoint_sub: Sub<SetpointV1>,
     pub(crate) servo_sub: Sub<ServoStateV2>,
     image_sub: Sub<FieldbusImageV1>,
-    status_subs: Vec<(Role, Sub<ProcessStatusV1>)>,
-    latency_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
-    exec_subs: Vec<(Role, Sub<LatencyHistogramV1>)>,
+    status_subs: Vec<Sub<ProcessStatusV2>>,
+    latency_subs: Vec<Sub<LatencyHistogramV1>>,
+    exec_subs: Vec<Sub<LatencyHistogramV1>>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
 }
 
@@ -257,6 +273,8 @@ impl Session {
         let command_pub = Pub::new(&node, i, ServiceId::MotionCommand).map_err(f)?;
         let request_pub = Pub::new(&node, i, ServiceId::ServoRequest).map_err(f)?;
         let events_sub = Sub::new(&node, i, ServiceId::Events, 1024).map_err(f)?;
+        let estop_sub = Sub::new(&node, i, ServiceId::Estop, 64).map_err(f)?;
+        let host_pub = Pub::new(&node, i, ServiceId::HostState).map_err(f)?;
         let sense_sub = Sub::new(&node, i, ServiceId::SenseToCommand, 1).map_err(f)?;
         let setpoint_sub = Sub::new(&node, i, ServiceId::Setpoint, 1024).map_err(f)?;
         let servo_sub = Sub::new(&node, i, ServiceId::ServoState, 1024).map_err(f)?;
@@ -264,34 +282,37 @@ impl Session {
         let mut status_subs = Vec::new();
         let mut latency_subs = Vec::new();
         let mut exec_subs = Vec::new();
-        for role in Role::ALL {
-            exec_subs.push((
-                role,
-                Sub::new(&node, i, ServiceId::ExecTime(role), 1).map_err(f)?,
-            ));
-            status_subs.push((
-                role,
-                Sub::new(&node, i, ServiceId::Status(role), 64).map_err(f)?,
-            ));
-            latency_subs.push((
-                role,
-                Sub::new(&node, i, ServiceId::Latency(role), 1).map_err(f)?,
-            ));
+        for p in &cfg.process {
+            let name = ProcessName::new(&p.name).map_err(|e| RunError::Input(e.to_string()))?;
+            exec_subs.push(Sub::new(&node, i, ServiceId::ExecTime(name), 1).map_err(f)?);
+            status_subs.push(Sub::new(&node, i, ServiceId::Status(name), 64).map_err(f)?);
+            latency_subs.push(Sub::new(&node, i, ServiceId::Latency(name), 1).map_err(f)?);
         }
         let cell = cfg.to_shm();
         config_pub.send(&cell);
+        let host = HostStateV1 {
+            stamp_ns: runtime::time::now_ns(),
+            pid: std::process::id(),
+            ..HostStateV1::default()
+        };
+        host_pub.send(&host);
         let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
-        for role in Role::ALL {
+        for (index, p) in cfg.process.iter().enumerate() {
             children
-                .spawn(cfg, role, &instance)
+                .spawn(p, index, None, &instance)
                 .map_err(RunError::failed)?;
         }
+        let n = cfg.process.len();
         Ok(Self {
             instance,
             children,
-            statuses: [None; 4],
-            latencies: Default::default(),
-            exec_times: Default::default(),
+            statuses: vec![None; n],
+            latencies: vec![None; n],
+            exec_times: vec![None; n],
+            beats: vec![(0, Instant::now()); n],
+            names: cfg.process.iter().map(|p| p.name.clone()).collect(),
+            estop: None,
+            host,
             sense_to_command: None,
             events: Vec::new(),
             axes: Axes::of_cell(&cell),
@@ -302,6 +323,8 @@ impl Session {
             command_pub,
             request_pub,
             events_sub,
+            estop_sub,
+            host_pub,
             sense_sub,
             setpoint_sub,
             servo_sub,
@@ -316,14 +339,14 @@ impl Session {
     /// Takes the newest latency histogram of every process (they publish about every 100 ms)
     /// and the drives' sense-to-command histogram.
     fn refresh_latency(&mut self) {
-        for (role, sub) in &self.latency_subs {
+        for (k, sub) in self.latency_subs.iter().enumerate() {
             if let Some(h) = sub.latest() {
-                self.latencies[role.index()] = Some(Box::new(h));
+                self.latencies[k] = Some(Box::new(h));
             }
         }
-        for (role, sub) in &self.exec_subs {
+        for (k, sub) in self.exec_subs.iter().enumerate() {
             if let Some(h) = sub.latest() {
-                self.exec_times[role.index()] = Some(Box::new(h));
+                self.exec_times[k] = Some(Box::new(h));
             }
         }
         if let Some(h) = self.sense_sub.latest() {
@@ -334,7 +357,7 @@ impl Session {
     /// Stops every process and removes the instance; fails if a process would not stop or
     /// something of the instance is left. Returns the run's events as JSON.
     pub(crate) fn close(mut self) -> Result<Vec<serde_json::Value>, RunError> {
-        let stop_problems = self.children.stop_all();
+        let stop_problems = self.stop_children();
         self.take_events();
         let events = self
             .events
@@ -344,8 +367,8 @@ impl Session {
         let instance = self.instance;
         drop(self);
         let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
-        if let Some((role, why)) = stop_problems.first() {
-            return Err(RunError::failed(format!("{} {why}", role.name())));
+        if let Some((name, why)) = stop_problems.first() {
+            return Err(RunError::failed(format!("{name} {why}")));
         }
         match leftover_error(&instance, &leftovers) {
             Some(e) => Err(e),
@@ -410,48 +433,109 @@ impl Session {
         )
     }
 
-    /// Fails if a process exited or stopped cycling; refreshes the statuses.
-    pub(crate) fn check_health(
-        &mut self,
-        cfg: &Config,
-        beats: &mut [(u64, Instant); 4],
-    ) -> Result<(), RunError> {
+    /// Stops every process (the heartbeat goes on meanwhile, so none of them takes the
+    /// supervisor for lost); returns those that did not stop cleanly.
+    pub(crate) fn stop_children(&mut self) -> Vec<(String, String)> {
+        let mut children = std::mem::take(&mut self.children);
+        let mut last = Instant::now();
+        let problems = children.stop_all(&mut || {
+            if last.elapsed() >= TICK {
+                last = Instant::now();
+                self.beat();
+            }
+        });
+        self.children = children;
+        problems
+    }
+
+    /// The heartbeat: the host state with the latched e-stop, every tick.
+    pub(crate) fn beat(&mut self) {
+        self.host.beat += 1;
+        self.host.stamp_ns = runtime::time::now_ns();
+        self.host_pub.send(&self.host);
+    }
+
+    /// The e-stop that stopped the run, in words.
+    pub(crate) fn estop_text(&self) -> Option<String> {
+        let (e, _) = self.estop?;
+        let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
+        let cause = self
+            .events
+            .iter()
+            .rev()
+            .find(|ev| ev.code == e.code && ev.source == e.source)
+            .map(|ev| events::line(ev, &self.axes, self.t0_ns));
+        Some(format!(
+            "e-stop ({origin}) raised by {}: {}{}",
+            self.axes.source_name(e.source),
+            str_of(&e.reason),
+            cause.map_or(String::new(), |c| format!("\n  {c}"))
+        ))
+    }
+
+    /// Fails if a process exited or stopped cycling, or the e-stop was raised (unless servo's
+    /// own latched fault explains it: the caller reports that); refreshes the statuses and
+    /// beats.
+    pub(crate) fn check_health(&mut self, cfg: &Config) -> Result<(), RunError> {
         if signals::stop_requested() {
             return Err(RunError::Interrupted);
         }
-        if let Some((role, pid, status)) = self.children.exited() {
+        self.beat();
+        if let Some((p, status)) = self.children.exited() {
             return Err(RunError::failed(format!(
-                "{} (pid {pid}) exited unexpectedly: {status}",
-                role.name()
+                "{} (pid {}) exited unexpectedly: {status}",
+                p.name,
+                p.pid()
             )));
         }
         self.config_pub.update_connections();
+        self.host_pub.update_connections();
         self.take_events();
-        for (role, sub) in &self.status_subs {
+        while let Some(e) = self.estop_sub.next() {
+            if e.kind == EstopKind::Trigger as u32 && self.estop.is_none() {
+                self.estop = Some((e, Instant::now()));
+                self.host.estop = EstopState::Latched as u32;
+                self.host.cause = e;
+            }
+        }
+        for (k, sub) in self.status_subs.iter().enumerate() {
             if let Some(s) = sub.latest() {
                 if ProcState::from_u32(s.state) == Some(ProcState::Fault) {
                     return Err(RunError::failed(format!(
                         "{} reports fault {}",
-                        role.name(),
-                        s.fault
+                        self.names[k], s.fault
                     )));
                 }
-                let b = &mut beats[role.index()];
+                let b = &mut self.beats[k];
                 if s.stats.cycles != b.0 {
                     *b = (s.stats.cycles, Instant::now());
                 }
-                self.statuses[role.index()] = Some(s);
+                self.statuses[k] = Some(s);
             }
         }
         let timeout = Duration::from_secs_f64(cfg.supervisor.heartbeat_timeout);
-        for role in Role::ALL {
-            let (cycles, at) = beats[role.index()];
-            if cycles > 0 && at.elapsed() > timeout {
+        for (k, (cycles, at)) in self.beats.iter().enumerate() {
+            if *cycles > 0 && at.elapsed() > timeout {
                 return Err(RunError::failed(format!(
                     "{} stopped cycling: its status has not advanced for {:.2} s",
-                    role.name(),
+                    self.names[k],
                     at.elapsed().as_secs_f64()
                 )));
+            }
+        }
+        // Servo's own fault is reported by the caller with its cause; any other e-stop (or
+        // one servo's state does not explain within a few ticks) ends the run here.
+        if let Some((e, at)) = self.estop {
+            let from_servo = e.origin == EstopOrigin::Device as u32
+                && self
+                    .names
+                    .get(e.source as usize)
+                    .is_some_and(|n| n == "servo");
+            if !from_servo || at.elapsed() > 20 * TICK {
+                self.take_events();
+                return Err(RunError::failed(
+                    self.estop_text().unwrap_or_else(|| "e-stop".into()),
+                ));
             }
         }
         Ok(())
@@ -460,18 +544,14 @@ impl Session {
     /// Startup: every process cyclic, trajgen publishing, the drives initialized; then an
     /// enable request, and a setpoint from after the arm is enabled (trajgen starts where
     /// servo holds). Returns that setpoint.
-    pub(crate) fn startup(
-        &mut self,
-        cfg: &Config,
-        beats: &mut [(u64, Instant); 4],
-    ) -> Result<SetpointV1, RunError> {
+    pub(crate) fn startup(&mut self, cfg: &Config) -> Result<SetpointV1, RunError> {
         let start = Instant::now();
         let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
         let (mut last_sp, mut last_servo) = (None::<SetpointV1>, None::<ServoStateV2>);
         let mut enable_sent = false;
         let mut enabled_at: Option<u64> = None;
         loop {
-            self.check_health(cfg, beats)?;
+            self.check_health(cfg)?;
             if let Some(s) = self.setpoint_sub.latest() {
                 last_sp = Some(s);
             }
@@ -484,13 +564,13 @@ impl Session {
                 self.take_events();
                 return Err(RunError::failed(self.fault_text(cfg, &s)));
             }
-            let statuses = self.statuses;
-            let cyclic = |r: Role| {
-                statuses[r.index()]
+            let statuses = self.statuses.clone();
+            let cyclic = |k: usize| {
+                statuses[k]
                     .is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
             };
             let initialized = last_servo.is_some_and(|s| s.status & st::INITIALIZED != 0);
-            let all_cyclic = Role::ALL.iter().all(|r| cyclic(*r));
+            let all_cyclic = (0..self.names.len()).all(cyclic);
             if all_cyclic && initialized && last_sp.is_some() && !enable_sent {
                 self.request(RequestKind::Enable)?;
                 enable_sent = true;
@@ -504,10 +584,9 @@ impl Session {
                 break;
             }
             if start.elapsed() > startup {
-                let mut missing: Vec<String> = Role::ALL
-                    .iter()
-                    .filter(|r| !cyclic(**r))
-                    .map(|r| format!("{} is not cyclic", r.name()))
+                let mut missing: Vec<String> = (0..self.names.len())
+                    .filter(|k| !cyclic(*k))
+                    .map(|k| format!("{} is not cyclic", self.names[k]))
                     .collect();
                 if last_sp.is_none() {
                     missing.push("trajgen publishes no setpoint".into());
@@ -537,8 +616,7 @@ impl Session {
         opts: &RunOptions,
     ) -> Result<Report, RunError> {
         let n = cfg.axis.len();
-        let mut beats = [(0u64, Instant::now()); 4];
-        let start_sp = self.startup(cfg, &mut beats)?;
+        let start_sp = self.startup(cfg)?;
         let start_pos: Vec<f64> = start_sp.position[..n].to_vec();
         let vmax: Vec<f64> = cfg.axis.iter().map(|a| a.vmax).collect();
         let predicted =
@@ -563,12 +641,16 @@ impl Session {
         });
 
         while settled_at.is_none() {
-            self.check_health(cfg, &mut beats)?;
+            self.check_health(cfg)?;
             // Setpoints of our motion.
             let mut newest = None;
             while let Some(sp) = self.setpoint_sub.next() {
                 newest = Some(sp);
                 if sp.program_id != program_id {
+                    continue;
+                }
+                if sp.fault == trajgen_fault::ESTOP {
+                    // The e-stop's own report (servo's fault, or the trigger) says why.
                     continue;
                 }
                 if sp.fault != trajgen_fault::NONE || sp.state == MotionState::Fault as u32 {
@@ -694,14 +776,15 @@ impl Session {
             vmax,
             t_acc: cfg.motion.t_acc,
             start: start_pos,
-            periods_us: Role::ALL
+            periods_us: cfg
+                .process
                 .iter()
-                .map(|r| (r.name().to_string(), cfg.process.get(*r).period_us))
+                .map(|p| (p.name.clone(), p.period_us))
                 .collect(),
             theoretical_s: done.theoretical_s,
             predicted_s: predicted,
             measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9,
-            trajgen_period_s: cfg.process.trajgen.period_us as f64 * 1e-6,
+            trajgen_period_s: cfg.period_s("trajgen"),
             settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
             final_position: final_state.act_position[..n].to_vec(),
             final_error: last_target.map_or(vec![0.0; n], |t| {

@@ -8,9 +8,11 @@ use runtime::ipc::{self, Sub};
 use runtime::rt::policy_name;
 use serde_json::{Map, Value, json};
 use shm_schema::drive::servo_status as st;
+use shm_schema::estop::{EstopState, HostStateV1};
 use shm_schema::{
-    CellConfigV2, InstanceName, LatencyHistogramV1, Power, ProcState, ProcessStatusV1, Role,
-    ServiceId, ServoStateV2, str_of,
+    CellConfigV3, DetectorV1, EstopOrigin, InstanceName, LatencyHistogramV1, MotionState, Power,
+    ProcState, ProcessName, ProcessStatusV2, ServiceId, ServoStateV2, SetpointV1, estop_seen,
+    str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -21,10 +23,10 @@ pub const LISTEN: Duration = Duration::from_millis(600);
 /// One process as seen by `status`.
 #[derive(Clone, Debug)]
 pub struct Seen {
-    /// Its role.
-    pub role: Role,
+    /// Its name.
+    pub name: String,
     /// Its latest status.
-    pub status: ProcessStatusV1,
+    pub status: ProcessStatusV2,
     /// Its latest latency histogram, if it publishes one.
     pub latency: Option<Box<LatencyHistogramV1>>,
     /// Its latest execution-time histogram, if it publishes one.
@@ -39,9 +41,13 @@ pub struct Snapshot {
     /// Servo's latest state.
     pub servo: Option<ServoStateV2>,
     /// The cell configuration (axis names and units).
-    pub cell: Option<Box<CellConfigV2>>,
+    pub cell: Option<Box<CellConfigV3>>,
     /// The drives' sense-to-command latency since they started.
     pub sense_to_command: Option<Box<LatencyHistogramV1>>,
+    /// The supervisor's heartbeat and latched e-stop.
+    pub host: Option<HostStateV1>,
+    /// trajgen's newest setpoint (the running program, its line, its motion time).
+    pub setpoint: Option<SetpointV1>,
 }
 
 /// Reads the status and latency of every process of `instance`. Errors when nothing of the
@@ -56,33 +62,52 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     }
     let f = |e: ipc::IpcError| e.to_string();
     let node = ipc::node(instance, &format!("status-{}", std::process::id())).map_err(f)?;
+    let cell_sub =
+        Sub::<CellConfigV3>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+    let start = Instant::now();
+    let cell = loop {
+        if let Some(c) = cell_sub.latest() {
+            break Box::new(c);
+        }
+        if start.elapsed() > LISTEN {
+            drop(cell_sub);
+            drop(node);
+            ipc::cleanup_after_client(instance);
+            return Err(format!(
+                "instance {instance} has live nodes (pids {live:?}) but publishes no cell configuration"
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
     let mut ports = Vec::new();
-    for role in Role::ALL {
+    let mut seen: Vec<Seen> = Vec::new();
+    for (k, p) in cell.processes().iter().enumerate() {
+        let Some(name) = ProcessName::from_field(&p.name) else {
+            continue;
+        };
         let status =
-            Sub::<ProcessStatusV1>::new(&node, instance, ServiceId::Status(role), 4).map_err(f)?;
-        let latency = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::Latency(role), 1)
+            Sub::<ProcessStatusV2>::new(&node, instance, ServiceId::Status(name), 4).map_err(f)?;
+        let latency = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::Latency(name), 1)
             .map_err(f)?;
-        let exec = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::ExecTime(role), 1)
+        let exec = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::ExecTime(name), 1)
             .map_err(f)?;
-        ports.push((role, status, latency, exec));
+        ports.push((k, status, latency, exec));
+        seen.push(Seen {
+            name: name.to_string(),
+            status: ProcessStatusV2::default(),
+            latency: None,
+            exec_time: None,
+        });
     }
     let servo_sub =
         Sub::<ServoStateV2>::new(&node, instance, ServiceId::ServoState, 4).map_err(f)?;
-    let cell_sub =
-        Sub::<CellConfigV2>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
     let sense_sub =
         Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::SenseToCommand, 1).map_err(f)?;
-    let (mut servo, mut cell, mut sense) = (None, None, None);
-    let mut seen: Vec<Seen> = Role::ALL
-        .iter()
-        .map(|r| Seen {
-            role: *r,
-            status: ProcessStatusV1::default(),
-            latency: None,
-            exec_time: None,
-        })
-        .collect();
-    let mut heard = [false; 4];
+    let host_sub = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(f)?;
+    let setpoint_sub =
+        Sub::<SetpointV1>::new(&node, instance, ServiceId::Setpoint, 4).map_err(f)?;
+    let (mut servo, mut sense, mut host, mut setpoint) = (None, None, None, None);
+    let mut heard = vec![false; seen.len()];
     let start = Instant::now();
     while start.elapsed() < LISTEN {
         for (k, ((_, status, latency, exec), p)) in ports.iter().zip(seen.iter_mut()).enumerate() {
@@ -100,11 +125,14 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
         if let Some(x) = servo_sub.latest() {
             servo = Some(x);
         }
-        if let Some(x) = cell_sub.latest() {
-            cell = Some(Box::new(x));
-        }
         if let Some(x) = sense_sub.latest() {
             sense = Some(Box::new(x));
+        }
+        if let Some(x) = host_sub.latest() {
+            host = Some(x);
+        }
+        if let Some(x) = setpoint_sub.latest() {
+            setpoint = Some(x);
         }
         if heard.iter().all(|h| *h)
             && seen
@@ -112,11 +140,14 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
                 .all(|p| p.latency.is_some() && p.exec_time.is_some())
             && servo.is_some()
             && sense.is_some()
+            && host.is_some()
+            && setpoint.is_some()
         {
             break;
         }
         std::thread::sleep(Duration::from_millis(10));
     }
+    drop((host_sub, setpoint_sub));
     drop((ports, servo_sub, cell_sub, sense_sub));
     drop(node);
     ipc::cleanup_after_client(instance);
@@ -134,8 +165,10 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     Ok(Snapshot {
         processes: out,
         servo,
-        cell,
+        cell: Some(cell),
         sense_to_command: sense,
+        host,
+        setpoint,
     })
 }
 
@@ -158,7 +191,7 @@ fn drive_state(sw: u16) -> &'static str {
 }
 
 /// Servo's state as JSON: the arm and every axis.
-fn servo_json(s: &ServoStateV2, cell: Option<&CellConfigV2>) -> Value {
+fn servo_json(s: &ServoStateV2, cell: Option<&CellConfigV3>) -> Value {
     let n = (s.axes as usize).min(shm_schema::MAX_AXES);
     let names: Vec<String> = (0..n)
         .map(|i| match cell {
@@ -194,9 +227,50 @@ fn servo_json(s: &ServoStateV2, cell: Option<&CellConfigV2>) -> Value {
         "initialized": s.status & st::INITIALIZED != 0,
         "enabled": s.status & st::ENABLED != 0,
         "settled": s.status & st::SETTLED != 0,
-        "estop": fault.is_some(),
         "fault": fault,
         "axes": axes,
+    })
+}
+
+/// The cell's e-stop: latched or clear, its origin, source and reason.
+fn estop_json(snap: &Snapshot) -> Value {
+    let Some(h) = &snap.host else {
+        return Value::Null;
+    };
+    let latched = h.estop == EstopState::Latched as u32;
+    let names = snap
+        .cell
+        .as_deref()
+        .map(crate::events::Axes::of_cell)
+        .unwrap_or_default();
+    json!({
+        "latched": latched,
+        "origin": latched.then(|| EstopOrigin::from_u32(h.cause.origin).map_or("?", EstopOrigin::name)),
+        "source": latched.then(|| names.source_name(h.cause.source)),
+        "reason": latched.then(|| str_of(&h.cause.reason).to_string()),
+        "cause": latched.then(|| shm_schema::event::info(h.cause.code).map_or("", |i| i.name)),
+        "resets": h.resets,
+    })
+}
+
+/// trajgen's program: state, line, motion time.
+fn program_json(snap: &Snapshot) -> Value {
+    let Some(sp) = &snap.setpoint else {
+        return Value::Null;
+    };
+    let state = match MotionState::from_u32(sp.state) {
+        Some(MotionState::Idle) => "idle",
+        Some(MotionState::Moving) => "moving",
+        Some(MotionState::Done) => "done",
+        Some(MotionState::Fault) => "fault",
+        None => "?",
+    };
+    json!({
+        "state": state,
+        "program_id": sp.program_id,
+        "line": sp.line,
+        "motion_time_s": sp.motion_time_s,
+        "fault": (sp.fault != 0).then(|| shm_schema::motion::trajgen_fault::text(sp.fault)),
     })
 }
 
@@ -205,11 +279,24 @@ pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
     let mut procs = Map::new();
     for p in &snap.processes {
         let s = &p.status;
+        let detector =
+            |d: &DetectorV1| json!({"level": d.level, "limit": d.limit, "total": d.total});
         procs.insert(
-            p.role.name().into(),
+            p.name.clone(),
             json!({
                 "pid": s.pid,
                 "state": state_name(s.state),
+                "estop": {
+                    "latched": s.estop & estop_seen::LATCHED != 0,
+                    "reacting": s.estop & estop_seen::REACTING != 0,
+                    "safe": s.estop & estop_seen::SAFE != 0,
+                    "raised": s.estop & estop_seen::RAISED != 0,
+                },
+                "health": {
+                    "pending_sequence_overrun": detector(&s.pending_sequence),
+                    "transport_overrun": detector(&s.transport),
+                    "thread_offset_variance": detector(&s.thread_offset),
+                },
                 "policy": policy_name(s.policy),
                 "priority": s.priority,
                 "cpu": s.cpu,
@@ -226,6 +313,8 @@ pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
     }
     json!({
         "instance": instance.as_str(),
+        "estop": estop_json(snap),
+        "program": program_json(snap),
         "processes": procs,
         "servo": snap.servo.as_ref().map(|s| servo_json(s, snap.cell.as_deref())),
         "sense_to_command_us": snap.sense_to_command.as_ref().filter(|h| h.count > 0).map(|h| Summary::of(h).to_json()),
@@ -243,7 +332,7 @@ pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
         let s = &p.status;
         out += &format!(
             "{:<9}  {:<7}  {:<8}  {:<11}  {:>4}  {:>8}  {:>8}",
-            p.role.name(),
+            p.name,
             s.pid,
             state_name(s.state),
             policy_name(s.policy),

@@ -205,7 +205,7 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
         instance: instance.to_string(),
         axis: a.name.clone(),
         unit: a.unit.clone(),
-        servo_period_us: cfg.process.servo.period_us,
+        servo_period_us: cfg.process_named("servo").map_or(1000, |p| p.period_us),
         step: opts.step,
         step_response: step_figures(&samples, start, opts.step, a.in_position),
         ramp,
@@ -224,13 +224,12 @@ const PATIENCE: Duration = Duration::from_secs(3);
 fn watch(
     session: &mut Session,
     cfg: &Config,
-    beats: &mut [(u64, Instant); 4],
     limit: Duration,
     mut stop: impl FnMut(&ServoStateV2) -> bool,
 ) -> Result<bool, RunError> {
     let start = Instant::now();
     while start.elapsed() < limit {
-        session.check_health(cfg, beats)?;
+        session.check_health(cfg)?;
         while let Some(s) = session.servo_sub.next() {
             if s.status & st::FAULT_LATCHED != 0 {
                 session.take_events();
@@ -250,12 +249,11 @@ fn watch(
 fn until_settled(
     session: &mut Session,
     cfg: &Config,
-    beats: &mut [(u64, Instant); 4],
     limit: Duration,
     mut log: Option<&mut Vec<ServoStateV2>>,
 ) -> Result<Option<ServoStateV2>, RunError> {
     let mut settled = None;
-    watch(session, cfg, beats, limit, |s| {
+    watch(session, cfg, limit, |s| {
         if let Some(l) = log.as_deref_mut() {
             l.push(*s);
         }
@@ -273,9 +271,8 @@ fn measure(
     i: usize,
     opts: &TuneOptions,
 ) -> Result<Measured, RunError> {
-    let mut beats = [(0u64, Instant::now()); 4];
-    let start_sp = session.startup(cfg, &mut beats)?;
-    let settled = until_settled(session, cfg, &mut beats, PATIENCE, None)?
+    let start_sp = session.startup(cfg)?;
+    let settled = until_settled(session, cfg, PATIENCE, None)?
         .ok_or_else(|| RunError::failed("the axes did not settle after enabling"))?;
     let start = settled.cmd_position[i];
 
@@ -283,7 +280,7 @@ fn measure(
     session.request_with(RequestKind::Step, i as u32, opts.step)?;
     let mut log = Vec::new();
     // Skip the cycles before servo took the request.
-    let taken = watch(session, cfg, &mut beats, PATIENCE, |s| {
+    let taken = watch(session, cfg, PATIENCE, |s| {
         let stepped = (s.cmd_position[i] - start).abs() > opts.step.abs() / 2.0;
         if stepped {
             log.push(*s);
@@ -296,8 +293,8 @@ fn measure(
             "servo did not take the step (see the request-refused event)",
         ));
     }
-    until_settled(session, cfg, &mut beats, PATIENCE, Some(&mut log))?;
-    watch(session, cfg, &mut beats, Duration::from_millis(300), |s| {
+    until_settled(session, cfg, PATIENCE, Some(&mut log))?;
+    watch(session, cfg, Duration::from_millis(300), |s| {
         log.push(*s);
         false
     })?;
@@ -314,18 +311,18 @@ fn measure(
     session.request_with(RequestKind::Step, i as u32, 0.0)?;
     // Servo's states queued before it took the step back still say "settled": wait for the
     // command to return first.
-    let returned = watch(session, cfg, &mut beats, PATIENCE, |s| {
+    let returned = watch(session, cfg, PATIENCE, |s| {
         (s.cmd_position[i] - start).abs() < opts.step.abs() / 2.0
     })?;
     if !returned {
         return Err(RunError::failed("servo did not take the step back"));
     }
-    until_settled(session, cfg, &mut beats, PATIENCE, None)?
+    until_settled(session, cfg, PATIENCE, None)?
         .ok_or_else(|| RunError::failed("the axis did not settle after the step back"))?;
 
     let ramp = match opts.ramp {
         None => None,
-        Some(d) => Some(ramp(session, cfg, &mut beats, i, d, start_sp.seq)?),
+        Some(d) => Some(ramp(session, cfg, i, d, start_sp.seq)?),
     };
     Ok((samples, start, ramp))
 }
@@ -334,7 +331,6 @@ fn measure(
 fn ramp(
     session: &mut Session,
     cfg: &Config,
-    beats: &mut [(u64, Instant); 4],
     i: usize,
     d: f64,
     salt: u64,
@@ -378,7 +374,7 @@ fn ramp(
         if start.elapsed() > limit {
             return Err(RunError::failed("the ramp did not end"));
         }
-        session.check_health(cfg, beats)?;
+        session.check_health(cfg)?;
         while let Some(sp) = session.setpoint_sub.next() {
             if sp.program_id == program_id && sp.state == MotionState::Done as u32 {
                 end_ns = Some(sp.motion_end_ns);
@@ -394,7 +390,7 @@ fn ramp(
         std::thread::sleep(TICK);
     }
     let mut log = Vec::new();
-    let settled = until_settled(session, cfg, beats, PATIENCE, Some(&mut log))?;
+    let settled = until_settled(session, cfg, PATIENCE, Some(&mut log))?;
     for s in &log {
         peak = peak.max(s.following_error[i].abs());
     }

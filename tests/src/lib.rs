@@ -42,9 +42,18 @@ pub fn default_cell() -> String {
 }
 
 /// The default cell with the machine and servo at `period_us`, their phases scaled (a tenth
-/// and two fifths of the period, as 100 µs and 400 µs are of 1 ms).
+/// and two fifths of the period, as 100 µs and 400 µs are of 1 ms), and the thread offset
+/// detector's share of the period scaled so that it counts the same wake-up latency (the
+/// host's stalls do not shrink with the period).
 pub fn cell_at_rate(period_us: u64) -> String {
     default_cell()
+        .replace(
+            "thread_offset_variance_percent = 50.0",
+            &format!(
+                "thread_offset_variance_percent = {:.1}",
+                50.0 * 1000.0 / period_us as f64
+            ),
+        )
         .replace(
             "period_us = 1000\nphase_us = 100",
             &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),

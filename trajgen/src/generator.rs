@@ -37,7 +37,7 @@ pub struct Params {
 
 impl Params {
     /// Parameters from the cell configuration.
-    pub fn from_cell(cell: &shm_schema::CellConfigV2) -> Self {
+    pub fn from_cell(cell: &shm_schema::CellConfigV3) -> Self {
         let mut p = Params {
             axes: cell.axes as usize,
             vmax: [1.0; MAX_AXES],
@@ -151,6 +151,25 @@ impl Generator {
             for (i, v) in pos.iter().take(self.p.axes).enumerate() {
                 self.rest[i] = *v;
             }
+        }
+    }
+
+    /// Drops the program at once (an e-stop): no segment, an empty queue, the fault
+    /// [`fault::ESTOP`], the reference at rest on `pos` (where servo brings the axes). The
+    /// fault clears when a new client session starts, as any other.
+    ///
+    /// # Real-time
+    /// Arithmetic and copies only.
+    pub fn abort(&mut self, pos: &[f64]) {
+        self.seg = None;
+        self.queue.clear();
+        for (i, v) in pos.iter().take(self.p.axes).enumerate() {
+            self.rest[i] = *v;
+        }
+        if self.state == MotionState::Moving || self.fault == fault::NONE {
+            self.fault = fault::ESTOP;
+            self.fault_line = self.line;
+            self.state = MotionState::Fault;
         }
     }
 

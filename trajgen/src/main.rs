@@ -1,13 +1,12 @@
 //! `trajgen`: the trajectory generator process. See the crate documentation.
 
-use runtime::cycle::{CycleClock, Wake};
 use runtime::ipc::{Notifier, Pub, Sub};
-use runtime::process::{self, Context, SetupError, Task};
+use runtime::process::{self, Context, Cycle, SetupError, Task};
+use shm_schema::EventV1;
 use shm_schema::drive::servo_status;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
-use shm_schema::{EventQueue, EventV1};
-use shm_schema::{MotionCommandV1, Role, ServiceId, ServoStateV2, SetpointV1};
+use shm_schema::{MotionCommandV1, ServiceId, ServoStateV2, SetpointV1};
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
 
@@ -23,6 +22,8 @@ struct Trajgen {
     ready: Notifier,
     /// The fault last reported as an event.
     reported_fault: u32,
+    /// Servo's newest state.
+    last_servo: Option<ServoStateV2>,
 }
 
 impl Trajgen {
@@ -36,6 +37,7 @@ impl Trajgen {
             setpoints: Pub::new(&ctx.node, i, ServiceId::Setpoint)?,
             ready: Notifier::new(&ctx.node, i, ServiceId::SetpointReady)?,
             reported_fault: trajgen_fault::NONE,
+            last_servo: None,
         })
     }
 }
@@ -43,12 +45,17 @@ impl Trajgen {
 impl Task for Trajgen {
     /// # Real-time
     /// IPC calls, then [`Generator::step`]; nothing else.
-    fn cycle(&mut self, wake: &Wake, clock: &mut CycleClock, events: &mut EventQueue) {
+    fn cycle(&mut self, cx: &mut Cycle<'_>) {
+        let now = cx.now_ns();
         // Servo's commanded position, once servo has drive feedback.
         let servo = self
             .servo
             .latest()
             .filter(|s| s.status & servo_status::NO_FEEDBACK == 0);
+        if let Some(s) = servo {
+            self.last_servo = Some(s);
+        }
+        let servo = self.last_servo;
         let generator = match (&mut self.generator, servo) {
             (Some(g), Some(s))
                 if s.status & (servo_status::SETPOINT_JUMP | servo_status::ENABLED)
@@ -67,16 +74,28 @@ impl Task for Trajgen {
             // No servo yet: nothing to start from, publish nothing.
             (None, None) => return,
         };
-        while let Some(c) = self.commands.next() {
-            generator.push_command(&c);
+        if cx.estop.react.is_some() {
+            // E-stop: the program is dropped, commands are refused until it is reset; the
+            // reference rests where servo brings the axes.
+            while self.commands.next().is_some() {}
+            if let Some(s) = servo {
+                generator.abort(&s.cmd_position);
+            }
+        } else {
+            while let Some(c) = self.commands.next() {
+                generator.push_command(&c);
+            }
         }
-        let sp = generator.step(wake.actual_ns);
+        let sp = generator.step(now);
         self.setpoints.send(&sp);
         if sp.fault != self.reported_fault {
             self.reported_fault = sp.fault;
-            if sp.fault != trajgen_fault::NONE {
-                events.push(EventV1::new(
-                    wake.actual_ns,
+            // Leaving (a stop request) drops the program too, but is no fault to report.
+            if sp.fault != trajgen_fault::NONE
+                && (sp.fault != trajgen_fault::ESTOP || cx.estop.latched)
+            {
+                cx.events.push(EventV1::new(
+                    now,
                     code::MOTION_COMMAND_REFUSED,
                     -1,
                     sp.fault_line as f64,
@@ -88,14 +107,14 @@ impl Task for Trajgen {
         self.ready.notify();
         // Read the next command at exactly t = T1 - t_acc, not at the next period.
         if let Some(t) = generator.next_transition_ns() {
-            clock.request_wake_at(t);
+            cx.clock.request_wake_at(t);
         }
     }
 }
 
 fn main() -> ExitCode {
     process::run(
-        Role::Trajgen,
+        "trajgen",
         "trajectory generator (seed 003 §2): blend zones against real elapsed time",
         Trajgen::new,
     )

@@ -300,12 +300,21 @@ fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
         "command = [\"no-such-iobridge\"",
     );
     let out = run_triangle_with(&inst, &cfg);
-    assert_eq!(out.status.code(), Some(1));
+    // Refused before anything starts, as `check-config` refuses it.
+    assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("cannot start iobridge (no-such-iobridge)"),
+        err.contains(
+            "process iobridge: \"no-such-iobridge\" is neither next to the supervisor nor in PATH"
+        ),
         "{err}"
     );
+    let check = supervisor()
+        .arg("check-config")
+        .arg(&cfg)
+        .output()
+        .expect("check-config runs");
+    assert_eq!(check.status.code(), Some(2), "check-config refuses it too");
     assert!(
         pids_with(&["--instance", &inst]).is_empty(),
         "processes left running"

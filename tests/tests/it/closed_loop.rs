@@ -3,8 +3,8 @@
 //! closes the loop) and in CSP (the drives close it), at 1 kHz and at 4 kHz.
 
 use crate::loop_sim::{Loop, MS};
+use shm_schema::MotionState;
 use shm_schema::drive::servo_status as st;
-use shm_schema::{MotionState, Role};
 use supervisor::config::Config;
 use trajgen::generator::{Generator, Params};
 
@@ -20,7 +20,7 @@ fn triangle(cfg: &Config) -> [f64; 3] {
     for c in prog.to_commands(1, 1) {
         generator.push_command(&c);
     }
-    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     let mut max_fe = [0.0f64; 3];
     let mut done_at = None;
     let mut sp = None;

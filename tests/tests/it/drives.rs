@@ -365,10 +365,17 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
 fn patient_config(test: &str) -> std::path::PathBuf {
     let cfg = integration_tests::default_cell();
     assert!(cfg.contains("heartbeat_timeout = 1.0"));
+    // The stall is for servo's own rules to catch, not for the supervisor's heartbeat or the
+    // health detectors (tested on their own in `health`).
     scratch(
         test,
         "cell.toml",
-        &cfg.replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 5.0", 1),
+        &cfg.replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 5.0", 1)
+            .replacen(
+                "pending_sequence_overrun_percent_limit = 10.0",
+                "pending_sequence_overrun_percent_limit = 100.0",
+                1,
+            ),
     )
 }
 

@@ -6,8 +6,8 @@ use machine_sim::Machine;
 use servo::{Controller, Params as ServoParams};
 use shm_schema::drive::servo_status as st;
 use shm_schema::{
-    CellConfigV2, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
-    RequestKind, Role, ServoRequestV1, ServoStateV2, SetpointV1,
+    CellConfigV3, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
+    RequestKind, ServoRequestV1, ServoStateV2, SetpointV1,
 };
 
 pub const MS: u64 = 1_000_000;
@@ -30,19 +30,20 @@ pub struct Loop {
 }
 
 impl Loop {
-    pub fn new(cell: &CellConfigV2) -> Self {
+    pub fn new(cell: &CellConfigV3) -> Self {
+        let proc = |name: &str| *cell.process_named(name).expect("in the table").1;
+        let (machine, servo) = (proc("machine"), proc("servo"));
         Self {
-            machine: Machine::new(cell),
-            servo: Controller::new(ServoParams::from_cell(cell)),
+            machine: Machine::new(cell, machine.period_ns),
+            servo: Controller::new(ServoParams::from_cell(cell, servo.period_ns)),
             fb: None,
             cmd: None,
             state: ServoStateV2::default(),
             events: Vec::new(),
             queue: EventQueue::default(),
-            now: 1_000_000_000 + cell.process[Role::Machine.index()].phase_ns,
-            period: cell.process[Role::Servo.index()].period_ns,
-            offset: cell.process[Role::Servo.index()].phase_ns
-                - cell.process[Role::Machine.index()].phase_ns,
+            now: 1_000_000_000 + machine.phase_ns,
+            period: servo.period_ns,
+            offset: servo.phase_ns - machine.phase_ns,
             request_seq: 0,
         }
     }

@@ -17,8 +17,11 @@ use trajgen::generator::{Generator, Params};
 #[test]
 fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
     let cell = Config::default_cell().to_shm();
-    let mut machine = Machine::new(&cell);
-    let mut servo = Controller::new(ServoParams::from_cell(&cell));
+    let mut machine = Machine::new(&cell, cell.period_of("machine").expect("machine"));
+    let mut servo = Controller::new(ServoParams::from_cell(
+        &cell,
+        cell.period_of("servo").expect("servo"),
+    ));
     let mut generator = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
     let cmds = motion_program::parse("MOVE(60,50,10)\nSTOP\nEND", 3)
         .expect("parses")

@@ -7,7 +7,7 @@ use crate::loop_sim::{Loop, MS};
 use cia402::{State, cw};
 use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
-use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, Role, SetpointV1};
+use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, SetpointV1};
 use supervisor::config::Config;
 use trajgen::generator::{Generator, Params};
 
@@ -18,7 +18,7 @@ fn cfg_with(from: &str, to: &str) -> Config {
 }
 
 /// A trajectory generator at the default start with `program` queued.
-fn generator(cell: &shm_schema::CellConfigV2, program: &str) -> Generator {
+fn generator(cell: &shm_schema::CellConfigV3, program: &str) -> Generator {
     let mut g = Generator::new(Params::from_cell(cell), &[40.0, 40.0, 0.0]);
     for c in motion_program::parse(program, 3)
         .expect("parses")
@@ -412,7 +412,7 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     let mut lp = Loop::new(&cell);
     lp.enable();
     let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     // 2 s of motion at full speed, then trajgen dies.
     for k in 0..2000 {
         let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000));
@@ -466,7 +466,7 @@ fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
     let mut lp = Loop::new(&cell);
     lp.enable();
     let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
     let mut prev = lp.state;
     for k in 0..8000u64 {
@@ -504,7 +504,7 @@ fn a_late_servo_cycle_is_not_a_step() {
     let mut lp = Loop::new(&cell);
     lp.enable();
     let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     for k in 0..6000u64 {
         if k == 4000 {
             assert!(lp.state.cmd_velocity[0] > 15.0);
@@ -686,7 +686,7 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
     let mut lp = Loop::new(&cell);
     lp.enable();
     let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-    let tg = cell.process[Role::Trajgen.index()].period_ns / lp.period;
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     for k in 0..12_000u64 {
         // One setpoint from the future of servo's cycle, at full speed.
         let ahead = if k == 10_000 { 6_000_000 } else { 0 };
