@@ -98,6 +98,11 @@ impl EstopWatch {
         self.supervisor_lost
     }
 
+    /// True once the process is leaving (a stop request, or the supervisor lost).
+    pub fn leaving(&self) -> bool {
+        self.leaving || self.supervisor_lost
+    }
+
     /// True when this process raised the latched e-stop.
     pub fn raised(&self) -> bool {
         self.raised
@@ -122,7 +127,11 @@ impl EstopWatch {
                 self.resets = h.resets;
                 reset |= self.clear();
             }
-            if h.estop == EstopState::Latched as u32 && !self.view.latched {
+            // A host state from before the newest reset this process took is stale.
+            if h.estop == EstopState::Latched as u32
+                && !self.view.latched
+                && h.resets >= self.resets
+            {
                 self.apply(&h.cause);
             }
         }

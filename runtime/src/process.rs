@@ -374,7 +374,7 @@ fn run_inner<T: Task>(
             );
         }
         let view = *estop.view();
-        if view.latched && view.react.is_some() && safe && !safe_reported {
+        if view.latched && view.react.is_some() && safe && !safe_reported && !estop.leaving() {
             safe_reported = true;
             queue.push(EventV1::new(
                 now,

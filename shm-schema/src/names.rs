@@ -282,12 +282,14 @@ impl ServiceId {
             max_subscribers: 8,
             history: 0,
             subscriber_max_buffer: 1024,
-            max_nodes: 16,
+            // A table of up to 16 processes, the supervisor and the user's tools.
+            max_nodes: 40,
         };
         match self {
             Self::CellConfig => Qos {
                 history: 1,
                 max_publishers: 1,
+                max_subscribers: 24,
                 ..base
             },
             Self::MotionCommand => Qos {

@@ -765,6 +765,15 @@ impl Config {
                 "settle_time must be 0 s or more".into(),
             );
         }
+        if !(m.estop_stop_time.is_finite() && (0.01..=60.0).contains(&m.estop_stop_time)) {
+            return bad(
+                vec![K("motion"), K("estop_stop_time")],
+                format!(
+                    "estop_stop_time = {} s must be 0.01..=60 s",
+                    m.estop_stop_time
+                ),
+            );
+        }
         if !positive(m.settle_timeout) {
             return bad(
                 vec![K("motion"), K("settle_timeout")],

@@ -1,10 +1,14 @@
-//! One-shot commands to a running instance: fault injection into the simulated drives.
+//! One-shot commands to a running instance: fault injection into the simulated drives, and
+//! the user's e-stop.
 
 use crate::config::{FAULT_NAMES, fault_code};
 use runtime::events::EventSink;
 use runtime::ipc::{self, Pub, Sub};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
-use shm_schema::{CellConfigV3, EventV1, FaultInjectionV1, InstanceName, ServiceId, str_of};
+use shm_schema::{
+    CellConfigV3, EstopOrigin, EstopV1, EventV1, FaultInjectionV1, InstanceName, ProcessStatusV2,
+    ServiceId, estop_seen, str_of,
+};
 use std::time::{Duration, Instant};
 
 /// How long `inject` waits for the running cell's configuration and for the drives'
@@ -148,6 +152,86 @@ pub fn inject(
                 )));
             }
             std::thread::sleep(Duration::from_millis(5));
+        }
+    })();
+    drop(node);
+    ipc::cleanup_after_client(&instance);
+    result
+}
+
+/// `supervisor estop`: raises the user's e-stop (seed 002's `trigger_estop`) on the running
+/// `instance`, straight on `<i>/estop` (not through the supervisor: a supervisor that is slow or
+/// dead does not delay it), and waits until a process of the cell reports it latched,
+/// resending while none has (a brand-new publisher's first sample can be lost while its
+/// connections settle).
+pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
+    let bad = ControlError::Input;
+    let instance =
+        InstanceName::new(instance).map_err(|e| bad(format!("--instance {instance:?}: {e}")))?;
+    ipc::quiet_iceoryx2_log();
+    if ipc::live_node_pids(&instance)
+        .unwrap_or_default()
+        .is_empty()
+    {
+        return Err(bad(format!("instance {instance} is not up")));
+    }
+    let f = |e: ipc::IpcError| ControlError::Failed(e.to_string());
+    let node = ipc::node(&instance, &format!("estop-{}", std::process::id())).map_err(f)?;
+    let result = (|| {
+        let port = Pub::<EstopV1>::new(&node, &instance, ServiceId::Estop).map_err(f)?;
+        let config =
+            Sub::<CellConfigV3>::new(&node, &instance, ServiceId::CellConfig, 1).map_err(f)?;
+        let start = Instant::now();
+        let cell = loop {
+            if let Some(c) = config.latest() {
+                break c;
+            }
+            if start.elapsed() > PATIENCE {
+                return Err(ControlError::Failed(format!(
+                    "instance {instance} published no cell configuration within {} s",
+                    PATIENCE.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        let mut statuses = Vec::new();
+        for k in 0..cell.processes().len() {
+            if let Some(name) = cell.process_name(k) {
+                statuses.push(
+                    Sub::<ProcessStatusV2>::new(&node, &instance, ServiceId::Status(name), 4)
+                        .map_err(f)?,
+                );
+            }
+        }
+        let trigger = EstopV1::trigger(
+            runtime::time::now_ns(),
+            EstopOrigin::External,
+            SOURCE_SUPERVISOR,
+            code::ESTOP_RAISED,
+            &[reason],
+        );
+        let start = Instant::now();
+        let mut sent_at: Option<Instant> = None;
+        loop {
+            if sent_at.is_none_or(|t| t.elapsed() > Duration::from_millis(50)) {
+                port.update_connections();
+                port.send(&trigger);
+                sent_at = Some(Instant::now());
+            }
+            let latched = statuses.iter().any(|s| {
+                s.latest()
+                    .is_some_and(|st| st.estop & estop_seen::LATCHED != 0)
+            });
+            if latched {
+                return Ok(format!("e-stop raised on instance {instance}: {reason}"));
+            }
+            if start.elapsed() > PATIENCE {
+                return Err(ControlError::Failed(format!(
+                    "no process of instance {instance} reported the e-stop latched within {} s",
+                    PATIENCE.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(2));
         }
     })();
     drop(node);

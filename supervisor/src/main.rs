@@ -155,6 +155,16 @@ enum Cmd {
         #[arg(long)]
         clear: bool,
     },
+    /// Raise the user's e-stop on a running instance (seed 002's trigger_estop): every process
+    /// reads it in its own cycle; servo brings the axes to rest and disables the drives.
+    Estop {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Why, in a few words (kept in the e-stop and its events).
+        #[arg(long, default_value = "operator e-stop")]
+        reason: String,
+    },
     /// The sending side of a latency hop (started by `supervisor latency`).
     #[command(hide = true, name = "latency-peer")]
     LatencyPeer {
@@ -318,6 +328,19 @@ fn main() -> ExitCode {
             fault,
             clear,
         } => match supervisor::control::inject(&instance, &axis, &fault, clear) {
+            Ok(msg) => {
+                println!("{msg}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(match e {
+                    supervisor::control::ControlError::Input(_) => 2,
+                    supervisor::control::ControlError::Failed(_) => 1,
+                })
+            }
+        },
+        Cmd::Estop { instance, reason } => match supervisor::control::estop(&instance, &reason) {
             Ok(msg) => {
                 println!("{msg}");
                 ExitCode::SUCCESS

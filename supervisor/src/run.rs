@@ -24,7 +24,7 @@ use shm_schema::motion::trajgen_fault;
 use shm_schema::{
     CellConfigV3, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName, LatencyHistogramV1,
     MAX_AXES, MotionCommandV1, MotionState, Power, ProcState, ProcessName, ProcessStatusV2,
-    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, str_of,
+    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, estop_seen, str_of,
 };
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -455,21 +455,61 @@ impl Session {
         self.host_pub.send(&self.host);
     }
 
-    /// The e-stop that stopped the run, in words.
+    /// Waits (beating) until every process that reacts to the e-stop reports its reaction
+    /// complete (servo: axes at rest, drives disabled), at most the e-stop stop time and a
+    /// second, so that the run stops a cell at rest and reports how long that took.
+    fn await_estop_reactions(&mut self, cfg: &Config) {
+        let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 1.0);
+        let start = Instant::now();
+        while start.elapsed() < limit {
+            self.beat();
+            self.take_events();
+            for (k, sub) in self.status_subs.iter().enumerate() {
+                if let Some(s) = sub.latest() {
+                    self.statuses[k] = Some(s);
+                }
+            }
+            let pending =
+                self.statuses.iter().flatten().any(|s| {
+                    s.estop & estop_seen::REACTING != 0 && s.estop & estop_seen::SAFE == 0
+                });
+            if !pending {
+                break;
+            }
+            std::thread::sleep(TICK);
+        }
+        self.take_events();
+    }
+
+    /// The e-stop that stopped the run, in words (servo's own fault as "servo cut power").
     pub(crate) fn estop_text(&self) -> Option<String> {
         let (e, _) = self.estop?;
-        let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
         let cause = self
             .events
             .iter()
             .rev()
-            .find(|ev| ev.code == e.code && ev.source == e.source)
-            .map(|ev| events::line(ev, &self.axes, self.t0_ns));
+            .find(|ev| ev.code == e.code && ev.source == e.source);
+        let line = cause.map_or(String::new(), |ev| {
+            format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
+        });
+        let servo_fault = e.origin == EstopOrigin::Device as u32
+            && self
+                .names
+                .get(e.source as usize)
+                .is_some_and(|n| n == "servo");
+        if servo_fault {
+            let name = shm_schema::event::info(e.code).map_or("unknown fault", |i| i.name);
+            let axis = cause
+                .and_then(|ev| usize::try_from(ev.axis).ok())
+                .and_then(|i| self.axes.axes.get(i))
+                .map_or(String::new(), |(a, _)| format!(" on axis {a}"));
+            return Some(format!("servo cut power: {name}{axis}{line}"));
+        }
+        let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
         Some(format!(
-            "e-stop ({origin}) raised by {}: {}{}",
+            "e-stop ({origin}) raised by {}: {}{line}",
             self.axes.source_name(e.source),
             str_of(&e.reason),
-            cause.map_or(String::new(), |c| format!("\n  {c}"))
         ))
     }
 
@@ -523,16 +563,24 @@ impl Session {
                 )));
             }
         }
-        // Servo's own fault is reported by the caller with its cause; any other e-stop (or
-        // one servo's state does not explain within a few ticks) ends the run here.
+        // An e-stop ends the run once it stops the motion: servo or trajgen reacts to it
+        // (servo's own fault is reported by the caller with its cause, unless its state does
+        // not explain it within a few ticks). One that no process of the motion reacts to
+        // (the cell's propagation rules) lets the motion finish; the run fails at its end.
         if let Some((e, at)) = self.estop {
+            let reacting = |name: &str| {
+                self.names.iter().position(|n| n == name).is_some_and(|k| {
+                    self.statuses[k].is_some_and(|s| s.estop & estop_seen::REACTING != 0)
+                })
+            };
             let from_servo = e.origin == EstopOrigin::Device as u32
                 && self
                     .names
                     .get(e.source as usize)
                     .is_some_and(|n| n == "servo");
-            if !from_servo || at.elapsed() > 20 * TICK {
-                self.take_events();
+            let stops_motion = reacting("trajgen") || (reacting("servo") && !from_servo);
+            if stops_motion || (from_servo && at.elapsed() > 20 * TICK) {
+                self.await_estop_reactions(cfg);
                 return Err(RunError::failed(
                     self.estop_text().unwrap_or_else(|| "e-stop".into()),
                 ));
@@ -751,6 +799,13 @@ impl Session {
             }
         }
         progress.finish();
+        if let Some(text) = self.estop_text() {
+            self.take_events();
+            return Err(RunError::failed(format!(
+                "{text}\n  the motion completed: by this cell's propagation rules (`[behaviour]`) \
+                 neither servo nor trajgen reacts to it, but it stays latched"
+            )));
+        }
 
         let done = done.expect("settling needs done");
         let (settle_start, final_state) = settled_at.expect("loop exit");

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-const WATCHDOG: Duration = Duration::from_secs(180);
+pub(crate) const WATCHDOG: Duration = Duration::from_secs(180);
 
 /// Runs the triangle with the configuration file `cfg` on `inst`, `--json`; it must succeed.
 fn triangle_json(inst: &str, cfg: &Path) -> serde_json::Value {
@@ -44,21 +44,34 @@ fn triangle_in_background(inst: &str) -> std::process::Child {
 }
 
 /// The same with a configuration file.
-fn triangle_in_background_with(inst: &str, cfg: Option<&Path>) -> std::process::Child {
+pub(crate) fn triangle_in_background_with(inst: &str, cfg: Option<&Path>) -> std::process::Child {
+    triangle_in_background_as(inst, cfg, false)
+}
+
+/// The same, optionally with `--json` on stdout (captured).
+pub(crate) fn triangle_in_background_as(
+    inst: &str,
+    cfg: Option<&Path>,
+    json: bool,
+) -> std::process::Child {
     let mut cmd = supervisor();
     cmd.args(["run", "--instance", inst]);
+    if json {
+        cmd.arg("--json").stdout(Stdio::piped());
+    } else {
+        cmd.stdout(Stdio::null());
+    }
     if let Some(c) = cfg {
         cmd.arg("--config").arg(c);
     }
     cmd.arg(examples().join("triangle.prog"))
-        .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn supervisor")
 }
 
 /// Waits (under the watchdog) for a background run to end.
-fn wait_for(mut run: std::process::Child) -> std::process::Output {
+pub(crate) fn wait_for(mut run: std::process::Child) -> std::process::Output {
     let start = Instant::now();
     while run.try_wait().expect("wait").is_none() {
         assert!(start.elapsed() < WATCHDOG, "run did not end");
@@ -67,7 +80,7 @@ fn wait_for(mut run: std::process::Child) -> std::process::Output {
     run.wait_with_output().expect("output")
 }
 
-fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json::Value> {
+pub(crate) fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json::Value> {
     j["events"]
         .as_array()
         .unwrap_or_else(|| panic!("no events in {j}"))
@@ -381,7 +394,7 @@ fn patient_config(test: &str) -> std::path::PathBuf {
 
 /// Pid of `role`'s process of the run on `inst`, by its program's name (the supervisor's own
 /// command line may hold the role's name too), waiting for it under the watchdog.
-fn pid_of(role: &str, inst: &str) -> i32 {
+pub(crate) fn pid_of(role: &str, inst: &str) -> i32 {
     let start = Instant::now();
     loop {
         let pids: Vec<i32> = pids_with(&["--instance", inst])
@@ -407,7 +420,7 @@ fn pid_of(role: &str, inst: &str) -> i32 {
 }
 
 /// Waits until servo of `inst` follows a motion (x faster than 1 mm/s); returns the port.
-fn until_moving(
+pub(crate) fn until_moving(
     node: &iceoryx2::prelude::Node<runtime::ipc::Ipc>,
     name: &shm_schema::InstanceName,
 ) -> runtime::ipc::Sub<shm_schema::ServoStateV2> {
@@ -430,7 +443,7 @@ fn until_moving(
 }
 
 /// Connects a node to `inst` once its cell is up (a run refuses an instance in use).
-fn client_of(
+pub(crate) fn client_of(
     inst: &str,
 ) -> (
     shm_schema::InstanceName,

@@ -7,6 +7,7 @@
 mod cell;
 mod closed_loop;
 mod drives;
+mod estop;
 mod latency;
 mod loop_sim;
 mod no_alloc;
