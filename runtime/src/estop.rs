@@ -167,15 +167,10 @@ impl EstopWatch {
         reset
     }
 
-    /// A stop was requested (SIGTERM): react as to an e-stop until safe, then leave.
-    pub fn leave(&mut self, now_ns: u64) {
-        if !self.leaving {
-            self.leaving = true;
-            self.view.react = Some(EstopReaction::Stop);
-            if self.view.since_ns == 0 {
-                self.view.since_ns = now_ns;
-            }
-        }
+    /// A stop was requested (SIGTERM): from the next [`EstopWatch::poll`] on, react as to an
+    /// e-stop until safe, then leave.
+    pub fn leave(&mut self) {
+        self.leaving = true;
     }
 
     /// Raises an e-stop from this process: publishes it and latches it here at once (this

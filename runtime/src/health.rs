@@ -199,6 +199,15 @@ impl Health {
         }
     }
 
+    /// The bucket of detector `d`.
+    pub fn bucket(&self, d: Detector) -> &LeakyBucket {
+        match d {
+            Detector::PendingSequence => &self.pending,
+            Detector::Transport => &self.transport,
+            Detector::ThreadOffset => &self.offset,
+        }
+    }
+
     /// The wake-up latency beyond which a cycle counts as a thread offset overrun (ns).
     pub fn offset_limit_ns(&self) -> u64 {
         self.offset_limit_ns

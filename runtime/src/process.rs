@@ -309,13 +309,13 @@ fn run_inner<T: Task>(
         };
         let now = wake.actual_ns;
         if signals::stop_requested() {
-            estop.leave(now);
+            estop.leave();
         }
         if estop.poll(now, &mut queue) {
             health.restart(now);
             safe_reported = false;
         }
-        if (signals::stop_requested() || estop.supervisor_lost()) && leaving_since.is_none() {
+        if estop.leaving() && leaving_since.is_none() {
             leaving_since = Some(now);
             status.state = ProcState::Stopping as u32;
         }
@@ -351,12 +351,7 @@ fn run_inner<T: Task>(
         if let Some(d) = expired
             && !estop.view().latched
         {
-            let b = match d {
-                crate::health::Detector::PendingSequence => &health.pending,
-                crate::health::Detector::Transport => &health.transport,
-                crate::health::Detector::ThreadOffset => &health.offset,
-            };
-            let r = b.report(now);
+            let r = health.bucket(d).report(now);
             queue.push(EventV1::new(
                 now,
                 code::HEALTH_EXPIRED,

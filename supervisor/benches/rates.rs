@@ -29,21 +29,6 @@ fn supervisor() -> PathBuf {
         .join("release/supervisor")
 }
 
-/// The default cell with the machine and servo at `period_us`, their phases scaled.
-fn config_at(period_us: u64) -> String {
-    let default =
-        std::fs::read_to_string(root().join("examples/gantry-uba.toml")).expect("default cell");
-    default
-        .replace(
-            "period_us = 1000\nphase_us = 100",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 400",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
-        )
-}
-
 /// What one run measured.
 #[derive(Clone, Debug, Default)]
 struct Run {
@@ -174,7 +159,7 @@ fn main() {
         .iter()
         .map(|(us, _)| {
             let p = dir.join(format!("cell-{us}us.toml"));
-            std::fs::write(&p, config_at(*us)).expect("write config");
+            std::fs::write(&p, integration_tests::cell_at_rate(*us)).expect("write config");
             p
         })
         .collect();

@@ -2,8 +2,9 @@
 //! the user's e-stop.
 
 use crate::config::{FAULT_NAMES, fault_code};
+use iceoryx2::prelude::Node;
 use runtime::events::EventSink;
-use runtime::ipc::{self, Pub, Sub};
+use runtime::ipc::{self, Ipc, Pub, Sub};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
     CellConfigV3, EstopOrigin, EstopV1, EventV1, FaultInjectionV1, InstanceName, ProcessStatusV2,
@@ -32,6 +33,55 @@ impl std::fmt::Display for ControlError {
     }
 }
 
+/// Runs `body` as a tool attached to the running `instance` (a node of its own, named after
+/// `tool`), then removes the node and whatever is left of an instance that ended meanwhile.
+/// An invalid instance name, or an instance with no live process, is bad input.
+fn attached<T>(
+    instance: &str,
+    tool: &str,
+    body: impl FnOnce(&InstanceName, &Node<Ipc>) -> Result<T, ControlError>,
+) -> Result<T, ControlError> {
+    let instance = InstanceName::new(instance)
+        .map_err(|e| ControlError::Input(format!("--instance {instance:?}: {e}")))?;
+    ipc::quiet_iceoryx2_log();
+    if ipc::live_node_pids(&instance)
+        .unwrap_or_default()
+        .is_empty()
+    {
+        return Err(ControlError::Input(format!(
+            "no process of instance {instance} is running"
+        )));
+    }
+    let node = ipc::node(&instance, &format!("{tool}-{}", std::process::id())).map_err(failed)?;
+    let result = body(&instance, &node);
+    drop(node);
+    ipc::cleanup_after_client(&instance);
+    result
+}
+
+fn failed(e: ipc::IpcError) -> ControlError {
+    ControlError::Failed(e.to_string())
+}
+
+/// The configuration the running cell published (its axes and processes, not a file's).
+fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV3, ControlError> {
+    let config =
+        Sub::<CellConfigV3>::new(node, instance, ServiceId::CellConfig, 1).map_err(failed)?;
+    let start = Instant::now();
+    loop {
+        if let Some(c) = config.latest() {
+            return Ok(c);
+        }
+        if start.elapsed() > PATIENCE {
+            return Err(ControlError::Failed(format!(
+                "instance {instance} published no cell configuration within {} s",
+                PATIENCE.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 /// `supervisor inject`: raises (or clears) `fault` on `axis` of the running `instance`, and
 /// waits until the drives report it (`fault-injected`), resending while they have not.
 pub fn inject(
@@ -40,37 +90,11 @@ pub fn inject(
     fault: &str,
     clear: bool,
 ) -> Result<String, ControlError> {
-    let bad = ControlError::Input;
-    let instance =
-        InstanceName::new(instance).map_err(|e| bad(format!("--instance {instance:?}: {e}")))?;
-    let code_of = fault_code(fault)
-        .ok_or_else(|| bad(format!("fault {fault:?} is not one of {FAULT_NAMES}")))?;
-    ipc::quiet_iceoryx2_log();
-    if ipc::live_node_pids(&instance)
-        .unwrap_or_default()
-        .is_empty()
-    {
-        return Err(bad(format!("no process of instance {instance} is running")));
-    }
-    let f = |e: ipc::IpcError| ControlError::Failed(e.to_string());
-    let node = ipc::node(&instance, &format!("inject-{}", std::process::id())).map_err(f)?;
-    let result = (|| {
-        // The axes of the cell that runs, not of a file: the configuration it published.
-        let config =
-            Sub::<CellConfigV3>::new(&node, &instance, ServiceId::CellConfig, 1).map_err(f)?;
-        let start = Instant::now();
-        let cell = loop {
-            if let Some(c) = config.latest() {
-                break c;
-            }
-            if start.elapsed() > PATIENCE {
-                return Err(ControlError::Failed(format!(
-                    "instance {instance} published no cell configuration within {} s",
-                    PATIENCE.as_secs()
-                )));
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        };
+    let code_of = fault_code(fault).ok_or_else(|| {
+        ControlError::Input(format!("fault {fault:?} is not one of {FAULT_NAMES}"))
+    })?;
+    attached(instance, "inject", |&instance, node| {
+        let cell = running_cell(node, &instance)?;
         let names: Vec<&str> = cell.axes().iter().map(|a| str_of(&a.name)).collect();
         let index = names.iter().position(|n| *n == axis).ok_or_else(|| {
             ControlError::Input(format!(
@@ -79,10 +103,10 @@ pub fn inject(
             ))
         })?;
         let machine = cell.process_named("machine").map(|(k, _)| k);
-        let port =
-            Pub::<FaultInjectionV1>::new(&node, &instance, ServiceId::FaultInjection).map_err(f)?;
-        let acks = Sub::<EventV1>::new(&node, &instance, ServiceId::Events, 256).map_err(f)?;
-        let mut events = EventSink::new(&node, &instance, SOURCE_SUPERVISOR).map_err(f)?;
+        let port = Pub::<FaultInjectionV1>::new(node, &instance, ServiceId::FaultInjection)
+            .map_err(failed)?;
+        let acks = Sub::<EventV1>::new(node, &instance, ServiceId::Events, 256).map_err(failed)?;
+        let mut events = EventSink::new(node, &instance, SOURCE_SUPERVISOR).map_err(failed)?;
         let sample = FaultInjectionV1 {
             // Unique per sender and increasing: the time.
             seq: runtime::time::now_ns(),
@@ -153,10 +177,7 @@ pub fn inject(
             }
             std::thread::sleep(Duration::from_millis(5));
         }
-    })();
-    drop(node);
-    ipc::cleanup_after_client(&instance);
-    result
+    })
 }
 
 /// `supervisor estop`: raises the user's e-stop (seed 002's `trigger_estop`) on the running
@@ -165,41 +186,15 @@ pub fn inject(
 /// resending while none has (a brand-new publisher's first sample can be lost while its
 /// connections settle).
 pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
-    let bad = ControlError::Input;
-    let instance =
-        InstanceName::new(instance).map_err(|e| bad(format!("--instance {instance:?}: {e}")))?;
-    ipc::quiet_iceoryx2_log();
-    if ipc::live_node_pids(&instance)
-        .unwrap_or_default()
-        .is_empty()
-    {
-        return Err(bad(format!("instance {instance} is not up")));
-    }
-    let f = |e: ipc::IpcError| ControlError::Failed(e.to_string());
-    let node = ipc::node(&instance, &format!("estop-{}", std::process::id())).map_err(f)?;
-    let result = (|| {
-        let port = Pub::<EstopV1>::new(&node, &instance, ServiceId::Estop).map_err(f)?;
-        let config =
-            Sub::<CellConfigV3>::new(&node, &instance, ServiceId::CellConfig, 1).map_err(f)?;
-        let start = Instant::now();
-        let cell = loop {
-            if let Some(c) = config.latest() {
-                break c;
-            }
-            if start.elapsed() > PATIENCE {
-                return Err(ControlError::Failed(format!(
-                    "instance {instance} published no cell configuration within {} s",
-                    PATIENCE.as_secs()
-                )));
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        };
+    attached(instance, "estop", |&instance, node| {
+        let port = Pub::<EstopV1>::new(node, &instance, ServiceId::Estop).map_err(failed)?;
+        let cell = running_cell(node, &instance)?;
         let mut statuses = Vec::new();
         for k in 0..cell.processes().len() {
             if let Some(name) = cell.process_name(k) {
                 statuses.push(
-                    Sub::<ProcessStatusV2>::new(&node, &instance, ServiceId::Status(name), 4)
-                        .map_err(f)?,
+                    Sub::<ProcessStatusV2>::new(node, &instance, ServiceId::Status(name), 4)
+                        .map_err(failed)?,
                 );
             }
         }
@@ -233,8 +228,5 @@ pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
             }
             std::thread::sleep(Duration::from_millis(2));
         }
-    })();
-    drop(node);
-    ipc::cleanup_after_client(&instance);
-    result
+    })
 }

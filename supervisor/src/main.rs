@@ -173,6 +173,24 @@ enum Cmd {
     },
 }
 
+/// Reports a one-shot command to a running instance (`inject`, `estop`): its message on
+/// stdout, exit 0; or its error, exit 2 for bad input, 1 when it failed.
+fn control_done(r: Result<String, supervisor::control::ControlError>) -> ExitCode {
+    match r {
+        Ok(msg) => {
+            println!("{msg}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(match e {
+                supervisor::control::ControlError::Input(_) => 2,
+                supervisor::control::ControlError::Failed(_) => 1,
+            })
+        }
+    }
+}
+
 /// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
 /// status: 2 bad input, 1 failed, 130 interrupted.
 fn run_failed(e: &RunError, json: bool) -> ExitCode {
@@ -327,32 +345,10 @@ fn main() -> ExitCode {
             axis,
             fault,
             clear,
-        } => match supervisor::control::inject(&instance, &axis, &fault, clear) {
-            Ok(msg) => {
-                println!("{msg}");
-                ExitCode::SUCCESS
-            }
-            Err(e) => {
-                eprintln!("error: {e}");
-                ExitCode::from(match e {
-                    supervisor::control::ControlError::Input(_) => 2,
-                    supervisor::control::ControlError::Failed(_) => 1,
-                })
-            }
-        },
-        Cmd::Estop { instance, reason } => match supervisor::control::estop(&instance, &reason) {
-            Ok(msg) => {
-                println!("{msg}");
-                ExitCode::SUCCESS
-            }
-            Err(e) => {
-                eprintln!("error: {e}");
-                ExitCode::from(match e {
-                    supervisor::control::ControlError::Input(_) => 2,
-                    supervisor::control::ControlError::Failed(_) => 1,
-                })
-            }
-        },
+        } => control_done(supervisor::control::inject(&instance, &axis, &fault, clear)),
+        Cmd::Estop { instance, reason } => {
+            control_done(supervisor::control::estop(&instance, &reason))
+        }
         Cmd::DefaultConfig => {
             print!("{DEFAULT_TOML}");
             ExitCode::SUCCESS

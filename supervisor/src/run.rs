@@ -415,22 +415,22 @@ impl Session {
     }
 
     /// The latched fault servo reports, in words, with the event that explains it.
-    pub(crate) fn fault_text(&self, cfg: &Config, s: &ServoStateV2) -> String {
-        let cause = self
-            .events
-            .iter()
-            .rev()
-            .find(|e| e.code == s.fault_code)
-            .map(|e| events::line(e, &self.axes, self.t0_ns));
-        let name = shm_schema::event::info(s.fault_code).map_or("unknown fault", |i| i.name);
-        let axis = usize::try_from(s.fault_axis)
+    pub(crate) fn fault_text(&self, s: &ServoStateV2) -> String {
+        let cause = self.events.iter().rev().find(|e| e.code == s.fault_code);
+        self.servo_cut_text(s.fault_code, s.fault_axis, cause)
+    }
+
+    /// "servo cut power: <cause> on axis <a>", and the event that explains it.
+    fn servo_cut_text(&self, code: u32, axis: i32, cause: Option<&EventV1>) -> String {
+        let name = shm_schema::event::info(code).map_or("unknown fault", |i| i.name);
+        let axis = usize::try_from(axis)
             .ok()
-            .and_then(|i| cfg.axis.get(i))
-            .map_or(String::new(), |a| format!(" on axis {}", a.name));
-        format!(
-            "servo cut power: {name}{axis}{}",
-            cause.map_or(String::new(), |c| format!("\n  {c}"))
-        )
+            .and_then(|i| self.axes.axes.get(i))
+            .map_or(String::new(), |(a, _)| format!(" on axis {a}"));
+        let line = cause.map_or(String::new(), |ev| {
+            format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
+        });
+        format!("servo cut power: {name}{axis}{line}")
     }
 
     /// Stops every process (the heartbeat goes on meanwhile, so none of them takes the
@@ -481,6 +481,15 @@ impl Session {
         self.take_events();
     }
 
+    /// True for servo's own device e-stop: a latched fault, which servo's state explains.
+    fn is_servo_fault(&self, e: &EstopV1) -> bool {
+        e.origin == EstopOrigin::Device as u32
+            && self
+                .names
+                .get(e.source as usize)
+                .is_some_and(|n| n == "servo")
+    }
+
     /// The e-stop that stopped the run, in words (servo's own fault as "servo cut power").
     pub(crate) fn estop_text(&self) -> Option<String> {
         let (e, _) = self.estop?;
@@ -489,22 +498,13 @@ impl Session {
             .iter()
             .rev()
             .find(|ev| ev.code == e.code && ev.source == e.source);
+        if self.is_servo_fault(&e) {
+            let axis = cause.map_or(-1, |ev| ev.axis);
+            return Some(self.servo_cut_text(e.code, axis, cause));
+        }
         let line = cause.map_or(String::new(), |ev| {
             format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
         });
-        let servo_fault = e.origin == EstopOrigin::Device as u32
-            && self
-                .names
-                .get(e.source as usize)
-                .is_some_and(|n| n == "servo");
-        if servo_fault {
-            let name = shm_schema::event::info(e.code).map_or("unknown fault", |i| i.name);
-            let axis = cause
-                .and_then(|ev| usize::try_from(ev.axis).ok())
-                .and_then(|i| self.axes.axes.get(i))
-                .map_or(String::new(), |(a, _)| format!(" on axis {a}"));
-            return Some(format!("servo cut power: {name}{axis}{line}"));
-        }
         let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
         Some(format!(
             "e-stop ({origin}) raised by {}: {}{line}",
@@ -573,11 +573,7 @@ impl Session {
                     self.statuses[k].is_some_and(|s| s.estop & estop_seen::REACTING != 0)
                 })
             };
-            let from_servo = e.origin == EstopOrigin::Device as u32
-                && self
-                    .names
-                    .get(e.source as usize)
-                    .is_some_and(|n| n == "servo");
+            let from_servo = self.is_servo_fault(&e);
             let stops_motion = reacting("trajgen") || (reacting("servo") && !from_servo);
             if stops_motion || (from_servo && at.elapsed() > 20 * TICK) {
                 self.await_estop_reactions(cfg);
@@ -610,7 +606,7 @@ impl Session {
                 && s.status & st::FAULT_LATCHED != 0
             {
                 self.take_events();
-                return Err(RunError::failed(self.fault_text(cfg, &s)));
+                return Err(RunError::failed(self.fault_text(&s)));
             }
             let statuses = self.statuses.clone();
             let cyclic = |k: usize| {
@@ -735,7 +731,7 @@ impl Session {
                 }
                 if s.status & st::FAULT_LATCHED != 0 {
                     self.take_events();
-                    return Err(RunError::failed(self.fault_text(cfg, &s)));
+                    return Err(RunError::failed(self.fault_text(&s)));
                 }
                 if s.power != Power::Enabled as u8 {
                     self.take_events();

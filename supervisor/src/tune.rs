@@ -233,7 +233,7 @@ fn watch(
         while let Some(s) = session.servo_sub.next() {
             if s.status & st::FAULT_LATCHED != 0 {
                 session.take_events();
-                return Err(RunError::failed(session.fault_text(cfg, &s)));
+                return Err(RunError::failed(session.fault_text(&s)));
             }
             if stop(&s) {
                 return Ok(true);
@@ -383,7 +383,7 @@ fn ramp(
         while let Some(s) = session.servo_sub.next() {
             if s.status & st::FAULT_LATCHED != 0 {
                 session.take_events();
-                return Err(RunError::failed(session.fault_text(cfg, &s)));
+                return Err(RunError::failed(session.fault_text(&s)));
             }
             peak = peak.max(s.following_error[i].abs());
         }
