@@ -41,6 +41,31 @@ pub fn default_cell() -> String {
     std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("the default cell")
 }
 
+/// `src` (a cell configuration) with room for the host's stalls where a test checks something
+/// else than the cell's tolerance of them: a following-error limit of 5 units, a drive
+/// watchdog and a feedback timeout of 0.5 s, a setpoint timeout of 0.2 s, and a
+/// pending-sequence detector that expires only when a process misses every sample for a
+/// second. On this VM a loaded host stalls a process for 100 ms now and then
+/// (`../shared/notes/machine.md`), which the default cell rightly treats as a fault.
+pub fn with_stall_room(src: &str) -> String {
+    let out = src
+        .replace("following_error_limit = 1.0", "following_error_limit = 5.0")
+        .replace(
+            "command_timeout = 0.1",
+            "command_timeout = 0.5\nfeedback_timeout = 0.5",
+        )
+        .replace("setpoint_timeout = 0.05", "setpoint_timeout = 0.2")
+        .replace(
+            "pending_sequence_overrun_percent_limit = 10.0",
+            "pending_sequence_overrun_percent_limit = 100.0",
+        );
+    assert!(
+        out.contains("feedback_timeout = 0.5") && !out.contains("following_error_limit = 1.0"),
+        "the cell's keys moved: update with_stall_room"
+    );
+    out
+}
+
 /// The default cell with the machine and servo at `period_us`, their phases scaled (a tenth
 /// and two fifths of the period, as 100 µs and 400 µs are of 1 ms), and the thread offset
 /// detector's share of the period scaled so that it counts the same wake-up latency (the

@@ -5,13 +5,16 @@
 use crate::drives::{
     WATCHDOG, client_of, events_named, pid_of, triangle_in_background_as, until_moving, wait_for,
 };
-use integration_tests::{assert_clean, default_cell, instance, pids_with, scratch, supervisor};
+use integration_tests::{
+    assert_clean, default_cell, instance, pids_with, scratch, supervisor, with_stall_room,
+};
 use shm_schema::Power;
 use std::time::{Duration, Instant};
 
-/// The default cell with `[behaviour]` set as given.
+/// The default cell with `[behaviour]` set as given, and room for the host's stalls (these
+/// tests are about the e-stop, not about the cell's tolerance of a stall).
 fn cell_with_behaviour(test: &str, propagate: bool, external: bool) -> std::path::PathBuf {
-    let src = default_cell().replace(
+    let src = with_stall_room(&default_cell()).replace(
         "propagate_estop = true\npropagate_external_estop = false",
         &format!("propagate_estop = {propagate}\npropagate_external_estop = {external}"),
     );
@@ -57,7 +60,8 @@ fn user_estop_mid_motion(inst: &str, cfg: Option<&std::path::Path>) -> (String, 
 #[test]
 fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_drives() {
     let inst = instance("estop-user");
-    let (_, j) = user_estop_mid_motion(&inst, None);
+    let cfg = cell_with_behaviour("estop-user", true, false);
+    let (_, j) = user_estop_mid_motion(&inst, Some(&cfg));
     // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
     // and the drives disabled, after the e-stop was raised.
     let safe = events_named(&j, "estop-safe");
@@ -151,7 +155,12 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
 #[test]
 fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit() {
     let inst = instance("estop-orphan");
-    let run = triangle_in_background_as(&inst, None, false);
+    let cfg = scratch(
+        "estop-orphan",
+        "cell.toml",
+        &with_stall_room(&default_cell()),
+    );
+    let run = triangle_in_background_as(&inst, Some(&cfg), false);
     let (name, node) = client_of(&inst);
     let state = until_moving(&node, &name);
     let cell = pids_with(&["--instance", &inst]);
@@ -185,7 +194,8 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
     runtime::ipc::cleanup_after_client(&name);
     // The next run of the instance starts, cleaning what the killed supervisor left.
     let out = supervisor()
-        .args(["run", "--instance", &inst])
+        .args(["run", "--instance", &inst, "--config"])
+        .arg(&cfg)
         .arg(integration_tests::examples().join("triangle.prog"))
         .output()
         .expect("run");
