@@ -34,7 +34,9 @@ pub use drive::{
 pub use estop::{EstopKind, EstopOrigin, EstopV1};
 pub use event::{EventQueue, EventV1, Severity};
 pub use latency::LatencyHistogramV1;
-pub use motion::{CommandKind, MotionCommandV1, MotionState, SetpointV1};
+pub use motion::{
+    CommandKind, ControlKind, MotionCommandV1, MotionControlV1, MotionState, SetpointV1,
+};
 pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};
 pub use status::{
     CycleStatsV1, DetectorV1, MAX_PROCESSES, ProcState, ProcessName, ProcessStatusV2, estop_seen,

@@ -50,6 +50,43 @@ pub struct MotionCommandV1 {
     pub user_time_s: f64,
 }
 
+/// What a [`MotionControlV1`] asks for. None of them is an e-stop: the axes stay enabled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ControlKind {
+    /// Decelerate along the path to rest within the blend time `t_acc`, and hold there.
+    Pause = 1,
+    /// Go on along the same path, accelerating within `t_acc`.
+    Resume = 2,
+    /// Come to rest along the path within `t_acc`, then drop the rest of the program (the
+    /// setpoint reports [`trajgen_fault::ABORTED`]).
+    Abort = 3,
+}
+
+impl ControlKind {
+    /// Decodes the wire value.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        [Self::Pause, Self::Resume, Self::Abort]
+            .into_iter()
+            .find(|k| *k as u32 == v)
+    }
+}
+
+/// A request that acts on the running motion at once (not queued behind the program's
+/// commands), `<i>/trajgen/control`; trajgen takes it in its next cycle.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::MotionControlV1")]
+pub struct MotionControlV1 {
+    /// Increasing per sender; trajgen echoes the last one it took in
+    /// [`SetpointV1::control_seq`].
+    pub seq: u64,
+    /// [`ControlKind`] as `u32`.
+    pub kind: u32,
+    /// Reserved (0).
+    pub reserved: u32,
+}
+
 /// State of the motion in a [`SetpointV1`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]
@@ -89,6 +126,9 @@ pub mod trajgen_fault {
     pub const SEQUENCE_GAP: u32 = 5;
     /// An e-stop dropped the program; the reference rests where servo brought the axes.
     pub const ESTOP: u32 = 6;
+    /// A client aborted the program ([`super::ControlKind::Abort`]): the axes came to rest
+    /// along the path and the rest of the program was dropped.
+    pub const ABORTED: u32 = 7;
 
     /// What a fault code means, in words.
     pub fn text(code: u32) -> &'static str {
@@ -100,6 +140,7 @@ pub mod trajgen_fault {
             QUEUE_OVERFLOW => "its command queue overflowed",
             SEQUENCE_GAP => "a command was lost (sequence gap)",
             ESTOP => "an e-stop dropped the program",
+            ABORTED => "the program was aborted",
             _ => "unknown fault",
         }
     }
@@ -148,6 +189,11 @@ pub struct SetpointV1 {
     pub queue_free: u32,
     /// Times the queue ran empty while a program was running (the axes stopped on the target).
     pub starved: u32,
+    /// Path speed as a share of the programmed one, 0..=1: below 1 while a pause or an
+    /// abort decelerates (0: paused at rest on the path) or a resume accelerates.
+    pub path_speed: f64,
+    /// Sequence number of the last [`MotionControlV1`] taken.
+    pub control_seq: u64,
     /// Reference position per axis (axis unit).
     pub position: [f64; MAX_AXES],
     /// Reference velocity per axis (unit/s).

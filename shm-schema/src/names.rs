@@ -179,6 +179,9 @@ pub enum ServiceId {
     CellConfig,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV1`], a client (the supervisor) to trajgen.
     MotionCommand,
+    /// `<i>/trajgen/control`: [`crate::MotionControlV1`], a client to trajgen: pause, resume,
+    /// abort, taken at once.
+    MotionControl,
     /// `<i>/trajgen/setpoint`: [`crate::SetpointV1`], trajgen to servo (and observers).
     Setpoint,
     /// `<i>/servo/state`: [`crate::ServoStateV2`], servo to iobridge (and observers).
@@ -256,6 +259,7 @@ impl ServiceId {
         match self {
             Self::CellConfig => "cell/config",
             Self::MotionCommand => "trajgen/command",
+            Self::MotionControl => "trajgen/control",
             Self::Setpoint => "trajgen/setpoint",
             Self::ServoState => "servo/state",
             Self::ServoRequest => "servo/request",
@@ -303,7 +307,7 @@ impl ServiceId {
                 max_nodes: 40,
                 ..base
             },
-            Self::ServoRequest | Self::FaultInjection => Qos {
+            Self::ServoRequest | Self::FaultInjection | Self::MotionControl => Qos {
                 max_publishers: 8,
                 ..base
             },

@@ -118,6 +118,11 @@ fn layouts() -> Vec<Layout> {
             target: "double[8]" = 8 * A,
             user_time_s: "double" = 8,
         }),
+        layout!(MotionControlV1 {
+            seq: "uint64_t" = 8,
+            kind: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+        }),
         layout!(SetpointV1 {
             seq: "uint64_t" = 8,
             stamp_ns: "uint64_t" = 8,
@@ -135,6 +140,8 @@ fn layouts() -> Vec<Layout> {
             commands_taken: "uint64_t" = 8,
             queue_free: "uint32_t" = 4,
             starved: "uint32_t" = 4,
+            path_speed: "double" = 8,
+            control_seq: "uint64_t" = 8,
             position: "double[8]" = 8 * A,
             velocity: "double[8]" = 8 * A,
             acceleration: "double[8]" = 8 * A,

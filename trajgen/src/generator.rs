@@ -7,6 +7,11 @@
 //! `A` is the previous segment evaluated at exactly `T1 - t_acc`, however late the cycle that
 //! notices the transition runs (several transitions are taken at once after a long stall).
 //!
+//! A pause, a resume or an abort ([`Generator::control`]) scales the rate at which the path
+//! is travelled, never the path: the path time runs at `speed` times real time, and `speed`
+//! ramps linearly between 1 and 0 within `t_acc` (the blend's own acceleration time). At
+//! speed 1 the path time is real elapsed time minus the time lost to pauses, exactly.
+//!
 //! Commands are taken into a fixed queue as they arrive (validated one by one); the next one
 //! is read only when the motion reaches `t = T1 - t_acc`. With the queue empty at that moment
 //! the axes stop exactly on the current target and wait (counted in `starved`); `END` stops
@@ -15,7 +20,9 @@
 use crate::blend::{Axes, Segment};
 use motion_program::segment_time;
 use shm_schema::motion::trajgen_fault as fault;
-use shm_schema::{CommandKind, MAX_AXES, MotionCommandV1, MotionState, SetpointV1};
+use shm_schema::{
+    CommandKind, ControlKind, MAX_AXES, MotionCommandV1, MotionControlV1, MotionState, SetpointV1,
+};
 
 /// Places in the command queue.
 pub const QUEUE_CAP: usize = 256;
@@ -114,6 +121,16 @@ pub struct Generator {
     commands_taken: u64,
     starved: u32,
     seq: u64,
+    /// Path speed as a share of the programmed one (0..=1), and where it ramps to.
+    speed: f64,
+    target_speed: f64,
+    /// An abort is decelerating: at speed 0 the program is dropped.
+    aborting: bool,
+    /// Real time lost to pauses in the current motion (s): path time = motion time − this.
+    lost_s: f64,
+    /// When `lost_s` was last brought up to date (ns).
+    path_ns: u64,
+    control_seq: u64,
 }
 
 impl Generator {
@@ -141,7 +158,38 @@ impl Generator {
             commands_taken: 0,
             starved: 0,
             seq: 0,
+            speed: 1.0,
+            target_speed: 1.0,
+            aborting: false,
+            lost_s: 0.0,
+            path_ns: 0,
+            control_seq: 0,
         }
+    }
+
+    /// Takes a pause, resume or abort (it acts from the next [`Generator::step`]). A pause
+    /// or an abort while no motion runs does nothing but is acknowledged.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn control(&mut self, c: &MotionControlV1) {
+        self.control_seq = c.seq;
+        match ControlKind::from_u32(c.kind) {
+            Some(ControlKind::Pause) if self.state == MotionState::Moving => {
+                self.target_speed = 0.0
+            }
+            Some(ControlKind::Resume) if !self.aborting => self.target_speed = 1.0,
+            Some(ControlKind::Abort) if self.state == MotionState::Moving => {
+                self.target_speed = 0.0;
+                self.aborting = true;
+            }
+            _ => {}
+        }
+    }
+
+    /// True while paused at rest on the path (speed 0, a motion running).
+    pub fn paused(&self) -> bool {
+        self.state == MotionState::Moving && self.speed == 0.0
     }
 
     /// Moves the resting point to `pos` when no segment runs (servo holds elsewhere, e.g.
@@ -163,6 +211,9 @@ impl Generator {
     pub fn abort(&mut self, pos: &[f64]) {
         self.seg = None;
         self.queue.clear();
+        self.aborting = false;
+        self.speed = 1.0;
+        self.target_speed = 1.0;
         for (i, v) in pos.iter().take(self.p.axes).enumerate() {
             self.rest[i] = *v;
         }
@@ -261,10 +312,15 @@ impl Generator {
             self.theoretical_s = 0.0;
             self.program_id = cmd.program_id;
             self.state = MotionState::Moving;
+            self.lost_s = 0.0;
+            self.path_ns = now_ns;
+            if !self.aborting {
+                self.speed = self.target_speed;
+            }
         }
         let c = self.target_of(cmd);
         let t1 = self.time_between(&self.rest, &c, cmd.user_time_s);
-        let origin = self.motion_time(now_ns) + self.p.t_acc;
+        let origin = self.path_time(now_ns) + self.p.t_acc;
         let rest = self.rest;
         self.begin(
             Segment {
@@ -283,10 +339,34 @@ impl Generator {
         (now_ns as i128 - self.motion_start_ns as i128) as f64 * 1e-9
     }
 
-    /// Absolute time (ns) of the next segment transition, for an exact extra wake-up.
+    /// Brings the speed ramp and the time lost to it up to `now_ns`; returns the path time.
+    /// The speed moves towards its target at `1 / t_acc` per second; the path advances by
+    /// the integral of the speed (exact for the linear ramp).
+    fn path_time(&mut self, now_ns: u64) -> f64 {
+        if now_ns > self.path_ns {
+            let dt = (now_ns - self.path_ns) as f64 * 1e-9;
+            self.path_ns = now_ns;
+            if self.speed != 1.0 || self.target_speed != 1.0 {
+                let rate = 1.0 / self.p.t_acc.max(1e-3);
+                let gap = self.target_speed - self.speed;
+                let ramp = (gap.abs() / rate).min(dt);
+                let end = self.speed + gap.signum() * rate * ramp;
+                let advance = (self.speed + end) / 2.0 * ramp + end * (dt - ramp);
+                self.speed = if ramp < dt { self.target_speed } else { end };
+                self.lost_s += dt - advance;
+            }
+        }
+        self.motion_time(now_ns) - self.lost_s
+    }
+
+    /// Absolute time (ns) of the next segment transition, for an exact extra wake-up (none
+    /// while the speed is below 1: the next period takes it).
     pub fn next_transition_ns(&self) -> Option<u64> {
         let seg = self.seg.as_ref()?;
-        let t = self.origin_s + seg.transition_time();
+        if self.speed != 1.0 || self.target_speed != 1.0 {
+            return None;
+        }
+        let t = self.origin_s + seg.transition_time() + self.lost_s;
         Some(self.motion_start_ns + (t * 1e9).ceil().max(0.0) as u64)
     }
 
@@ -299,24 +379,34 @@ impl Generator {
         if self.seg.is_none() {
             self.take_at_rest(now_ns);
         }
-        // Take every transition the motion time has passed, each at its exact instant.
-        let mt = self.motion_time(now_ns);
+        // Take every transition the path time has passed, each at its exact instant.
+        let mt = self.path_time(now_ns);
         while let Some(seg) = self.seg {
             if mt - self.origin_s < seg.transition_time() {
                 break;
             }
             self.transition(seg, now_ns);
         }
+        if self.aborting && self.speed == 0.0 {
+            self.drop_program(mt, now_ns);
+        }
         let (pos, vel, acc) = match &self.seg {
             Some(seg) => {
                 let (p, v) = seg.eval(mt - self.origin_s);
-                (p, v, seg.accel(mt - self.origin_s))
+                let a = seg.accel(mt - self.origin_s);
+                // d/dt of p(s(t)): v·speed, and a·speed² + v·speed' while the speed ramps.
+                let ramp = if self.speed == self.target_speed {
+                    0.0
+                } else {
+                    (self.target_speed - self.speed).signum() / self.p.t_acc.max(1e-3)
+                };
+                (p, v * self.speed, a * (self.speed * self.speed) + v * ramp)
             }
             None => (self.rest, Axes::zeros(), Axes::zeros()),
         };
         self.seq += 1;
         let motion_time_s = match self.state {
-            MotionState::Moving => mt,
+            MotionState::Moving => self.motion_time(now_ns),
             MotionState::Done | MotionState::Fault => self.end_motion_s,
             MotionState::Idle => 0.0,
         };
@@ -337,6 +427,8 @@ impl Generator {
             commands_taken: self.commands_taken,
             queue_free: (QUEUE_CAP - self.queue.len) as u32,
             starved: self.starved,
+            path_speed: self.speed,
+            control_seq: self.control_seq,
             position: [0.0; MAX_AXES],
             velocity: [0.0; MAX_AXES],
             acceleration: [0.0; MAX_AXES],
@@ -374,7 +466,23 @@ impl Generator {
         }
     }
 
+    /// The end of an abort: at rest on the path at path time `mt`, the program dropped.
+    fn drop_program(&mut self, mt: f64, now_ns: u64) {
+        if let Some(seg) = self.seg.take() {
+            self.rest = seg.eval(mt - self.origin_s).0;
+        }
+        self.queue.clear();
+        self.aborting = false;
+        self.speed = 1.0;
+        self.target_speed = 1.0;
+        self.fault = fault::ABORTED;
+        self.fault_line = self.line;
+        self.finish(now_ns, MotionState::Fault);
+    }
+
     fn finish(&mut self, now_ns: u64, state: MotionState) {
+        self.speed = 1.0;
+        self.target_speed = 1.0;
         self.state = state;
         self.motion_end_ns = now_ns;
         self.end_motion_s = self.motion_time(now_ns);

@@ -6,7 +6,7 @@ use shm_schema::EventV1;
 use shm_schema::drive::servo_status;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
-use shm_schema::{MotionCommandV1, ServiceId, ServoStateV2, SetpointV1};
+use shm_schema::{MotionCommandV1, MotionControlV1, ServiceId, ServoStateV2, SetpointV1};
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
 
@@ -15,6 +15,8 @@ struct Trajgen {
     /// `None` until servo's commanded position is known: the motion starts where servo is.
     generator: Option<Generator>,
     commands: Sub<MotionCommandV1>,
+    /// Pause, resume, abort: taken at once, not queued.
+    control: Sub<MotionControlV1>,
     servo: Sub<ServoStateV2>,
     setpoints: Pub<SetpointV1>,
     /// Wakes event-driven consumers after each setpoint (none in the default cell: servo
@@ -33,6 +35,7 @@ impl Trajgen {
             params: Params::from_cell(&ctx.cell),
             generator: None,
             commands: Sub::new(&ctx.node, i, ServiceId::MotionCommand, QUEUE_CAP)?,
+            control: Sub::new(&ctx.node, i, ServiceId::MotionControl, 8)?,
             servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 4)?,
             setpoints: Pub::new(&ctx.node, i, ServiceId::Setpoint)?,
             ready: Notifier::new(&ctx.node, i, ServiceId::SetpointReady)?,
@@ -78,12 +81,16 @@ impl Task for Trajgen {
             // E-stop: the program is dropped, commands are refused until it is reset; the
             // reference rests where servo brings the axes.
             while self.commands.next().is_some() {}
+            while self.control.next().is_some() {}
             if let Some(s) = servo {
                 generator.abort(&s.cmd_position);
             }
         } else {
             while let Some(c) = self.commands.next() {
                 generator.push_command(&c);
+            }
+            while let Some(c) = self.control.next() {
+                generator.control(&c);
             }
         }
         let sp = generator.step(now);
@@ -93,6 +100,7 @@ impl Task for Trajgen {
             // Leaving (a stop request) drops the program too, but is no fault to report.
             if sp.fault != trajgen_fault::NONE
                 && (sp.fault != trajgen_fault::ESTOP || cx.estop.latched)
+                && sp.fault != trajgen_fault::ABORTED
             {
                 cx.events.push(EventV1::new(
                     now,

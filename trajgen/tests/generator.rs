@@ -348,3 +348,125 @@ fn queue_overflow_is_refused_not_lost_silently() {
     }
     assert_eq!(g.step(T0).fault, trajgen_fault::QUEUE_OVERFLOW);
 }
+
+fn control(seq: u64, kind: shm_schema::ControlKind) -> shm_schema::MotionControlV1 {
+    shm_schema::MotionControlV1 {
+        seq,
+        kind: kind as u32,
+        reserved: 0,
+    }
+}
+
+/// Distance of `p` from the offline path: the nearest of its samples (1 ms apart).
+fn off_path(plan: &[(f64, Segment)], p: &[f64]) -> f64 {
+    (0..20_000)
+        .map(|k| {
+            let q = formula_at(plan, k as f64 * 1e-3).0;
+            (0..3).map(|i| (q[i] - p[i]).powi(2)).sum::<f64>().sqrt()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn a_pause_comes_to_rest_on_the_path_within_t_acc_and_resume_goes_on_along_it() {
+    let plan = offline_triangle();
+    let mut g = loaded(TRIANGLE);
+    let period = 1_000_000u64;
+    let mut t = T0;
+    let mut trace = Vec::new();
+    // Into the first blend zone, then pause.
+    while t < T0 + 6_500_000_000 {
+        trace.push(g.step(t));
+        t += period;
+    }
+    g.control(&control(1, shm_schema::ControlKind::Pause));
+    let paused_at = t;
+    let mut rest_at = None;
+    while t < paused_at + 3_000_000_000 {
+        let sp = g.step(t);
+        assert_eq!(sp.state, MotionState::Moving as u32, "a pause is no end");
+        assert_eq!(sp.control_seq, 1);
+        if rest_at.is_none() && sp.velocity[..3].iter().all(|v| *v == 0.0) {
+            rest_at = Some(t);
+        }
+        trace.push(sp);
+        t += period;
+    }
+    let rest_at = rest_at.expect("the axes come to rest");
+    let t_acc_ns = (params().t_acc * 1e9) as u64;
+    assert!(
+        rest_at - paused_at <= t_acc_ns + period,
+        "rest {} ms after the pause, t_acc {} ms",
+        (rest_at - paused_at) / 1_000_000,
+        t_acc_ns / 1_000_000
+    );
+    assert!(g.paused());
+    g.control(&control(2, shm_schema::ControlKind::Resume));
+    loop {
+        let sp = g.step(t);
+        trace.push(sp);
+        t += period;
+        if sp.state == MotionState::Done as u32 {
+            break;
+        }
+        assert!(t < T0 + 60_000_000_000, "the program ends");
+    }
+    let done = trace.last().expect("setpoints");
+    // The motion took longer by the pause (3 s, less what the ramps travelled), never less.
+    let theoretical = done.theoretical_s;
+    assert!(done.motion_time_s > theoretical + 2.0 && done.motion_time_s < theoretical + 3.1);
+    // Every reference lies on the offline path (what a pause changes is when, not where).
+    for sp in trace.iter().step_by(50) {
+        let d = off_path(&plan, &sp.position[..3]);
+        assert!(d < 0.02, "{:?} is {d} mm off the path", &sp.position[..3]);
+    }
+    assert_close(&done.position[..3], &START, 1e-9, "ends on the last target");
+    // The velocity never jumps: at most the acceleration of a ramp from vmax within t_acc
+    // plus the blend's own, per millisecond.
+    for w in trace.windows(2) {
+        for i in 0..3 {
+            let dv = (w[1].velocity[i] - w[0].velocity[i]).abs();
+            assert!(dv < 2.0 * params().vmax[i] / params().t_acc * 1e-3 + 1e-9);
+        }
+    }
+}
+
+#[test]
+fn an_abort_comes_to_rest_on_the_path_and_drops_the_program() {
+    let plan = offline_triangle();
+    let mut g = loaded(TRIANGLE);
+    let mut t = T0;
+    while t < T0 + 3_000_000_000 {
+        g.step(t);
+        t += 1_000_000;
+    }
+    g.control(&control(1, shm_schema::ControlKind::Abort));
+    // A resume cannot undo an abort.
+    g.control(&control(2, shm_schema::ControlKind::Resume));
+    let mut last = g.step(t);
+    for _ in 0..2000 {
+        t += 1_000_000;
+        last = g.step(t);
+    }
+    assert_eq!(last.state, MotionState::Fault as u32);
+    assert_eq!(last.fault, trajgen_fault::ABORTED);
+    assert!(last.velocity[..3].iter().all(|v| *v == 0.0));
+    assert!(off_path(&plan, &last.position[..3]) < 0.02);
+    // A new program starts from where the abort left the axes.
+    let mut cmds = commands("MOVE(100, 100, 0)\nEND\n");
+    for c in &mut cmds {
+        c.program_id = 9;
+    }
+    for c in &cmds {
+        g.push_command(c);
+    }
+    let sp = g.step(t + 1_000_000);
+    assert_eq!(sp.state, MotionState::Moving as u32);
+    assert_eq!(sp.fault, trajgen_fault::NONE);
+    assert_close(
+        &sp.position[..3],
+        &last.position[..3],
+        1e-6,
+        "starts where it rested",
+    );
+}
