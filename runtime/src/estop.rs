@@ -48,6 +48,7 @@ pub struct EstopWatch {
     last_beat_change_ns: u64,
     supervisor_lost: bool,
     leaving: bool,
+    handover: bool,
 }
 
 impl EstopWatch {
@@ -80,6 +81,7 @@ impl EstopWatch {
             last_beat_change_ns: now_ns,
             supervisor_lost: false,
             leaving: false,
+            handover: false,
         })
     }
 
@@ -103,6 +105,12 @@ impl EstopWatch {
         self.leaving || self.supervisor_lost
     }
 
+    /// True while the supervisor replaces a process of the cell: missing samples are not
+    /// pending-sequence overruns meanwhile.
+    pub fn handover(&self) -> bool {
+        self.handover
+    }
+
     /// True when this process raised the latched e-stop.
     pub fn raised(&self) -> bool {
         self.raised
@@ -119,6 +127,7 @@ impl EstopWatch {
             reset |= self.apply(&e);
         }
         if let Some(h) = self.host.latest() {
+            self.handover = h.handover != 0;
             if h.beat != self.last_beat {
                 self.last_beat = h.beat;
                 self.last_beat_change_ns = now_ns;

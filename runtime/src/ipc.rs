@@ -430,6 +430,25 @@ pub fn live_node_pids(instance: &InstanceName) -> Result<Vec<u32>, IpcError> {
     Ok(pids)
 }
 
+/// The live nodes of `instance`: process id and node name.
+pub fn live_nodes(instance: &InstanceName) -> Result<Vec<(u32, String)>, IpcError> {
+    let cfg = config_for(instance)?;
+    let mut nodes = Vec::new();
+    Node::<Ipc>::list(&cfg, |state| {
+        if let NodeState::Alive(view) = state
+            && let Some(details) = view.details()
+        {
+            nodes.push((
+                details.process_id().value() as u32,
+                details.name().to_string(),
+            ));
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| err(format!("listing nodes of instance {instance}"), e))?;
+    Ok(nodes)
+}
+
 /// Removes the instance's global management segment (`..._node.<version>.global_mgmt`),
 /// which iceoryx2 keeps beyond every node's life on purpose. Only when no node of the
 /// instance is alive; the supervisor calls it last. Returns true if it removed it.

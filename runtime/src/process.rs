@@ -345,6 +345,10 @@ fn run_inner<T: Task>(
         let s = clock.stats().skipped;
         pending += s - skipped;
         skipped = s;
+        if estop.handover() {
+            // A process of the cell is being replaced: its gap is announced, not a fault.
+            pending = 0;
+        }
         let t = ipc::transport_errors();
         let expired = health.cycle(now, wake.latency_ns(), pending, t - transport);
         transport = t;

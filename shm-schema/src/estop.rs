@@ -166,6 +166,12 @@ pub struct HostStateV1 {
     pub estop: u32,
     /// The first trigger since the last reset (its `kind` is 0 while clear).
     pub cause: EstopV1,
+    /// A process of the table is being replaced (`restart`, `swap`): bit `k` for process
+    /// index `k`. While any bit is set, consumers do not count missing samples as
+    /// pending-sequence overruns (the handover would trip them otherwise).
+    pub handover: u32,
+    /// Reserved (0).
+    pub reserved: u32,
 }
 
 impl Default for HostStateV1 {
@@ -177,6 +183,8 @@ impl Default for HostStateV1 {
             pid: 0,
             estop: EstopState::Clear as u32,
             cause: EstopV1::default(),
+            handover: 0,
+            reserved: 0,
         }
     }
 }

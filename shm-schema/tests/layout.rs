@@ -249,6 +249,8 @@ fn layouts() -> Vec<Layout> {
             pid: "uint32_t" = 4,
             estop: "uint32_t" = 4,
             cause: "EstopV1" = size_of::<EstopV1>(),
+            handover: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
         }),
         layout!(ProcessStatusV2 {
             pid: "uint32_t" = 4,

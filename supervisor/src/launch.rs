@@ -10,6 +10,7 @@ use crate::config::Process;
 use nix::sys::signal::{Signal, killpg};
 use nix::unistd::Pid;
 use shm_schema::InstanceName;
+use std::os::fd::{AsFd, BorrowedFd, FromRawFd, OwnedFd};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -23,6 +24,9 @@ pub struct Running {
     /// Its index in the process table.
     pub index: usize,
     child: Child,
+    /// A descriptor that becomes readable when the process exits (`pidfd_open`), so the
+    /// supervisor's wait wakes at once.
+    pidfd: Option<OwnedFd>,
 }
 
 impl Running {
@@ -126,8 +130,38 @@ impl Children {
             name: p.name.clone(),
             index,
             child,
+            pidfd: pidfd_open(pid),
         });
         Ok(pid)
+    }
+
+    /// The process of table index `index`, if it runs.
+    pub fn get(&self, index: usize) -> Option<&Running> {
+        self.procs.iter().find(|p| p.index == index)
+    }
+
+    /// Descriptors that become readable when a process exits.
+    pub fn fds(&self) -> Vec<BorrowedFd<'_>> {
+        self.procs
+            .iter()
+            .filter_map(|p| p.pidfd.as_ref().map(|f| f.as_fd()))
+            .collect()
+    }
+
+    /// Stops the process of table index `index` (SIGTERM to its group, SIGKILL after the
+    /// stop timeout), `tick` running meanwhile; `Some(problem)` if it did not exit cleanly.
+    pub fn stop(&mut self, index: usize, tick: &mut dyn FnMut()) -> Option<String> {
+        let k = self.procs.iter().position(|p| p.index == index)?;
+        let mut p = self.procs.remove(k);
+        stop_one(&mut p, self.stop_timeout, tick)
+    }
+
+    /// Kills the group of the process of table index `index` at once (a stalled process);
+    /// its exit is then seen by [`Children::exited`].
+    pub fn kill(&self, index: usize) {
+        if let Some(p) = self.get(index) {
+            let _ = killpg(Pid::from_raw(p.pid() as i32), Signal::SIGKILL);
+        }
     }
 
     /// The running processes, in start order.
@@ -198,6 +232,15 @@ impl Drop for Children {
     fn drop(&mut self) {
         self.stop_all(&mut || {});
     }
+}
+
+/// A pidfd for `pid` (Linux 5.3), or `None` where the kernel has none: the supervisor's
+/// tick then finds the exit within 10 ms instead of at once.
+fn pidfd_open(pid: u32) -> Option<OwnedFd> {
+    // SAFETY: pidfd_open takes a pid and flags and returns a new descriptor or -1.
+    let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid as libc::pid_t, 0) };
+    // SAFETY: a non-negative return is a descriptor this process now owns.
+    (fd >= 0).then(|| unsafe { OwnedFd::from_raw_fd(fd as i32) })
 }
 
 /// CPU time (user + system) used by process `pid` so far, from `/proc/<pid>/stat` (s).

@@ -1,12 +1,18 @@
 //! The supervisor: loads the cell configuration, launches the processes, runs programs,
 //! watches their health, stops them and removes every shared-memory resource.
 
+pub mod cell;
 pub mod config;
 pub mod control;
+pub mod ctl;
 pub mod events;
+pub mod job;
 pub mod latency_cmd;
 pub mod launch;
 pub mod report;
 pub mod run;
+pub mod serve;
 pub mod status;
+pub mod swap;
 pub mod tune;
+pub mod up;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use supervisor::config::{Config, DEFAULT_TOML};
+use supervisor::ctl::{self, Reply, Request};
 use supervisor::latency_cmd::{LatencyArgs, LatencyError, latency};
 use supervisor::run::{RunError, RunOptions, run};
 
@@ -36,6 +37,91 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Bring a cell up and keep it up, cyclic, drives enabled and holding, until `down`,
+    /// SIGTERM or SIGINT. Logs on stderr. Control it from other shells (docs/operations.md).
+    Up {
+        /// Cell configuration (TOML); without it, the embedded Gantry UBA cell.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Instance name: prefixes every service and shared-memory file.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Stop a cell that is up: every process leaves safely, nothing of the instance is left.
+    Down {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Validate a program and run it on a cell that is up.
+    Exec {
+        /// Program file.
+        program: PathBuf,
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Wait until the program ends and print the report `run` prints.
+        #[arg(long)]
+        wait: bool,
+        /// With --wait: one JSON object on stdout instead of the summary.
+        #[arg(long, requires = "wait")]
+        json: bool,
+        /// With --wait: write the CSV trace.
+        #[arg(long, requires = "wait")]
+        trace: Option<PathBuf>,
+    },
+    /// Decelerate every axis to rest along the path (within t_acc) and hold.
+    Pause {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Go on along the path after a pause.
+    Resume {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Come to rest along the path and drop the rest of the program (not an e-stop).
+    Abort {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Clear the e-stop and servo's latched faults where their cause is gone; says what
+    /// cannot be cleared and why. The drives stay disabled until `start`.
+    Reset {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Enable the drives, holding where the axes stand (bumpless).
+    Start {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Stop one process of the cell and start it again.
+    Restart {
+        /// Its name in the process table.
+        process: String,
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Replace one process of the cell by a new one (a new build, another program, another
+    /// language) while the others keep running.
+    Swap {
+        /// Its name in the process table.
+        process: String,
+        /// The new command line ("PROGRAM ARGS…", split on whitespace; {instance} and {name}
+        /// are substituted); without it, the configured command starts again.
+        #[arg(long)]
+        command: Option<String>,
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
     /// Check a configuration file (or the embedded default) and exit.
     CheckConfig {
         /// Cell configuration (TOML).
@@ -52,6 +138,9 @@ enum Cmd {
         /// Print one JSON object instead of the table.
         #[arg(long)]
         json: bool,
+        /// Refresh in place every half second, like `top`, until Ctrl-C.
+        #[arg(long, conflicts_with = "json")]
+        watch: bool,
     },
     /// Measure latency like cyclictest: the cycle runtime's timer wake-up (one thread per
     /// CPU) and the one-way IPC hop between two processes, each test for the duration.
@@ -208,32 +297,225 @@ fn run_failed(e: &RunError, json: bool) -> ExitCode {
     })
 }
 
+/// Logging on stderr through `tracing`. For the commands that watch a cell (`up`, `run`,
+/// `tune`) the writer is non-blocking: a full pipe or a paused terminal loses lines, never
+/// stalls the supervisor. The guard flushes on exit.
+fn init_logging(watching: bool) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+    if !watching {
+        runtime::process::init_logging();
+        return None;
+    }
+    let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+        .lossy(true)
+        .buffered_lines_limit(4096)
+        .finish(std::io::stderr());
+    let filter = tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(writer)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_target(false)
+        .try_init();
+    runtime::ipc::quiet_iceoryx2_log();
+    Some(guard)
+}
+
+/// The instance named on the command line, or exit 2.
+fn instance_of(name: &str) -> Result<shm_schema::InstanceName, ExitCode> {
+    shm_schema::InstanceName::new(name).map_err(|e| {
+        eprintln!("error: --instance {name:?}: {e}");
+        ExitCode::from(2)
+    })
+}
+
+/// Sends one request to a cell that is up and reports its answer: exit 0 done, 2 refused
+/// (or not up), 1 failed.
+fn ctl_call(instance: &str, req: Request) -> ExitCode {
+    let instance = match instance_of(instance) {
+        Ok(i) => i,
+        Err(c) => return c,
+    };
+    match ctl::call(&instance, &req) {
+        Ok(reply) => ctl_reply(reply, false, None),
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn ctl_reply(reply: Reply, json: bool, trace: Option<&std::path::Path>) -> ExitCode {
+    match reply {
+        Reply::Done(m) => {
+            println!("{m}");
+            ExitCode::SUCCESS
+        }
+        Reply::Json(j) => {
+            println!("{j}");
+            ExitCode::SUCCESS
+        }
+        Reply::Refused(m) => {
+            eprintln!("error: {m}");
+            ExitCode::from(2)
+        }
+        Reply::Failed(m) => {
+            eprintln!("error: {m}");
+            ExitCode::FAILURE
+        }
+        Reply::Report {
+            ok,
+            json: body,
+            text,
+            trace_csv,
+        } => {
+            if let (Some(path), Some(csv)) = (trace, trace_csv)
+                && let Err(e) = std::fs::write(path, csv)
+            {
+                eprintln!("error: {}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+            if json {
+                println!("{body}");
+            }
+            if ok {
+                if !json {
+                    print!("{text}");
+                }
+                ExitCode::SUCCESS
+            } else {
+                eprintln!("error: {text}");
+                ExitCode::FAILURE
+            }
+        }
+    }
+}
+
+/// `supervisor status`: the supervisor's view (control channel) and the processes' own
+/// (shared memory).
+fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
+    let instance = match instance_of(instance) {
+        Ok(i) => i,
+        Err(c) => return c,
+    };
+    let once = || -> Result<(serde_json::Value, String), (u8, String)> {
+        let info = match ctl::call(&instance, &Request::Info) {
+            Ok(Reply::Json(j)) => serde_json::from_str(&j).unwrap_or_default(),
+            Ok(other) => return Err((1, format!("unexpected answer: {other:?}"))),
+            Err(e) => return Err((2, e.to_string())),
+        };
+        let snap = supervisor::status::read(&instance).map_err(|e| (1, e))?;
+        let mut v = supervisor::status::to_json(&instance, &snap);
+        let text = supervisor::status::supervisor_lines(&info)
+            + &supervisor::status::human(&instance, &snap);
+        v["supervisor"] = info;
+        Ok((v, text))
+    };
+    loop {
+        match once() {
+            Ok((v, text)) => {
+                if json {
+                    println!("{v}");
+                } else if watch {
+                    print!("\x1b[H\x1b[2J{text}");
+                    let _ = std::io::Write::flush(&mut std::io::stdout());
+                } else {
+                    print!("{text}");
+                }
+            }
+            Err((code, e)) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(code);
+            }
+        }
+        if !watch {
+            return ExitCode::SUCCESS;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(500));
+    }
+}
+
 fn main() -> ExitCode {
-    runtime::process::init_logging();
-    match Cli::parse().cmd {
-        Cmd::Status { instance, json } => {
-            let instance = match shm_schema::InstanceName::new(&instance) {
+    let cli = Cli::parse();
+    let _log = init_logging(matches!(
+        cli.cmd,
+        Cmd::Up { .. } | Cmd::Run { .. } | Cmd::Tune { .. }
+    ));
+    match cli.cmd {
+        Cmd::Status {
+            instance,
+            json,
+            watch,
+        } => status(&instance, json, watch),
+        Cmd::Up { config, instance } => match supervisor::up::up(config.as_deref(), &instance) {
+            Ok(msg) => {
+                tracing::info!("{msg}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => run_failed(&e, false),
+        },
+        Cmd::Down { instance } => {
+            let code = ctl_call(&instance, Request::Down);
+            if code == ExitCode::SUCCESS
+                && let Ok(i) = shm_schema::InstanceName::new(&instance)
+            {
+                // Until the supervisor has stopped everything and let go of the instance.
+                while ctl::is_up(&i) {
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                println!("instance {i} is down");
+            }
+            code
+        }
+        Cmd::Exec {
+            program,
+            instance,
+            wait,
+            json,
+            trace,
+        } => {
+            let i = match instance_of(&instance) {
                 Ok(i) => i,
+                Err(c) => return c,
+            };
+            let source = match std::fs::read_to_string(&program) {
+                Ok(s) => s,
                 Err(e) => {
-                    eprintln!("error: --instance {instance:?}: {e}");
+                    eprintln!("error: {}: cannot read: {e}", program.display());
                     return ExitCode::from(2);
                 }
             };
-            match supervisor::status::read(&instance) {
-                Ok(seen) => {
-                    if json {
-                        println!("{}", supervisor::status::to_json(&instance, &seen));
-                    } else {
-                        print!("{}", supervisor::status::human(&instance, &seen));
-                    }
-                    ExitCode::SUCCESS
-                }
+            let req = Request::Exec {
+                name: program.display().to_string(),
+                source,
+                wait,
+                trace: trace.is_some(),
+            };
+            match ctl::call(&i, &req) {
+                Ok(r) => ctl_reply(r, json, trace.as_deref()),
                 Err(e) => {
                     eprintln!("error: {e}");
-                    ExitCode::FAILURE
+                    ExitCode::from(2)
                 }
             }
         }
+        Cmd::Pause { instance } => ctl_call(&instance, Request::Pause),
+        Cmd::Resume { instance } => ctl_call(&instance, Request::Resume),
+        Cmd::Abort { instance } => ctl_call(&instance, Request::Abort),
+        Cmd::Reset { instance } => ctl_call(&instance, Request::Reset),
+        Cmd::Start { instance } => ctl_call(&instance, Request::Start),
+        Cmd::Restart { process, instance } => ctl_call(&instance, Request::Restart { process }),
+        Cmd::Swap {
+            process,
+            command,
+            instance,
+        } => ctl_call(
+            &instance,
+            Request::Swap {
+                process,
+                command: command.map(|c| c.split_whitespace().map(str::to_string).collect()),
+            },
+        ),
         Cmd::Latency {
             interval_us,
             phase_us,

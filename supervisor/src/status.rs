@@ -321,6 +321,64 @@ pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
     })
 }
 
+/// The supervisor's part of `supervisor status` (its `Info` answer): the e-stop, the
+/// program, and per process its life and restarts.
+pub fn supervisor_lines(info: &Value) -> String {
+    let mut out = format!(
+        "supervisor pid {} ({}), e-stop resets {}\n",
+        info["pid"],
+        info["mode"].as_str().unwrap_or("?"),
+        info["resets"]
+    );
+    match &info["estop"] {
+        Value::Null => out += "e-stop: clear\n",
+        e => {
+            out += &format!(
+                "e-stop: LATCHED: {}\n  `supervisor reset`, then `supervisor start`\n",
+                e["text"].as_str().unwrap_or("?")
+            )
+        }
+    }
+    match &info["job"] {
+        Value::Null => {
+            out += "program: none";
+            if let Some(l) = info["last_job"].as_object() {
+                out += &format!(
+                    " (last: {} {})",
+                    l["program"].as_str().unwrap_or("?"),
+                    if l["ok"] == true { "done" } else { "failed" }
+                );
+            }
+            out += "\n";
+        }
+        j => {
+            out += &format!(
+                "program: {} line {} motion {:.2} / {:.2} s{}\n",
+                j["program"].as_str().unwrap_or("?"),
+                j["line"],
+                j["motion_time_s"].as_f64().unwrap_or(0.0),
+                j["predicted_s"].as_f64().unwrap_or(0.0),
+                if j["paused"] == true { " PAUSED" } else { "" }
+            )
+        }
+    }
+    if let Some(procs) = info["processes"].as_array() {
+        for p in procs {
+            out += &format!(
+                "  {:<9} {:<10} pid {:<8} restarts {}{}\n",
+                p["name"].as_str().unwrap_or("?"),
+                p["life"].as_str().unwrap_or("?"),
+                p["pid"],
+                p["restarts"],
+                p["why"]
+                    .as_str()
+                    .map_or(String::new(), |w| format!("  ({w})"))
+            );
+        }
+    }
+    out
+}
+
 /// The table of `supervisor status`.
 pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
     let seen = &snap.processes;

@@ -12,8 +12,9 @@
 //!    (until the error stays within the larger of 2 % of the step and the in-position band),
 //!    peak following error and peak effort; a PNG of command, position and effort.
 
+use crate::cell::{Cell, Mode, open_cell};
 use crate::config::Config;
-use crate::run::{RunError, Session, TICK, open_cell};
+use crate::run::{RunError, TICK};
 use latency::plot::{Panel, series_png};
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;
@@ -186,7 +187,7 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     }
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    let mut session = open_cell(&cfg, instance, opts.progress)?;
+    let (mut session, _server) = open_cell(&cfg, instance, Mode::Run)?;
     let measured = measure(&mut session, &cfg, i, opts);
     let closed = session.close();
     let (samples, start, ramp) = match (measured, &closed) {
@@ -222,7 +223,7 @@ const PATIENCE: Duration = Duration::from_secs(3);
 /// Reads servo's states as they come, for at most `limit`, handing each to `stop` until it
 /// returns true (then true). Fails on a process failure or a latched fault.
 fn watch(
-    session: &mut Session,
+    session: &mut Cell,
     cfg: &Config,
     limit: Duration,
     mut stop: impl FnMut(&ServoStateV2) -> bool,
@@ -247,7 +248,7 @@ fn watch(
 /// Waits (at most `limit`) until servo says the arm is settled; records every servo state on
 /// the way into `log` when given. Returns the settled state.
 fn until_settled(
-    session: &mut Session,
+    session: &mut Cell,
     cfg: &Config,
     limit: Duration,
     mut log: Option<&mut Vec<ServoStateV2>>,
@@ -266,7 +267,7 @@ fn until_settled(
 }
 
 fn measure(
-    session: &mut Session,
+    session: &mut Cell,
     cfg: &Config,
     i: usize,
     opts: &TuneOptions,
@@ -329,7 +330,7 @@ fn measure(
 
 /// Out by `d` on axis `i` and back, through trajgen.
 fn ramp(
-    session: &mut Session,
+    session: &mut Cell,
     cfg: &Config,
     i: usize,
     d: f64,

@@ -167,13 +167,18 @@ impl Generator {
         }
     }
 
-    /// Takes a pause, resume or abort (it acts from the next [`Generator::step`]). A pause
-    /// or an abort while no motion runs does nothing but is acknowledged.
+    /// Takes a pause, resume or abort at `now_ns` (the ramp starts exactly then: call
+    /// [`Generator::step`] with the same instant). A pause or an abort while no motion runs
+    /// does nothing but is acknowledged.
     ///
     /// # Real-time
     /// Arithmetic only.
-    pub fn control(&mut self, c: &MotionControlV1) {
+    pub fn control(&mut self, c: &MotionControlV1, now_ns: u64) {
         self.control_seq = c.seq;
+        if self.state == MotionState::Moving {
+            // The ramp starts now, not at the previous cycle.
+            self.path_time(now_ns);
+        }
         match ControlKind::from_u32(c.kind) {
             Some(ControlKind::Pause) if self.state == MotionState::Moving => {
                 self.target_speed = 0.0
@@ -359,15 +364,41 @@ impl Generator {
         self.motion_time(now_ns) - self.lost_s
     }
 
-    /// Absolute time (ns) of the next segment transition, for an exact extra wake-up (none
-    /// while the speed is below 1: the next period takes it).
+    /// Absolute time (ns) of the next instant the reference changes its law — a segment
+    /// transition, or the end of a speed ramp — for an exact extra wake-up: servo
+    /// extrapolates each setpoint with its acceleration, so a change between two setpoints
+    /// would show as a velocity step.
     pub fn next_transition_ns(&self) -> Option<u64> {
         let seg = self.seg.as_ref()?;
-        if self.speed != 1.0 || self.target_speed != 1.0 {
-            return None;
-        }
-        let t = self.origin_s + seg.transition_time() + self.lost_s;
-        Some(self.motion_start_ns + (t * 1e9).ceil().max(0.0) as u64)
+        let to_transition = self.origin_s + seg.transition_time() - self.path_s_at_path_ns();
+        let rate = 1.0 / self.p.t_acc.max(1e-3);
+        let gap = self.target_speed - self.speed;
+        let dt = if gap == 0.0 {
+            // Constant speed: at 0 (paused) nothing changes until a resume.
+            (self.speed > 0.0).then(|| to_transition / self.speed)?
+        } else {
+            // Along the ramp the path advances s·τ + r·τ²/2: the transition, if it comes
+            // before the ramp ends, else the ramp's end.
+            let r = gap.signum() * rate;
+            let ramp_end = gap.abs() / rate;
+            let disc = self.speed * self.speed + 2.0 * r * to_transition;
+            let at = if disc >= 0.0 && to_transition >= 0.0 {
+                (-self.speed + disc.sqrt()) / r
+            } else {
+                f64::INFINITY
+            };
+            if at.is_finite() && at >= 0.0 && at < ramp_end {
+                at
+            } else {
+                ramp_end
+            }
+        };
+        Some(self.path_ns + (dt.max(0.0) * 1e9).ceil() as u64)
+    }
+
+    /// The path time at `path_ns` (the last instant the speed ramp was brought up to).
+    fn path_s_at_path_ns(&self) -> f64 {
+        self.motion_time(self.path_ns) - self.lost_s
     }
 
     /// Advances to `now_ns` and returns the setpoint for it.

@@ -90,7 +90,7 @@ impl Task for Trajgen {
                 generator.push_command(&c);
             }
             while let Some(c) = self.control.next() {
-                generator.control(&c);
+                generator.control(&c, now);
             }
         }
         let sp = generator.step(now);

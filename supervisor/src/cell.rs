@@ -1,0 +1,811 @@
+//! The long-lived cell: the supervisor's ports, the processes of the table and what the
+//! supervisor knows of each, the latched e-stop and the heartbeat.
+//!
+//! [`Cell::tick`] runs every supervisor tick (10 ms, or at once when a child exits): it beats,
+//! notices a dead child (its pidfd) or a stalled one (its cycle count), raises the host
+//! e-stop for it and restarts it per its policy, and latches the e-stops it sees. It never
+//! ends the cell: what a job makes of an incident is the job's business ([`crate::job`]).
+
+use crate::config::{Config, RestartPolicy};
+use crate::ctl;
+use crate::events::{self, Axes};
+use crate::launch::Children;
+use crate::run::{RunError, TICK};
+use runtime::ipc::{self, Pub, Sub};
+use runtime::signals;
+use serde_json::{Value, json};
+use shm_schema::drive::servo_status as st;
+use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
+use shm_schema::event::{SOURCE_SUPERVISOR, code};
+use shm_schema::{
+    CellConfigV3, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
+    LatencyHistogramV1, MotionCommandV1, MotionControlV1, ProcState, ProcessName, ProcessStatusV2,
+    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, estop_seen, str_of,
+};
+use std::time::{Duration, Instant};
+
+/// How the cell is run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// `supervisor run`: one program; any incident ends it. Events print on stderr.
+    Run,
+    /// `supervisor up`: until `down`; lost processes restart per their policy.
+    Up,
+}
+
+/// Something that happened to a process of the cell in a tick.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Incident {
+    /// It exited.
+    Exited {
+        /// Its name.
+        name: String,
+        /// Its pid.
+        pid: u32,
+        /// Its exit status, in words.
+        status: String,
+    },
+    /// Its cycle count stopped advancing for `heartbeat_timeout`.
+    Stalled {
+        /// Its name.
+        name: String,
+        /// For how long (s).
+        for_s: f64,
+    },
+    /// It reported the fault state.
+    Fault {
+        /// Its name.
+        name: String,
+        /// Its fault code.
+        fault: u32,
+    },
+}
+
+impl std::fmt::Display for Incident {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Incident::Exited { name, pid, status } => {
+                write!(f, "{name} (pid {pid}) exited unexpectedly: {status}")
+            }
+            Incident::Stalled { name, for_s } => write!(
+                f,
+                "{name} stopped cycling: its status has not advanced for {for_s:.2} s"
+            ),
+            Incident::Fault { name, fault } => write!(f, "{name} reports fault {fault}"),
+        }
+    }
+}
+
+/// Where a process of the table stands, as the supervisor sees it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Life {
+    /// Started; cyclic once its status says so.
+    Running,
+    /// Lost; starts again at the instant (its restart policy).
+    Restarting(Instant),
+    /// Lost for good (policy `never`, or the restart limit); the reason.
+    Down(String),
+}
+
+/// Starts the cell of `cfg` on `instance`: takes the instance's control channel (refused if
+/// another supervisor serves it), waits for the processes a killed supervisor left to leave,
+/// removes what is left of the instance, creates the services, publishes the configuration,
+/// starts every process. Whatever a failure started is stopped and removed.
+pub(crate) fn open_cell(
+    cfg: &Config,
+    instance: InstanceName,
+    mode: Mode,
+) -> Result<(Cell, ctl::Server), RunError> {
+    signals::install()
+        .map_err(|e| RunError::failed(format!("cannot install signal handlers: {e}")))?;
+    ipc::quiet_iceoryx2_log();
+    let server = ctl::Server::bind(&instance).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::AddrInUse {
+            RunError::Input(format!(
+                "instance {instance} is in use: another supervisor serves it \
+                 (`supervisor status --instance {instance}`; `supervisor down --instance {instance}` stops it)"
+            ))
+        } else {
+            RunError::failed(format!("instance {instance}: control channel: {e}"))
+        }
+    })?;
+    // We hold the instance now: no other supervisor creates or removes anything of it.
+    await_orphans(cfg, &instance)?;
+    let _ = ipc::remove_dead_nodes(&instance);
+    if ipc::live_node_pids(&instance)
+        .unwrap_or_default()
+        .is_empty()
+    {
+        // Nothing of the instance is alive: whatever is left (a half-created service, a
+        // half-removed node of a supervisor killed while starting) goes.
+        let _ = ipc::remove_instance(&instance);
+    }
+    let cell = Cell::open(cfg, instance, mode).inspect_err(|_| {
+        ipc::remove_instance(&instance);
+    })?;
+    Ok((cell, server))
+}
+
+/// Waits for the processes of a previous supervisor of the instance (killed: its processes
+/// bring the axes to rest and leave once its heartbeat stops) to go. Observers (a status, a
+/// recorder, a foreign tool) are welcome and not waited for.
+fn await_orphans(cfg: &Config, instance: &InstanceName) -> Result<(), RunError> {
+    let ours = |name: &str| name == "supervisor" || cfg.process.iter().any(|p| p.name == name);
+    let patience = Duration::from_secs_f64(
+        cfg.supervisor.supervisor_timeout
+            + cfg.motion.estop_stop_time
+            + cfg.supervisor.stop_timeout
+            + 1.0,
+    );
+    let start = Instant::now();
+    loop {
+        let orphans: Vec<(u32, String)> = ipc::live_nodes(instance)
+            .unwrap_or_default()
+            .into_iter()
+            .filter(|(_, n)| ours(n))
+            .collect();
+        if orphans.is_empty() {
+            return Ok(());
+        }
+        if start.elapsed() > patience {
+            let list: Vec<String> = orphans
+                .iter()
+                .map(|(pid, n)| format!("{n} (pid {pid})"))
+                .collect();
+            return Err(RunError::Input(format!(
+                "instance {instance} is in use by {} that did not leave within {:.1} s; \
+                 stop them or choose another --instance",
+                list.join(", "),
+                patience.as_secs_f64()
+            )));
+        }
+        std::thread::sleep(TICK);
+    }
+}
+
+/// The supervisor's ports and the processes of the cell.
+pub(crate) struct Cell {
+    pub(crate) instance: InstanceName,
+    pub(crate) mode: Mode,
+    pub(crate) children: Children,
+    /// Per process of the table: its latest status, latency and execution-time histograms.
+    pub(crate) statuses: Vec<Option<ProcessStatusV2>>,
+    pub(crate) latencies: Vec<Option<Box<LatencyHistogramV1>>>,
+    pub(crate) exec_times: Vec<Option<Box<LatencyHistogramV1>>>,
+    /// Per process: the cycle count last seen and when it last advanced.
+    beats: Vec<(u64, Instant)>,
+    pub(crate) names: Vec<String>,
+    pub(crate) life: Vec<Life>,
+    pub(crate) restarts: Vec<u32>,
+    /// Per process: restarts since the operator last reset the e-stop (the limit's count).
+    streak: Vec<u32>,
+    /// Per process: the pid whose statuses are ignored (the old one, during a swap).
+    ignore_pid: Vec<Option<u32>>,
+    /// Per process: the command it runs now (`swap --command`), `None` for the configured.
+    commands: Vec<Option<Vec<String>>>,
+    /// Per process: an incident (stall, fault) already reported for its current life.
+    flagged: Vec<bool>,
+    /// The first e-stop trigger since the last reset, and when it was seen.
+    pub(crate) estop: Option<(EstopV1, Instant)>,
+    host: HostStateV1,
+    pub(crate) sense_to_command: Option<Box<LatencyHistogramV1>>,
+    /// Every event since the cell came up (run) or since the current job began (up).
+    pub(crate) events: Vec<EventV1>,
+    pub(crate) axes: Axes,
+    pub(crate) t0_ns: u64,
+    pub(crate) last_sp: Option<SetpointV1>,
+    pub(crate) last_servo: Option<ServoStateV2>,
+    request_seq: u64,
+    control_seq: u64,
+    event_seq: u64,
+    // Field order is drop order: ports before the node.
+    config_pub: Pub<CellConfigV3>,
+    pub(crate) command_pub: Pub<MotionCommandV1>,
+    control_pub: Pub<MotionControlV1>,
+    request_pub: Pub<ServoRequestV1>,
+    events_sub: Sub<EventV1>,
+    events_pub: Pub<EventV1>,
+    estop_sub: Sub<EstopV1>,
+    estop_pub: Pub<EstopV1>,
+    host_pub: Pub<HostStateV1>,
+    sense_sub: Sub<LatencyHistogramV1>,
+    pub(crate) setpoint_sub: Sub<SetpointV1>,
+    pub(crate) servo_sub: Sub<ServoStateV2>,
+    pub(crate) image_sub: Sub<FieldbusImageV1>,
+    status_subs: Vec<Sub<ProcessStatusV2>>,
+    latency_subs: Vec<Sub<LatencyHistogramV1>>,
+    exec_subs: Vec<Sub<LatencyHistogramV1>>,
+    _node: iceoryx2::prelude::Node<ipc::Ipc>,
+}
+
+impl Cell {
+    /// Creates every service, publishes the configuration and starts the processes.
+    fn open(cfg: &Config, instance: InstanceName, mode: Mode) -> Result<Self, RunError> {
+        let f = |e: ipc::IpcError| RunError::failed(e.to_string());
+        let node = ipc::node(&instance, "supervisor").map_err(f)?;
+        let i = &instance;
+        let config_pub = Pub::new(&node, i, ServiceId::CellConfig).map_err(f)?;
+        let command_pub = Pub::new(&node, i, ServiceId::MotionCommand).map_err(f)?;
+        let control_pub = Pub::new(&node, i, ServiceId::MotionControl).map_err(f)?;
+        let request_pub = Pub::new(&node, i, ServiceId::ServoRequest).map_err(f)?;
+        let events_sub = Sub::new(&node, i, ServiceId::Events, 1024).map_err(f)?;
+        let events_pub = Pub::new(&node, i, ServiceId::Events).map_err(f)?;
+        let estop_sub = Sub::new(&node, i, ServiceId::Estop, 64).map_err(f)?;
+        let estop_pub = Pub::new(&node, i, ServiceId::Estop).map_err(f)?;
+        let host_pub = Pub::new(&node, i, ServiceId::HostState).map_err(f)?;
+        let sense_sub = Sub::new(&node, i, ServiceId::SenseToCommand, 1).map_err(f)?;
+        let setpoint_sub = Sub::new(&node, i, ServiceId::Setpoint, 1024).map_err(f)?;
+        let servo_sub = Sub::new(&node, i, ServiceId::ServoState, 1024).map_err(f)?;
+        let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
+        let mut status_subs = Vec::new();
+        let mut latency_subs = Vec::new();
+        let mut exec_subs = Vec::new();
+        for p in &cfg.process {
+            let name = ProcessName::new(&p.name).map_err(|e| RunError::Input(e.to_string()))?;
+            exec_subs.push(Sub::new(&node, i, ServiceId::ExecTime(name), 1).map_err(f)?);
+            status_subs.push(Sub::new(&node, i, ServiceId::Status(name), 64).map_err(f)?);
+            latency_subs.push(Sub::new(&node, i, ServiceId::Latency(name), 1).map_err(f)?);
+        }
+        let cell = cfg.to_shm();
+        config_pub.send(&cell);
+        let host = HostStateV1 {
+            stamp_ns: runtime::time::now_ns(),
+            pid: std::process::id(),
+            ..HostStateV1::default()
+        };
+        host_pub.send(&host);
+        let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
+        for (index, p) in cfg.process.iter().enumerate() {
+            children
+                .spawn(p, index, None, &instance)
+                .map_err(RunError::failed)?;
+        }
+        let n = cfg.process.len();
+        Ok(Self {
+            instance,
+            mode,
+            children,
+            statuses: vec![None; n],
+            latencies: vec![None; n],
+            exec_times: vec![None; n],
+            beats: vec![(0, Instant::now()); n],
+            names: cfg.process.iter().map(|p| p.name.clone()).collect(),
+            life: vec![Life::Running; n],
+            restarts: vec![0; n],
+            streak: vec![0; n],
+            ignore_pid: vec![None; n],
+            commands: vec![None; n],
+            flagged: vec![false; n],
+            estop: None,
+            host,
+            sense_to_command: None,
+            events: Vec::new(),
+            axes: Axes::of_cell(&cell),
+            t0_ns: runtime::time::now_ns(),
+            last_sp: None,
+            last_servo: None,
+            request_seq: 0,
+            control_seq: 0,
+            event_seq: 0,
+            config_pub,
+            command_pub,
+            control_pub,
+            request_pub,
+            events_sub,
+            events_pub,
+            estop_sub,
+            estop_pub,
+            host_pub,
+            sense_sub,
+            setpoint_sub,
+            servo_sub,
+            image_sub,
+            status_subs,
+            latency_subs,
+            exec_subs,
+            _node: node,
+        })
+    }
+
+    /// Index of process `name` in the table.
+    pub(crate) fn index_of(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+
+    /// Takes the newest latency histogram of every process (they publish about every 100 ms)
+    /// and the drives' sense-to-command histogram.
+    pub(crate) fn refresh_latency(&mut self) {
+        for (k, sub) in self.latency_subs.iter().enumerate() {
+            if let Some(h) = sub.latest() {
+                self.latencies[k] = Some(Box::new(h));
+            }
+        }
+        for (k, sub) in self.exec_subs.iter().enumerate() {
+            if let Some(h) = sub.latest() {
+                self.exec_times[k] = Some(Box::new(h));
+            }
+        }
+        if let Some(h) = self.sense_sub.latest() {
+            self.sense_to_command = Some(Box::new(h));
+        }
+    }
+
+    /// Takes the events that arrived: printed on stderr as they happen (`run`), or logged
+    /// (`up`).
+    pub(crate) fn take_events(&mut self) {
+        while let Some(e) = self.events_sub.next() {
+            let line = events::line(&e, &self.axes, self.t0_ns);
+            match self.mode {
+                Mode::Run => eprintln!("{line}"),
+                Mode::Up => match e.severity {
+                    s if s >= shm_schema::event::Severity::Error as u32 => {
+                        tracing::error!("{line}")
+                    }
+                    s if s >= shm_schema::event::Severity::Warning as u32 => {
+                        tracing::warn!("{line}")
+                    }
+                    _ => tracing::info!("{line}"),
+                },
+            }
+            if self.events.len() < 100_000 {
+                self.events.push(e);
+            }
+        }
+    }
+
+    /// Publishes an event of the supervisor's own.
+    pub(crate) fn event(&mut self, code: u32, value: f64, parts: &[&str]) {
+        self.event_seq += 1;
+        let mut e = EventV1::new(runtime::time::now_ns(), code, -1, value, 0.0, parts);
+        e.seq = self.event_seq;
+        e.source = SOURCE_SUPERVISOR;
+        self.events_pub.send(&e);
+    }
+
+    /// Asks servo for `kind` (it takes effect in servo's next cycle).
+    pub(crate) fn request(&mut self, kind: RequestKind) -> Result<(), RunError> {
+        self.request_with(kind, 0, 0.0)
+    }
+
+    /// Asks servo for `kind` with an axis and a value (a tuning step).
+    pub(crate) fn request_with(
+        &mut self,
+        kind: RequestKind,
+        axis: u32,
+        value: f64,
+    ) -> Result<(), RunError> {
+        self.request_seq += 1;
+        let r = ServoRequestV1 {
+            seq: self.request_seq,
+            kind: kind as u32,
+            axis,
+            value,
+        };
+        if self.request_pub.send(&r) {
+            Ok(())
+        } else {
+            Err(RunError::failed(
+                "servo's request service refused a request",
+            ))
+        }
+    }
+
+    /// Asks trajgen to pause, resume or abort; returns the request's sequence number
+    /// (trajgen echoes it in `SetpointV1::control_seq` once taken).
+    pub(crate) fn motion_control(&mut self, kind: ControlKind) -> u64 {
+        self.control_seq += 1;
+        self.control_pub.send(&MotionControlV1 {
+            seq: self.control_seq,
+            kind: kind as u32,
+            reserved: 0,
+        });
+        self.control_seq
+    }
+
+    /// The heartbeat: the host state with the latched e-stop, every tick.
+    pub(crate) fn beat(&mut self) {
+        self.host.beat += 1;
+        self.host.stamp_ns = runtime::time::now_ns();
+        self.host_pub.send(&self.host);
+    }
+
+    /// Latches `e` (the first trigger since the last reset wins).
+    fn latch(&mut self, e: EstopV1) {
+        if self.estop.is_none() {
+            self.estop = Some((e, Instant::now()));
+            self.host.estop = EstopState::Latched as u32;
+            self.host.cause = e;
+            let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
+            tracing::warn!(
+                "e-stop ({origin}) raised by {}: {}",
+                self.axes.source_name(e.source),
+                str_of(&e.reason)
+            );
+        }
+    }
+
+    /// Raises a host e-stop (a process lost): published to every process, latched here.
+    fn raise_host(&mut self, cause: u32, parts: &[&str]) {
+        let e = EstopV1::trigger(
+            runtime::time::now_ns(),
+            EstopOrigin::Host,
+            SOURCE_SUPERVISOR,
+            cause,
+            parts,
+        );
+        self.estop_pub.send(&e);
+        self.latch(e);
+        // The host state carries it too, so a process started later sees it at once.
+        self.beat();
+    }
+
+    /// A process was lost: the host e-stop, its resources, its restart.
+    fn lost(&mut self, k: usize, cfg: &Config, why: &str, exit_code: f64) {
+        let name = self.names[k].clone();
+        self.event(code::PROCESS_LOST, exit_code, &[&name, ": ", why]);
+        self.raise_host(code::PROCESS_LOST, &[&name, " lost"]);
+        let _ = ipc::remove_dead_nodes(&self.instance);
+        let p = &cfg.process[k];
+        self.life[k] = if self.mode == Mode::Run {
+            Life::Down(format!("lost: {why}"))
+        } else if p.restart == RestartPolicy::Never {
+            Life::Down(format!("lost: {why}; restart = \"never\""))
+        } else if self.streak[k] >= cfg.supervisor.restart_limit {
+            Life::Down(format!(
+                "lost: {why}; restart limit of {} reached",
+                cfg.supervisor.restart_limit
+            ))
+        } else {
+            let backoff = cfg.supervisor.restart_backoff * f64::from(1u32 << self.streak[k].min(6));
+            Life::Restarting(Instant::now() + Duration::from_secs_f64(backoff))
+        };
+        match &self.life[k] {
+            Life::Down(why) => tracing::error!("{name} {why}"),
+            Life::Restarting(at) => tracing::warn!(
+                "{name} lost ({why}); restarting in {:.2} s",
+                at.saturating_duration_since(Instant::now()).as_secs_f64()
+            ),
+            Life::Running => {}
+        }
+    }
+
+    /// Starts process `k` (again), with its current command.
+    pub(crate) fn start_process(&mut self, k: usize, cfg: &Config) -> Result<u32, String> {
+        let command = self.commands[k].clone();
+        let pid = self
+            .children
+            .spawn(&cfg.process[k], k, command.as_deref(), &self.instance)?;
+        self.life[k] = Life::Running;
+        self.beats[k] = (0, Instant::now());
+        self.statuses[k] = None;
+        self.flagged[k] = false;
+        Ok(pid)
+    }
+
+    /// One supervisor tick; see the module documentation. Returns what happened to the
+    /// processes in it.
+    pub(crate) fn tick(&mut self, cfg: &Config) -> Vec<Incident> {
+        let mut out = Vec::new();
+        self.beat();
+        while let Some((p, status)) = self.children.exited() {
+            let k = p.index;
+            let text = status.to_string();
+            out.push(Incident::Exited {
+                name: p.name.clone(),
+                pid: p.pid(),
+                status: text.clone(),
+            });
+            self.lost(
+                k,
+                cfg,
+                &format!("exited: {text}"),
+                status.code().map_or(-1.0, f64::from),
+            );
+        }
+        self.config_pub.update_connections();
+        self.host_pub.update_connections();
+        self.take_events();
+        while let Some(e) = self.estop_sub.next() {
+            if e.kind == EstopKind::Trigger as u32 {
+                self.latch(e);
+            }
+        }
+        let timeout = Duration::from_secs_f64(cfg.supervisor.heartbeat_timeout);
+        for k in 0..self.names.len() {
+            while let Some(s) = self.status_subs[k].next() {
+                if self.ignore_pid[k] == Some(s.pid) {
+                    continue;
+                }
+                let b = &mut self.beats[k];
+                if s.stats.cycles != b.0 {
+                    *b = (s.stats.cycles, Instant::now());
+                }
+                self.statuses[k] = Some(s);
+            }
+            if self.life[k] != Life::Running || self.flagged[k] {
+                continue;
+            }
+            if let Some(s) = self.statuses[k]
+                && ProcState::from_u32(s.state) == Some(ProcState::Fault)
+            {
+                self.flagged[k] = true;
+                out.push(Incident::Fault {
+                    name: self.names[k].clone(),
+                    fault: s.fault,
+                });
+            }
+            let (cycles, at) = self.beats[k];
+            if cycles > 0 && at.elapsed() > timeout && self.host.handover & (1 << k) == 0 {
+                self.flagged[k] = true;
+                let for_s = at.elapsed().as_secs_f64();
+                out.push(Incident::Stalled {
+                    name: self.names[k].clone(),
+                    for_s,
+                });
+                self.event(
+                    code::PROCESS_LOST,
+                    -1.0,
+                    &[&self.names[k].clone(), ": stalled"],
+                );
+                self.raise_host(code::PROCESS_LOST, &[&self.names[k].clone(), " stalled"]);
+                if self.mode == Mode::Up && cfg.process[k].restart == RestartPolicy::OnFailure {
+                    // Alive but not cycling: end it; its exit restarts it.
+                    self.children.kill(k);
+                }
+            }
+        }
+        // Restarts that are due.
+        for k in 0..self.names.len() {
+            if let Life::Restarting(at) = self.life[k]
+                && Instant::now() >= at
+            {
+                self.restarts[k] += 1;
+                self.streak[k] += 1;
+                match self.start_process(k, cfg) {
+                    Ok(pid) => {
+                        let name = self.names[k].clone();
+                        tracing::warn!(
+                            "{name} restarted (pid {pid}, restart {})",
+                            self.restarts[k]
+                        );
+                        self.event(
+                            code::PROCESS_RESTARTED,
+                            f64::from(self.restarts[k]),
+                            &[&name, " restarted"],
+                        );
+                    }
+                    Err(e) => {
+                        tracing::error!("{e}");
+                        self.life[k] = Life::Down(e);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Takes the setpoints, servo states and images that arrived, keeping the newest (when
+    /// no job reads them).
+    pub(crate) fn drain_motion(&mut self) {
+        while let Some(s) = self.setpoint_sub.next() {
+            self.last_sp = Some(s);
+        }
+        while let Some(s) = self.servo_sub.next() {
+            self.last_servo = Some(s);
+        }
+        while self.image_sub.next().is_some() {}
+    }
+
+    /// Stops every process (the heartbeat goes on meanwhile, so none of them takes the
+    /// supervisor for lost); returns those that did not stop cleanly.
+    pub(crate) fn stop_children(&mut self) -> Vec<(String, String)> {
+        let mut children = std::mem::take(&mut self.children);
+        let mut last = Instant::now();
+        let problems = children.stop_all(&mut || {
+            if last.elapsed() >= TICK {
+                last = Instant::now();
+                self.beat();
+            }
+        });
+        self.children = children;
+        problems
+    }
+
+    /// Stops process `k` alone, beating meanwhile.
+    pub(crate) fn stop_process(&mut self, k: usize) -> Option<String> {
+        let mut children = std::mem::take(&mut self.children);
+        let mut last = Instant::now();
+        let problem = children.stop(k, &mut || {
+            if last.elapsed() >= TICK {
+                last = Instant::now();
+                self.beat();
+            }
+        });
+        self.children = children;
+        problem
+    }
+
+    /// Marks process `k` as being replaced (or not): consumers do not count its gap.
+    pub(crate) fn set_handover(&mut self, k: usize, on: bool) {
+        if on {
+            self.host.handover |= 1 << k;
+        } else {
+            self.host.handover &= !(1 << k);
+        }
+        self.beat();
+    }
+
+    /// Ignores the statuses of `pid` for process `k` (the old one during a swap).
+    pub(crate) fn ignore_statuses_of(&mut self, k: usize, pid: Option<u32>) {
+        self.ignore_pid[k] = pid;
+    }
+
+    /// Sets the command process `k` runs from its next start.
+    pub(crate) fn set_command(&mut self, k: usize, command: Option<Vec<String>>) {
+        self.commands[k] = command;
+    }
+
+    /// True when process `k` is cyclic and its cycles advance.
+    pub(crate) fn cyclic(&self, k: usize) -> bool {
+        self.life[k] == Life::Running
+            && self.statuses[k]
+                .is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
+    }
+
+    /// The reasons the e-stop cannot be cleared now (empty: it can).
+    pub(crate) fn reset_blockers(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for (k, name) in self.names.iter().enumerate() {
+            match &self.life[k] {
+                Life::Down(why) => out.push(format!(
+                    "{name} is not running ({why}): `supervisor restart {name}` first"
+                )),
+                Life::Restarting(_) => out.push(format!("{name} is restarting")),
+                Life::Running if !self.cyclic(k) => {
+                    out.push(format!("{name} is not cyclic yet"));
+                }
+                Life::Running => {}
+            }
+        }
+        out
+    }
+
+    /// Clears the e-stop: the host state first (so a process that reads it cannot take the
+    /// reset for stale), then the reset record on `<i>/estop`, then servo's latched fault.
+    pub(crate) fn reset(&mut self) -> Result<u64, RunError> {
+        self.host.resets += 1;
+        self.host.estop = EstopState::Clear as u32;
+        self.host.cause = EstopV1::default();
+        self.estop = None;
+        self.beat();
+        let mut r = EstopV1::reset(runtime::time::now_ns(), SOURCE_SUPERVISOR);
+        r.code = self.host.resets as u32;
+        self.estop_pub.send(&r);
+        self.event(code::ESTOP_RESET, self.host.resets as f64, &["reset"]);
+        self.streak.iter_mut().for_each(|s| *s = 0);
+        self.request(RequestKind::Reset)?;
+        Ok(self.host.resets)
+    }
+
+    /// The processes still showing the e-stop latched after a reset.
+    pub(crate) fn still_latched(&self) -> Vec<String> {
+        self.names
+            .iter()
+            .zip(&self.statuses)
+            .filter(|(_, s)| s.is_some_and(|s| s.estop & estop_seen::LATCHED != 0))
+            .map(|(n, _)| n.clone())
+            .collect()
+    }
+
+    /// True while a process that reacts to the e-stop has not completed its reaction.
+    pub(crate) fn reactions_pending(&self) -> bool {
+        self.statuses
+            .iter()
+            .flatten()
+            .any(|s| s.estop & estop_seen::REACTING != 0 && s.estop & estop_seen::SAFE == 0)
+    }
+
+    /// True when process `name` reacts to the e-stop.
+    pub(crate) fn reacting(&self, name: &str) -> bool {
+        self.index_of(name)
+            .is_some_and(|k| self.statuses[k].is_some_and(|s| s.estop & estop_seen::REACTING != 0))
+    }
+
+    /// True for servo's own device e-stop: a latched fault, which servo's state explains.
+    pub(crate) fn is_servo_fault(&self, e: &EstopV1) -> bool {
+        e.origin == EstopOrigin::Device as u32
+            && self
+                .names
+                .get(e.source as usize)
+                .is_some_and(|n| n == "servo")
+    }
+
+    /// The latched fault servo reports, in words, with the event that explains it.
+    pub(crate) fn fault_text(&self, s: &ServoStateV2) -> String {
+        let cause = self.events.iter().rev().find(|e| e.code == s.fault_code);
+        self.servo_cut_text(s.fault_code, s.fault_axis, cause)
+    }
+
+    /// "servo cut power: <cause> on axis <a>", and the event that explains it.
+    fn servo_cut_text(&self, code: u32, axis: i32, cause: Option<&EventV1>) -> String {
+        let name = shm_schema::event::info(code).map_or("unknown fault", |i| i.name);
+        let axis = usize::try_from(axis)
+            .ok()
+            .and_then(|i| self.axes.axes.get(i))
+            .map_or(String::new(), |(a, _)| format!(" on axis {a}"));
+        let line = cause.map_or(String::new(), |ev| {
+            format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
+        });
+        format!("servo cut power: {name}{axis}{line}")
+    }
+
+    /// The latched e-stop, in words (servo's own fault as "servo cut power").
+    pub(crate) fn estop_text(&self) -> Option<String> {
+        let (e, _) = self.estop?;
+        let cause = self
+            .events
+            .iter()
+            .rev()
+            .find(|ev| ev.code == e.code && ev.source == e.source);
+        if self.is_servo_fault(&e) {
+            let axis = cause.map_or(-1, |ev| ev.axis);
+            return Some(self.servo_cut_text(e.code, axis, cause));
+        }
+        let line = cause.map_or(String::new(), |ev| {
+            format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
+        });
+        let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
+        Some(format!(
+            "e-stop ({origin}) raised by {}: {}{line}",
+            self.axes.source_name(e.source),
+            str_of(&e.reason),
+        ))
+    }
+
+    /// The supervisor's view for `status --json`: per process its pid, life and restarts;
+    /// the arm; the e-stop.
+    pub(crate) fn info(&self) -> Value {
+        let processes: Vec<Value> = (0..self.names.len())
+            .map(|k| {
+                let (life, why) = match &self.life[k] {
+                    Life::Running if self.cyclic(k) => ("running", None),
+                    Life::Running => ("starting", None),
+                    Life::Restarting(_) => ("restarting", None),
+                    Life::Down(w) => ("down", Some(w.clone())),
+                };
+                json!({
+                    "name": self.names[k],
+                    "pid": self.children.get(k).map(|p| p.pid()),
+                    "life": life,
+                    "why": why,
+                    "restarts": self.restarts[k],
+                    "command": self.commands[k],
+                })
+            })
+            .collect();
+        let estop = self.estop.map(|(e, _)| {
+            json!({
+                "origin": EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name),
+                "source": self.axes.source_name(e.source),
+                "code": e.code,
+                "reason": str_of(&e.reason),
+                "text": self.estop_text(),
+            })
+        });
+        let arm = self.last_servo.map(|s| {
+            json!({
+                "enabled": s.status & st::ENABLED != 0,
+                "fault_latched": s.status & st::FAULT_LATCHED != 0,
+                "fault": (s.status & st::FAULT_LATCHED != 0).then(|| self.fault_text(&s)),
+            })
+        });
+        json!({
+            "pid": std::process::id(),
+            "mode": match self.mode { Mode::Run => "run", Mode::Up => "up" },
+            "resets": self.host.resets,
+            "estop": estop,
+            "arm": arm,
+            "processes": processes,
+        })
+    }
+}

@@ -1,0 +1,504 @@
+//! What runs on a cell, a tick at a time: enabling the arm ([`Enabling`]) and a motion
+//! program ([`Job`]). Neither blocks: the supervisor's loop calls `step` every tick and keeps
+//! beating, serving its control channel and watching the processes meanwhile.
+
+use crate::cell::{Cell, Incident};
+use crate::config::Config;
+use crate::report::{Report, TraceRow};
+use crate::run::{RunError, TICK};
+use motion_program::{Op, Program};
+use shm_schema::drive::servo_status as st;
+use shm_schema::event::code;
+use shm_schema::motion::trajgen_fault;
+use shm_schema::{
+    MAX_AXES, MotionCommandV1, MotionState, Power, RequestKind, ServoStateV2, SetpointV1,
+};
+use std::io::IsTerminal;
+use std::time::{Duration, Instant};
+
+/// Enabling the arm: every process cyclic, trajgen publishing, the drives initialized; then an
+/// enable request, and a setpoint from after the arm is enabled (trajgen starts where servo
+/// holds: bumpless).
+#[derive(Debug)]
+pub(crate) struct Enabling {
+    start: Instant,
+    timeout: Duration,
+    sent_ns: Option<u64>,
+    enabled_at: Option<u64>,
+}
+
+impl Enabling {
+    pub(crate) fn new(cfg: &Config) -> Self {
+        Self {
+            start: Instant::now(),
+            timeout: Duration::from_secs_f64(cfg.supervisor.startup_timeout),
+            sent_ns: None,
+            enabled_at: None,
+        }
+    }
+
+    /// `None` while under way; the first setpoint from after the enable once done.
+    pub(crate) fn step(&mut self, cell: &mut Cell) -> Option<Result<SetpointV1, RunError>> {
+        if let Some(s) = cell.last_servo
+            && s.status & st::FAULT_LATCHED != 0
+        {
+            return Some(Err(RunError::failed(cell.fault_text(&s))));
+        }
+        if let Some(t) = self.sent_ns
+            && let Some(e) = cell
+                .events
+                .iter()
+                .rev()
+                .find(|e| e.code == code::REQUEST_REFUSED && e.stamp_ns >= t)
+        {
+            return Some(Err(RunError::Input(format!("servo: {}", e.text()))));
+        }
+        let initialized = cell
+            .last_servo
+            .is_some_and(|s| s.status & st::INITIALIZED != 0);
+        let all_cyclic = (0..cell.names.len()).all(|k| cell.cyclic(k));
+        if all_cyclic && initialized && cell.last_sp.is_some() && self.sent_ns.is_none() {
+            self.sent_ns = Some(runtime::time::now_ns());
+            if let Err(e) = cell.request(RequestKind::Enable) {
+                return Some(Err(e));
+            }
+        }
+        if let Some(s) = cell.last_servo.filter(|s| s.status & st::ENABLED != 0)
+            && self.sent_ns.is_some()
+        {
+            self.enabled_at.get_or_insert(s.stamp_ns);
+        }
+        if let (Some(t), Some(sp)) = (self.enabled_at, cell.last_sp)
+            && sp.stamp_ns > t
+        {
+            return Some(Ok(sp));
+        }
+        if self.start.elapsed() > self.timeout {
+            let mut missing: Vec<String> = (0..cell.names.len())
+                .filter(|k| !cell.cyclic(*k))
+                .map(|k| format!("{} is not cyclic", cell.names[k]))
+                .collect();
+            if cell.last_sp.is_none() {
+                missing.push("trajgen publishes no setpoint".into());
+            }
+            if !initialized {
+                missing.push("the drives did not initialize".into());
+            }
+            if self.enabled_at.is_none() {
+                missing.push("the arm is not enabled".into());
+            }
+            return Some(Err(RunError::failed(format!(
+                "startup did not complete within {:.1} s: {}",
+                self.timeout.as_secs_f64(),
+                missing.join(", ")
+            ))));
+        }
+        None
+    }
+}
+
+/// A motion program running on the cell.
+pub(crate) struct Job {
+    /// Its name as the user gave it.
+    pub(crate) name: String,
+    /// The program id its commands and setpoints carry.
+    pub(crate) program_id: u32,
+    commands: Vec<MotionCommandV1>,
+    sent: usize,
+    start_pos: Vec<f64>,
+    predicted: f64,
+    rows: Vec<SetpointV1>,
+    servo_log: Vec<ServoStateV2>,
+    /// Fieldbus images: count, sum of delays, max delay (ns).
+    images: (u64, u64, u64),
+    done: Option<SetpointV1>,
+    done_at: Option<Instant>,
+    settled_at: Option<(u64, ServoStateV2)>,
+    in_pos_since: Option<u64>,
+    progress: Progress,
+    last_target: Option<[f64; MAX_AXES]>,
+    /// An e-stop stops the motion: the job ends once the reactions complete.
+    ending: Option<Instant>,
+    /// The newest setpoint of this program.
+    pub(crate) last: Option<SetpointV1>,
+}
+
+impl Job {
+    /// A job for `program` (already validated) starting from `start` (a setpoint from after
+    /// the arm was enabled).
+    pub(crate) fn new(
+        cfg: &Config,
+        name: &str,
+        program: &Program,
+        src: &str,
+        start: &SetpointV1,
+        progress: bool,
+    ) -> Self {
+        let n = cfg.axis.len();
+        let start_pos: Vec<f64> = start.position[..n].to_vec();
+        let vmax: Vec<f64> = cfg.axis.iter().map(|a| a.vmax).collect();
+        let predicted =
+            motion_program::theoretical_time(program, &start_pos, &vmax, cfg.motion.t_acc);
+        let program_id = (std::process::id() ^ (start.seq as u32).rotate_left(16)) | 1;
+        Self {
+            name: name.to_string(),
+            program_id,
+            commands: program.to_commands(program_id, 1),
+            sent: 0,
+            start_pos,
+            predicted,
+            rows: Vec::new(),
+            servo_log: Vec::new(),
+            images: (0, 0, 0),
+            done: None,
+            done_at: None,
+            settled_at: None,
+            in_pos_since: None,
+            progress: Progress::new(progress, predicted, src),
+            last_target: program.instructions.iter().rev().find_map(|i| match i.op {
+                Op::Move { target, .. } => Some(target),
+                _ => None,
+            }),
+            ending: None,
+            last: None,
+        }
+    }
+
+    /// The predicted duration (s).
+    pub(crate) fn predicted(&self) -> f64 {
+        self.predicted
+    }
+
+    /// One tick: `None` while the program runs; its report, or why it failed, at its end.
+    /// `incidents` are the cell's of this tick: any of them ends the job.
+    pub(crate) fn step(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        incidents: &[Incident],
+    ) -> Option<Result<Report, RunError>> {
+        match self.step_inner(cell, cfg, incidents) {
+            Ok(None) => None,
+            Ok(Some(r)) => Some(Ok(r)),
+            Err(e) => {
+                self.progress.finish();
+                Some(Err(e))
+            }
+        }
+    }
+
+    fn step_inner(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        incidents: &[Incident],
+    ) -> Result<Option<Report>, RunError> {
+        if let Some(since) = self.ending {
+            // Wait (the loop beats meanwhile) until every process that reacts to the e-stop
+            // completed its reaction (servo: axes at rest, drives disabled), at most the
+            // e-stop stop time and a second: the job ends on a cell at rest.
+            let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 1.0);
+            if cell.reactions_pending() && since.elapsed() < limit {
+                return Ok(None);
+            }
+            return Err(RunError::failed(
+                cell.estop_text().unwrap_or_else(|| "e-stop".into()),
+            ));
+        }
+        if let Some(i) = incidents.first() {
+            return Err(RunError::failed(i.to_string()));
+        }
+        // An e-stop ends the job once it stops the motion: servo or trajgen reacts to it
+        // (servo's own fault is reported below with its cause, unless its state does not
+        // explain it within a few ticks). One that no process of the motion reacts to (the
+        // cell's propagation rules) lets the motion finish; the job fails at its end.
+        if let Some((e, at)) = cell.estop {
+            let from_servo = cell.is_servo_fault(&e);
+            let stops_motion = cell.reacting("trajgen") || (cell.reacting("servo") && !from_servo);
+            if stops_motion || (from_servo && at.elapsed() > 20 * TICK) {
+                self.ending = Some(Instant::now());
+                return Ok(None);
+            }
+        }
+        let n = cfg.axis.len();
+        // Setpoints of our motion.
+        let mut newest = None;
+        while let Some(sp) = cell.setpoint_sub.next() {
+            newest = Some(sp);
+            cell.last_sp = Some(sp);
+            if sp.program_id != self.program_id {
+                continue;
+            }
+            self.last = Some(sp);
+            if sp.fault == trajgen_fault::ESTOP {
+                // The e-stop's own report (servo's fault, or the trigger) says why.
+                continue;
+            }
+            if sp.fault == trajgen_fault::ABORTED {
+                return Err(RunError::failed(format!(
+                    "{}: aborted at line {} after {:.2} s of motion; the axes rest on the path",
+                    self.name, sp.fault_line, sp.motion_time_s
+                )));
+            }
+            if sp.fault != trajgen_fault::NONE || sp.state == MotionState::Fault as u32 {
+                return Err(RunError::failed(format!(
+                    "trajgen refused {}:{}: {} (fault {}); the axes stopped",
+                    self.name,
+                    sp.fault_line,
+                    trajgen_fault::text(sp.fault),
+                    sp.fault
+                )));
+            }
+            match MotionState::from_u32(sp.state) {
+                Some(MotionState::Moving) => self.rows.push(sp),
+                Some(MotionState::Done) if self.done.is_none() => {
+                    self.rows.push(sp);
+                    self.done = Some(sp);
+                    self.done_at = Some(Instant::now());
+                }
+                _ => {}
+            }
+        }
+        // Flow control: never more in flight than trajgen has free places.
+        if let Some(sp) = newest {
+            let sent = self.sent as u64;
+            let in_flight = sent - sp.commands_taken.min(sent);
+            let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
+            for c in self.commands.iter().skip(self.sent).take(credit) {
+                if !cell.command_pub.send(c) {
+                    return Err(RunError::failed(
+                        "trajgen's command service refused a command",
+                    ));
+                }
+                self.sent += 1;
+            }
+            if sp.program_id == self.program_id {
+                self.progress.show(&sp);
+            }
+        }
+        // Servo: following error, drive faults, settling.
+        let settle_ns = (cfg.motion.settle_time * 1e9) as u64;
+        while let Some(s) = cell.servo_sub.next() {
+            cell.last_servo = Some(s);
+            if self.rows.is_empty() {
+                continue;
+            }
+            if s.status & st::FAULT_LATCHED != 0 {
+                cell.take_events();
+                return Err(RunError::failed(cell.fault_text(&s)));
+            }
+            if s.power != Power::Enabled as u8 {
+                cell.take_events();
+                return Err(RunError::failed(format!(
+                    "the arm is no longer enabled (servo power {}): a disable request from \
+                     another client stopped the run",
+                    Power::from_u8(s.power).map_or("?", Power::name)
+                )));
+            }
+            if s.status & st::SETPOINT_JUMP != 0 {
+                cell.take_events();
+                return Err(RunError::failed(
+                    "servo refused a setpoint as a jump (see the setpoint-jump event)",
+                ));
+            }
+            self.servo_log.push(s);
+            if let Some(d) = &self.done {
+                let inside = (0..n).all(|i| {
+                    s.following_error[i].abs() <= cfg.axis[i].in_position
+                        && s.act_velocity[i].abs() <= cfg.axis[i].settle_velocity()
+                });
+                let used_final = s.setpoint_seq >= d.seq;
+                match (inside && used_final, self.in_pos_since) {
+                    (true, None) => self.in_pos_since = Some(s.stamp_ns),
+                    (true, Some(t0)) if s.stamp_ns - t0 >= settle_ns => {
+                        self.settled_at = Some((t0, s))
+                    }
+                    (false, _) => self.in_pos_since = None,
+                    _ => {}
+                }
+            }
+        }
+        while let Some(img) = cell.image_sub.next() {
+            if !self.rows.is_empty() {
+                let d = img.written_ns.saturating_sub(img.measured_ns);
+                let im = &mut self.images;
+                *im = (im.0 + 1, im.1 + d, im.2.max(d));
+            }
+        }
+        if let Some(t) = self.done_at
+            && self.settled_at.is_none()
+            && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout
+        {
+            let s = self.servo_log.last().copied();
+            let errs = s.map_or(String::new(), |s| {
+                (0..n)
+                    .map(|i| {
+                        format!(
+                            "{} {:.4} {}",
+                            cfg.axis[i].name, s.following_error[i], cfg.axis[i].unit
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            });
+            return Err(RunError::failed(format!(
+                "the axes did not settle within {} s of the end of the motion (following error {errs})",
+                cfg.motion.settle_timeout
+            )));
+        }
+        let Some((settle_start, final_state)) = self.settled_at else {
+            return Ok(None);
+        };
+        self.progress.finish();
+        if let Some(text) = cell.estop_text() {
+            cell.take_events();
+            return Err(RunError::failed(format!(
+                "{text}\n  the motion completed: by this cell's propagation rules (`[behaviour]`) \
+                 neither servo nor trajgen reacts to it, but it stays latched"
+            )));
+        }
+        Ok(Some(self.report(cell, cfg, settle_start, &final_state)))
+    }
+
+    fn report(
+        &self,
+        cell: &Cell,
+        cfg: &Config,
+        settle_start: u64,
+        final_state: &ServoStateV2,
+    ) -> Report {
+        let n = cfg.axis.len();
+        let done = self.done.expect("settling needs done");
+        let mut max_fe = [0.0f64; MAX_AXES];
+        for s in self
+            .servo_log
+            .iter()
+            .filter(|s| s.stamp_ns <= final_state.stamp_ns)
+        {
+            for (m, e) in max_fe.iter_mut().zip(&s.following_error[..n]) {
+                *m = m.max(e.abs());
+            }
+        }
+        let images = self.images;
+        Report {
+            ok: true,
+            program: self.name.clone(),
+            instance: cell.instance.to_string(),
+            cell: cfg.cell.name.clone(),
+            axes: cfg.axis.iter().map(|a| a.name.clone()).collect(),
+            units: cfg.axis.iter().map(|a| a.unit.clone()).collect(),
+            vmax: cfg.axis.iter().map(|a| a.vmax).collect(),
+            t_acc: cfg.motion.t_acc,
+            start: self.start_pos.clone(),
+            periods_us: cfg
+                .process
+                .iter()
+                .map(|p| (p.name.clone(), p.period_us))
+                .collect(),
+            theoretical_s: done.theoretical_s,
+            predicted_s: self.predicted,
+            measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9,
+            trajgen_period_s: cfg.period_s("trajgen"),
+            settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
+            final_position: final_state.act_position[..n].to_vec(),
+            final_error: self.last_target.map_or(vec![0.0; n], |t| {
+                (0..n).map(|i| final_state.act_position[i] - t[i]).collect()
+            }),
+            max_following_error: max_fe[..n].to_vec(),
+            setpoints: self.rows.len(),
+            lost_setpoints: lost_setpoints(&self.rows),
+            starved: done.starved,
+            iobridge_delay_us: (images.0 > 0).then(|| {
+                (
+                    images.1 as f64 / images.0 as f64 * 1e-3,
+                    images.2 as f64 * 1e-3,
+                )
+            }),
+            processes: Vec::new(),
+            trace: trace_rows(&self.rows, &self.servo_log),
+            events: Vec::new(),
+            sense_to_command: None,
+        }
+    }
+}
+
+/// One row per setpoint: its command, and the measured position at the servo cycle that used
+/// it (the first servo cycle whose setpoint is this one or a later one).
+fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV2]) -> Vec<TraceRow> {
+    rows.iter()
+        .map(|sp| {
+            let idx = servo.partition_point(|s| s.setpoint_seq < sp.seq);
+            let act = servo
+                .get(idx)
+                .or(servo.last())
+                .map_or(sp.position, |s| s.act_position);
+            TraceRow {
+                t_s: sp.motion_time_s,
+                cmd: sp.position,
+                act,
+            }
+        })
+        .collect()
+}
+
+fn lost_setpoints(rows: &[SetpointV1]) -> u64 {
+    rows.windows(2)
+        .map(|w| w[1].seq.saturating_sub(w[0].seq + 1))
+        .sum()
+}
+
+/// Progress on stderr: motion time against the total and the current program line.
+struct Progress {
+    on: bool,
+    tty: bool,
+    total: f64,
+    lines: Vec<String>,
+    last: Option<Instant>,
+}
+
+impl Progress {
+    fn new(on: bool, total: f64, src: &str) -> Self {
+        Self {
+            on,
+            tty: std::io::stderr().is_terminal(),
+            total,
+            lines: if on {
+                src.lines().map(str::to_string).collect()
+            } else {
+                Vec::new()
+            },
+            last: None,
+        }
+    }
+
+    fn show(&mut self, sp: &SetpointV1) {
+        let every = if self.tty { 0.2 } else { 1.0 };
+        if !self.on
+            || sp.state != MotionState::Moving as u32
+            || self.last.is_some_and(|t| t.elapsed().as_secs_f64() < every)
+        {
+            return;
+        }
+        self.last = Some(Instant::now());
+        let text = self
+            .lines
+            .get(sp.line.saturating_sub(1) as usize)
+            .map_or("", |l| l.split("//").next().unwrap_or("").trim());
+        let msg = format!(
+            "motion {:6.2} / {:.2} s   line {}: {}",
+            sp.motion_time_s, self.total, sp.line, text
+        );
+        if self.tty {
+            eprint!("\r\x1b[2K{msg}");
+        } else {
+            eprintln!("{msg}");
+        }
+    }
+
+    fn finish(&mut self) {
+        if self.on && self.tty && self.last.is_some() {
+            eprintln!();
+        }
+        self.on = false;
+    }
+}

@@ -1,0 +1,612 @@
+//! The supervisor's loop over a running cell, for `up` and `run` alike.
+//!
+//! Every tick (10 ms, or at once when a child exits or a client connects: the loop waits in
+//! `poll` on the children's pidfds and the control channel), it:
+//! 1. runs [`Cell::tick`]: the heartbeat, lost and stalled processes, restarts, the e-stop;
+//! 2. advances what runs on the cell: enabling the arm, the program job;
+//! 3. takes the control channel's requests and answers those that are complete.
+//!
+//! `run` is this loop with one program queued at the start, ending with it; `up` is this loop
+//! until `down` or a signal.
+
+use crate::cell::{Cell, Incident, Mode};
+use crate::config::Config;
+use crate::ctl::{ConnId, Reply, Request, Server};
+use crate::events;
+use crate::job::{Enabling, Job};
+use crate::launch::cpu_seconds;
+use crate::report::{ProcessReport, Report};
+use crate::run::{RunError, TICK};
+use motion_program::Program;
+use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+use runtime::rt::sched_of;
+use runtime::signals;
+use serde_json::{Value, json};
+use shm_schema::ControlKind;
+use shm_schema::drive::servo_status as st;
+use std::time::{Duration, Instant};
+
+/// A program to run.
+pub(crate) struct ProgramJob {
+    /// Its name as the user gave it.
+    pub name: String,
+    /// Parsed and checked against the cell's limits.
+    pub program: Program,
+    /// Its source.
+    pub src: String,
+    /// Print progress on stderr.
+    pub progress: bool,
+}
+
+/// Why the loop ended.
+pub(crate) enum End {
+    /// `supervisor down`.
+    Down,
+    /// SIGINT or SIGTERM.
+    Interrupted,
+    /// `run`: the program ended (or the cell failed before it could start).
+    Program(Box<Result<Report, RunError>>),
+}
+
+/// A request whose answer waits for the cell.
+enum Pending {
+    Reset {
+        conn: ConnId,
+        since: Instant,
+    },
+    Control {
+        conn: ConnId,
+        seq: u64,
+        kind: ControlKind,
+        since: Instant,
+    },
+}
+
+/// The program running now, who waits for it, and where its events start.
+struct Running {
+    job: Job,
+    waiters: Vec<(ConnId, bool)>,
+    events_from: usize,
+    started: Instant,
+}
+
+struct Loop<'a> {
+    cfg: &'a Config,
+    cell: &'a mut Cell,
+    server: &'a mut Server,
+    enabling: Option<(Enabling, Vec<ConnId>)>,
+    queued: Option<ProgramJob>,
+    running: Option<Running>,
+    pending: Vec<Pending>,
+    /// The last program's end, for `status`.
+    last_job: Option<Value>,
+    down: bool,
+}
+
+/// Runs the loop; see the module documentation. `first` is `run`'s program.
+pub(crate) fn serve(
+    cfg: &Config,
+    cell: &mut Cell,
+    server: &mut Server,
+    first: Option<ProgramJob>,
+) -> End {
+    let mut l = Loop {
+        cfg,
+        cell,
+        server,
+        enabling: Some((Enabling::new(cfg), Vec::new())),
+        queued: first,
+        running: None,
+        pending: Vec::new(),
+        last_job: None,
+        down: false,
+    };
+    loop {
+        l.wait();
+        if signals::stop_requested() {
+            return End::Interrupted;
+        }
+        let cfg = l.cfg;
+        let incidents = l.cell.tick(cfg);
+        if let Some(end) = l.advance(&incidents) {
+            l.server.drain(Duration::from_millis(200));
+            return end;
+        }
+        let requests = l.server.poll();
+        for (conn, req) in requests {
+            l.handle(conn, req);
+        }
+        l.pending_step();
+        if l.down {
+            l.server.drain(Duration::from_millis(200));
+            return End::Down;
+        }
+    }
+}
+
+impl Loop<'_> {
+    /// Sleeps until the next tick, a child's exit or a client's request.
+    fn wait(&self) {
+        let server_fds = self.server.fds();
+        let child_fds = self.cell.children.fds();
+        let mut fds: Vec<PollFd> = server_fds
+            .iter()
+            .chain(child_fds.iter())
+            .map(|fd| PollFd::new(*fd, PollFlags::POLLIN))
+            .collect();
+        let _ = poll(&mut fds, PollTimeout::from(TICK.as_millis() as u16));
+    }
+
+    /// Enabling, the job; `Some` when `run` is over.
+    fn advance(&mut self, incidents: &[Incident]) -> Option<End> {
+        let run = self.cell.mode == Mode::Run;
+        if self.running.is_none() {
+            self.cell.drain_motion();
+        }
+        if let Some((en, waiters)) = &mut self.enabling {
+            let outcome = if run && let Some(i) = incidents.first() {
+                Some(Err(RunError::failed(i.to_string())))
+            } else {
+                en.step(self.cell)
+            };
+            if let Some(result) = outcome {
+                let waiters = std::mem::take(waiters);
+                self.enabling = None;
+                match &result {
+                    Ok(_) => {
+                        tracing::info!("the drives are enabled, holding");
+                        for c in waiters {
+                            self.server
+                                .reply(c, &Reply::Done("the drives are enabled, holding".into()));
+                        }
+                    }
+                    Err(e) => {
+                        tracing::error!("the arm is not enabled: {e}");
+                        let reply = match e {
+                            RunError::Input(m) => Reply::Refused(m.clone()),
+                            e => Reply::Failed(e.to_string()),
+                        };
+                        for c in waiters {
+                            self.server.reply(c, &reply);
+                        }
+                    }
+                }
+                match (result, self.queued.take()) {
+                    (Ok(sp), Some(p)) => {
+                        let job = Job::new(self.cfg, &p.name, &p.program, &p.src, &sp, p.progress);
+                        self.begin(job, Vec::new());
+                    }
+                    (Err(e), Some(_)) => {
+                        return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
+                    }
+                    _ => {}
+                }
+            }
+        }
+        if let Some(r) = &mut self.running
+            && let Some(result) = r.job.step(self.cell, self.cfg, incidents)
+        {
+            let r = self.running.take().expect("checked");
+            let result = match result {
+                Ok(mut report) => {
+                    self.cell.take_events();
+                    report.events = self.events_json(r.events_from);
+                    if !run {
+                        self.cell.refresh_latency();
+                        report.processes = process_reports(self.cell);
+                        report.sense_to_command = self
+                            .cell
+                            .sense_to_command
+                            .as_deref()
+                            .filter(|h| h.count > 0)
+                            .map(latency::report::Summary::of);
+                    }
+                    Ok(report)
+                }
+                Err(e) => Err(self.with_events(e, r.events_from)),
+            };
+            self.finish(&r, &result);
+            if run {
+                return Some(End::Program(Box::new(result)));
+            }
+        }
+        None
+    }
+
+    fn events_json(&self, from: usize) -> Vec<Value> {
+        self.cell.events[from.min(self.cell.events.len())..]
+            .iter()
+            .map(|e| events::to_json(e, &self.cell.axes, self.cell.t0_ns))
+            .collect()
+    }
+
+    fn with_events(&mut self, e: RunError, from: usize) -> RunError {
+        self.cell.take_events();
+        match e {
+            RunError::Failed { message, .. } => RunError::Failed {
+                message,
+                events: self.events_json(from),
+            },
+            e => e,
+        }
+    }
+
+    fn begin(&mut self, job: Job, waiters: Vec<(ConnId, bool)>) {
+        tracing::info!("running {} (predicted {:.2} s)", job.name, job.predicted());
+        self.running = Some(Running {
+            job,
+            waiters,
+            events_from: self.cell.events.len(),
+            started: Instant::now(),
+        });
+    }
+
+    /// A program ended: its waiters get the report; `status` keeps a summary.
+    fn finish(&mut self, r: &Running, result: &Result<Report, RunError>) {
+        let (ok, json, text, csv) = match result {
+            Ok(rep) => (
+                true,
+                rep.to_json(),
+                rep.human(),
+                Some(crate::run::trace_csv(rep)),
+            ),
+            Err(e) => (
+                false,
+                json!({"ok": false, "error": e.to_string(), "events": e.events()}),
+                e.to_string(),
+                None,
+            ),
+        };
+        match result {
+            Ok(rep) => tracing::info!(
+                "{} done: {:.3} s measured, {:.3} s theoretical",
+                r.job.name,
+                rep.measured_s,
+                rep.theoretical_s
+            ),
+            Err(e) => tracing::error!("{} failed: {e}", r.job.name),
+        }
+        self.last_job = Some(json!({
+            "program": r.job.name,
+            "ok": ok,
+            "error": if ok { Value::Null } else { json!(text) },
+            "measured_s": json.get("measured_s"),
+            "theoretical_s": json.get("theoretical_s"),
+            "ran_s": r.started.elapsed().as_secs_f64(),
+        }));
+        let body = json.to_string();
+        for (conn, trace) in &r.waiters {
+            self.server.reply(
+                *conn,
+                &Reply::Report {
+                    ok,
+                    json: body.clone(),
+                    text: text.clone(),
+                    trace_csv: if *trace { csv.clone() } else { None },
+                },
+            );
+        }
+    }
+
+    fn handle(&mut self, conn: ConnId, req: Request) {
+        let reply = match req {
+            Request::Info => Some(Reply::Json(self.info().to_string())),
+            Request::Exec {
+                name,
+                source,
+                wait,
+                trace,
+            } => self.exec(conn, name, &source, wait, trace),
+            Request::Pause => self.control(conn, ControlKind::Pause),
+            Request::Resume => self.control(conn, ControlKind::Resume),
+            Request::Abort => self.control(conn, ControlKind::Abort),
+            Request::Reset => self.reset(conn),
+            Request::Start => self.start(conn),
+            Request::Restart { process } => Some(self.replace(&process, None, false)),
+            Request::Swap { process, command } => Some(self.replace(&process, command, true)),
+            Request::Down => {
+                self.down = true;
+                Some(Reply::Done(format!(
+                    "instance {}: going down",
+                    self.cell.instance
+                )))
+            }
+        };
+        if let Some(r) = reply {
+            self.server.reply(conn, &r);
+        }
+    }
+
+    fn info(&self) -> Value {
+        let mut v = self.cell.info();
+        let job = self.running.as_ref().map(|r| {
+            let sp = r.job.last;
+            json!({
+                "program": r.job.name,
+                "line": sp.map(|s| s.line),
+                "motion_time_s": sp.map(|s| s.motion_time_s),
+                "predicted_s": r.job.predicted(),
+                "path_speed": sp.map(|s| s.path_speed),
+                "paused": sp.is_some_and(|s| s.path_speed == 0.0),
+            })
+        });
+        v["job"] = job.unwrap_or(Value::Null);
+        v["last_job"] = self.last_job.clone().unwrap_or(Value::Null);
+        v["enabling"] = json!(self.enabling.is_some());
+        v
+    }
+
+    /// Why a program cannot start now, if it cannot.
+    fn not_ready(&self) -> Option<String> {
+        if let Some(r) = &self.running {
+            return Some(format!(
+                "busy: {} is running (`supervisor abort` ends it)",
+                r.job.name
+            ));
+        }
+        if self.enabling.is_some() {
+            return Some("the drives are being enabled; try again in a moment".into());
+        }
+        if let Some(text) = self.cell.estop_text() {
+            return Some(format!(
+                "the e-stop is latched: {text}\n  `supervisor reset`, then `supervisor start`"
+            ));
+        }
+        let enabled = self
+            .cell
+            .last_servo
+            .is_some_and(|s| s.status & st::ENABLED != 0);
+        if !enabled {
+            return Some("the drives are disabled: `supervisor start` enables them".into());
+        }
+        None
+    }
+
+    fn exec(
+        &mut self,
+        conn: ConnId,
+        name: String,
+        src: &str,
+        wait: bool,
+        trace: bool,
+    ) -> Option<Reply> {
+        let program = match crate::run::parse_program(self.cfg, &name, src) {
+            Ok(p) => p,
+            Err(e) => return Some(Reply::Refused(e.to_string())),
+        };
+        if let Some(why) = self.not_ready() {
+            return Some(Reply::Refused(why));
+        }
+        let Some(sp) = self.cell.last_sp else {
+            return Some(Reply::Refused("trajgen publishes no setpoint".into()));
+        };
+        let job = Job::new(self.cfg, &name, &program, src, &sp, false);
+        let text = format!("started {name}: predicted {:.2} s", job.predicted());
+        self.cell.events.clear();
+        self.begin(
+            job,
+            if wait {
+                vec![(conn, trace)]
+            } else {
+                Vec::new()
+            },
+        );
+        (!wait).then_some(Reply::Done(text))
+    }
+
+    fn control(&mut self, conn: ConnId, kind: ControlKind) -> Option<Reply> {
+        if self.running.is_none() {
+            return Some(Reply::Refused("no program is running".into()));
+        }
+        let seq = self.cell.motion_control(kind);
+        self.pending.push(Pending::Control {
+            conn,
+            seq,
+            kind,
+            since: Instant::now(),
+        });
+        None
+    }
+
+    fn reset(&mut self, conn: ConnId) -> Option<Reply> {
+        let fault = self
+            .cell
+            .last_servo
+            .is_some_and(|s| s.status & st::FAULT_LATCHED != 0);
+        if self.cell.estop.is_none() && !fault && self.cell.still_latched().is_empty() {
+            return Some(Reply::Done("nothing to reset: the e-stop is clear".into()));
+        }
+        let blockers = self.cell.reset_blockers();
+        if !blockers.is_empty() {
+            return Some(Reply::Refused(format!(
+                "the e-stop cannot be cleared: {}",
+                blockers.join("; ")
+            )));
+        }
+        if let Err(e) = self.cell.reset() {
+            return Some(Reply::Failed(e.to_string()));
+        }
+        tracing::info!("e-stop reset");
+        self.pending.push(Pending::Reset {
+            conn,
+            since: Instant::now(),
+        });
+        None
+    }
+
+    fn start(&mut self, conn: ConnId) -> Option<Reply> {
+        if let Some(text) = self.cell.estop_text() {
+            return Some(Reply::Refused(format!(
+                "the e-stop is latched: {text}\n  `supervisor reset` first"
+            )));
+        }
+        if let Some(s) = self.cell.last_servo {
+            if s.status & st::FAULT_LATCHED != 0 {
+                return Some(Reply::Refused(format!(
+                    "{}\n  `supervisor reset` first",
+                    self.cell.fault_text(&s)
+                )));
+            }
+            if s.status & st::ENABLED != 0 {
+                return Some(Reply::Done("the drives are enabled, holding".into()));
+            }
+        }
+        match &mut self.enabling {
+            Some((_, waiters)) => waiters.push(conn),
+            None => self.enabling = Some((Enabling::new(self.cfg), vec![conn])),
+        }
+        None
+    }
+
+    /// Answers the requests whose effect has come (or not in time).
+    fn pending_step(&mut self) {
+        let pending = std::mem::take(&mut self.pending);
+        for p in pending {
+            match self.pending_done(&p) {
+                Some(reply) => {
+                    let conn = match p {
+                        Pending::Reset { conn, .. } | Pending::Control { conn, .. } => conn,
+                    };
+                    self.server.reply(conn, &reply);
+                }
+                None => self.pending.push(p),
+            }
+        }
+    }
+
+    fn pending_done(&self, p: &Pending) -> Option<Reply> {
+        match *p {
+            Pending::Reset { since, .. } => {
+                let fault = self
+                    .cell
+                    .last_servo
+                    .filter(|s| s.status & st::FAULT_LATCHED != 0);
+                let latched = self.cell.still_latched();
+                if fault.is_none() && latched.is_empty() {
+                    return Some(Reply::Done(
+                        "the e-stop is clear; `supervisor start` enables the drives".into(),
+                    ));
+                }
+                if since.elapsed() < Duration::from_secs(2) {
+                    return None;
+                }
+                let mut left = Vec::new();
+                if let Some(s) = fault {
+                    left.push(format!(
+                        "{}: its cause is still present, so it stays latched",
+                        self.cell.fault_text(&s)
+                    ));
+                }
+                if !latched.is_empty() {
+                    left.push(format!(
+                        "{} still show the e-stop latched",
+                        latched.join(", ")
+                    ));
+                }
+                if let Some(t) = self.cell.estop_text() {
+                    left.push(format!("a new e-stop was raised: {t}"));
+                }
+                Some(Reply::Failed(format!(
+                    "reset did not clear everything:\n  {}",
+                    left.join("\n  ")
+                )))
+            }
+            Pending::Control {
+                seq, kind, since, ..
+            } => {
+                let sp = self.cell.last_sp?;
+                let taken = sp.control_seq >= seq;
+                let reply = match kind {
+                    ControlKind::Pause if taken && sp.path_speed == 0.0 => Some(format!(
+                        "paused at rest on the path, line {}, motion time {:.2} s",
+                        sp.line, sp.motion_time_s
+                    )),
+                    ControlKind::Resume if taken => Some("resumed along the path".into()),
+                    ControlKind::Abort if taken && self.running.is_none() => Some(
+                        "aborted: the axes rest on the path; the rest of the program is dropped"
+                            .into(),
+                    ),
+                    _ => None,
+                };
+                if let Some(text) = reply {
+                    return Some(Reply::Done(text));
+                }
+                let limit = Duration::from_secs_f64(self.cfg.motion.t_acc + 2.0);
+                (since.elapsed() > limit).then(|| {
+                    Reply::Failed(format!(
+                        "trajgen did not complete the {kind:?} within {:.1} s",
+                        limit.as_secs_f64()
+                    ))
+                })
+            }
+        }
+    }
+
+    /// `restart` and `swap`: see [`crate::swap`].
+    fn replace(&mut self, process: &str, command: Option<Vec<String>>, swap: bool) -> Reply {
+        let Some(k) = self.cell.index_of(process) else {
+            return Reply::Refused(format!(
+                "no process {process:?} in this cell (it has {})",
+                self.cell.names.join(", ")
+            ));
+        };
+        let motion = matches!(process, "trajgen" | "servo" | "machine");
+        if motion && let Some(r) = &self.running {
+            return Reply::Refused(format!(
+                "{process} can be replaced only while no program runs ({} is running; \
+                 `supervisor abort` ends it, or wait for it)",
+                r.job.name
+            ));
+        }
+        if self.enabling.is_some() {
+            return Reply::Refused("the drives are being enabled; try again in a moment".into());
+        }
+        let was_enabled = self
+            .cell
+            .last_servo
+            .is_some_and(|s| s.status & st::ENABLED != 0);
+        let result = crate::swap::replace(self.cell, self.cfg, k, command, swap);
+        match result {
+            Ok(text) => {
+                if motion && was_enabled && self.cell.estop.is_none() {
+                    // The new process re-enables bumplessly, holding where the axes stand.
+                    self.enabling = Some((Enabling::new(self.cfg), Vec::new()));
+                    Reply::Done(format!("{text}; re-enabling the drives"))
+                } else {
+                    Reply::Done(text)
+                }
+            }
+            Err(e) => Reply::Failed(e),
+        }
+    }
+}
+
+/// Per process, its figures from the cell's view (for the report).
+pub(crate) fn process_reports(cell: &Cell) -> Vec<ProcessReport> {
+    let mut out = Vec::new();
+    for k in 0..cell.names.len() {
+        let Some(p) = cell.children.get(k) else {
+            continue;
+        };
+        let pid = p.pid();
+        let status = cell.statuses[k].unwrap_or_default();
+        let (policy, priority) = sched_of(pid as i32).unwrap_or((status.policy, status.priority));
+        let mut r = ProcessReport::new(
+            &cell.names[k],
+            pid,
+            policy,
+            priority,
+            &status,
+            cpu_seconds(pid),
+        );
+        r.wakeup_latency = cell.latencies[k]
+            .as_deref()
+            .map(latency::report::Summary::of);
+        r.exec_time = cell.exec_times[k]
+            .as_deref()
+            .filter(|h| h.count > 0)
+            .map(latency::report::Summary::of);
+        out.push(r);
+    }
+    out
+}

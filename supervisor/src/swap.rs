@@ -1,0 +1,180 @@
+//! `restart` and `swap`: one process of the cell replaced while the others keep running.
+//!
+//! - A process outside the motion path (iobridge, any other of the table): **make before
+//!   break**. The new one starts beside the old one (the services allow two publishers);
+//!   once it is cyclic, the old one is stopped, so its outputs (the fieldbus image) never
+//!   miss more than a cycle or so.
+//! - servo, the drives' process (machine) and trajgen: only while no program runs, **with the
+//!   brakes on**: the drives are disabled first, the process is replaced, and the caller
+//!   re-enables the drives bumplessly (holding where the axes stand).
+//!
+//! Meanwhile the host state announces the handover (`HostStateV1::handover`), so the other
+//! processes do not count the gap as pending-sequence overruns, and the supervisor does not
+//! take the replaced process' silence for a stall.
+
+use crate::cell::{Cell, Incident};
+use crate::config::Config;
+use crate::launch::find_program;
+use crate::run::TICK;
+use shm_schema::Power;
+use std::time::{Duration, Instant};
+
+/// Replaces process `k`: `swap` with `command` (or its configured command: a new build),
+/// or restarts it as it runs. Returns what was done, with the swap's duration and, for the
+/// processes that publish the fieldbus image, its largest gap.
+pub(crate) fn replace(
+    cell: &mut Cell,
+    cfg: &Config,
+    k: usize,
+    command: Option<Vec<String>>,
+    swap: bool,
+) -> Result<String, String> {
+    let name = cell.names[k].clone();
+    if let Some(c) = &command {
+        let first = c.first().ok_or("--command is empty")?;
+        find_program(first).map_err(|e| format!("--command: {e}"))?;
+    }
+    if swap {
+        cell.set_command(k, command);
+    }
+    let motion = matches!(name.as_str(), "trajgen" | "servo" | "machine");
+    let start = Instant::now();
+    if motion
+        && cell
+            .last_servo
+            .is_some_and(|s| s.power != Power::Disabled as u8)
+    {
+        // Brakes on: the axes come to rest (they are at rest: no program runs) and the
+        // drives are disabled before the process goes.
+        cell.request(shm_schema::RequestKind::Disable)
+            .map_err(|e| e.to_string())?;
+        let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 2.0);
+        wait_until(cell, cfg, k, limit, &mut GapMeter::default(), |c| {
+            c.last_servo
+                .is_some_and(|s| s.power == Power::Disabled as u8)
+        })
+        .map_err(|e| format!("{name}: the drives did not disable: {e}"))?;
+    }
+    cell.set_handover(k, true);
+    let result = handover(cell, cfg, k, motion);
+    cell.set_handover(k, false);
+    cell.ignore_statuses_of(k, None);
+    let (old, new, gap) = result?;
+    cell.restarts[k] += 1;
+    let what = if swap { "swapped" } else { "restarted" };
+    let gap = gap.map_or(String::new(), |(g, n)| {
+        format!(
+            "; fieldbus image: {n} images during the handover, largest gap {:.2} ms",
+            g as f64 * 1e-6
+        )
+    });
+    tracing::info!("{name} {what} (pid {old:?} → {new})");
+    Ok(format!(
+        "{name} {what} in {:.0} ms (pid {} → {new}){gap}",
+        start.elapsed().as_secs_f64() * 1e3,
+        old.map_or("-".to_string(), |p| p.to_string())
+    ))
+}
+
+/// What a handover did: the old and new pids, the fieldbus image's largest gap (ns) and
+/// how many images arrived meanwhile.
+type Handover = (Option<u32>, u32, Option<(u64, u64)>);
+
+/// Stops the old process and starts the new one (make before break outside the motion
+/// path).
+fn handover(cell: &mut Cell, cfg: &Config, k: usize, motion: bool) -> Result<Handover, String> {
+    let name = cell.names[k].clone();
+    let old = cell.children.get(k).map(|p| p.pid());
+    let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
+    let mut gaps = GapMeter::default();
+    let new = if !motion && old.is_some() {
+        cell.ignore_statuses_of(k, old);
+        let new = cell.start_process(k, cfg)?;
+        wait_until(cell, cfg, k, startup, &mut gaps, |c| c.cyclic(k))
+            .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
+        if let Some(problem) = cell.stop_process(k) {
+            tracing::warn!("the old {name} {problem}");
+        }
+        // A few more ticks: the image keeps flowing from the new one alone.
+        let _ = wait_until(cell, cfg, k, 5 * TICK, &mut gaps, |_| false);
+        new
+    } else {
+        if let Some(problem) = cell.stop_process(k) {
+            tracing::warn!("the old {name} {problem}");
+        }
+        let new = cell.start_process(k, cfg)?;
+        wait_until(cell, cfg, k, startup, &mut gaps, |c| c.cyclic(k))
+            .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
+        new
+    };
+    Ok((old, new, gaps.result()))
+}
+
+/// The largest interval between consecutive fieldbus images seen (ns), and their count.
+#[derive(Default)]
+struct GapMeter {
+    last_ns: Option<u64>,
+    max_ns: u64,
+    count: u64,
+}
+
+impl GapMeter {
+    fn take(&mut self, cell: &mut Cell) {
+        while let Some(img) = cell.image_sub.next() {
+            if let Some(t) = self.last_ns
+                && img.written_ns > t
+            {
+                self.max_ns = self.max_ns.max(img.written_ns - t);
+            }
+            self.last_ns = Some(
+                self.last_ns
+                    .map_or(img.written_ns, |t| t.max(img.written_ns)),
+            );
+            self.count += 1;
+        }
+    }
+
+    fn result(&self) -> Option<(u64, u64)> {
+        (self.count > 1).then_some((self.max_ns, self.count))
+    }
+}
+
+/// Ticks the cell until `done` holds (Ok), process `k` is lost, or `limit` passes.
+fn wait_until(
+    cell: &mut Cell,
+    cfg: &Config,
+    k: usize,
+    limit: Duration,
+    gaps: &mut GapMeter,
+    done: impl Fn(&Cell) -> bool,
+) -> Result<(), String> {
+    let start = Instant::now();
+    loop {
+        std::thread::sleep(TICK);
+        let incidents = cell.tick(cfg);
+        while let Some(s) = cell.setpoint_sub.next() {
+            cell.last_sp = Some(s);
+        }
+        while let Some(s) = cell.servo_sub.next() {
+            cell.last_servo = Some(s);
+        }
+        gaps.take(cell);
+        if let Some(i) = incidents.iter().find(|i| concerns(i, &cell.names[k])) {
+            return Err(i.to_string());
+        }
+        if done(cell) {
+            return Ok(());
+        }
+        if start.elapsed() > limit {
+            return Err(format!("not within {:.1} s", limit.as_secs_f64()));
+        }
+    }
+}
+
+fn concerns(i: &Incident, name: &str) -> bool {
+    match i {
+        Incident::Exited { name: n, .. }
+        | Incident::Stalled { name: n, .. }
+        | Incident::Fault { name: n, .. } => n == name,
+    }
+}
