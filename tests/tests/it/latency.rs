@@ -188,12 +188,8 @@ fn bad_latency_options_are_refused_by_name() {
 fn status_reports_the_running_cell_and_its_latency() {
     let inst = instance("status");
     let none = run_with_watchdog(supervisor().args(["status", "--instance", &inst]), WATCHDOG);
-    assert_eq!(none.status.code(), Some(1));
-    assert!(
-        stderr(&none).contains("no process of instance"),
-        "{}",
-        stderr(&none)
-    );
+    assert_eq!(none.status.code(), Some(2));
+    assert!(stderr(&none).contains("is not up"), "{}", stderr(&none));
 
     let prog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/triangle.prog");
     let mut run = supervisor()

@@ -11,6 +11,7 @@ mod estop;
 mod latency;
 mod loop_sim;
 mod no_alloc;
+mod operations;
 mod servo_layer;
 
 #[global_allocator]

@@ -1,0 +1,457 @@
+//! The long-running cell on the real binaries (docs/operations.md): `up`, the control CLI from
+//! other shells, e-stop and recovery, processes killed and stalled mid-motion and restarted by
+//! their policy, hot swap, another user refused, nothing left after `down`.
+
+use crate::drives::{WATCHDOG, pid_of};
+use integration_tests::{
+    assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, with_stall_room,
+};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// A short program: out and back on x (2 segments, about 13 s from the default start).
+const SHORT: &str = "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n";
+
+/// `supervisor up` in the background, its log in a file; SIGTERM and wait on drop, so a
+/// failing test leaves no cell behind.
+struct Up {
+    inst: String,
+    child: Option<Child>,
+    log: PathBuf,
+}
+
+impl Up {
+    fn start(test: &str, cfg: &Path) -> Self {
+        let inst = instance(test);
+        let log = scratch(test, "up.log", "");
+        let child = supervisor()
+            .args(["up", "--instance", &inst, "--config"])
+            .arg(cfg)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).expect("log"))
+            .spawn()
+            .expect("supervisor up");
+        let up = Self {
+            inst,
+            child: Some(child),
+            log,
+        };
+        // Up once the drives are enabled and holding.
+        up.until("the drives enabled", |s| {
+            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+        });
+        up
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// `supervisor <args> --instance <inst>`, under the watchdog.
+    fn ctl(&self, args: &[&str]) -> Output {
+        let mut cmd = supervisor();
+        cmd.args(args).args(["--instance", &self.inst]);
+        run_with_watchdog(&mut cmd, WATCHDOG)
+    }
+
+    /// Like [`Up::ctl`], and it must succeed; its stdout.
+    fn ok(&self, args: &[&str]) -> String {
+        let out = self.ctl(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}\n{}\nlog:\n{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+            self.log()
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    }
+
+    /// Like [`Up::ctl`], and it must be refused (exit 2); its stderr.
+    fn refused(&self, args: &[&str]) -> String {
+        let out = self.ctl(args);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        err
+    }
+
+    fn status(&self) -> Value {
+        let out = self.ok(&["status", "--json"]);
+        serde_json::from_str(out.trim()).expect("status JSON")
+    }
+
+    /// Polls `status --json` until `pred` holds, under the watchdog.
+    fn until(&self, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+        let start = Instant::now();
+        loop {
+            let mut cmd = supervisor();
+            cmd.args(["status", "--json", "--instance", &self.inst]);
+            let out = run_with_watchdog(&mut cmd, WATCHDOG);
+            if out.status.success()
+                && let Ok(v) =
+                    serde_json::from_str::<Value>(String::from_utf8_lossy(&out.stdout).trim())
+                && pred(&v)
+            {
+                return v;
+            }
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "{what}: never happened\n{}\nlog:\n{}",
+                String::from_utf8_lossy(&out.stdout),
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// `down`, then the supervisor exits 0 and nothing of the instance is left.
+    fn down(mut self) {
+        self.ok(&["down"]);
+        let child = self.child.take().expect("running");
+        let out = wait_child(child);
+        assert!(out.success(), "up exited with {out}\n{}", self.log());
+        assert_clean(&self.inst);
+    }
+}
+
+impl Drop for Up {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(c.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+            let _ = c.wait();
+        }
+    }
+}
+
+fn wait_child(mut c: Child) -> std::process::ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = c.try_wait().expect("wait") {
+            return s;
+        }
+        assert!(start.elapsed() < WATCHDOG, "the supervisor did not exit");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn cell(test: &str) -> PathBuf {
+    scratch(test, "cell.toml", &with_stall_room(&default_cell()))
+}
+
+fn program(test: &str, src: &str) -> String {
+    scratch(test, "p.prog", src).display().to_string()
+}
+
+fn moving(s: &Value) -> bool {
+    s["supervisor"]["job"]["motion_time_s"]
+        .as_f64()
+        .is_some_and(|t| t > 1.0)
+}
+
+fn latched(s: &Value) -> bool {
+    !s["supervisor"]["estop"].is_null()
+}
+
+#[test]
+fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
+    let test = "ops-up";
+    let cfg = cell(test);
+    let up = Up::start(test, &cfg);
+    // A second supervisor of the instance is refused, whether `up` or `run`.
+    let err = up.refused(&["up", "--config", cfg.to_str().expect("utf-8")]);
+    assert!(err.contains("is in use"), "{err}");
+    let triangle = integration_tests::examples().join("triangle.prog");
+    let tri = triangle.to_str().expect("utf-8");
+    let err = up.refused(&["run", tri]);
+    assert!(err.contains("is in use"), "{err}");
+    // A bad program is refused with its line and column; nothing moves.
+    let bad = program(test, "MOVE(140, 40)\nEND\n");
+    let err = up.refused(&["exec", &bad]);
+    assert!(err.contains("p.prog:1:"), "{err}");
+    // exec --wait prints run's report.
+    let out = up.ok(&["exec", tri, "--wait", "--json"]);
+    let r: Value = serde_json::from_str(out.trim()).expect("report");
+    assert_eq!(r["ok"], true);
+    let diff = r["difference_s"].as_f64().expect("difference");
+    println!("exec --wait: measured - theoretical = {:.3} ms", diff * 1e3);
+    assert!(diff >= 0.0, "{r}");
+    for p in ["machine", "servo", "trajgen", "iobridge"] {
+        assert!(r["processes"][p]["cycles"].as_u64().unwrap_or(0) > 0, "{p}");
+    }
+    // Pause: the axes come to rest on the path and hold; resume goes on; abort drops it.
+    up.ok(&["exec", tri]);
+    up.until("moving", moving);
+    let paused = up.ok(&["pause"]);
+    assert!(paused.contains("paused at rest on the path"), "{paused}");
+    let s = up.status();
+    assert_eq!(s["supervisor"]["job"]["paused"], true, "{s}");
+    assert!(
+        s["supervisor"]["estop"].is_null(),
+        "a pause is no e-stop: {s}"
+    );
+    let line = s["supervisor"]["job"]["line"].clone();
+    std::thread::sleep(Duration::from_millis(500));
+    let s2 = up.status();
+    assert_eq!(s2["supervisor"]["job"]["line"], line, "held while paused");
+    let err = up.refused(&["exec", tri]);
+    assert!(err.contains("busy"), "{err}");
+    up.ok(&["resume"]);
+    up.until("moving again", |s| {
+        s["supervisor"]["job"]["path_speed"].as_f64() == Some(1.0)
+    });
+    let aborted = up.ok(&["abort"]);
+    assert!(aborted.contains("aborted"), "{aborted}");
+    let s = up.status();
+    assert!(s["supervisor"]["job"].is_null(), "{s}");
+    assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
+    assert!(
+        s["supervisor"]["estop"].is_null(),
+        "an abort is no e-stop: {s}"
+    );
+    assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
+    // The next program starts where the abort left the axes.
+    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    up.down();
+    // A command to an instance that is not up says so.
+    let out = supervisor()
+        .args(["status", "--instance", &instance(test)])
+        .output()
+        .expect("status");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is not up"));
+}
+
+#[test]
+fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named() {
+    let test = "ops-reset";
+    let up = Up::start(test, &cell(test));
+    up.ok(&["estop", "--reason", "ops test"]);
+    let s = up.until("latched and safe", |s| {
+        latched(s) && s["supervisor"]["arm"]["enabled"] == false
+    });
+    assert!(
+        s["supervisor"]["estop"]["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("ops test")),
+        "{s}"
+    );
+    // Nothing runs and nothing enables while it is latched.
+    assert!(
+        up.refused(&["exec", &program(test, SHORT)])
+            .contains("e-stop is latched")
+    );
+    assert!(up.refused(&["start"]).contains("reset"));
+    up.ok(&["reset"]);
+    // Drives never re-enable by themselves.
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(up.status()["supervisor"]["arm"]["enabled"], false);
+    up.ok(&["start"]);
+    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    // A fault whose cause is still there: reset clears the e-stop and says what stays.
+    up.ok(&["inject", "--axis", "x", "encoder-loss"]);
+    up.until("servo's fault", |s| {
+        latched(s) && s["supervisor"]["arm"]["fault_latched"] == true
+    });
+    let out = up.ctl(&["reset"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("its cause is still present"), "{err}");
+    up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
+    up.ok(&["reset"]);
+    up.ok(&["start"]);
+    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    up.down();
+}
+
+#[test]
+fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_recovers() {
+    let test = "ops-kill";
+    let up = Up::start(test, &cell(test));
+    let long = program(
+        test,
+        "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nMOVE(140, 40, 0)\nEND\n",
+    );
+    for (victim, program) in [
+        ("trajgen", "trajgen"),
+        ("servo", "servo"),
+        ("iobridge", "iobridge"),
+        ("machine", "machine-sim"),
+    ] {
+        up.ok(&["exec", &long]);
+        up.until("moving", moving);
+        let pid = pid_of(program, &up.inst);
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid),
+            nix::sys::signal::Signal::SIGKILL,
+        )
+        .expect("kill");
+        // The host e-stop names the process; the axes come to rest with the drives off; the
+        // supervisor stays up and restarts the process (restart = "on-failure").
+        let s = up.until("restarted and at rest", |s| {
+            latched(s)
+                && s["supervisor"]["job"].is_null()
+                && s["supervisor"]["arm"]["enabled"] == false
+                && s["supervisor"]["processes"]
+                    .as_array()
+                    .and_then(|p| p.iter().find(|p| p["name"] == *victim))
+                    .is_some_and(|p| p["life"] == "running" && p["restarts"] == 1)
+        });
+        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+        assert!(reason.contains(victim), "{victim}: {s}");
+        assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
+        assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
+        let all_running = |s: &Value| {
+            s["supervisor"]["processes"]
+                .as_array()
+                .is_some_and(|p| p.iter().all(|p| p["life"] == "running"))
+        };
+        up.until("all cyclic", all_running);
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+    }
+    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    up.down();
+}
+
+#[test]
+fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
+    let test = "ops-stall";
+    let up = Up::start(test, &cell(test));
+    let pid = pid_of("iobridge", &up.inst);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid),
+        nix::sys::signal::Signal::SIGSTOP,
+    )
+    .expect("stop");
+    let s = up.until("stall found, iobridge restarted", |s| {
+        latched(s)
+            && s["supervisor"]["processes"]
+                .as_array()
+                .and_then(|p| p.iter().find(|p| p["name"] == "iobridge"))
+                .is_some_and(|p| p["restarts"] == 1 && p["life"] == "running")
+    });
+    assert!(
+        s["supervisor"]["estop"]["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("iobridge")),
+        "{s}"
+    );
+    assert!(up.log().contains("stalled"), "{}", up.log());
+    up.until("cyclic", |s| {
+        s["supervisor"]["processes"]
+            .as_array()
+            .is_some_and(|p| p.iter().all(|p| p["life"] == "running"))
+    });
+    up.ok(&["reset"]);
+    up.ok(&["start"]);
+    up.down();
+}
+
+#[test]
+fn iobridge_swaps_during_motion_and_trajgen_at_rest_without_an_estop() {
+    let test = "ops-swap";
+    let up = Up::start(test, &cell(test));
+    let triangle = integration_tests::examples().join("triangle.prog");
+    let mut run = supervisor()
+        .args(["exec", "--wait", "--json", "--instance", &up.inst])
+        .arg(&triangle)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("exec");
+    up.until("moving", moving);
+    let out = up.ok(&["swap", "iobridge"]);
+    println!("{}", out.trim());
+    assert!(out.contains("largest gap"), "{out}");
+    // trajgen carries the motion: not while a program runs (yet); refused, nothing changes.
+    let err = up.refused(&["swap", "trajgen"]);
+    assert!(err.contains("only while no program runs"), "{err}");
+    let start = Instant::now();
+    while run.try_wait().expect("wait").is_none() {
+        assert!(start.elapsed() < WATCHDOG, "the program did not end");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = run.wait_with_output().expect("output");
+    assert!(
+        out.status.success(),
+        "{}\nlog:\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        up.log()
+    );
+    // At rest: trajgen swapped for the same build, with a command of its own.
+    let trajgen = integration_tests::bin("trajgen");
+    let cmd = format!(
+        "{} --instance {{instance}} --name {{name}}",
+        trajgen.display()
+    );
+    let out = up.ok(&["swap", "trajgen", "--command", &cmd]);
+    println!("{}", out.trim());
+    up.until("enabled again", |s| {
+        s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+    });
+    let s = up.status();
+    assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
+    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    // A bad command changes nothing.
+    let out = up.ctl(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
+    assert_ne!(out.status.code(), Some(0));
+    assert!(up.refused(&["swap", "nosuch"]).contains("no process"));
+    up.down();
+}
+
+#[test]
+fn another_user_is_refused_by_the_control_channel() {
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("skipped: needs root to run a command as another user");
+        return;
+    }
+    let test = "ops-user";
+    let up = Up::start(test, &cell(test));
+    let out = std::process::Command::new("setpriv")
+        .args(["--reuid", "65534", "--regid", "65534", "--clear-groups"])
+        .arg(integration_tests::bin("supervisor"))
+        .args(["down", "--instance", &up.inst])
+        .output()
+        .expect("setpriv");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("uid 65534 may not control it"), "{err}");
+    // Nothing changed: the cell is still up.
+    assert_eq!(up.status()["supervisor"]["arm"]["enabled"], true);
+    up.down();
+}
+
+#[test]
+fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
+    let test = "ops-sigkill";
+    let cfg = cell(test);
+    let mut up = Up::start(test, &cfg);
+    let mut child = up.child.take().expect("running");
+    child.kill().expect("SIGKILL");
+    let _ = child.wait();
+    let inst = up.inst.clone();
+    drop(up);
+    // Its processes notice (the heartbeat stops), bring the axes to rest and exit.
+    let start = Instant::now();
+    while !integration_tests::pids_with(&["--instance", &inst]).is_empty() {
+        assert!(start.elapsed() < WATCHDOG, "processes left running");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // The same instance comes up again and works.
+    let mut cmd = supervisor();
+    cmd.args(["run", "--instance", &inst, "--config"])
+        .arg(&cfg)
+        .arg(program(test, SHORT));
+    let out = run_with_watchdog(&mut cmd, WATCHDOG);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_clean(&inst);
+}
