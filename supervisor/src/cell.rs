@@ -347,7 +347,7 @@ impl Cell {
                     _ => tracing::info!("{line}"),
                 },
             }
-            if self.events.len() < 100_000 {
+            if self.events.len() < 1_000_000 {
                 self.events.push(e);
             }
         }

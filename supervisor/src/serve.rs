@@ -142,6 +142,10 @@ impl Loop<'_> {
         let run = self.cell.mode == Mode::Run;
         if self.running.is_none() {
             self.cell.drain_motion();
+            // Hours up: keep the newest events only (a job's own are kept whole).
+            if self.cell.events.len() > 20_000 {
+                self.cell.events.drain(..10_000);
+            }
         }
         if let Some((en, waiters)) = &mut self.enabling {
             let outcome = if run && let Some(i) = incidents.first() {

@@ -455,3 +455,52 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
     );
     assert_clean(&inst);
 }
+
+#[test]
+fn a_python_iobridge_written_from_the_documents_takes_the_role() {
+    // The bindings come from PyPI (`pip install iceoryx2==0.10.0`; .ci/run installs them).
+    let probe = std::process::Command::new("python3")
+        .args(["-c", "import iceoryx2"])
+        .output()
+        .expect("python3");
+    assert!(
+        probe.status.success(),
+        "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0\n{}",
+        String::from_utf8_lossy(&probe.stderr)
+    );
+    let test = "ops-python";
+    let script = integration_tests::examples().join("python/iobridge.py");
+    let rust = r#"command = ["iobridge", "--instance", "{instance}"]"#;
+    let src = with_stall_room(&default_cell());
+    assert!(src.contains(rust), "the default cell's iobridge command");
+    let cfg = scratch(
+        test,
+        "cell.toml",
+        &src.replace(
+            rust,
+            &format!(
+                r#"command = ["python3", "{}", "--instance", "{{instance}}", "--name", "{{name}}"]"#,
+                script.display()
+            ),
+        ),
+    );
+    let inst = instance(test);
+    let mut cmd = supervisor();
+    cmd.args(["run", "--json", "--instance", &inst, "--config"])
+        .arg(&cfg)
+        .arg(program(test, SHORT));
+    let out = run_with_watchdog(&mut cmd, WATCHDOG);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = integration_tests::json_of(&out);
+    // The Python process was cyclic, and its fieldbus images reached the supervisor.
+    assert!(
+        r["processes"]["iobridge"]["cycles"].as_u64().unwrap_or(0) > 100,
+        "{r}"
+    );
+    assert!(!r["iobridge_delay_us"].is_null(), "no fieldbus image: {r}");
+    assert_clean(&inst);
+}
