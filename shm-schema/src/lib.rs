@@ -36,6 +36,7 @@ pub use event::{EventQueue, EventV1, Severity};
 pub use latency::LatencyHistogramV1;
 pub use motion::{
     CommandKind, ControlKind, MotionCommandV1, MotionControlV1, MotionState, SetpointV1,
+    TrajgenHandoverV1,
 };
 pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};
 pub use status::{

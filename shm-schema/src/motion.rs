@@ -87,6 +87,48 @@ pub struct MotionControlV1 {
     pub reserved: u32,
 }
 
+/// trajgen's motion while it is paused, `<i>/trajgen/handover` (history 1), so that a new
+/// trajgen (`supervisor swap trajgen` during a program) goes on along the same path from
+/// where the old one left it: the segment being executed, where on it, and which command it
+/// came from. trajgen publishes it every cycle while paused, and one record with `valid` 0
+/// when it stops being paused.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::TrajgenHandoverV1")]
+pub struct TrajgenHandoverV1 {
+    /// When it was published (ns, `CLOCK_MONOTONIC`).
+    pub stamp_ns: u64,
+    /// Sequence number of the command whose segment is being executed: the successor takes
+    /// the commands after it.
+    pub command_seq: u64,
+    /// Start of the motion (ns): the successor's motion time goes on from it.
+    pub motion_start_ns: u64,
+    /// Program of the motion.
+    pub program_id: u32,
+    /// Program line of the segment.
+    pub line: u32,
+    /// 1 while the record describes a paused motion; 0 otherwise.
+    pub valid: u32,
+    /// Times the queue ran empty so far.
+    pub starved: u32,
+    /// Local time on the segment (s): where on it the axes rest.
+    pub local_s: f64,
+    /// Real time lost to pauses so far (s).
+    pub lost_s: f64,
+    /// Sum of the segment times so far (s).
+    pub theoretical_s: f64,
+    /// The segment (seed 003 §2): its `T1` (s) and acceleration time (s).
+    pub t1_s: f64,
+    /// Acceleration time of the segment (s).
+    pub t_acc_s: f64,
+    /// `A`, `B`, `C` of the segment per axis.
+    pub a: [f64; MAX_AXES],
+    /// `B`.
+    pub b: [f64; MAX_AXES],
+    /// `C`.
+    pub c: [f64; MAX_AXES],
+}
+
 /// State of the motion in a [`SetpointV1`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]

@@ -182,6 +182,9 @@ pub enum ServiceId {
     /// `<i>/trajgen/control`: [`crate::MotionControlV1`], a client to trajgen: pause, resume,
     /// abort, taken at once.
     MotionControl,
+    /// `<i>/trajgen/handover`: [`crate::TrajgenHandoverV1`], trajgen's paused motion for its
+    /// successor (history 1).
+    TrajgenHandover,
     /// `<i>/trajgen/setpoint`: [`crate::SetpointV1`], trajgen to servo (and observers).
     Setpoint,
     /// `<i>/servo/state`: [`crate::ServoStateV2`], servo to iobridge (and observers).
@@ -260,6 +263,7 @@ impl ServiceId {
             Self::CellConfig => "cell/config",
             Self::MotionCommand => "trajgen/command",
             Self::MotionControl => "trajgen/control",
+            Self::TrajgenHandover => "trajgen/handover",
             Self::Setpoint => "trajgen/setpoint",
             Self::ServoState => "servo/state",
             Self::ServoRequest => "servo/request",
@@ -318,6 +322,8 @@ impl ServiceId {
                 max_nodes: 40,
                 ..base
             },
+            // The successor gets the paused motion at once.
+            Self::TrajgenHandover => Qos { history: 1, ..base },
             // A process started late gets the latched state at once.
             Self::HostState => Qos {
                 history: 1,

@@ -20,7 +20,8 @@ use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
     CellConfigV3, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
     LatencyHistogramV1, MotionCommandV1, MotionControlV1, ProcState, ProcessName, ProcessStatusV2,
-    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, estop_seen, str_of,
+    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, TrajgenHandoverV1,
+    estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -212,6 +213,10 @@ pub(crate) struct Cell {
     pub(crate) setpoint_sub: Sub<SetpointV1>,
     pub(crate) servo_sub: Sub<ServoStateV2>,
     pub(crate) image_sub: Sub<FieldbusImageV1>,
+    pub(crate) handover_sub: Sub<TrajgenHandoverV1>,
+    /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
+    /// its history, die with it).
+    handover_pub: Pub<TrajgenHandoverV1>,
     status_subs: Vec<Sub<ProcessStatusV2>>,
     latency_subs: Vec<Sub<LatencyHistogramV1>>,
     exec_subs: Vec<Sub<LatencyHistogramV1>>,
@@ -237,6 +242,8 @@ impl Cell {
         let setpoint_sub = Sub::new(&node, i, ServiceId::Setpoint, 1024).map_err(f)?;
         let servo_sub = Sub::new(&node, i, ServiceId::ServoState, 1024).map_err(f)?;
         let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
+        let handover_sub = Sub::new(&node, i, ServiceId::TrajgenHandover, 1).map_err(f)?;
+        let handover_pub = Pub::new(&node, i, ServiceId::TrajgenHandover).map_err(f)?;
         let mut status_subs = Vec::new();
         let mut latency_subs = Vec::new();
         let mut exec_subs = Vec::new();
@@ -300,6 +307,8 @@ impl Cell {
             setpoint_sub,
             servo_sub,
             image_sub,
+            handover_sub,
+            handover_pub,
             status_subs,
             latency_subs,
             exec_subs,
@@ -504,6 +513,7 @@ impl Cell {
         }
         self.config_pub.update_connections();
         self.host_pub.update_connections();
+        self.handover_pub.update_connections();
         self.take_events();
         while let Some(e) = self.estop_sub.next() {
             if e.kind == EstopKind::Trigger as u32 {
@@ -623,6 +633,11 @@ impl Cell {
         });
         self.children = children;
         problem
+    }
+
+    /// Offers `h` to a new trajgen (history 1); `valid` 0 withdraws the offer.
+    pub(crate) fn offer_handover(&mut self, h: &TrajgenHandoverV1) {
+        self.handover_pub.send(h);
     }
 
     /// Marks process `k` as being replaced (or not): consumers do not count its gap.

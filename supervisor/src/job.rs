@@ -164,6 +164,12 @@ impl Job {
         }
     }
 
+    /// A new trajgen goes on with the program after the command `seq` (a swap): the commands
+    /// after it are sent again.
+    pub(crate) fn rewind_to(&mut self, seq: u64) {
+        self.sent = (seq as usize).min(self.commands.len());
+    }
+
     /// The predicted duration (s).
     pub(crate) fn predicted(&self) -> f64 {
         self.predicted

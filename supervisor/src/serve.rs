@@ -555,6 +555,26 @@ impl Loop<'_> {
             ));
         };
         let motion = matches!(process, "trajgen" | "servo" | "machine");
+        if process == "trajgen"
+            && let Some(r) = &mut self.running
+        {
+            if r.job.last.is_some_and(|sp| sp.path_speed == 0.0) {
+                return Reply::Refused(
+                    "the program is paused: `supervisor resume` first (a swap pauses and resumes it itself)"
+                        .into(),
+                );
+            }
+            return match crate::swap::trajgen_during_program(
+                self.cell,
+                self.cfg,
+                k,
+                if swap { command } else { None },
+                &mut r.job,
+            ) {
+                Ok(text) => Reply::Done(text),
+                Err(e) => Reply::Failed(e),
+            };
+        }
         if motion && let Some(r) = &self.running {
             return Reply::Refused(format!(
                 "{process} can be replaced only while no program runs ({} is running; \

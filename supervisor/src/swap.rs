@@ -4,9 +4,14 @@
 //!   break**. The new one starts beside the old one (the services allow two publishers);
 //!   once it is cyclic, the old one is stopped, so its outputs (the fieldbus image) never
 //!   miss more than a cycle or so.
-//! - servo, the drives' process (machine) and trajgen: only while no program runs, **with the
-//!   brakes on**: the drives are disabled first, the process is replaced, and the caller
-//!   re-enables the drives bumplessly (holding where the axes stand).
+//! - trajgen **during a program**: [`trajgen_during_program`]: pause (the axes come to rest
+//!   on the path within `t_acc`), the old trajgen's handover record (the segment and where on
+//!   it), the new trajgen goes on from that record, the program's commands after the
+//!   segment's are sent again, resume. No e-stop, the drives stay enabled; the motion time
+//!   grows by the pause and the swap.
+//! - servo, the drives' process (machine), and trajgen with no program: **with the brakes
+//!   on**: the drives are disabled first, the process is replaced, and the caller re-enables
+//!   the drives bumplessly (holding where the axes stand).
 //!
 //! Meanwhile the host state announces the handover (`HostStateV1::handover`), so the other
 //! processes do not count the gap as pending-sequence overruns, and the supervisor does not
@@ -14,6 +19,7 @@
 
 use crate::cell::{Cell, Incident};
 use crate::config::Config;
+use crate::job::Job;
 use crate::launch::find_program;
 use crate::run::TICK;
 use shm_schema::Power;
@@ -73,6 +79,82 @@ pub(crate) fn replace(
         "{name} {what} in {:.0} ms (pid {} → {new}){gap}",
         start.elapsed().as_secs_f64() * 1e3,
         old.map_or("-".to_string(), |p| p.to_string())
+    ))
+}
+
+/// Swaps trajgen (process `k`) while `job` runs; see the module documentation.
+pub(crate) fn trajgen_during_program(
+    cell: &mut Cell,
+    cfg: &Config,
+    k: usize,
+    command: Option<Vec<String>>,
+    job: &mut Job,
+) -> Result<String, String> {
+    if let Some(c) = &command {
+        let first = c.first().ok_or("--command is empty")?;
+        find_program(first).map_err(|e| format!("--command: {e}"))?;
+    }
+    cell.set_command(k, command);
+    let start = Instant::now();
+    let limit = Duration::from_secs_f64(cfg.motion.t_acc + 2.0);
+    let mut gaps = GapMeter::default();
+    let seq = cell.motion_control(shm_schema::ControlKind::Pause);
+    wait_until(cell, cfg, k, limit, &mut gaps, |c| {
+        c.last_sp
+            .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0)
+    })
+    .map_err(|e| format!("trajgen did not pause: {e}"))?;
+    let program_id = job.program_id;
+    let record = std::cell::Cell::new(None);
+    wait_until(cell, cfg, k, limit, &mut gaps, |c| {
+        if let Some(h) = c.handover_sub.latest() {
+            record.set(Some(h));
+        }
+        record
+            .get()
+            .is_some_and(|h| h.valid == 1 && h.program_id == program_id)
+    })
+    .map_err(|e| format!("trajgen published no handover record: {e}"))?;
+    let h = record.get().ok_or("no handover record")?;
+    cell.set_handover(k, true);
+    let old = cell.children.get(k).map(|p| p.pid());
+    if let Some(problem) = cell.stop_process(k) {
+        tracing::warn!("the old trajgen {problem}");
+    }
+    let started = runtime::time::now_ns();
+    cell.offer_handover(&h);
+    let new = cell.start_process(k, cfg);
+    let resumed = new.and_then(|_| {
+        let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
+        wait_until(cell, cfg, k, startup, &mut gaps, |c| {
+            c.cyclic(k)
+                && c.last_sp.is_some_and(|sp| {
+                    sp.stamp_ns > started && sp.program_id == program_id && sp.path_speed == 0.0
+                })
+        })
+        .map_err(|e| format!("the new trajgen did not take the motion over: {e}"))
+    });
+    cell.set_handover(k, false);
+    // Withdrawn: a trajgen started later (a restart) must not take an old motion over.
+    cell.offer_handover(&shm_schema::TrajgenHandoverV1::default());
+    let new = match resumed {
+        Ok(()) => cell.children.get(k).map_or(0, |p| p.pid()),
+        Err(e) => return Err(e),
+    };
+    job.rewind_to(h.command_seq);
+    let seq = cell.motion_control(shm_schema::ControlKind::Resume);
+    wait_until(cell, cfg, k, limit, &mut gaps, |c| {
+        c.last_sp.is_some_and(|sp| sp.control_seq >= seq)
+    })
+    .map_err(|e| format!("the new trajgen did not resume: {e}"))?;
+    cell.restarts[k] += 1;
+    tracing::info!("trajgen swapped during {} (pid {old:?} → {new})", job.name);
+    Ok(format!(
+        "trajgen swapped during {} in {:.0} ms (pid {} → {new}): paused at line {} on the path, resumed from there",
+        job.name,
+        start.elapsed().as_secs_f64() * 1e3,
+        old.map_or("-".to_string(), |p| p.to_string()),
+        h.line
     ))
 }
 

@@ -22,6 +22,7 @@ use motion_program::segment_time;
 use shm_schema::motion::trajgen_fault as fault;
 use shm_schema::{
     CommandKind, ControlKind, MAX_AXES, MotionCommandV1, MotionControlV1, MotionState, SetpointV1,
+    TrajgenHandoverV1,
 };
 
 /// Places in the command queue.
@@ -131,6 +132,8 @@ pub struct Generator {
     /// When `lost_s` was last brought up to date (ns).
     path_ns: u64,
     control_seq: u64,
+    /// Sequence number of the command whose segment runs.
+    exec_seq: u64,
 }
 
 impl Generator {
@@ -164,7 +167,72 @@ impl Generator {
             lost_s: 0.0,
             path_ns: 0,
             control_seq: 0,
+            exec_seq: 0,
         }
+    }
+
+    /// The paused motion for a successor (`None` unless paused on a segment).
+    ///
+    /// # Real-time
+    /// Arithmetic and copies only.
+    pub fn handover(&self, now_ns: u64) -> Option<TrajgenHandoverV1> {
+        let seg = self.seg.as_ref().filter(|_| self.paused())?;
+        let mut h = TrajgenHandoverV1 {
+            stamp_ns: now_ns,
+            command_seq: self.exec_seq,
+            motion_start_ns: self.motion_start_ns,
+            program_id: self.program_id,
+            line: self.line,
+            valid: 1,
+            starved: self.starved,
+            local_s: self.path_s_at_path_ns() - self.origin_s,
+            lost_s: self.lost_s,
+            theoretical_s: self.theoretical_s,
+            t1_s: seg.t1,
+            t_acc_s: seg.t_acc,
+            ..TrajgenHandoverV1::default()
+        };
+        h.a.copy_from_slice(seg.a.as_slice());
+        h.b.copy_from_slice(seg.b.as_slice());
+        h.c.copy_from_slice(seg.c.as_slice());
+        Some(h)
+    }
+
+    /// A generator that goes on with a predecessor's paused motion `h` at `now_ns`: paused on
+    /// the same point of the same segment, expecting the commands after `h.command_seq`.
+    pub fn resume_from(p: Params, h: &TrajgenHandoverV1, now_ns: u64) -> Self {
+        let mut a = Axes::zeros();
+        let mut b = Axes::zeros();
+        let mut c = Axes::zeros();
+        for i in 0..p.axes {
+            a[i] = h.a[i];
+            b[i] = h.b[i];
+            c[i] = h.c[i];
+        }
+        let seg = Segment {
+            a,
+            b,
+            c,
+            t1: h.t1_s,
+            t_acc: h.t_acc_s,
+        };
+        let mut g = Self::new(p, &[]);
+        g.rest = seg.eval(h.local_s).0;
+        g.state = MotionState::Moving;
+        g.motion_start_ns = h.motion_start_ns;
+        g.program_id = h.program_id;
+        g.line = h.line;
+        g.theoretical_s = h.theoretical_s;
+        g.starved = h.starved;
+        g.commands_taken = h.command_seq;
+        g.exec_seq = h.command_seq;
+        g.lost_s = h.lost_s;
+        g.path_ns = now_ns;
+        g.speed = 0.0;
+        g.target_speed = 0.0;
+        g.origin_s = g.path_s_at_path_ns() - h.local_s;
+        g.seg = Some(seg);
+        g
     }
 
     /// Takes a pause, resume or abort at `now_ns` (the ramp starts exactly then: call
@@ -190,6 +258,13 @@ impl Generator {
             }
             _ => {}
         }
+    }
+
+    /// Where the reference rests when no segment runs (or where a resumed one was paused).
+    pub fn rest_position(&self) -> [f64; MAX_AXES] {
+        let mut p = [0.0; MAX_AXES];
+        p.copy_from_slice(self.rest.as_slice());
+        p
     }
 
     /// True while paused at rest on the path (speed 0, a motion running).
@@ -326,6 +401,7 @@ impl Generator {
         let c = self.target_of(cmd);
         let t1 = self.time_between(&self.rest, &c, cmd.user_time_s);
         let origin = self.path_time(now_ns) + self.p.t_acc;
+        self.exec_seq = cmd.seq;
         let rest = self.rest;
         self.begin(
             Segment {
@@ -544,6 +620,7 @@ impl Generator {
         match next.map(|c| (c, CommandKind::from_u32(c.kind))) {
             Some((cmd, Some(CommandKind::Move))) => {
                 self.queue.pop();
+                self.exec_seq = cmd.seq;
                 let c = self.target_of(&cmd);
                 let t1 = self.time_between(&seg.c, &c, cmd.user_time_s);
                 self.begin(
@@ -560,6 +637,7 @@ impl Generator {
             }
             Some((cmd, Some(CommandKind::Stop))) => {
                 self.queue.pop();
+                self.exec_seq = cmd.seq;
                 self.begin(stop, origin, cmd.line);
             }
             Some((cmd, _)) if seg.stops() => {

@@ -6,7 +6,9 @@ use shm_schema::EventV1;
 use shm_schema::drive::servo_status;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
-use shm_schema::{MotionCommandV1, MotionControlV1, ServiceId, ServoStateV2, SetpointV1};
+use shm_schema::{
+    MotionCommandV1, MotionControlV1, ServiceId, ServoStateV2, SetpointV1, TrajgenHandoverV1,
+};
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
 
@@ -26,6 +28,11 @@ struct Trajgen {
     reported_fault: u32,
     /// Servo's newest state.
     last_servo: Option<ServoStateV2>,
+    /// The paused motion, for a successor (and from a predecessor, at start).
+    handover_pub: Pub<TrajgenHandoverV1>,
+    handover_sub: Sub<TrajgenHandoverV1>,
+    /// A valid handover record is the newest published.
+    handing_over: bool,
 }
 
 impl Trajgen {
@@ -41,6 +48,9 @@ impl Trajgen {
             ready: Notifier::new(&ctx.node, i, ServiceId::SetpointReady)?,
             reported_fault: trajgen_fault::NONE,
             last_servo: None,
+            handover_pub: Pub::new(&ctx.node, i, ServiceId::TrajgenHandover)?,
+            handover_sub: Sub::new(&ctx.node, i, ServiceId::TrajgenHandover, 1)?,
+            handing_over: false,
         })
     }
 }
@@ -71,9 +81,16 @@ impl Task for Trajgen {
                 g
             }
             (Some(g), _) => g,
-            (None, Some(s)) => self
-                .generator
-                .insert(Generator::new(self.params, &s.cmd_position)),
+            (None, Some(s)) => {
+                let g = match self.handover_sub.latest() {
+                    // A predecessor paused a motion where servo holds: go on with it.
+                    Some(h) if takes_over(&h, &s, now, self.params) => {
+                        Generator::resume_from(self.params, &h, now)
+                    }
+                    _ => Generator::new(self.params, &s.cmd_position),
+                };
+                self.generator.insert(g)
+            }
             // No servo yet: nothing to start from, publish nothing.
             (None, None) => return,
         };
@@ -95,6 +112,17 @@ impl Task for Trajgen {
         }
         let sp = generator.step(now);
         self.setpoints.send(&sp);
+        match generator.handover(now) {
+            Some(h) => {
+                self.handover_pub.send(&h);
+                self.handing_over = true;
+            }
+            None if self.handing_over => {
+                self.handover_pub.send(&TrajgenHandoverV1::default());
+                self.handing_over = false;
+            }
+            None => {}
+        }
         if sp.fault != self.reported_fault {
             self.reported_fault = sp.fault;
             // Leaving (a stop request) drops the program too, but is no fault to report.
@@ -118,6 +146,17 @@ impl Task for Trajgen {
             cx.clock.request_wake_at(t);
         }
     }
+}
+
+/// True when `h` is a predecessor's paused motion to go on with: valid, recent, and resting
+/// where servo holds (so its first setpoint is no jump).
+fn takes_over(h: &TrajgenHandoverV1, s: &ServoStateV2, now: u64, params: Params) -> bool {
+    const RECENT_NS: u64 = 30_000_000_000;
+    if h.valid != 1 || now.saturating_sub(h.stamp_ns) > RECENT_NS {
+        return false;
+    }
+    let p = Generator::resume_from(params, h, now).rest_position();
+    (0..params.axes).all(|i| (p[i] - s.cmd_position[i]).abs() < 1e-3)
 }
 
 fn main() -> ExitCode {

@@ -485,3 +485,73 @@ fn an_abort_comes_to_rest_on_the_path_and_drops_the_program() {
         "starts where it rested",
     );
 }
+
+#[test]
+fn a_successor_goes_on_from_a_paused_motion_along_the_same_path() {
+    let plan = offline_triangle();
+    let cmds = commands(TRIANGLE);
+    let mut g = loaded(TRIANGLE);
+    let mut t = T0;
+    // Pause inside the second segment's blend zone.
+    while t < T0 + 7_000_000_000 {
+        g.step(t);
+        t = next_wake(&g, t);
+    }
+    g.control(&control(1, shm_schema::ControlKind::Pause), t);
+    while !g.paused() {
+        g.step(t);
+        t = next_wake(&g, t);
+    }
+    let last_old = g.step(t);
+    let h = g.handover(t).expect("paused on a segment");
+    assert_eq!(h.valid, 1);
+    // The old process goes; a new one starts 300 ms later from the record alone.
+    t += 300_000_000;
+    let mut n = Generator::resume_from(params(), &h, t);
+    let first = n.step(t);
+    assert_close(
+        &first.position[..3],
+        &last_old.position[..3],
+        1e-9,
+        "same point",
+    );
+    assert!(
+        first.velocity[..3].iter().all(|v| *v == 0.0),
+        "still paused"
+    );
+    assert_eq!(first.program_id, last_old.program_id);
+    for c in cmds.iter().filter(|c| c.seq > h.command_seq) {
+        n.push_command(c);
+    }
+    assert_eq!(
+        n.step(t).fault,
+        trajgen_fault::NONE,
+        "the commands after it are taken"
+    );
+    n.control(&control(2, shm_schema::ControlKind::Resume), t);
+    let mut trace = Vec::new();
+    loop {
+        let sp = n.step(t);
+        trace.push(sp);
+        if sp.state == MotionState::Done as u32 {
+            break;
+        }
+        t = next_wake(&n, t);
+        assert!(t < T0 + 60_000_000_000, "the program ends");
+    }
+    for sp in trace.iter().step_by(20) {
+        let d = off_path(&plan, &sp.position[..3]);
+        assert!(d < 0.02, "{:?} is {d} mm off the path", &sp.position[..3]);
+    }
+    let done = trace.last().expect("done");
+    assert_close(&done.position[..3], &START, 1e-9, "ends on the last target");
+    let p = parse(TRIANGLE, 3).expect("parses");
+    let theoretical = theoretical_time(&p, &START, &params().vmax[..3], params().t_acc);
+    assert!(
+        (done.theoretical_s - theoretical).abs() < 1e-9,
+        "the same segments"
+    );
+    // The motion time grew by the pause and the 300 ms gap, no more.
+    let extra = done.motion_time_s - done.theoretical_s;
+    assert!(extra > 0.3 && extra < 0.3 + 2.0 * params().t_acc, "{extra}");
+}

@@ -353,7 +353,7 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
 }
 
 #[test]
-fn iobridge_swaps_during_motion_and_trajgen_at_rest_without_an_estop() {
+fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     let test = "ops-swap";
     let up = Up::start(test, &cell(test));
     let triangle = integration_tests::examples().join("triangle.prog");
@@ -368,8 +368,18 @@ fn iobridge_swaps_during_motion_and_trajgen_at_rest_without_an_estop() {
     let out = up.ok(&["swap", "iobridge"]);
     println!("{}", out.trim());
     assert!(out.contains("largest gap"), "{out}");
-    // trajgen carries the motion: not while a program runs (yet); refused, nothing changes.
-    let err = up.refused(&["swap", "trajgen"]);
+    // trajgen carries the motion: swapped during it, the program goes on along the path.
+    let out = up.ok(&["swap", "trajgen"]);
+    println!("{}", out.trim());
+    assert!(out.contains("trajgen swapped during"), "{out}");
+    let swap_ms: f64 = out
+        .split(" in ")
+        .nth(1)
+        .and_then(|r| r.split(" ms").next())
+        .and_then(|v| v.parse().ok())
+        .expect("the swap's duration");
+    // servo cannot be swapped under a moving arm.
+    let err = up.refused(&["swap", "servo"]);
     assert!(err.contains("only while no program runs"), "{err}");
     let start = Instant::now();
     while run.try_wait().expect("wait").is_none() {
@@ -382,6 +392,18 @@ fn iobridge_swaps_during_motion_and_trajgen_at_rest_without_an_estop() {
         "{}\nlog:\n{}",
         String::from_utf8_lossy(&out.stderr),
         up.log()
+    );
+    // No e-stop, the following error within its limit (or servo would have cut power), and
+    // the motion time grew by about what the swap took (the pause's ramps included).
+    let r: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).expect("json");
+    let extra_ms = r["difference_s"].as_f64().expect("difference") * 1e3;
+    println!(
+        "motion time grew by {extra_ms:.0} ms; the trajgen swap took {swap_ms:.0} ms; max following error {}",
+        r["max_following_error"]
+    );
+    assert!(
+        extra_ms > 0.0 && extra_ms < swap_ms + 525.0,
+        "{extra_ms} vs {swap_ms}"
     );
     // At rest: trajgen swapped for the same build, with a command of its own.
     let trajgen = integration_tests::bin("trajgen");
