@@ -413,6 +413,11 @@ impl Job {
             max_following_error: max_fe[..n].to_vec(),
             setpoints: self.rows.len(),
             lost_setpoints: lost_setpoints(&self.rows),
+            lost_servo_states: self
+                .servo_log
+                .windows(2)
+                .map(|w| w[1].seq.saturating_sub(w[0].seq + 1))
+                .sum(),
             starved: done.starved,
             iobridge_delay_us: (images.0 > 0).then(|| {
                 (

@@ -137,6 +137,10 @@ pub struct Report {
     pub setpoints: usize,
     /// Setpoints missing from the record (sequence gaps).
     pub lost_setpoints: u64,
+    /// servo states the supervisor did not receive (sequence gaps: it was stalled, or its
+    /// buffer overflowed). The following-error figures miss them; the verdict does not, since
+    /// servo judges every cycle itself and latches a following error over its limit.
+    pub lost_servo_states: u64,
     /// Times trajgen's queue ran empty.
     pub starved: u32,
     /// iobridge: mean and max age of the position in the fieldbus image (µs).
@@ -199,6 +203,7 @@ impl Report {
             "periods_us": periods,
             "setpoints": self.setpoints,
             "lost_setpoints": self.lost_setpoints,
+            "lost_servo_states": self.lost_servo_states,
             "starved": self.starved,
             "iobridge_delay_us": self.iobridge_delay_us.map(|(mean, max)| json!({"mean": mean, "max": max})),
             "processes": procs,
@@ -264,6 +269,12 @@ impl Report {
             "  trace              {} setpoints, {} lost\n",
             self.setpoints, self.lost_setpoints
         );
+        if self.lost_servo_states > 0 {
+            s += &format!(
+                "  servo states       {} not received: the following-error figures miss them (servo judged them itself)\n",
+                self.lost_servo_states
+            );
+        }
         s += "  process    pid      policy       prio  period   cycles   overruns  wake-up µs: p50    p99  p99.9      max  exec µs p99     max   cpu\n";
         for p in &self.processes {
             let m = p.wakeup_latency.unwrap_or_default();

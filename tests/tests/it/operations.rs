@@ -526,3 +526,46 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
     assert!(!r["iobridge_delay_us"].is_null(), "no fieldbus image: {r}");
     assert_clean(&inst);
 }
+
+/// Stops process `program` of `inst` for `ms` milliseconds (SIGSTOP, then SIGCONT).
+fn stall(program: &str, inst: &str, ms: u64) {
+    let pid = nix::unistd::Pid::from_raw(pid_of(program, inst));
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).expect("stop");
+    std::thread::sleep(Duration::from_millis(ms));
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).expect("cont");
+}
+
+#[test]
+fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit() {
+    // The embedded cell's detectors, unwidened: iobridge at 4 ms forgives 10 % of its
+    // rate, 25 missed periods, leaking one every 50 ms.
+    let test = "ops-iostall";
+    let up = Up::start(test, &scratch(test, "cell.toml", &default_cell()));
+    let pending = |s: &Value| {
+        s["processes"]["iobridge"]["health"]["pending_sequence_overrun"]["total"]
+            .as_u64()
+            .unwrap_or(0)
+    };
+    let before = pending(&up.status());
+    // 20 ms: 5 periods missed, below the limit: counted, no trip.
+    stall("iobridge", &up.inst, 20);
+    let s = up.until("the gap counted", |s| pending(s) > before);
+    std::thread::sleep(Duration::from_millis(500));
+    let s2 = up.status();
+    assert!(!latched(&s2), "a 20 ms gap tripped: {s2}\nbefore: {s}");
+    // 300 ms: 75 periods, three times the limit: a host e-stop naming the detector.
+    stall("iobridge", &up.inst, 300);
+    let s = up.until("the trip", latched);
+    let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+    assert!(
+        reason.contains("pending_sequence_overrun") && reason.contains("iobridge"),
+        "{s}"
+    );
+    assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
+    up.until("at rest, drives off", |s| {
+        s["supervisor"]["arm"]["enabled"] == false
+    });
+    up.ok(&["reset"]);
+    up.ok(&["start"]);
+    up.down();
+}
