@@ -56,7 +56,7 @@ pub fn with_stall_room(src: &str) -> String {
         )
         .replace("setpoint_timeout = 0.05", "setpoint_timeout = 0.2")
         .replace(
-            "pending_sequence_overrun_percent_limit = 10.0",
+            "pending_sequence_overrun_percent_limit = 30.0",
             "pending_sequence_overrun_percent_limit = 100.0",
         );
     assert!(

@@ -282,9 +282,10 @@ impl Generator {
         }
     }
 
-    /// Drops the program at once (an e-stop): no segment, an empty queue, the fault
-    /// [`fault::ESTOP`], the reference at rest on `pos` (where servo brings the axes). The
-    /// fault clears when a new client session starts, as any other.
+    /// Drops the program at once (an e-stop): no segment, an empty queue, the reference at
+    /// rest on `pos` (where servo brings the axes), and, if a motion was running, the fault
+    /// [`fault::ESTOP`] (none when idle: no program was dropped). The fault clears when a new
+    /// client session starts, as any other.
     ///
     /// # Real-time
     /// Arithmetic and copies only.
@@ -297,7 +298,7 @@ impl Generator {
         for (i, v) in pos.iter().take(self.p.axes).enumerate() {
             self.rest[i] = *v;
         }
-        if self.state == MotionState::Moving || self.fault == fault::NONE {
+        if self.state == MotionState::Moving {
             self.fault = fault::ESTOP;
             self.fault_line = self.line;
             self.state = MotionState::Fault;

@@ -537,10 +537,12 @@ fn stall(program: &str, inst: &str, ms: u64) {
 
 #[test]
 fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit() {
-    // The embedded cell's detectors, unwidened: iobridge at 4 ms forgives 10 % of its
-    // rate, 25 missed periods, leaking one every 50 ms.
+    // The embedded cell's detectors, unwidened: iobridge at 4 ms forgives 30 % of its
+    // rate, 75 missed periods, leaking one every 50 ms. The supervisor's heartbeat watch is
+    // made slower than the detector, so the detector is what catches the stall.
     let test = "ops-iostall";
-    let up = Up::start(test, &scratch(test, "cell.toml", &default_cell()));
+    let src = default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1);
+    let up = Up::start(test, &scratch(test, "cell.toml", &src));
     let pending = |s: &Value| {
         s["processes"]["iobridge"]["health"]["pending_sequence_overrun"]["total"]
             .as_u64()
@@ -553,8 +555,8 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
     std::thread::sleep(Duration::from_millis(500));
     let s2 = up.status();
     assert!(!latched(&s2), "a 20 ms gap tripped: {s2}\nbefore: {s}");
-    // 300 ms: 75 periods, three times the limit: a host e-stop naming the detector.
-    stall("iobridge", &up.inst, 300);
+    // 1 s: 250 periods, three times the limit: a host e-stop naming the detector.
+    stall("iobridge", &up.inst, 1000);
     let s = up.until("the trip", latched);
     let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
     assert!(
