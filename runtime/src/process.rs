@@ -78,6 +78,9 @@ pub struct Cycle<'a> {
     pub events: &'a mut EventQueue,
     /// The e-stop, as read at the start of this cycle.
     pub estop: EstopView,
+    /// The supervisor is replacing a process of the cell (`HostStateV1::handover`): a
+    /// process that starts now may be the successor (trajgen waits for its handover record).
+    pub handover: bool,
     raise: Option<(EstopOrigin, u32, [u8; shm_schema::estop::REASON_LEN])>,
     pending: u64,
     safe: bool,
@@ -324,6 +327,7 @@ fn run_inner<T: Task>(
             clock: &mut clock,
             events: &mut queue,
             estop: *estop.view(),
+            handover: estop.handover(),
             raise: None,
             pending: 0,
             safe: true,

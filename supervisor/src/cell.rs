@@ -345,7 +345,7 @@ impl Cell {
         while let Some(e) = self.events_sub.next() {
             let line = events::line(&e, &self.axes, self.t0_ns);
             match self.mode {
-                Mode::Run => eprintln!("{line}"),
+                Mode::Run => crate::out::line(&line),
                 Mode::Up => match e.severity {
                     s if s >= shm_schema::event::Severity::Error as u32 => {
                         tracing::error!("{line}")
@@ -504,6 +504,11 @@ impl Cell {
                 pid: p.pid(),
                 status: text.clone(),
             });
+            if self.host.handover & (1 << k) != 0 && self.children.get(k).is_some() {
+                // One of two during a swap (make before break): the other one still runs,
+                // nothing is lost; the swap reports it.
+                continue;
+            }
             self.lost(
                 k,
                 cfg,
@@ -606,33 +611,39 @@ impl Cell {
         while self.image_sub.next().is_some() {}
     }
 
-    /// Stops every process (the heartbeat goes on meanwhile, so none of them takes the
-    /// supervisor for lost); returns those that did not stop cleanly.
-    pub(crate) fn stop_children(&mut self) -> Vec<(String, String)> {
+    /// Runs `f` on the children with a tick that keeps the heartbeat going (every 10 ms), so
+    /// that no process takes the supervisor for lost while it waits for one to stop.
+    fn beating<R>(&mut self, f: impl FnOnce(&mut Children, &mut dyn FnMut()) -> R) -> R {
         let mut children = std::mem::take(&mut self.children);
         let mut last = Instant::now();
-        let problems = children.stop_all(&mut || {
+        let r = f(&mut children, &mut || {
             if last.elapsed() >= TICK {
                 last = Instant::now();
                 self.beat();
             }
         });
         self.children = children;
-        problems
+        r
     }
 
-    /// Stops process `k` alone, beating meanwhile.
+    /// Stops every process; returns those that did not stop cleanly.
+    pub(crate) fn stop_children(&mut self) -> Vec<(String, String)> {
+        self.beating(|c, tick| c.stop_all(tick))
+    }
+
+    /// Stops the process with pid `pid` alone (the new one of a failed swap).
+    pub(crate) fn stop_pid(&mut self, pid: u32) -> Option<String> {
+        self.beating(|c, tick| c.stop_pid(pid, tick))
+    }
+
+    /// The command process `k` runs now (`None`: the configured one).
+    pub(crate) fn command_of(&self, k: usize) -> Option<Vec<String>> {
+        self.commands[k].clone()
+    }
+
+    /// Stops process `k` alone.
     pub(crate) fn stop_process(&mut self, k: usize) -> Option<String> {
-        let mut children = std::mem::take(&mut self.children);
-        let mut last = Instant::now();
-        let problem = children.stop(k, &mut || {
-            if last.elapsed() >= TICK {
-                last = Instant::now();
-                self.beat();
-            }
-        });
-        self.children = children;
-        problem
+        self.beating(|c, tick| c.stop(k, tick))
     }
 
     /// Offers `h` to a new trajgen (history 1); `valid` 0 withdraws the offer.

@@ -14,7 +14,8 @@
 //!   many bytes of a postcard-encoded [`Request`] or [`Reply`] (at most [`MAX_FRAME`]).
 //!
 //! The server never blocks: connections are non-blocking, read and written a piece per
-//! supervisor tick, and a client that does not read its answer is dropped, never waited for.
+//! supervisor tick; a client that does not read its answer only keeps its own connection open
+//! (until it hangs up or the supervisor ends), it is never waited for.
 
 use serde::{Deserialize, Serialize};
 use shm_schema::InstanceName;
@@ -143,18 +144,29 @@ pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CtlError> {
             "instance {instance}: the supervisor's control channel broke: {e}"
         ))
     };
-    s.write_all(&frame(&bytes)).map_err(broke)?;
+    // A refusal (another user) may be written and the connection closed before the request
+    // is even read: read the answer whatever the write did.
+    let wrote = s.write_all(&frame(&bytes));
+    match read_frame(&mut s) {
+        Ok(body) => {
+            postcard::from_bytes(&body).map_err(|e| CtlError::Io(format!("a garbled answer: {e}")))
+        }
+        Err(e) => Err(broke(wrote.err().unwrap_or(e))),
+    }
+}
+
+fn read_frame(s: &mut UnixStream) -> std::io::Result<Vec<u8>> {
     let mut len = [0u8; 4];
-    s.read_exact(&mut len).map_err(broke)?;
+    s.read_exact(&mut len)?;
     let len = u32::from_le_bytes(len) as usize;
     if len > MAX_FRAME {
-        return Err(CtlError::Io(format!(
+        return Err(std::io::Error::other(format!(
             "an answer of {len} bytes is too long"
         )));
     }
     let mut body = vec![0u8; len];
-    s.read_exact(&mut body).map_err(broke)?;
-    postcard::from_bytes(&body).map_err(|e| CtlError::Io(format!("a garbled answer: {e}")))
+    s.read_exact(&mut body)?;
+    Ok(body)
 }
 
 /// True when a supervisor serves `instance`.
@@ -172,6 +184,9 @@ struct Conn {
     written: usize,
     /// A request was taken from it (so no second one is read).
     asked: bool,
+    /// The answer to whatever it asks (another user: refused). Given once its request is
+    /// read, so the connection closes with nothing unread and the client reads the answer.
+    refusal: Option<Reply>,
 }
 
 /// The serving side: the instance's lock and its connections.
@@ -226,6 +241,7 @@ impl Server {
                 output: Vec::new(),
                 written: 0,
                 asked: false,
+                refusal: None,
             };
             let peer = nix::sys::socket::getsockopt(
                 &conn.stream,
@@ -239,16 +255,14 @@ impl Server {
                         c.uid(),
                         c.pid()
                     );
-                    conn.asked = true;
-                    conn.set_reply(&Reply::Refused(format!(
+                    conn.refusal = Some(Reply::Refused(format!(
                         "refused: this cell belongs to uid {}; uid {} may not control it",
                         self.uid,
                         c.uid()
                     )));
                 }
                 Err(e) => {
-                    conn.asked = true;
-                    conn.set_reply(&Reply::Refused(format!(
+                    conn.refusal = Some(Reply::Refused(format!(
                         "refused: cannot read the peer's credentials: {e}"
                     )));
                 }
@@ -259,6 +273,11 @@ impl Server {
         for c in &mut self.conns {
             if !c.asked {
                 match c.read_request() {
+                    Ok(Some(_)) if c.refusal.is_some() => {
+                        c.asked = true;
+                        let r = c.refusal.take().expect("checked");
+                        c.set_reply(&r);
+                    }
                     Ok(Some(r)) => {
                         c.asked = true;
                         out.push((c.id, r));

@@ -170,6 +170,30 @@ impl Job {
         self.sent = (seq as usize).min(self.commands.len());
     }
 
+    /// Records what arrived without acting on it (while a swap holds the loop): the
+    /// program's setpoints and servo's states, so the trace and the following-error figures
+    /// cover the swap too.
+    pub(crate) fn record(&mut self, cell: &mut Cell) {
+        while let Some(sp) = cell.setpoint_sub.next() {
+            cell.last_sp = Some(sp);
+            if sp.program_id == self.program_id && sp.state == MotionState::Moving as u32 {
+                self.last = Some(sp);
+                self.rows.push(sp);
+            }
+        }
+        while let Some(s) = cell.servo_sub.next() {
+            cell.last_servo = Some(s);
+            if !self.rows.is_empty() {
+                self.servo_log.push(s);
+            }
+        }
+    }
+
+    /// True once the motion has ended (the axes settle): too late to pause.
+    pub(crate) fn motion_done(&self) -> bool {
+        self.done.is_some()
+    }
+
     /// The predicted duration (s).
     pub(crate) fn predicted(&self) -> f64 {
         self.predicted
@@ -434,11 +458,12 @@ impl Job {
 }
 
 /// One row per setpoint: its command, and the measured position at the servo cycle that used
-/// it (the first servo cycle whose setpoint is this one or a later one).
+/// it (the first servo cycle at or after its time: servo takes the newest setpoint). By time,
+/// not by sequence number: a swapped trajgen numbers its setpoints from 1 again.
 fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV2]) -> Vec<TraceRow> {
     rows.iter()
         .map(|sp| {
-            let idx = servo.partition_point(|s| s.setpoint_seq < sp.seq);
+            let idx = servo.partition_point(|s| s.stamp_ns < sp.stamp_ns);
             let act = servo
                 .get(idx)
                 .or(servo.last())
@@ -500,15 +525,15 @@ impl Progress {
             sp.motion_time_s, self.total, sp.line, text
         );
         if self.tty {
-            eprint!("\r\x1b[2K{msg}");
+            crate::out::text(&format!("\r\x1b[2K{msg}"));
         } else {
-            eprintln!("{msg}");
+            crate::out::line(&msg);
         }
     }
 
     fn finish(&mut self) {
         if self.on && self.tty && self.last.is_some() {
-            eprintln!();
+            crate::out::line("");
         }
         self.on = false;
     }

@@ -156,6 +156,13 @@ impl Children {
         stop_one(&mut p, self.stop_timeout, tick)
     }
 
+    /// Stops the process with pid `pid` (one of two with the same index, during a swap).
+    pub fn stop_pid(&mut self, pid: u32, tick: &mut dyn FnMut()) -> Option<String> {
+        let k = self.procs.iter().position(|p| p.pid() == pid)?;
+        let mut p = self.procs.remove(k);
+        stop_one(&mut p, self.stop_timeout, tick)
+    }
+
     /// Kills the group of the process of table index `index` at once (a stalled process);
     /// its exit is then seen by [`Children::exited`].
     pub fn kill(&self, index: usize) {

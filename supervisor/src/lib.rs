@@ -9,6 +9,7 @@ pub mod events;
 pub mod job;
 pub mod latency_cmd;
 pub mod launch;
+pub mod out;
 pub mod report;
 pub mod run;
 pub mod serve;

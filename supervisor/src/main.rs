@@ -300,11 +300,17 @@ fn run_failed(e: &RunError, json: bool) -> ExitCode {
 /// Logging on stderr through `tracing`. For the commands that watch a cell (`up`, `run`,
 /// `tune`) the writer is non-blocking: a full pipe or a paused terminal loses lines, never
 /// stalls the supervisor. The guard flushes on exit.
-fn init_logging(watching: bool) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+fn init_logging(watching: bool) -> Vec<tracing_appender::non_blocking::WorkerGuard> {
     if !watching {
         runtime::process::init_logging();
-        return None;
+        return Vec::new();
     }
+    // The run's events and progress: non-blocking too.
+    let (lines, lines_guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+        .lossy(true)
+        .buffered_lines_limit(4096)
+        .finish(std::io::stderr());
+    supervisor::out::set(lines);
     let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
         .lossy(true)
         .buffered_lines_limit(4096)
@@ -318,7 +324,7 @@ fn init_logging(watching: bool) -> Option<tracing_appender::non_blocking::Worker
         .with_target(false)
         .try_init();
     runtime::ipc::quiet_iceoryx2_log();
-    Some(guard)
+    vec![guard, lines_guard]
 }
 
 /// The instance named on the command line, or exit 2.
@@ -401,6 +407,7 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
     let once = || -> Result<(serde_json::Value, String), (u8, String)> {
         let info = match ctl::call(&instance, &Request::Info) {
             Ok(Reply::Json(j)) => serde_json::from_str(&j).unwrap_or_default(),
+            Ok(Reply::Refused(m)) => return Err((2, m)),
             Ok(other) => return Err((1, format!("unexpected answer: {other:?}"))),
             Err(e) => return Err((2, e.to_string())),
         };

@@ -110,9 +110,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let stop_problems = cell.stop_children();
     let sense_to_command = cell.sense_to_command.take();
     drop(cell);
-    drop(server);
-    // A client (status, events, inject) may be finishing: give it a second to go.
+    // A client (status, events, inject) may be finishing: give it a second to go. The lock
+    // (the control socket) is let go only once the instance is removed.
     let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
+    drop(server);
     let mut report = match end {
         End::Program(r) => (*r)?,
         End::Interrupted => return Err(RunError::Interrupted),

@@ -104,6 +104,8 @@ pub(crate) fn serve(
     loop {
         l.wait();
         if signals::stop_requested() {
+            l.abandon("the supervisor was stopped by a signal");
+            l.server.drain(Duration::from_millis(200));
             return End::Interrupted;
         }
         let cfg = l.cfg;
@@ -118,6 +120,7 @@ pub(crate) fn serve(
         }
         l.pending_step();
         if l.down {
+            l.abandon("`supervisor down` stopped the cell");
             l.server.drain(Duration::from_millis(200));
             return End::Down;
         }
@@ -215,6 +218,26 @@ impl Loop<'_> {
             }
         }
         None
+    }
+
+    /// The cell goes down: whoever waits gets told, not dropped.
+    fn abandon(&mut self, why: &str) {
+        if let Some(r) = self.running.take() {
+            let e = self.with_events(
+                RunError::failed(format!("{why} before {} ended", r.job.name)),
+                r.events_from,
+            );
+            self.finish(&r, &Err(e));
+        }
+        if let Some((_, waiters)) = self.enabling.take() {
+            for c in waiters {
+                self.server.reply(c, &Reply::Failed(why.to_string()));
+            }
+        }
+        for p in std::mem::take(&mut self.pending) {
+            let (Pending::Reset { conn, .. } | Pending::Control { conn, .. }) = p;
+            self.server.reply(conn, &Reply::Failed(why.to_string()));
+        }
     }
 
     fn events_json(&self, from: usize) -> Vec<Value> {
@@ -399,8 +422,13 @@ impl Loop<'_> {
     }
 
     fn control(&mut self, conn: ConnId, kind: ControlKind) -> Option<Reply> {
-        if self.running.is_none() {
+        let Some(r) = &self.running else {
             return Some(Reply::Refused("no program is running".into()));
+        };
+        if r.job.motion_done() {
+            return Some(Reply::Refused(
+                "the program's motion has ended; the axes are settling".into(),
+            ));
         }
         let seq = self.cell.motion_control(kind);
         self.pending.push(Pending::Control {
@@ -554,6 +582,14 @@ impl Loop<'_> {
                 self.cell.names.join(", ")
             ));
         };
+        if let Some(c) = &command {
+            let Some(first) = c.first() else {
+                return Reply::Refused("--command is empty".into());
+            };
+            if let Err(e) = crate::launch::find_program(first) {
+                return Reply::Refused(format!("--command: {e}; nothing was changed"));
+            }
+        }
         let motion = matches!(process, "trajgen" | "servo" | "machine");
         if process == "trajgen"
             && let Some(r) = &mut self.running
@@ -564,15 +600,24 @@ impl Loop<'_> {
                         .into(),
                 );
             }
+            if r.job.motion_done() {
+                return Reply::Refused(
+                    "the program's motion has ended (the axes settle); try again in a moment"
+                        .into(),
+                );
+            }
             return match crate::swap::trajgen_during_program(
-                self.cell,
-                self.cfg,
-                k,
-                if swap { command } else { None },
-                &mut r.job,
+                self.cell, self.cfg, k, command, swap, &mut r.job,
             ) {
                 Ok(text) => Reply::Done(text),
-                Err(e) => Reply::Failed(e),
+                Err(e) => {
+                    if e.program_lost {
+                        let r = self.running.take().expect("checked");
+                        let err = self.with_events(RunError::failed(&e.message), r.events_from);
+                        self.finish(&r, &Err(err));
+                    }
+                    Reply::Failed(e.message)
+                }
             };
         }
         if motion && let Some(r) = &self.running {

@@ -20,7 +20,6 @@
 use crate::cell::{Cell, Incident};
 use crate::config::Config;
 use crate::job::Job;
-use crate::launch::find_program;
 use crate::run::TICK;
 use shm_schema::Power;
 use std::time::{Duration, Instant};
@@ -36,10 +35,7 @@ pub(crate) fn replace(
     swap: bool,
 ) -> Result<String, String> {
     let name = cell.names[k].clone();
-    if let Some(c) = &command {
-        let first = c.first().ok_or("--command is empty")?;
-        find_program(first).map_err(|e| format!("--command: {e}"))?;
-    }
+    let previous = cell.command_of(k);
     if swap {
         cell.set_command(k, command);
     }
@@ -55,17 +51,25 @@ pub(crate) fn replace(
         cell.request(shm_schema::RequestKind::Disable)
             .map_err(|e| e.to_string())?;
         let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 2.0);
-        wait_until(cell, cfg, k, limit, &mut GapMeter::default(), |c| {
-            c.last_servo
-                .is_some_and(|s| s.power == Power::Disabled as u8)
-        })
+        wait_until(
+            cell,
+            cfg,
+            k,
+            limit,
+            &mut GapMeter::default(),
+            &mut keep_newest,
+            |c| {
+                c.last_servo
+                    .is_some_and(|s| s.power == Power::Disabled as u8)
+            },
+        )
         .map_err(|e| format!("{name}: the drives did not disable: {e}"))?;
     }
     cell.set_handover(k, true);
     let result = handover(cell, cfg, k, motion);
     cell.set_handover(k, false);
     cell.ignore_statuses_of(k, None);
-    let (old, new, gap) = result?;
+    let (old, new, gap) = result.inspect_err(|_| cell.set_command(k, previous))?;
     cell.restarts[k] += 1;
     let what = if swap { "swapped" } else { "restarted" };
     let gap = gap.map_or(String::new(), |(g, n)| {
@@ -82,40 +86,81 @@ pub(crate) fn replace(
     ))
 }
 
-/// Swaps trajgen (process `k`) while `job` runs; see the module documentation.
+/// Why a swap of trajgen during a program failed, and whether the program survived it.
+#[derive(Debug)]
+pub(crate) struct TrajgenSwapError {
+    /// What went wrong.
+    pub message: String,
+    /// The program cannot go on (the old trajgen is gone and the new one did not take it
+    /// over): the caller ends it.
+    pub program_lost: bool,
+}
+
+/// Swaps trajgen (process `k`) while `job` runs; see the module documentation. `command`
+/// (checked by the caller) replaces its command line when `swap`.
 pub(crate) fn trajgen_during_program(
     cell: &mut Cell,
     cfg: &Config,
     k: usize,
     command: Option<Vec<String>>,
+    swap: bool,
     job: &mut Job,
-) -> Result<String, String> {
-    if let Some(c) = &command {
-        let first = c.first().ok_or("--command is empty")?;
-        find_program(first).map_err(|e| format!("--command: {e}"))?;
-    }
-    cell.set_command(k, command);
+) -> Result<String, TrajgenSwapError> {
+    let kept = |message: String| TrajgenSwapError {
+        message,
+        program_lost: false,
+    };
     let start = Instant::now();
     let limit = Duration::from_secs_f64(cfg.motion.t_acc + 2.0);
     let mut gaps = GapMeter::default();
     let seq = cell.motion_control(shm_schema::ControlKind::Pause);
-    wait_until(cell, cfg, k, limit, &mut gaps, |c| {
-        c.last_sp
-            .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0)
-    })
-    .map_err(|e| format!("trajgen did not pause: {e}"))?;
+    let paused = wait_until(
+        cell,
+        cfg,
+        k,
+        limit,
+        &mut gaps,
+        &mut |c: &mut Cell| job.record(c),
+        |c| {
+            c.last_sp
+                .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0)
+        },
+    );
     let program_id = job.program_id;
     let record = std::cell::Cell::new(None);
-    wait_until(cell, cfg, k, limit, &mut gaps, |c| {
-        if let Some(h) = c.handover_sub.latest() {
-            record.set(Some(h));
+    let recorded = paused.and_then(|()| {
+        wait_until(
+            cell,
+            cfg,
+            k,
+            limit,
+            &mut gaps,
+            &mut |c: &mut Cell| job.record(c),
+            |c| {
+                if let Some(h) = c.handover_sub.latest() {
+                    record.set(Some(h));
+                }
+                record
+                    .get()
+                    .is_some_and(|h| h.valid == 1 && h.program_id == program_id)
+            },
+        )
+    });
+    let h = match (recorded, record.get()) {
+        (Ok(()), Some(h)) => h,
+        (r, _) => {
+            // Nothing was replaced: the program goes on with the old trajgen.
+            cell.motion_control(shm_schema::ControlKind::Resume);
+            let why = r.err().unwrap_or_else(|| "no handover record".into());
+            return Err(kept(format!(
+                "trajgen was not swapped: it did not pause on a segment ({why}); the program goes on"
+            )));
         }
-        record
-            .get()
-            .is_some_and(|h| h.valid == 1 && h.program_id == program_id)
-    })
-    .map_err(|e| format!("trajgen published no handover record: {e}"))?;
-    let h = record.get().ok_or("no handover record")?;
+    };
+    let previous = cell.command_of(k);
+    if swap {
+        cell.set_command(k, command);
+    }
     cell.set_handover(k, true);
     let old = cell.children.get(k).map(|p| p.pid());
     if let Some(problem) = cell.stop_process(k) {
@@ -123,34 +168,52 @@ pub(crate) fn trajgen_during_program(
     }
     let started = runtime::time::now_ns();
     cell.offer_handover(&h);
-    let new = cell.start_process(k, cfg);
-    let resumed = new.and_then(|_| {
+    let resumed = cell.start_process(k, cfg).and_then(|_| {
         let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
-        wait_until(cell, cfg, k, startup, &mut gaps, |c| {
-            c.cyclic(k)
-                && c.last_sp.is_some_and(|sp| {
-                    sp.stamp_ns > started && sp.program_id == program_id && sp.path_speed == 0.0
-                })
-        })
+        wait_until(
+            cell,
+            cfg,
+            k,
+            startup,
+            &mut gaps,
+            &mut |c: &mut Cell| job.record(c),
+            |c| {
+                c.cyclic(k)
+                    && c.last_sp.is_some_and(|sp| {
+                        sp.stamp_ns > started && sp.program_id == program_id && sp.path_speed == 0.0
+                    })
+            },
+        )
         .map_err(|e| format!("the new trajgen did not take the motion over: {e}"))
     });
     cell.set_handover(k, false);
     // Withdrawn: a trajgen started later (a restart) must not take an old motion over.
     cell.offer_handover(&shm_schema::TrajgenHandoverV1::default());
-    let new = match resumed {
-        Ok(()) => cell.children.get(k).map_or(0, |p| p.pid()),
-        Err(e) => return Err(e),
-    };
+    if let Err(e) = resumed {
+        cell.set_command(k, previous);
+        return Err(TrajgenSwapError {
+            message: format!("{e}; the program is lost, the axes rest on its path"),
+            program_lost: true,
+        });
+    }
+    let new = cell.children.get(k).map_or(0, |p| p.pid());
     job.rewind_to(h.command_seq);
     let seq = cell.motion_control(shm_schema::ControlKind::Resume);
-    wait_until(cell, cfg, k, limit, &mut gaps, |c| {
-        c.last_sp.is_some_and(|sp| sp.control_seq >= seq)
-    })
-    .map_err(|e| format!("the new trajgen did not resume: {e}"))?;
+    wait_until(
+        cell,
+        cfg,
+        k,
+        limit,
+        &mut gaps,
+        &mut |c: &mut Cell| job.record(c),
+        |c| c.last_sp.is_some_and(|sp| sp.control_seq >= seq),
+    )
+    .map_err(|e| kept(format!("the new trajgen did not resume: {e}")))?;
     cell.restarts[k] += 1;
-    tracing::info!("trajgen swapped during {} (pid {old:?} → {new})", job.name);
+    let what = if swap { "swapped" } else { "restarted" };
+    tracing::info!("trajgen {what} during {} (pid {old:?} → {new})", job.name);
     Ok(format!(
-        "trajgen swapped during {} in {:.0} ms (pid {} → {new}): paused at line {} on the path, resumed from there",
+        "trajgen {what} during {} in {:.0} ms (pid {} → {new}): paused at line {} on the path, resumed from there",
         job.name,
         start.elapsed().as_secs_f64() * 1e3,
         old.map_or("-".to_string(), |p| p.to_string()),
@@ -172,21 +235,33 @@ fn handover(cell: &mut Cell, cfg: &Config, k: usize, motion: bool) -> Result<Han
     let new = if !motion && old.is_some() {
         cell.ignore_statuses_of(k, old);
         let new = cell.start_process(k, cfg)?;
-        wait_until(cell, cfg, k, startup, &mut gaps, |c| c.cyclic(k))
-            .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
+        if let Err(e) = wait_until(cell, cfg, k, startup, &mut gaps, &mut keep_newest, |c| {
+            c.cyclic(k)
+        }) {
+            // Break nothing: the new one goes, the old one stays.
+            let _ = cell.stop_pid(new);
+            return Err(format!(
+                "the new {name} did not become cyclic ({e}); the old one (pid {}) keeps running",
+                old.map_or(0, |p| p)
+            ));
+        }
         if let Some(problem) = cell.stop_process(k) {
             tracing::warn!("the old {name} {problem}");
         }
         // A few more ticks: the image keeps flowing from the new one alone.
-        let _ = wait_until(cell, cfg, k, 5 * TICK, &mut gaps, |_| false);
+        let _ = wait_until(cell, cfg, k, 5 * TICK, &mut gaps, &mut keep_newest, |_| {
+            false
+        });
         new
     } else {
         if let Some(problem) = cell.stop_process(k) {
             tracing::warn!("the old {name} {problem}");
         }
         let new = cell.start_process(k, cfg)?;
-        wait_until(cell, cfg, k, startup, &mut gaps, |c| c.cyclic(k))
-            .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
+        wait_until(cell, cfg, k, startup, &mut gaps, &mut keep_newest, |c| {
+            c.cyclic(k)
+        })
+        .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
         new
     };
     Ok((old, new, gaps.result()))
@@ -221,25 +296,32 @@ impl GapMeter {
     }
 }
 
-/// Ticks the cell until `done` holds (Ok), process `k` is lost, or `limit` passes.
+/// What arrived meanwhile, taken without a job: the newest setpoint and servo state.
+fn keep_newest(cell: &mut Cell) {
+    while let Some(sp) = cell.setpoint_sub.next() {
+        cell.last_sp = Some(sp);
+    }
+    while let Some(s) = cell.servo_sub.next() {
+        cell.last_servo = Some(s);
+    }
+}
+
+/// Ticks the cell until `done` holds (Ok), process `k` is lost, or `limit` passes; `sink`
+/// takes the setpoints and servo states that arrive.
 fn wait_until(
     cell: &mut Cell,
     cfg: &Config,
     k: usize,
     limit: Duration,
     gaps: &mut GapMeter,
+    sink: &mut dyn FnMut(&mut Cell),
     done: impl Fn(&Cell) -> bool,
 ) -> Result<(), String> {
     let start = Instant::now();
     loop {
         std::thread::sleep(TICK);
         let incidents = cell.tick(cfg);
-        while let Some(s) = cell.setpoint_sub.next() {
-            cell.last_sp = Some(s);
-        }
-        while let Some(s) = cell.servo_sub.next() {
-            cell.last_servo = Some(s);
-        }
+        sink(cell);
         gaps.take(cell);
         if let Some(i) = incidents.iter().find(|i| concerns(i, &cell.names[k])) {
             return Err(i.to_string());

@@ -37,8 +37,10 @@ pub fn up(config: Option<&Path>, instance: &str) -> Result<String, RunError> {
     tracing::info!("instance {instance}: going down ({why})");
     let problems = cell.stop_children();
     drop(cell);
-    drop(server);
+    // The lock (the control socket) is let go only once the instance is removed: the next
+    // supervisor of the instance never meets this one's cleanup.
     let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
+    drop(server);
     if let Some((name, problem)) = problems.first() {
         return Err(RunError::failed(format!("{name} {problem}")));
     }

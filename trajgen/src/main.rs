@@ -87,6 +87,10 @@ impl Task for Trajgen {
                     Some(h) if takes_over(&h, &s, now, self.params) => {
                         Generator::resume_from(self.params, &h, now)
                     }
+                    // A process is being replaced: this may be the successor, and the
+                    // supervisor's offer may not have reached us yet. Wait for it (or for
+                    // the handover to end), publishing nothing.
+                    _ if cx.handover => return,
                     _ => Generator::new(self.params, &s.cmd_position),
                 };
                 self.generator.insert(g)

@@ -216,7 +216,22 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
     assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
     // The next program starts where the abort left the axes.
     up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    // `down` while a client waits for a program: the client is told, not dropped.
+    let waiting = supervisor()
+        .args(["exec", "--wait", "--instance", &up.inst])
+        .arg(program(test, SHORT))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("exec");
+    up.until("moving", moving);
+    let inst = up.inst.clone();
     up.down();
+    let out = waiting.wait_with_output().expect("exec");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
+    assert_clean(&inst);
     // A command to an instance that is not up says so.
     let out = supervisor()
         .args(["status", "--instance", &instance(test)])
@@ -420,8 +435,8 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
     up.ok(&["exec", &program(test, SHORT), "--wait"]);
     // A bad command changes nothing.
-    let out = up.ctl(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
-    assert_ne!(out.status.code(), Some(0));
+    let err = up.refused(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
+    assert!(err.contains("nothing was changed"), "{err}");
     assert!(up.refused(&["swap", "nosuch"]).contains("no process"));
     up.down();
 }
