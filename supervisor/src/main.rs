@@ -283,13 +283,15 @@ fn control_done(r: Result<String, supervisor::control::ControlError>) -> ExitCod
 /// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
 /// status: 2 bad input, 1 failed, 130 interrupted.
 fn run_failed(e: &RunError, json: bool) -> ExitCode {
-    eprintln!("error: {e}");
     if json {
         println!(
             "{}",
             serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
         );
     }
+    // Through the non-blocking writer where the command has one: a blocked stderr must not
+    // keep the verdict (the exit status, the JSON above) from the caller.
+    supervisor::out::line(&format!("error: {e}"));
     ExitCode::from(match e {
         RunError::Input(_) => 2,
         RunError::Failed { .. } => 1,

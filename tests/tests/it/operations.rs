@@ -586,3 +586,63 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
     up.ok(&["start"]);
     up.down();
 }
+
+/// A pipe already full, its write end blocking: whoever writes to it without care blocks for
+/// good (a paused terminal, a log reader that stopped reading).
+fn full_pipe() -> (std::os::fd::OwnedFd, std::os::fd::OwnedFd) {
+    use nix::fcntl::{FcntlArg, OFlag, fcntl};
+    let (r, w) = nix::unistd::pipe().expect("pipe");
+    fcntl(&w, FcntlArg::F_SETFL(OFlag::O_NONBLOCK)).expect("non-blocking");
+    let chunk = [b'x'; 4096];
+    while nix::unistd::write(&w, &chunk).is_ok() {}
+    fcntl(&w, FcntlArg::F_SETFL(OFlag::empty())).expect("blocking again");
+    (r, w)
+}
+
+#[test]
+fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
+    // Found by fault injection: with its stderr blocked, the supervisor blocked in a write and
+    // missed a killed servo. Now its lines are dropped, and it still sees everything.
+    let test = "ops-stderr";
+    let inst = instance(test);
+    let (_r, w) = full_pipe();
+    let triangle = integration_tests::examples().join("triangle.prog");
+    let run = supervisor()
+        .args(["run", "--json", "--instance", &inst, "--config"])
+        .arg(cell(test))
+        .arg(&triangle)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::from(w))
+        .spawn()
+        .expect("run");
+    // While it moves, servo dies.
+    let start = Instant::now();
+    loop {
+        let mut cmd = supervisor();
+        cmd.args(["status", "--json", "--instance", &inst]);
+        let out = run_with_watchdog(&mut cmd, WATCHDOG);
+        if serde_json::from_slice::<Value>(&out.stdout).is_ok_and(|s| moving(&s)) {
+            break;
+        }
+        assert!(start.elapsed() < WATCHDOG, "never moved");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid_of("servo", &inst)),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .expect("kill");
+    let start = Instant::now();
+    let mut run = run;
+    while run.try_wait().expect("wait").is_none() {
+        assert!(start.elapsed() < WATCHDOG, "the supervisor is stuck");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = run.wait_with_output().expect("output");
+    assert_eq!(out.status.code(), Some(1));
+    let j = integration_tests::json_of(&out);
+    assert_eq!(j["ok"], false);
+    let error = j["error"].as_str().unwrap_or("");
+    assert!(error.contains("servo"), "{j}");
+    assert_clean(&inst);
+}
