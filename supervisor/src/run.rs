@@ -108,6 +108,14 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     cell.refresh_latency();
     let processes = serve::process_reports(&cell);
     let stop_problems = cell.stop_children();
+    // Every event until the processes stopped (the drives' fault reactions arrive after the
+    // verdict): the report's and the failure's.
+    cell.take_events();
+    let all_events: Vec<serde_json::Value> = cell
+        .events
+        .iter()
+        .map(|e| crate::events::to_json(e, &cell.axes, cell.t0_ns))
+        .collect();
     let sense_to_command = cell.sense_to_command.take();
     drop(cell);
     // A client (status, events, inject) may be finishing: give it a second to go. The lock
@@ -115,7 +123,16 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
     drop(server);
     let mut report = match end {
-        End::Program(r) => (*r)?,
+        End::Program(r) => match *r {
+            Ok(r) => r,
+            Err(RunError::Failed { message, .. }) => {
+                return Err(RunError::Failed {
+                    message,
+                    events: all_events,
+                });
+            }
+            Err(e) => return Err(e),
+        },
         End::Interrupted => return Err(RunError::Interrupted),
         End::Down => {
             return Err(RunError::failed(
@@ -128,6 +145,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .filter(|h| h.count > 0)
         .map(latency::report::Summary::of);
     report.processes = processes;
+    report.events = all_events;
     if let Some((name, why)) = stop_problems.first() {
         return Err(RunError::failed(format!("{name} {why}")));
     }
