@@ -88,6 +88,13 @@ pub enum Life {
     Down(String),
 }
 
+/// What closing a cell left: its events as JSON, and why the close failed (a process that
+/// would not stop, resources left behind), if it did.
+pub(crate) struct Closed {
+    pub(crate) events: Vec<Value>,
+    pub(crate) problem: Option<RunError>,
+}
+
 /// Starts the cell of `cfg` on `instance`: takes the instance's control channel (refused if
 /// another supervisor serves it), waits for the processes a killed supervisor left to leave,
 /// removes what is left of the instance, creates the services, publishes the configuration,
@@ -125,6 +132,29 @@ pub(crate) fn open_cell(
         ipc::remove_instance(&instance);
     })?;
     Ok((cell, server))
+}
+
+/// What is left of `instance` after its processes stopped is a failure, unless a client
+/// (a tool of another shell: `status`, `events`, a foreign process) still holds it: then the
+/// client's files are its own, and a warning names it (the next run of the instance, or the
+/// client's own exit, removes them).
+fn leftover_error(instance: &InstanceName, leftovers: &[String]) -> Option<RunError> {
+    if leftovers.is_empty() {
+        return None;
+    }
+    let clients = ipc::live_node_pids(instance).unwrap_or_default();
+    if clients.is_empty() {
+        return Some(RunError::failed(format!(
+            "iceoryx2 resources left behind: {}",
+            leftovers.join(", ")
+        )));
+    }
+    tracing::warn!(
+        "instance {instance}: {} iceoryx2 file(s) are still held by client process(es) {clients:?}; \
+         they go when those clients exit or with the next run of the instance",
+        leftovers.len()
+    );
+    None
 }
 
 /// Waits for the processes of a previous supervisor of the instance (killed: its processes
@@ -314,6 +344,29 @@ impl Cell {
             exec_subs,
             _node: node,
         })
+    }
+
+    /// Stops every process, takes the events that came meanwhile (the drives' fault
+    /// reactions arrive after a verdict), removes the instance, and only then lets go of its
+    /// lock (`server`): the next supervisor of the instance never meets this one's cleanup.
+    pub(crate) fn close(mut self, server: ctl::Server) -> Closed {
+        let stopped = self.stop_children();
+        self.take_events();
+        let events = self
+            .events
+            .iter()
+            .map(|e| events::to_json(e, &self.axes, self.t0_ns))
+            .collect();
+        let instance = self.instance;
+        drop(self);
+        // A client (status, events, inject) may be finishing: give it a second to go.
+        let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
+        drop(server);
+        let problem = match stopped.first() {
+            Some((name, why)) => Some(RunError::failed(format!("{name} {why}"))),
+            None => leftover_error(&instance, &leftovers),
+        };
+        Closed { events, problem }
     }
 
     /// Index of process `name` in the table.

@@ -302,11 +302,6 @@ impl Server {
         self.flush();
     }
 
-    /// True while connection `id` is open (its client still waits).
-    pub fn is_open(&self, id: ConnId) -> bool {
-        self.conns.iter().any(|c| c.id == id)
-    }
-
     /// Writes what is pending; drops finished, closed and stuck connections.
     fn flush(&mut self) {
         self.conns.retain_mut(|c| c.pump());

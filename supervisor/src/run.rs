@@ -15,7 +15,6 @@ use crate::job::Enabling;
 use crate::report::Report;
 use crate::serve::{self, End, ProgramJob};
 use motion_program::Program;
-use runtime::ipc;
 use runtime::signals;
 use shm_schema::{InstanceName, SetpointV1};
 use std::path::PathBuf;
@@ -107,28 +106,15 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let end = serve::serve(&cfg, &mut cell, &mut server, Some(first));
     cell.refresh_latency();
     let processes = serve::process_reports(&cell);
-    let stop_problems = cell.stop_children();
-    // Every event until the processes stopped (the drives' fault reactions arrive after the
-    // verdict): the report's and the failure's.
-    cell.take_events();
-    let all_events: Vec<serde_json::Value> = cell
-        .events
-        .iter()
-        .map(|e| crate::events::to_json(e, &cell.axes, cell.t0_ns))
-        .collect();
     let sense_to_command = cell.sense_to_command.take();
-    drop(cell);
-    // A client (status, events, inject) may be finishing: give it a second to go. The lock
-    // (the control socket) is let go only once the instance is removed.
-    let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
-    drop(server);
+    let closed = cell.close(server);
     let mut report = match end {
         End::Program(r) => match *r {
             Ok(r) => r,
             Err(RunError::Failed { message, .. }) => {
                 return Err(RunError::Failed {
                     message,
-                    events: all_events,
+                    events: closed.events,
                 });
             }
             Err(e) => return Err(e),
@@ -145,11 +131,8 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .filter(|h| h.count > 0)
         .map(latency::report::Summary::of);
     report.processes = processes;
-    report.events = all_events;
-    if let Some((name, why)) = stop_problems.first() {
-        return Err(RunError::failed(format!("{name} {why}")));
-    }
-    if let Some(e) = leftover_error(&instance, &leftovers) {
+    report.events = closed.events;
+    if let Some(e) = closed.problem {
         return Err(e);
     }
     if let Some(path) = &opts.trace {
@@ -157,29 +140,6 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
     }
     Ok(report)
-}
-
-/// What is left of `instance` after its processes stopped is a failure, unless a client
-/// (a tool of another shell: `status`, `events`, a foreign process) still holds it: then the
-/// client's files are its own, and a warning names it (the next run of the instance, or the
-/// client's own exit, removes them).
-pub(crate) fn leftover_error(instance: &InstanceName, leftovers: &[String]) -> Option<RunError> {
-    if leftovers.is_empty() {
-        return None;
-    }
-    let clients = ipc::live_node_pids(instance).unwrap_or_default();
-    if clients.is_empty() {
-        return Some(RunError::failed(format!(
-            "iceoryx2 resources left behind: {}",
-            leftovers.join(", ")
-        )));
-    }
-    tracing::warn!(
-        "instance {instance}: {} iceoryx2 file(s) are still held by client process(es) {clients:?}; \
-         they go when those clients exit or with the next run of the instance",
-        leftovers.len()
-    );
-    None
 }
 
 /// The trace as CSV: `t_s, cmd_<axis>..., act_<axis>...`, one row per setpoint.
@@ -232,28 +192,6 @@ impl Cell {
                 return r;
             }
             std::thread::sleep(TICK);
-        }
-    }
-
-    /// Stops every process and removes the instance; fails if a process would not stop or
-    /// something of the instance is left. Returns the events as JSON.
-    pub(crate) fn close(mut self) -> Result<Vec<serde_json::Value>, RunError> {
-        let stop_problems = self.stop_children();
-        self.take_events();
-        let events = self
-            .events
-            .iter()
-            .map(|e| crate::events::to_json(e, &self.axes, self.t0_ns))
-            .collect();
-        let instance = self.instance;
-        drop(self);
-        let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
-        if let Some((name, why)) = stop_problems.first() {
-            return Err(RunError::failed(format!("{name} {why}")));
-        }
-        match leftover_error(&instance, &leftovers) {
-            Some(e) => Err(e),
-            None => Ok(events),
         }
     }
 }

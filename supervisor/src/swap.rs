@@ -57,7 +57,7 @@ pub(crate) fn replace(
             k,
             limit,
             &mut GapMeter::default(),
-            &mut keep_newest,
+            &mut Cell::drain_motion,
             |c| {
                 c.last_servo
                     .is_some_and(|s| s.power == Power::Disabled as u8)
@@ -235,9 +235,15 @@ fn handover(cell: &mut Cell, cfg: &Config, k: usize, motion: bool) -> Result<Han
     let new = if !motion && old.is_some() {
         cell.ignore_statuses_of(k, old);
         let new = cell.start_process(k, cfg)?;
-        if let Err(e) = wait_until(cell, cfg, k, startup, &mut gaps, &mut keep_newest, |c| {
-            c.cyclic(k)
-        }) {
+        if let Err(e) = wait_until(
+            cell,
+            cfg,
+            k,
+            startup,
+            &mut gaps,
+            &mut Cell::drain_motion,
+            |c| c.cyclic(k),
+        ) {
             // Break nothing: the new one goes, the old one stays.
             let _ = cell.stop_pid(new);
             return Err(format!(
@@ -249,18 +255,30 @@ fn handover(cell: &mut Cell, cfg: &Config, k: usize, motion: bool) -> Result<Han
             tracing::warn!("the old {name} {problem}");
         }
         // A few more ticks: the image keeps flowing from the new one alone.
-        let _ = wait_until(cell, cfg, k, 5 * TICK, &mut gaps, &mut keep_newest, |_| {
-            false
-        });
+        let _ = wait_until(
+            cell,
+            cfg,
+            k,
+            5 * TICK,
+            &mut gaps,
+            &mut Cell::drain_motion,
+            |_| false,
+        );
         new
     } else {
         if let Some(problem) = cell.stop_process(k) {
             tracing::warn!("the old {name} {problem}");
         }
         let new = cell.start_process(k, cfg)?;
-        wait_until(cell, cfg, k, startup, &mut gaps, &mut keep_newest, |c| {
-            c.cyclic(k)
-        })
+        wait_until(
+            cell,
+            cfg,
+            k,
+            startup,
+            &mut gaps,
+            &mut Cell::drain_motion,
+            |c| c.cyclic(k),
+        )
         .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
         new
     };
@@ -296,16 +314,6 @@ impl GapMeter {
     }
 }
 
-/// What arrived meanwhile, taken without a job: the newest setpoint and servo state.
-fn keep_newest(cell: &mut Cell) {
-    while let Some(sp) = cell.setpoint_sub.next() {
-        cell.last_sp = Some(sp);
-    }
-    while let Some(s) = cell.servo_sub.next() {
-        cell.last_servo = Some(s);
-    }
-}
-
 /// Ticks the cell until `done` holds (Ok), process `k` is lost, or `limit` passes; `sink`
 /// takes the setpoints and servo states that arrive.
 fn wait_until(
@@ -321,8 +329,8 @@ fn wait_until(
     loop {
         std::thread::sleep(TICK);
         let incidents = cell.tick(cfg);
-        sink(cell);
         gaps.take(cell);
+        sink(cell);
         if let Some(i) = incidents.iter().find(|i| concerns(i, &cell.names[k])) {
             return Err(i.to_string());
         }

@@ -187,21 +187,24 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     }
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    let (mut session, _server) = open_cell(&cfg, instance, Mode::Run)?;
+    let (mut session, server) = open_cell(&cfg, instance, Mode::Run)?;
     let measured = measure(&mut session, &cfg, i, opts);
-    let closed = session.close();
-    let (samples, start, ramp) = match (measured, &closed) {
-        (Ok(m), _) => m,
+    let closed = session.close(server);
+    let (samples, start, ramp) = match measured {
+        Ok(m) => m,
         // A failed session still reports its events.
-        (Err(RunError::Failed { message, .. }), Ok(events)) => {
+        Err(RunError::Failed { message, .. }) => {
             return Err(RunError::Failed {
                 message,
-                events: events.clone(),
+                events: closed.events,
             });
         }
-        (Err(e), _) => return Err(e),
+        Err(e) => return Err(e),
     };
-    let events = closed?;
+    if let Some(e) = closed.problem {
+        return Err(e);
+    }
+    let events = closed.events;
     Ok(TuneReport {
         instance: instance.to_string(),
         axis: a.name.clone(),

@@ -3,12 +3,10 @@
 
 use crate::cell::{Mode, open_cell};
 use crate::config::Config;
-use crate::run::{RunError, leftover_error};
+use crate::run::RunError;
 use crate::serve::{End, serve};
-use runtime::ipc;
 use shm_schema::InstanceName;
 use std::path::Path;
-use std::time::Duration;
 
 /// Brings the cell of `config` up on `instance` and serves it until it is told to go down;
 /// then stops every process and removes every resource of the instance. Returns how it
@@ -35,16 +33,7 @@ pub fn up(config: Option<&Path>, instance: &str) -> Result<String, RunError> {
         End::Program(_) => "the program",
     };
     tracing::info!("instance {instance}: going down ({why})");
-    let problems = cell.stop_children();
-    drop(cell);
-    // The lock (the control socket) is let go only once the instance is removed: the next
-    // supervisor of the instance never meets this one's cleanup.
-    let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
-    drop(server);
-    if let Some((name, problem)) = problems.first() {
-        return Err(RunError::failed(format!("{name} {problem}")));
-    }
-    if let Some(e) = leftover_error(&instance, &leftovers) {
+    if let Some(e) = cell.close(server).problem {
         return Err(e);
     }
     Ok(format!("instance {instance} is down ({why})"))

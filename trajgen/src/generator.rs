@@ -201,18 +201,10 @@ impl Generator {
     /// A generator that goes on with a predecessor's paused motion `h` at `now_ns`: paused on
     /// the same point of the same segment, expecting the commands after `h.command_seq`.
     pub fn resume_from(p: Params, h: &TrajgenHandoverV1, now_ns: u64) -> Self {
-        let mut a = Axes::zeros();
-        let mut b = Axes::zeros();
-        let mut c = Axes::zeros();
-        for i in 0..p.axes {
-            a[i] = h.a[i];
-            b[i] = h.b[i];
-            c[i] = h.c[i];
-        }
         let seg = Segment {
-            a,
-            b,
-            c,
+            a: axes_of(&p, &h.a),
+            b: axes_of(&p, &h.b),
+            c: axes_of(&p, &h.c),
             t1: h.t1_s,
             t_acc: h.t_acc_s,
         };
@@ -369,9 +361,7 @@ impl Generator {
     }
 
     fn target_of(&self, c: &MotionCommandV1) -> Axes {
-        let mut t = Axes::zeros();
-        t.as_mut_slice()[..self.p.axes].copy_from_slice(&c.target[..self.p.axes]);
-        t
+        axes_of(&self.p, &c.target)
     }
 
     fn time_between(&self, b: &Axes, c: &Axes, user: f64) -> f64 {
@@ -667,4 +657,11 @@ impl Generator {
             }
         }
     }
+}
+
+/// The axes in use of a wire array (the rest zero).
+fn axes_of(p: &Params, v: &[f64; MAX_AXES]) -> Axes {
+    let mut t = Axes::zeros();
+    t.as_mut_slice()[..p.axes].copy_from_slice(&v[..p.axes]);
+    t
 }

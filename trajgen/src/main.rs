@@ -82,16 +82,18 @@ impl Task for Trajgen {
             }
             (Some(g), _) => g,
             (None, Some(s)) => {
-                let g = match self.handover_sub.latest() {
+                let successor = self
+                    .handover_sub
+                    .latest()
+                    .and_then(|h| successor(&h, &s, now, self.params));
+                let g = match successor {
                     // A predecessor paused a motion where servo holds: go on with it.
-                    Some(h) if takes_over(&h, &s, now, self.params) => {
-                        Generator::resume_from(self.params, &h, now)
-                    }
+                    Some(g) => g,
                     // A process is being replaced: this may be the successor, and the
                     // supervisor's offer may not have reached us yet. Wait for it (or for
                     // the handover to end), publishing nothing.
-                    _ if cx.handover => return,
-                    _ => Generator::new(self.params, &s.cmd_position),
+                    None if cx.handover => return,
+                    None => Generator::new(self.params, &s.cmd_position),
                 };
                 self.generator.insert(g)
             }
@@ -152,15 +154,18 @@ impl Task for Trajgen {
     }
 }
 
-/// True when `h` is a predecessor's paused motion to go on with: valid, recent, and resting
-/// where servo holds (so its first setpoint is no jump).
-fn takes_over(h: &TrajgenHandoverV1, s: &ServoStateV2, now: u64, params: Params) -> bool {
+/// The generator that goes on with `h`, a predecessor's paused motion, if `h` is valid,
+/// recent, and rests where servo holds (so its first setpoint is no jump).
+fn successor(h: &TrajgenHandoverV1, s: &ServoStateV2, now: u64, p: Params) -> Option<Generator> {
     const RECENT_NS: u64 = 30_000_000_000;
     if h.valid != 1 || now.saturating_sub(h.stamp_ns) > RECENT_NS {
-        return false;
+        return None;
     }
-    let p = Generator::resume_from(params, h, now).rest_position();
-    (0..params.axes).all(|i| (p[i] - s.cmd_position[i]).abs() < 1e-3)
+    let g = Generator::resume_from(p, h, now);
+    let rest = g.rest_position();
+    (0..p.axes)
+        .all(|i| (rest[i] - s.cmd_position[i]).abs() < 1e-3)
+        .then_some(g)
 }
 
 fn main() -> ExitCode {

@@ -157,6 +157,24 @@ fn latched(s: &Value) -> bool {
     !s["supervisor"]["estop"].is_null()
 }
 
+/// Process `name` in the supervisor's view of `status --json`.
+fn process_in<'a>(s: &'a Value, name: &str) -> Option<&'a Value> {
+    s["supervisor"]["processes"]
+        .as_array()
+        .and_then(|p| p.iter().find(|p| p["name"] == name))
+}
+
+fn all_running(s: &Value) -> bool {
+    s["supervisor"]["processes"]
+        .as_array()
+        .is_some_and(|p| p.iter().all(|p| p["life"] == "running"))
+}
+
+/// Sends `sig` to the process of `inst` that runs `program`.
+fn signal(program: &str, inst: &str, sig: nix::sys::signal::Signal) {
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid_of(program, inst)), sig).expect("kill");
+}
+
 #[test]
 fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
     let test = "ops-up";
@@ -299,32 +317,20 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
     ] {
         up.ok(&["exec", &long]);
         up.until("moving", moving);
-        let pid = pid_of(program, &up.inst);
-        nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(pid),
-            nix::sys::signal::Signal::SIGKILL,
-        )
-        .expect("kill");
+        signal(program, &up.inst, nix::sys::signal::Signal::SIGKILL);
         // The host e-stop names the process; the axes come to rest with the drives off; the
         // supervisor stays up and restarts the process (restart = "on-failure").
         let s = up.until("restarted and at rest", |s| {
             latched(s)
                 && s["supervisor"]["job"].is_null()
                 && s["supervisor"]["arm"]["enabled"] == false
-                && s["supervisor"]["processes"]
-                    .as_array()
-                    .and_then(|p| p.iter().find(|p| p["name"] == *victim))
+                && process_in(s, victim)
                     .is_some_and(|p| p["life"] == "running" && p["restarts"] == 1)
         });
         let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
         assert!(reason.contains(victim), "{victim}: {s}");
         assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
         assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
-        let all_running = |s: &Value| {
-            s["supervisor"]["processes"]
-                .as_array()
-                .is_some_and(|p| p.iter().all(|p| p["life"] == "running"))
-        };
         up.until("all cyclic", all_running);
         up.ok(&["reset"]);
         up.ok(&["start"]);
@@ -337,17 +343,10 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
 fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
     let test = "ops-stall";
     let up = Up::start(test, &cell(test));
-    let pid = pid_of("iobridge", &up.inst);
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(pid),
-        nix::sys::signal::Signal::SIGSTOP,
-    )
-    .expect("stop");
+    signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
     let s = up.until("stall found, iobridge restarted", |s| {
         latched(s)
-            && s["supervisor"]["processes"]
-                .as_array()
-                .and_then(|p| p.iter().find(|p| p["name"] == "iobridge"))
+            && process_in(s, "iobridge")
                 .is_some_and(|p| p["restarts"] == 1 && p["life"] == "running")
     });
     assert!(
@@ -357,11 +356,7 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
         "{s}"
     );
     assert!(up.log().contains("stalled"), "{}", up.log());
-    up.until("cyclic", |s| {
-        s["supervisor"]["processes"]
-            .as_array()
-            .is_some_and(|p| p.iter().all(|p| p["life"] == "running"))
-    });
+    up.until("cyclic", all_running);
     up.ok(&["reset"]);
     up.ok(&["start"]);
     up.down();
@@ -544,10 +539,9 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
 
 /// Stops process `program` of `inst` for `ms` milliseconds (SIGSTOP, then SIGCONT).
 fn stall(program: &str, inst: &str, ms: u64) {
-    let pid = nix::unistd::Pid::from_raw(pid_of(program, inst));
-    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).expect("stop");
+    signal(program, inst, nix::sys::signal::Signal::SIGSTOP);
     std::thread::sleep(Duration::from_millis(ms));
-    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).expect("cont");
+    signal(program, inst, nix::sys::signal::Signal::SIGCONT);
 }
 
 #[test]
@@ -627,11 +621,7 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
         assert!(start.elapsed() < WATCHDOG, "never moved");
         std::thread::sleep(Duration::from_millis(50));
     }
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(pid_of("servo", &inst)),
-        nix::sys::signal::Signal::SIGKILL,
-    )
-    .expect("kill");
+    signal("servo", &inst, nix::sys::signal::Signal::SIGKILL);
     let start = Instant::now();
     let mut run = run;
     while run.try_wait().expect("wait").is_none() {
