@@ -41,14 +41,15 @@ CellConfigV3 = payload("rtc::CellConfigV3", 2944, [
     ("propagate_estop", u32), ("propagate_external_estop", u32), ("process_count", u32),
     ("reserved", u32), ("health", f64 * 9), ("process", ProcessConfigV2 * 16),
     ("axis", u8 * (8 * 240)), ("inject", u8 * (4 * 24))])  # axes/faults unused here
-ServoStateV2 = payload("rtc::ServoStateV2", 512, [
+ServoStateV3 = payload("rtc::ServoStateV3", 584, [
     ("seq", u64), ("stamp_ns", u64), ("measured_stamp_ns", u64), ("setpoint_seq", u64),
     ("request_seq", u64), ("status", u32), ("axes", u32), ("power", u8),
     ("axis_power", u8 * 8), ("reserved", u8 * 7), ("settled_axes", u32), ("fault_code", u32),
     ("fault_axis", i32), ("reserved2", u32), ("fault_value", f64), ("fault_limit", f64),
     ("controlword", u16 * 8), ("statusword", u16 * 8)] + [(n, f64 * 8) for n in (
         "cmd_position", "cmd_velocity", "act_position", "act_velocity", "following_error",
-        "effort")])
+        "effort")] + [("peak_program", u32), ("reserved3", u32),
+                      ("peak_following_error", f64 * 8)])
 FieldbusImageV1 = payload("rtc::FieldbusImageV1", 104, [
     ("seq", u64), ("written_ns", u64), ("measured_ns", u64), ("source_seq", u64),
     ("len", u32), ("axes", u32), ("image", u8 * 64)])
@@ -170,7 +171,7 @@ class Bridge:
             return 1
         self.index = names.index(self.name)
         self.me = cell.process[self.index]
-        self.servo_sub = self.sub("servo/state", ServoStateV2)
+        self.servo_sub = self.sub("servo/state", ServoStateV3)
         self.estop_sub = self.sub("estop", EstopV1, buffer=64)
         self.host_sub = self.sub("host/state", HostStateV1)
         self.image_pub = self.pub("iobridge/output", FieldbusImageV1)

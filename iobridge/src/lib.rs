@@ -7,7 +7,7 @@
 //! `<i>/iobridge/output`.
 
 use shm_schema::drive::{FIELDBUS_IMAGE_LEN, IMAGE_INVALID};
-use shm_schema::{FieldbusImageV1, ServoStateV2};
+use shm_schema::{FieldbusImageV1, ServoStateV3};
 
 /// Bytes of the timestamp at the start of the image.
 pub const STAMP_BYTES: usize = 8;
@@ -33,7 +33,7 @@ pub fn milli_units(v: f64) -> i32 {
 ///
 /// # Real-time
 /// Arithmetic and byte copies only.
-pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV2) -> FieldbusImageV1 {
+pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV3) -> FieldbusImageV1 {
     let axes = (state.axes as usize).min(IMAGE_AXES);
     let mut image = [0u8; FIELDBUS_IMAGE_LEN];
     image[..STAMP_BYTES].copy_from_slice(&(state.measured_stamp_ns / 1000).to_le_bytes());
@@ -82,7 +82,7 @@ mod tests {
 
     #[test]
     fn the_image_carries_the_measurement_time_and_positions() {
-        let mut s = ServoStateV2 {
+        let mut s = ServoStateV3 {
             seq: 9,
             measured_stamp_ns: 123_456_789_000,
             axes: 3,
@@ -100,7 +100,7 @@ mod tests {
 
     #[test]
     fn a_position_that_is_not_finite_is_marked_invalid_not_zero() {
-        let mut s = ServoStateV2 {
+        let mut s = ServoStateV3 {
             axes: 2,
             ..Default::default()
         };

@@ -4,13 +4,13 @@ use iobridge::write_image;
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, SetupError, Task};
-use shm_schema::{FieldbusImageV1, ServiceId, ServoStateV2};
+use shm_schema::{FieldbusImageV1, ServiceId, ServoStateV3};
 use std::process::ExitCode;
 
 struct Bridge {
     seq: u64,
-    servo: Sub<ServoStateV2>,
-    last: Option<ServoStateV2>,
+    servo: Sub<ServoStateV3>,
+    last: Option<ServoStateV3>,
     /// Servo's states arrive every servo period.
     servo_fresh: Freshness,
     output: Pub<FieldbusImageV1>,

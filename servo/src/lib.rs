@@ -55,7 +55,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
     AxisConfigV2, CellConfigV3, DriveCommandV2, DriveFeedbackV2, EstopReaction, EventV1, MAX_AXES,
-    Power, RequestKind, ServoRequestV1, ServoStateV2, SetpointV1, bound, str_of,
+    Power, RequestKind, ServoRequestV1, ServoStateV3, SetpointV1, bound, str_of,
 };
 
 /// Parameters of the controller.
@@ -155,6 +155,39 @@ pub struct Controller {
     /// Real time since the previous cycle (s).
     elapsed_s: f64,
     seq: u64,
+    peak: Peak,
+}
+
+/// The largest |following error| per axis since a program's first setpoint, latched by servo
+/// in every cycle so a run's verdict never depends on which states a reader saw.
+#[derive(Clone, Copy, Debug, Default)]
+struct Peak {
+    program: u32,
+    fe: [f64; MAX_AXES],
+}
+
+impl Peak {
+    /// Takes the following errors of a cycle that follows program `program`'s setpoints.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    fn note(&mut self, program: u32, fe: &[f64]) {
+        if program != self.program {
+            *self = Self {
+                program,
+                ..Self::default()
+            };
+        }
+        for (m, e) in self.fe.iter_mut().zip(fe) {
+            // A NaN never lowers the figure (f64::max ignores it): it is a fault elsewhere.
+            *m = m.max(e.abs());
+        }
+    }
+
+    fn publish(&self, state: &mut ServoStateV3) {
+        state.peak_program = self.program;
+        state.peak_following_error = self.fe;
+    }
 }
 
 /// The setpoint `sp` of axis `i` extrapolated `h` seconds (back in time when negative):
@@ -213,7 +246,7 @@ impl Rejoin {
 /// What one cycle decided for the drives and for servo's state (internal).
 struct Out {
     cmd: DriveCommandV2,
-    state: ServoStateV2,
+    state: ServoStateV3,
 }
 
 impl Controller {
@@ -248,6 +281,7 @@ impl Controller {
             applied_offset: [0.0; MAX_AXES],
             last_ns: 0,
             elapsed_s: 0.0,
+            peak: Peak::default(),
             seq: 0,
         }
     }
@@ -733,7 +767,7 @@ impl Controller {
         new_setpoint: Option<&SetpointV1>,
         feedback: Option<&DriveFeedbackV2>,
         events: &mut EventQueue,
-    ) -> (DriveCommandV2, ServoStateV2) {
+    ) -> (DriveCommandV2, ServoStateV3) {
         let n = self.p.axes;
         self.seq += 1;
         // The real time since the previous cycle (command validation scales its step limits
@@ -752,7 +786,7 @@ impl Controller {
                 axes: n as u32,
                 ..Default::default()
             },
-            state: ServoStateV2 {
+            state: ServoStateV3 {
                 seq: self.seq,
                 stamp_ns: now_ns,
                 axes: n as u32,
@@ -767,6 +801,7 @@ impl Controller {
                 self.request(now_ns, r, false, events);
             }
             out.state.request_seq = self.request_seq;
+            self.peak.publish(&mut out.state);
             return (out.cmd, out.state);
         };
         out.cmd.feedback_seq = fb.seq;
@@ -817,6 +852,7 @@ impl Controller {
         }
         self.controlwords(&states[..n], fb, &mut out);
         self.publishable(now_ns, &states[..n], fb, &mut out);
+        self.peak.publish(&mut out.state);
         (out.cmd, out.state)
     }
 
@@ -1029,6 +1065,8 @@ impl Controller {
                 self.latch(now_ns, l, &[str_of(&g.name), ": following error"], events);
             }
         }
+        let program = self.setpoint.map_or(self.peak.program, |s| s.program_id);
+        self.peak.note(program, &out.state.following_error[..n]);
         out.state.cmd_position = pos;
         out.state.cmd_velocity = vel;
         if self.power == Power::Enabled {

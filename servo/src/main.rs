@@ -5,7 +5,7 @@ use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, SetupError, Task};
 use servo::{Controller, Params};
 use shm_schema::{
-    DriveCommandV2, DriveFeedbackV2, EstopOrigin, ServiceId, ServoRequestV1, ServoStateV2,
+    DriveCommandV2, DriveFeedbackV2, EstopOrigin, ServiceId, ServoRequestV1, ServoStateV3,
     SetpointV1,
 };
 use std::process::ExitCode;
@@ -23,7 +23,7 @@ struct Servo {
     setpoints: Sub<SetpointV1>,
     drive_feedback: Sub<DriveFeedbackV2>,
     drive_commands: Pub<DriveCommandV2>,
-    state: Pub<ServoStateV2>,
+    state: Pub<ServoStateV3>,
 }
 
 impl Servo {

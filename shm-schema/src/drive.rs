@@ -83,7 +83,7 @@ pub struct DriveFeedbackV2 {
     pub following_error: [f64; MAX_AXES],
 }
 
-/// Servo status bits in [`ServoStateV2::status`].
+/// Servo status bits in [`ServoStateV3::status`].
 pub mod servo_status {
     /// Every axis is in Operation enabled and servo follows setpoints.
     pub const ENABLED: u32 = 1;
@@ -95,7 +95,7 @@ pub mod servo_status {
     /// The first setpoint of a new source did not start where servo holds and was refused;
     /// servo holds.
     pub const SETPOINT_JUMP: u32 = 8;
-    /// A fault is latched (see [`super::ServoStateV2::fault_code`]): power was cut and stays
+    /// A fault is latched (see [`super::ServoStateV3::fault_code`]): power was cut and stays
     /// off until a reset request.
     pub const FAULT_LATCHED: u32 = 16;
     /// No drive feedback has arrived yet.
@@ -108,7 +108,7 @@ pub mod servo_status {
 }
 
 /// Power state of the arm and of each axis (seed 001's `LLI_state`), in
-/// [`ServoStateV2::power`] and [`ServoStateV2::axis_power`].
+/// [`ServoStateV3::power`] and [`ServoStateV3::axis_power`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u8)]
 pub enum Power {
@@ -149,8 +149,8 @@ impl Power {
 /// What servo publishes on `<i>/servo/state` every cycle.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("rtc::ServoStateV2")]
-pub struct ServoStateV2 {
+#[type_name("rtc::ServoStateV3")]
+pub struct ServoStateV3 {
     /// +1 per servo cycle.
     pub seq: u64,
     /// Wake-up time of this servo cycle (ns, `CLOCK_MONOTONIC`).
@@ -199,6 +199,14 @@ pub struct ServoStateV2 {
     pub following_error: [f64; MAX_AXES],
     /// Effort per axis: commanded (CST) or reported by the drive (CSP, CSV) (N or N·m).
     pub effort: [f64; MAX_AXES],
+    /// `program_id` of the setpoints `peak_following_error` covers, 0 for none yet.
+    pub peak_program: u32,
+    /// Reserved, 0.
+    pub reserved3: u32,
+    /// Largest |following error| per axis (axis unit) servo found in any of its cycles since
+    /// the first setpoint of program `peak_program`: the figure a run's verdict takes, since
+    /// servo sees every cycle and a reader of this service may miss states.
+    pub peak_following_error: [f64; MAX_AXES],
 }
 
 /// What a [`ServoRequestV1`] asks for (seed 001's `LLI_enable`, `LLI_disable`).
@@ -235,7 +243,7 @@ impl RequestKind {
 #[type_name("rtc::ServoRequestV1")]
 pub struct ServoRequestV1 {
     /// Increasing per requester; servo acts on every new value and echoes it in
-    /// [`ServoStateV2::request_seq`].
+    /// [`ServoStateV3::request_seq`].
     pub seq: u64,
     /// [`RequestKind`] as `u32`.
     pub kind: u32,

@@ -29,7 +29,7 @@ pub use config::{
 };
 pub use drive::{
     DriveCommandV2, DriveFeedbackV2, FaultInjectionV1, FieldbusImageV1, Power, RequestKind,
-    ServoRequestV1, ServoStateV2,
+    ServoRequestV1, ServoStateV3,
 };
 pub use estop::{EstopKind, EstopOrigin, EstopV1};
 pub use event::{EventQueue, EventV1, Severity};

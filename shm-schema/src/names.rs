@@ -187,7 +187,7 @@ pub enum ServiceId {
     TrajgenHandover,
     /// `<i>/trajgen/setpoint`: [`crate::SetpointV1`], trajgen to servo (and observers).
     Setpoint,
-    /// `<i>/servo/state`: [`crate::ServoStateV2`], servo to iobridge (and observers).
+    /// `<i>/servo/state`: [`crate::ServoStateV3`], servo to iobridge (and observers).
     ServoState,
     /// `<i>/servo/request`: [`crate::ServoRequestV1`], a client (the supervisor) to servo:
     /// enable, disable, reset.

@@ -163,7 +163,7 @@ fn layouts() -> Vec<Layout> {
             velocity: "double[8]" = 8 * A,
             acceleration: "double[8]" = 8 * A,
         }),
-        layout!(ServoStateV2 {
+        layout!(ServoStateV3 {
             seq: "uint64_t" = 8,
             stamp_ns: "uint64_t" = 8,
             measured_stamp_ns: "uint64_t" = 8,
@@ -188,6 +188,9 @@ fn layouts() -> Vec<Layout> {
             act_velocity: "double[8]" = 8 * A,
             following_error: "double[8]" = 8 * A,
             effort: "double[8]" = 8 * A,
+            peak_program: "uint32_t" = 4,
+            reserved3: "uint32_t" = 4,
+            peak_following_error: "double[8]" = 8 * A,
         }),
         layout!(ServoRequestV1 {
             seq: "uint64_t" = 8,

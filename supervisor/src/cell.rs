@@ -20,7 +20,7 @@ use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
     CellConfigV3, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
     LatencyHistogramV1, MotionCommandV1, MotionControlV1, ProcState, ProcessName, ProcessStatusV2,
-    RequestKind, ServiceId, ServoRequestV1, ServoStateV2, SetpointV1, TrajgenHandoverV1,
+    RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV1, TrajgenHandoverV1,
     estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
@@ -225,7 +225,7 @@ pub(crate) struct Cell {
     pub(crate) axes: Axes,
     pub(crate) t0_ns: u64,
     pub(crate) last_sp: Option<SetpointV1>,
-    pub(crate) last_servo: Option<ServoStateV2>,
+    pub(crate) last_servo: Option<ServoStateV3>,
     request_seq: u64,
     control_seq: u64,
     event_seq: u64,
@@ -241,7 +241,7 @@ pub(crate) struct Cell {
     host_pub: Pub<HostStateV1>,
     sense_sub: Sub<LatencyHistogramV1>,
     pub(crate) setpoint_sub: Sub<SetpointV1>,
-    pub(crate) servo_sub: Sub<ServoStateV2>,
+    pub(crate) servo_sub: Sub<ServoStateV3>,
     pub(crate) image_sub: Sub<FieldbusImageV1>,
     pub(crate) handover_sub: Sub<TrajgenHandoverV1>,
     /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
@@ -800,7 +800,7 @@ impl Cell {
     }
 
     /// The latched fault servo reports, in words, with the event that explains it.
-    pub(crate) fn fault_text(&self, s: &ServoStateV2) -> String {
+    pub(crate) fn fault_text(&self, s: &ServoStateV3) -> String {
         let cause = self.events.iter().rev().find(|e| e.code == s.fault_code);
         self.servo_cut_text(s.fault_code, s.fault_axis, cause)
     }

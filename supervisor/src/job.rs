@@ -11,7 +11,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    MAX_AXES, MotionCommandV1, MotionState, Power, RequestKind, ServoStateV2, SetpointV1,
+    MAX_AXES, MotionCommandV1, MotionState, Power, RequestKind, ServoStateV3, SetpointV1,
 };
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
@@ -108,12 +108,12 @@ pub(crate) struct Job {
     start_pos: Vec<f64>,
     predicted: f64,
     rows: Vec<SetpointV1>,
-    servo_log: Vec<ServoStateV2>,
+    servo_log: Vec<ServoStateV3>,
     /// Fieldbus images: count, sum of delays, max delay (ns).
     images: (u64, u64, u64),
     done: Option<SetpointV1>,
     done_at: Option<Instant>,
-    settled_at: Option<(u64, ServoStateV2)>,
+    settled_at: Option<(u64, ServoStateV3)>,
     in_pos_since: Option<u64>,
     progress: Progress,
     last_target: Option<[f64; MAX_AXES]>,
@@ -395,20 +395,16 @@ impl Job {
         cell: &Cell,
         cfg: &Config,
         settle_start: u64,
-        final_state: &ServoStateV2,
+        final_state: &ServoStateV3,
     ) -> Report {
         let n = cfg.axis.len();
         let done = self.done.expect("settling needs done");
-        let mut max_fe = [0.0f64; MAX_AXES];
-        for s in self
-            .servo_log
-            .iter()
-            .filter(|s| s.stamp_ns <= final_state.stamp_ns)
-        {
-            for (m, e) in max_fe.iter_mut().zip(&s.following_error[..n]) {
-                *m = m.max(e.abs());
-            }
-        }
+        // Servo's own latch, never the states this loop happened to read: it saw every cycle.
+        let max_fe = if final_state.peak_program == self.program_id {
+            final_state.peak_following_error
+        } else {
+            [f64::NAN; MAX_AXES]
+        };
         let images = self.images;
         Report {
             ok: true,
@@ -460,7 +456,7 @@ impl Job {
 /// One row per setpoint: its command, and the measured position at the servo cycle that used
 /// it (the first servo cycle at or after its time: servo takes the newest setpoint). By time,
 /// not by sequence number: a swapped trajgen numbers its setpoints from 1 again.
-fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV2]) -> Vec<TraceRow> {
+fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV3]) -> Vec<TraceRow> {
     rows.iter()
         .map(|sp| {
             let idx = servo.partition_point(|s| s.stamp_ns < sp.stamp_ns);

@@ -131,15 +131,16 @@ pub struct Report {
     pub final_position: Vec<f64>,
     /// Final position minus the last target.
     pub final_error: Vec<f64>,
-    /// Largest |following error| per axis during the motion and settling.
+    /// Largest |following error| per axis during the motion and settling, as servo latched it
+    /// in every one of its cycles (`ServoStateV3.peak_following_error`).
     pub max_following_error: Vec<f64>,
     /// Setpoints recorded.
     pub setpoints: usize,
     /// Setpoints missing from the record (sequence gaps).
     pub lost_setpoints: u64,
     /// servo states the supervisor did not receive (sequence gaps: it was stalled, or its
-    /// buffer overflowed). The following-error figures miss them; the verdict does not, since
-    /// servo judges every cycle itself and latches a following error over its limit.
+    /// buffer overflowed). The trace misses them; the following-error figures and the verdict
+    /// do not, since servo judges and latches every cycle itself.
     pub lost_servo_states: u64,
     /// Times trajgen's queue ran empty.
     pub starved: u32,
@@ -271,7 +272,7 @@ impl Report {
         );
         if self.lost_servo_states > 0 {
             s += &format!(
-                "  servo states       {} not received: the following-error figures miss them (servo judged them itself)\n",
+                "  servo states       {} not received: the trace misses them (servo latched its figures itself)\n",
                 self.lost_servo_states
             );
         }

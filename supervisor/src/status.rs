@@ -11,7 +11,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopState, HostStateV1};
 use shm_schema::{
     CellConfigV3, DetectorV1, EstopOrigin, InstanceName, LatencyHistogramV1, MotionState, Power,
-    ProcState, ProcessName, ProcessStatusV2, ServiceId, ServoStateV2, SetpointV1, estop_seen,
+    ProcState, ProcessName, ProcessStatusV2, ServiceId, ServoStateV3, SetpointV1, estop_seen,
     str_of,
 };
 use std::time::{Duration, Instant};
@@ -39,7 +39,7 @@ pub struct Snapshot {
     /// The processes that published a status.
     pub processes: Vec<Seen>,
     /// Servo's latest state.
-    pub servo: Option<ServoStateV2>,
+    pub servo: Option<ServoStateV3>,
     /// The cell configuration (axis names and units).
     pub cell: Option<Box<CellConfigV3>>,
     /// The drives' sense-to-command latency since they started.
@@ -100,7 +100,7 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
         });
     }
     let servo_sub =
-        Sub::<ServoStateV2>::new(&node, instance, ServiceId::ServoState, 4).map_err(f)?;
+        Sub::<ServoStateV3>::new(&node, instance, ServiceId::ServoState, 4).map_err(f)?;
     let sense_sub =
         Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::SenseToCommand, 1).map_err(f)?;
     let host_sub = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(f)?;
@@ -191,7 +191,7 @@ fn drive_state(sw: u16) -> &'static str {
 }
 
 /// Servo's state as JSON: the arm and every axis.
-fn servo_json(s: &ServoStateV2, cell: Option<&CellConfigV3>) -> Value {
+fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV3>) -> Value {
     let n = (s.axes as usize).min(shm_schema::MAX_AXES);
     let names: Vec<String> = (0..n)
         .map(|i| match cell {

@@ -19,7 +19,7 @@ use latency::plot::{Panel, series_png};
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;
 use shm_schema::{
-    CommandKind, InstanceName, MAX_AXES, MotionCommandV1, MotionState, RequestKind, ServoStateV2,
+    CommandKind, InstanceName, MAX_AXES, MotionCommandV1, MotionState, RequestKind, ServoStateV3,
 };
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -229,7 +229,7 @@ fn watch(
     session: &mut Cell,
     cfg: &Config,
     limit: Duration,
-    mut stop: impl FnMut(&ServoStateV2) -> bool,
+    mut stop: impl FnMut(&ServoStateV3) -> bool,
 ) -> Result<bool, RunError> {
     let start = Instant::now();
     while start.elapsed() < limit {
@@ -254,8 +254,8 @@ fn until_settled(
     session: &mut Cell,
     cfg: &Config,
     limit: Duration,
-    mut log: Option<&mut Vec<ServoStateV2>>,
-) -> Result<Option<ServoStateV2>, RunError> {
+    mut log: Option<&mut Vec<ServoStateV3>>,
+) -> Result<Option<ServoStateV3>, RunError> {
     let mut settled = None;
     watch(session, cfg, limit, |s| {
         if let Some(l) = log.as_deref_mut() {

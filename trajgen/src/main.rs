@@ -7,7 +7,7 @@ use shm_schema::drive::servo_status;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    MotionCommandV1, MotionControlV1, ServiceId, ServoStateV2, SetpointV1, TrajgenHandoverV1,
+    MotionCommandV1, MotionControlV1, ServiceId, ServoStateV3, SetpointV1, TrajgenHandoverV1,
 };
 use std::process::ExitCode;
 use trajgen::generator::{Generator, Params, QUEUE_CAP};
@@ -19,7 +19,7 @@ struct Trajgen {
     commands: Sub<MotionCommandV1>,
     /// Pause, resume, abort: taken at once, not queued.
     control: Sub<MotionControlV1>,
-    servo: Sub<ServoStateV2>,
+    servo: Sub<ServoStateV3>,
     setpoints: Pub<SetpointV1>,
     /// Wakes event-driven consumers after each setpoint (none in the default cell: servo
     /// runs on its own phase of the shared grid).
@@ -27,7 +27,7 @@ struct Trajgen {
     /// The fault last reported as an event.
     reported_fault: u32,
     /// Servo's newest state.
-    last_servo: Option<ServoStateV2>,
+    last_servo: Option<ServoStateV3>,
     /// The paused motion, for a successor (and from a predecessor, at start).
     handover_pub: Pub<TrajgenHandoverV1>,
     handover_sub: Sub<TrajgenHandoverV1>,
@@ -156,7 +156,7 @@ impl Task for Trajgen {
 
 /// The generator that goes on with `h`, a predecessor's paused motion, if `h` is valid,
 /// recent, and rests where servo holds (so its first setpoint is no jump).
-fn successor(h: &TrajgenHandoverV1, s: &ServoStateV2, now: u64, p: Params) -> Option<Generator> {
+fn successor(h: &TrajgenHandoverV1, s: &ServoStateV3, now: u64, p: Params) -> Option<Generator> {
     const RECENT_NS: u64 = 30_000_000_000;
     if h.valid != 1 || now.saturating_sub(h.stamp_ns) > RECENT_NS {
         return None;

@@ -49,7 +49,10 @@ fn check_run(j: &serde_json::Value, target: [f64; 3]) {
     for (axis, want) in ["x", "y", "theta"].iter().zip(target) {
         let got = j["final_position"][axis].as_f64().expect("final position");
         assert!((got - want).abs() <= 0.01, "{axis}: {got} vs {want}");
-        assert!(j["max_following_error"][axis].as_f64().expect("fe") < 1.0);
+        // Servo's own latch, for the program that ran: an axis that moves (x does) has some
+        // following error, within its limit.
+        let fe = j["max_following_error"][axis].as_f64().expect("fe");
+        assert!(fe < 1.0 && (*axis != "x" || fe > 0.0), "{axis}: {fe}");
     }
     for p in ["trajgen", "servo", "iobridge", "machine"] {
         let proc_ = &j["processes"][p];

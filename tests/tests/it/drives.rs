@@ -320,7 +320,7 @@ fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
 #[test]
 fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
     use runtime::ipc::{self, Pub, Sub};
-    use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV2};
+    use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV3};
     let inst = instance("disable");
     let run = triangle_in_background(&inst);
     // Connect once the cell is up (an instance with a live client is refused by `run`).
@@ -332,7 +332,7 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
     }
     let node = ipc::node(&name, "test-client").expect("node");
     let requests = Pub::<ServoRequestV1>::new(&node, &name, ServiceId::ServoRequest).expect("pub");
-    let state = Sub::<ServoStateV2>::new(&node, &name, ServiceId::ServoState, 64).expect("sub");
+    let state = Sub::<ServoStateV3>::new(&node, &name, ServiceId::ServoState, 64).expect("sub");
     // Wait until the arm is enabled and moving, then ask servo to disable it.
     loop {
         assert!(start.elapsed() < WATCHDOG, "the arm never moved");
@@ -423,8 +423,8 @@ pub(crate) fn pid_of(role: &str, inst: &str) -> i32 {
 pub(crate) fn until_moving(
     node: &iceoryx2::prelude::Node<runtime::ipc::Ipc>,
     name: &shm_schema::InstanceName,
-) -> runtime::ipc::Sub<shm_schema::ServoStateV2> {
-    let state = runtime::ipc::Sub::<shm_schema::ServoStateV2>::new(
+) -> runtime::ipc::Sub<shm_schema::ServoStateV3> {
+    let state = runtime::ipc::Sub::<shm_schema::ServoStateV3>::new(
         node,
         name,
         shm_schema::ServiceId::ServoState,

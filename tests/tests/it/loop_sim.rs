@@ -7,7 +7,7 @@ use servo::{Controller, Params as ServoParams};
 use shm_schema::drive::servo_status as st;
 use shm_schema::{
     CellConfigV3, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
-    RequestKind, ServoRequestV1, ServoStateV2, SetpointV1,
+    RequestKind, ServoRequestV1, ServoStateV3, SetpointV1,
 };
 
 pub const MS: u64 = 1_000_000;
@@ -17,7 +17,7 @@ pub struct Loop {
     pub servo: Controller,
     pub fb: Option<DriveFeedbackV2>,
     pub cmd: Option<DriveCommandV2>,
-    pub state: ServoStateV2,
+    pub state: ServoStateV3,
     /// Every event so far.
     pub events: Vec<EventV1>,
     queue: EventQueue,
@@ -38,7 +38,7 @@ impl Loop {
             servo: Controller::new(ServoParams::from_cell(cell, servo.period_ns)),
             fb: None,
             cmd: None,
-            state: ServoStateV2::default(),
+            state: ServoStateV3::default(),
             events: Vec::new(),
             queue: EventQueue::default(),
             now: 1_000_000_000 + machine.phase_ns,
@@ -54,7 +54,7 @@ impl Loop {
         request: Option<RequestKind>,
         setpoint: Option<&SetpointV1>,
         inject: Option<&FaultInjectionV1>,
-    ) -> ServoStateV2 {
+    ) -> ServoStateV3 {
         let fb = self
             .machine
             .cycle(self.now, self.cmd.as_ref(), inject, &mut self.queue);
@@ -97,7 +97,7 @@ impl Loop {
         self.queue.clear();
     }
 
-    pub fn step(&mut self) -> ServoStateV2 {
+    pub fn step(&mut self) -> ServoStateV3 {
         self.step_with(None, None, None)
     }
 
@@ -106,8 +106,8 @@ impl Loop {
         &mut self,
         kind: Option<RequestKind>,
         cycles: usize,
-        done: impl Fn(&ServoStateV2) -> bool,
-    ) -> ServoStateV2 {
+        done: impl Fn(&ServoStateV3) -> bool,
+    ) -> ServoStateV3 {
         let mut s = self.step_with(kind, None, None);
         for _ in 0..cycles {
             if done(&s) {
@@ -123,7 +123,7 @@ impl Loop {
     }
 
     /// Enables the arm.
-    pub fn enable(&mut self) -> ServoStateV2 {
+    pub fn enable(&mut self) -> ServoStateV3 {
         self.until(None, 10, |s| s.status & st::INITIALIZED != 0);
         self.until(Some(RequestKind::Enable), 50, |s| {
             s.status & st::ENABLED != 0

@@ -695,3 +695,48 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
         assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
     }
 }
+
+#[test]
+fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+    // A reader that sees every state finds exactly servo's latched figure.
+    let mut seen = [0.0f64; 3];
+    let mut last = None;
+    for k in 0..12_000u64 {
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        for (m, e) in seen.iter_mut().zip(&s.following_error[..3]) {
+            *m = m.max(e.abs());
+        }
+        last = Some(s);
+    }
+    let s = last.expect("states");
+    assert_eq!(s.peak_program, 1);
+    assert!(seen[0] > 1e-4, "x moved: {seen:?}");
+    assert_eq!(&s.peak_following_error[..3], &seen[..]);
+    // The next program's first setpoint starts a new figure.
+    for c in motion_program::parse("MOVE(141,40,0)\nEND", 3)
+        .expect("parses")
+        .to_commands(2, 1)
+    {
+        g.push_command(&c);
+    }
+    let mut first = None;
+    for k in 0..4_000u64 {
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let s = lp.step_with(None, sp.as_ref(), None);
+        if s.peak_program == 2 && first.is_none() {
+            first = Some(s);
+        }
+    }
+    let first = first.expect("program 2 followed");
+    for i in 0..3 {
+        assert_eq!(
+            first.peak_following_error[i],
+            first.following_error[i].abs()
+        );
+    }
+}
