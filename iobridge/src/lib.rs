@@ -5,6 +5,12 @@
 //! processes) behind the encoders, and the timestamp makes that delay visible to whoever reads
 //! the image. The fieldbus is simulated in this version: the image is published on
 //! `<i>/iobridge/output`.
+//!
+//! iobridge also owns the cell's named digital IO ([`digital`]): it takes the field's inputs
+//! and the output requests, sets the outputs to their safe values when it reacts to an e-stop,
+//! raises the e-stop when an e-stop input opens, and publishes the IO image every cycle.
+
+pub mod digital;
 
 use shm_schema::drive::{FIELDBUS_IMAGE_LEN, IMAGE_INVALID};
 use shm_schema::{FieldbusImageV1, ServoStateV3};

@@ -1,24 +1,34 @@
 //! `iobridge`: the IO bridge process. See the crate documentation.
 
+use iobridge::digital::DigitalIo;
 use iobridge::write_image;
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, SetupError, Task};
-use shm_schema::{FieldbusImageV1, ServiceId, ServoStateV3};
+use shm_schema::event::code;
+use shm_schema::{
+    DigitalIoV1, EstopOrigin, EventV1, FieldbusImageV1, IoWriteV1, ServiceId, ServoStateV3,
+};
 use std::process::ExitCode;
 
 struct Bridge {
+    /// Fieldbus images written.
     seq: u64,
+    cycles: u64,
     servo: Sub<ServoStateV3>,
     last: Option<ServoStateV3>,
     /// Servo's states arrive every servo period.
     servo_fresh: Freshness,
     output: Pub<FieldbusImageV1>,
+    io: DigitalIo,
+    field: Sub<IoWriteV1>,
+    requests: Sub<IoWriteV1>,
+    io_state: Pub<DigitalIoV1>,
 }
 
 impl Task for Bridge {
     /// # Real-time
-    /// IPC calls and [`write_image`]; nothing else.
+    /// IPC calls, [`write_image`] and [`DigitalIo`]; nothing else.
     fn cycle(&mut self, cx: &mut Cycle<'_>) {
         let now = cx.now_ns();
         if let Some(s) = self.servo.latest() {
@@ -29,23 +39,49 @@ impl Task for Bridge {
             self.seq += 1;
             self.output.send(&write_image(self.seq, now, s));
         }
+        // The field first, then the e-stop reaction, then the requests: a request never
+        // overrides a safe value in the cycle that set it.
+        while let Some(w) = self.field.next() {
+            self.io.field(&w, now, cx.events);
+        }
+        self.io.react(cx.estop.react.is_some());
+        while let Some(w) = self.requests.next() {
+            self.io.request(&w, now, cx.events);
+        }
+        if !cx.estop.latched
+            && let Some(k) = self.io.open_estop_input()
+        {
+            let name = self.io.name(k);
+            let why = ["e-stop input ", name, " is open"];
+            cx.events
+                .push(EventV1::new(now, code::ESTOP_INPUT, -1, 0.0, 0.0, &why));
+            cx.raise_estop(EstopOrigin::External, code::ESTOP_INPUT, &why);
+        }
+        self.cycles += 1;
+        let image = self.io.image(self.cycles, now, cx.events);
+        self.io_state.send(&image);
     }
 }
 
 fn main() -> ExitCode {
     process::run(
         "iobridge",
-        "fieldbus output image with measurement timestamps",
+        "fieldbus output image with measurement timestamps, and the named digital IO",
         |ctx: &Context| {
             let i = &ctx.instance;
             Ok::<_, SetupError>(Bridge {
                 seq: 0,
+                cycles: 0,
                 servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
                 last: None,
                 servo_fresh: Freshness::new(
                     ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
                 ),
                 output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
+                io: DigitalIo::new(&ctx.cell),
+                field: Sub::new(&ctx.node, i, ServiceId::FieldInputs, 64)?,
+                requests: Sub::new(&ctx.node, i, ServiceId::IoRequest, 64)?,
+                io_state: Pub::new(&ctx.node, i, ServiceId::IoState)?,
             })
         },
     )

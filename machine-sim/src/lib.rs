@@ -28,10 +28,12 @@
 //! `substeps` steps per machine period, the drive's own loop running at every step), so a
 //! late cycle simulates the time that really passed, in more steps of the same size.
 
+pub mod field;
+
 use cia402::{Conditions, Device, Mode, QuickStopOption, State, error_code};
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
-    AxisConfigV2, CellConfigV3, DriveCommandV2, DriveFeedbackV2, EventV1, FaultInjectionV1,
+    AxisConfigV2, CellConfigV4, DriveCommandV2, DriveFeedbackV2, EventV1, FaultInjectionV1,
     MAX_AXES, str_of,
 };
 
@@ -253,7 +255,7 @@ impl Machine {
     /// The machine of `cell`, at rest at the axes' start positions, every drive in Not ready
     /// to switch on.
     /// The machine of `cell`, cycling every `period_ns`.
-    pub fn new(cell: &CellConfigV3, period_ns: u64) -> Self {
+    pub fn new(cell: &CellConfigV4, period_ns: u64) -> Self {
         let idle = AxisConfigV2::default();
         let mut axis = [Axis::from_config(&idle); MAX_AXES];
         let mut drive = [Drive::new(&idle); MAX_AXES];
@@ -667,8 +669,8 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn cell(mode: Mode) -> CellConfigV3 {
-        let mut c = CellConfigV3 {
+    fn cell(mode: Mode) -> CellConfigV4 {
+        let mut c = CellConfigV4 {
             axes: 1,
             machine_substeps: 4,
             drive_command_timeout_ns: 20 * MS,

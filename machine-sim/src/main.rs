@@ -1,11 +1,13 @@
 //! `machine-sim`: the simulated machine process. See the crate documentation.
 
 use machine_sim::Machine;
+use machine_sim::field::Field;
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
 use shm_schema::{
-    DriveCommandV2, DriveFeedbackV2, EventQueue, FaultInjectionV1, LatencyHistogramV1, ServiceId,
+    DigitalIoV1, DriveCommandV2, DriveFeedbackV2, EventQueue, FaultInjectionV1, IoWriteV1,
+    LatencyHistogramV1, ServiceId,
 };
 use std::process::ExitCode;
 
@@ -21,6 +23,10 @@ struct Sim {
     injections: Sub<FaultInjectionV1>,
     feedback: Pub<DriveFeedbackV2>,
     sense_to_command_pub: Pub<LatencyHistogramV1>,
+    /// The simulated two-position devices (the gripper) and their sensors.
+    field: Field,
+    io_state: Sub<DigitalIoV1>,
+    sensors: Pub<IoWriteV1>,
 }
 
 impl Sim {
@@ -52,6 +58,12 @@ impl Task for Sim {
         if fb.sense_to_command_ns > 0 {
             self.sense_to_command.record(fb.sense_to_command_ns);
         }
+        if !self.field.is_empty() {
+            let outputs = self.io_state.latest().map(|s| s.values);
+            if let Some(w) = self.field.step(now, outputs) {
+                self.sensors.send(&w);
+            }
+        }
         if now.saturating_sub(self.last_published_ns) >= LATENCY_PUBLISH_INTERVAL_NS {
             self.publish_latency(now);
         }
@@ -80,6 +92,9 @@ fn main() -> ExitCode {
                 injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
                 sense_to_command_pub: Pub::new(&ctx.node, i, ServiceId::SenseToCommand)?,
+                field: Field::new(&ctx.cell),
+                io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
+                sensors: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
             })
         },
     )

@@ -6,6 +6,7 @@
 //! take part.
 
 use crate::MAX_AXES;
+use crate::io::{IoConfigV1, MAX_IO};
 use crate::status::{MAX_PROCESSES, PROCESS_NAME_LEN, ProcessName};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -181,14 +182,14 @@ pub struct ConfiguredFaultV1 {
     pub code: u32,
 }
 
-/// Capacity of [`CellConfigV3::inject`].
+/// Capacity of [`CellConfigV4::inject`].
 pub const MAX_CONFIGURED_FAULTS: usize = 4;
 
 /// The whole cell.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
-#[type_name("rtc::CellConfigV3")]
-pub struct CellConfigV3 {
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("rtc::CellConfigV4")]
+pub struct CellConfigV4 {
     /// Number of axes in use, 1..=[`MAX_AXES`].
     pub axes: u32,
     /// Integration steps of the simulated machine per machine cycle.
@@ -230,9 +231,43 @@ pub struct CellConfigV3 {
     pub axis: [AxisConfigV2; MAX_AXES],
     /// Configured fault injections; entries with `code` 0 are unused.
     pub inject: [ConfiguredFaultV1; MAX_CONFIGURED_FAULTS],
+    /// Entries of `io` in use.
+    pub io_count: u32,
+    /// Reserved, 0.
+    pub reserved2: u32,
+    /// The named digital IO; entry `k` is bit `k` of [`crate::DigitalIoV1`]'s masks.
+    pub io: [IoConfigV1; MAX_IO],
 }
 
-impl CellConfigV3 {
+impl Default for CellConfigV4 {
+    fn default() -> Self {
+        Self {
+            axes: 0,
+            machine_substeps: 0,
+            t_acc_s: 0.0,
+            drive_command_timeout_ns: 0,
+            setpoint_timeout_ns: 0,
+            feedback_timeout_ns: 0,
+            enable_timeout_ns: 0,
+            settle_time_ns: 0,
+            estop_stop_time_ns: 0,
+            supervisor_timeout_ns: 0,
+            propagate_estop: 0,
+            propagate_external_estop: 0,
+            process_count: 0,
+            reserved: 0,
+            health: HealthConfigV1::default(),
+            process: [ProcessConfigV2::default(); MAX_PROCESSES],
+            axis: [AxisConfigV2::default(); MAX_AXES],
+            inject: [ConfiguredFaultV1::default(); MAX_CONFIGURED_FAULTS],
+            io_count: 0,
+            reserved2: 0,
+            io: [IoConfigV1::default(); MAX_IO],
+        }
+    }
+}
+
+impl CellConfigV4 {
     /// The axes in use.
     pub fn axes(&self) -> &[AxisConfigV2] {
         &self.axis[..(self.axes as usize).min(MAX_AXES)]
@@ -241,6 +276,18 @@ impl CellConfigV3 {
     /// The process table entries in use.
     pub fn processes(&self) -> &[ProcessConfigV2] {
         &self.process[..(self.process_count as usize).min(MAX_PROCESSES)]
+    }
+
+    /// The IO entries in use.
+    pub fn io(&self) -> &[IoConfigV1] {
+        &self.io[..(self.io_count as usize).min(MAX_IO)]
+    }
+
+    /// Index of the IO entry called `name`.
+    pub fn io_named(&self, name: &str) -> Option<usize> {
+        self.io()
+            .iter()
+            .position(|e| crate::str_of(&e.name) == name)
     }
 
     /// Index and entry of the process called `name`.

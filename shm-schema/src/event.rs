@@ -236,6 +236,13 @@ pub mod code {
     pub const HEALTH_EXPIRED: u32 = 604;
     /// The supervisor's heartbeat stopped; value: its age (s), limit: the timeout (s).
     pub const SUPERVISOR_LOST: u32 = 605;
+
+    /// A named digital IO changed (the text names it); value: its new value.
+    pub const IO_CHANGED: u32 = 701;
+    /// An e-stop input is open (the text names it).
+    pub const ESTOP_INPUT: u32 = 702;
+    /// A write of the IO was refused (the text names the entry and why).
+    pub const IO_REFUSED: u32 = 703;
 }
 
 /// What a code means, for documents and reports.
@@ -520,6 +527,27 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Error,
         unit: "s",
         meaning: "A process has not seen the supervisor's heartbeat for `supervisor_timeout`: it reacts as to a host e-stop (servo brings the axes to rest and disables the drives) and exits, so no cell runs headless.",
+    },
+    CodeInfo {
+        code: code::IO_CHANGED,
+        name: "io-changed",
+        severity: Severity::Info,
+        unit: "0 or 1",
+        meaning: "A named digital IO (docs/io.md) changed to the value given: an input as the field reported it, an output as iobridge wrote it (on request, or to its safe value on an e-stop); the text names it.",
+    },
+    CodeInfo {
+        code: code::ESTOP_INPUT,
+        name: "estop-input",
+        severity: Severity::Error,
+        unit: "",
+        meaning: "An e-stop input (an `[[io]]` entry with `estop = true`) opened: a button was pressed or its wire broke. iobridge raises the user's e-stop (external origin: `propagate_external_estop` applies) and raises it again after a reset for as long as the input stays open.",
+    },
+    CodeInfo {
+        code: code::IO_REFUSED,
+        name: "io-refused",
+        severity: Severity::Warning,
+        unit: "",
+        meaning: "iobridge refused a write of the IO and changed nothing: an output requested while its e-stop reaction holds the outputs at their safe values, an input written as an output or the reverse, or a bit beyond the IO table; the text says which.",
     },
 ];
 

@@ -19,13 +19,14 @@ pub mod config;
 pub mod drive;
 pub mod estop;
 pub mod event;
+pub mod io;
 pub mod latency;
 pub mod motion;
 pub mod names;
 pub mod status;
 
 pub use config::{
-    AxisConfigV2, CellConfigV3, ConfiguredFaultV1, EstopReaction, HealthConfigV1, ProcessConfigV2,
+    AxisConfigV2, CellConfigV4, ConfiguredFaultV1, EstopReaction, HealthConfigV1, ProcessConfigV2,
 };
 pub use drive::{
     DriveCommandV2, DriveFeedbackV2, FaultInjectionV1, FieldbusImageV1, Power, RequestKind,
@@ -33,6 +34,7 @@ pub use drive::{
 };
 pub use estop::{EstopKind, EstopOrigin, EstopV1};
 pub use event::{EventQueue, EventV1, Severity};
+pub use io::{DigitalIoV1, IoConfigV1, IoDirection, IoWriteV1, MAX_IO, SafeValue};
 pub use latency::LatencyHistogramV1;
 pub use motion::{
     CommandKind, ControlKind, MotionCommandV1, MotionControlV1, MotionState, SetpointV1,

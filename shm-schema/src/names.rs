@@ -174,7 +174,7 @@ impl fmt::Display for ServiceNameBuf {
 /// their payload layouts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ServiceId {
-    /// `<i>/cell/config`: [`crate::CellConfigV3`], published once by the supervisor with
+    /// `<i>/cell/config`: [`crate::CellConfigV4`], published once by the supervisor with
     /// history 1, so a process that starts later still receives it.
     CellConfig,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV1`], a client (the supervisor) to trajgen.
@@ -223,6 +223,15 @@ pub enum ServiceId {
     /// `<i>/host/state`: [`crate::estop::HostStateV1`], the supervisor's heartbeat and the
     /// latched e-stop, every supervisor tick, history 1.
     HostState,
+    /// `<i>/io/state`: [`crate::DigitalIoV1`], iobridge's image of the named digital IO, every
+    /// iobridge cycle, history 1.
+    IoState,
+    /// `<i>/io/request`: [`crate::IoWriteV1`], output requests from trajgen (`OUT`), the
+    /// supervisor's tools and any client to iobridge.
+    IoRequest,
+    /// `<i>/field/inputs`: [`crate::IoWriteV1`], the inputs as field devices report them (the
+    /// simulated machine, a simulated button, a fieldbus driver) to iobridge.
+    FieldInputs,
     /// `<i>/trajgen/setpoint` (event service): trajgen notifies it after each setpoint
     /// publish, so a consumer may block until a setpoint arrives instead of polling.
     SetpointReady,
@@ -275,6 +284,9 @@ impl ServiceId {
             Self::FieldbusOutput => "iobridge/output",
             Self::Estop => "estop",
             Self::HostState => "host/state",
+            Self::IoState => "io/state",
+            Self::IoRequest => "io/request",
+            Self::FieldInputs => "field/inputs",
             Self::Status(_) | Self::Latency(_) | Self::ExecTime(_) => "",
             Self::SetpointReady => "trajgen/setpoint",
         }
@@ -311,7 +323,11 @@ impl ServiceId {
                 max_nodes: 40,
                 ..base
             },
-            Self::ServoRequest | Self::FaultInjection | Self::MotionControl => Qos {
+            Self::ServoRequest
+            | Self::FaultInjection
+            | Self::MotionControl
+            | Self::IoRequest
+            | Self::FieldInputs => Qos {
                 max_publishers: 8,
                 ..base
             },
@@ -322,8 +338,8 @@ impl ServiceId {
                 max_nodes: 40,
                 ..base
             },
-            // The successor gets the paused motion at once.
-            Self::TrajgenHandover => Qos { history: 1, ..base },
+            // The successor gets the paused motion at once; a tool the IO image.
+            Self::TrajgenHandover | Self::IoState => Qos { history: 1, ..base },
             // A process started late gets the latched state at once.
             Self::HostState => Qos {
                 history: 1,

@@ -31,7 +31,7 @@ const A: usize = MAX_AXES;
 
 fn layouts() -> Vec<Layout> {
     vec![
-        layout!(CellConfigV3 {
+        layout!(CellConfigV4 {
             axes: "uint32_t" = 4,
             machine_substeps: "uint32_t" = 4,
             t_acc_s: "double" = 8,
@@ -50,6 +50,36 @@ fn layouts() -> Vec<Layout> {
             process: "ProcessConfigV2[16]" = MAX_PROCESSES * size_of::<ProcessConfigV2>(),
             axis: "AxisConfigV2[8]" = A * size_of::<AxisConfigV2>(),
             inject: "ConfiguredFaultV1[4]" = 4 * size_of::<ConfiguredFaultV1>(),
+            io_count: "uint32_t" = 4,
+            reserved2: "uint32_t" = 4,
+            io: "IoConfigV1[64]" = MAX_IO * size_of::<IoConfigV1>(),
+        }),
+        layout!(IoConfigV1 {
+            name: "char[24]" = 24,
+            direction: "uint32_t" = 4,
+            safe: "uint32_t" = 4,
+            estop: "uint32_t" = 4,
+            sim: "uint32_t" = 4,
+            follows: "int32_t" = 4,
+            reserved: "uint32_t" = 4,
+            switch_time_ns: "uint64_t" = 8,
+        }),
+        layout!(IoWriteV1 {
+            stamp_ns: "uint64_t" = 8,
+            mask: "uint64_t" = 8,
+            values: "uint64_t" = 8,
+            source: "uint32_t" = 4,
+            line: "uint32_t" = 4,
+        }),
+        layout!(DigitalIoV1 {
+            seq: "uint64_t" = 8,
+            stamp_ns: "uint64_t" = 8,
+            values: "uint64_t" = 8,
+            changed: "uint64_t" = 8,
+            taken: "uint64_t" = 8,
+            refused: "uint64_t" = 8,
+            count: "uint32_t" = 4,
+            outputs_safe: "uint32_t" = 4,
         }),
         layout!(ProcessConfigV2 {
             name: "char[16]" = 16,

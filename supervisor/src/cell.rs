@@ -18,7 +18,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
-    CellConfigV3, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
+    CellConfigV4, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
     LatencyHistogramV1, MotionCommandV1, MotionControlV1, ProcState, ProcessName, ProcessStatusV2,
     RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV1, TrajgenHandoverV1,
     estop_seen, str_of,
@@ -230,7 +230,7 @@ pub(crate) struct Cell {
     control_seq: u64,
     event_seq: u64,
     // Field order is drop order: ports before the node.
-    config_pub: Pub<CellConfigV3>,
+    config_pub: Pub<CellConfigV4>,
     pub(crate) command_pub: Pub<MotionCommandV1>,
     control_pub: Pub<MotionControlV1>,
     request_pub: Pub<ServoRequestV1>,

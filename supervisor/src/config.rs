@@ -6,12 +6,13 @@ use serde::Deserialize;
 use shm_schema::config::MAX_CONFIGURED_FAULTS;
 use shm_schema::drive::injected;
 use shm_schema::{
-    AxisConfigV2, CellConfigV3, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
+    AxisConfigV2, CellConfigV4, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
     MAX_PROCESSES, ProcessConfigV2, ProcessName, fixed_str,
 };
 use std::fmt;
 use std::ops::Range;
 
+pub mod io;
 mod stability;
 
 /// The embedded default cell (the Gantry UBA).
@@ -632,6 +633,9 @@ pub struct Config {
     /// `[supervisor]`
     #[serde(default)]
     pub supervisor: SupervisorSettings,
+    /// `[[io]]`: the named digital IO.
+    #[serde(default)]
+    pub io: Vec<io::Io>,
 }
 
 /// One step of a key path, to find where a value is written.
@@ -779,6 +783,9 @@ impl Config {
                 vec![K("motion"), K("settle_timeout")],
                 "settle_timeout must be positive".into(),
             );
+        }
+        if let Some(e) = io::validate(&self.io) {
+            return Err(e);
         }
         if let Some(e) = self.validate_processes() {
             return Err(e);
@@ -1216,9 +1223,9 @@ impl Config {
     }
 
     /// The configuration as every process reads it from shared memory.
-    pub fn to_shm(&self) -> CellConfigV3 {
+    pub fn to_shm(&self) -> CellConfigV4 {
         let ns = |s: f64| (s * 1e9) as u64;
-        let mut c = CellConfigV3 {
+        let mut c = CellConfigV4 {
             axes: self.axis.len() as u32,
             machine_substeps: self.drives.substeps,
             t_acc_s: self.motion.t_acc,
@@ -1237,6 +1244,9 @@ impl Config {
             process: [ProcessConfigV2::default(); MAX_PROCESSES],
             axis: [AxisConfigV2::default(); MAX_AXES],
             inject: [ConfiguredFaultV1::default(); MAX_CONFIGURED_FAULTS],
+            io_count: self.io.len() as u32,
+            reserved2: 0,
+            io: io::to_shm(&self.io),
         };
         for (j, f) in self.drives.inject.iter().enumerate() {
             c.inject[j] = ConfiguredFaultV1 {
@@ -1438,6 +1448,52 @@ mod tests {
             "period_us = 4000\nphase_us = 600",
             "period_us = 4000\nphase_us = 6000",
             &(src_line(line_of("phase_us = 600")) + "process iobridge: phase_us must be smaller"),
+        );
+    }
+
+    #[test]
+    fn a_bad_io_table_is_refused_naming_the_entry_and_key() {
+        let at = |needle: &str| format!("cell.toml:{}:1: ", line_of(needle));
+        check(
+            "safe = \"hold\"",
+            "safe = 2",
+            &(at("safe = \"hold\"") + "IO gripper: safe must be 0, 1 or \"hold\""),
+        );
+        check(
+            "safe = \"hold\"",
+            "safe = \"hold\"\nestop = true",
+            &format!(
+                "cell.toml:{}:1: IO gripper: `estop` is for inputs; gripper is an output",
+                line_of("safe = \"hold\"") + 1
+            ),
+        );
+        check(
+            "follows = \"gripper\"",
+            "follows = \"part_present\"",
+            &(at("follows = \"gripper\"")
+                + "IO gripper_closed: follows \"part_present\", which is not an output of `[[io]]`"),
+        );
+        check(
+            "switch_time = 0.08",
+            "switch_time = 1e20",
+            &(at("switch_time = 0.08")
+                + "IO gripper_closed: switch_time = 100000000000000000000 s must be 0..=10"),
+        );
+        check(
+            "name = \"part_present\"",
+            "name = \"gripper\"",
+            &(at("name = \"part_present\"") + "IO name \"gripper\" is used twice"),
+        );
+        check(
+            "name = \"part_present\"",
+            "name = \"part present\"",
+            &(at("name = \"part_present\"")
+                + "IO name \"part present\": a letter, then letters, digits and '_', at most 23 bytes"),
+        );
+        check(
+            "direction = \"input\"\nestop = true",
+            "direction = \"in\"\nestop = true",
+            "cell.toml:",
         );
     }
 

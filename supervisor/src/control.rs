@@ -1,5 +1,5 @@
-//! One-shot commands to a running instance: fault injection into the simulated drives, and
-//! the user's e-stop.
+//! One-shot commands to a running instance: fault injection into the simulated drives, the
+//! user's e-stop, and the named digital IO.
 
 use crate::config::{FAULT_NAMES, fault_code};
 use iceoryx2::prelude::Node;
@@ -7,8 +7,8 @@ use runtime::events::EventSink;
 use runtime::ipc::{self, Ipc, Pub, Sub};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
-    CellConfigV3, EstopOrigin, EstopV1, EventV1, FaultInjectionV1, InstanceName, ProcessStatusV2,
-    ServiceId, estop_seen, str_of,
+    CellConfigV4, DigitalIoV1, EstopOrigin, EstopV1, EventV1, FaultInjectionV1, InstanceName,
+    IoDirection, IoWriteV1, ProcessStatusV2, ServiceId, estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -64,9 +64,9 @@ fn failed(e: ipc::IpcError) -> ControlError {
 }
 
 /// The configuration the running cell published (its axes and processes, not a file's).
-fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV3, ControlError> {
+fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV4, ControlError> {
     let config =
-        Sub::<CellConfigV3>::new(node, instance, ServiceId::CellConfig, 1).map_err(failed)?;
+        Sub::<CellConfigV4>::new(node, instance, ServiceId::CellConfig, 1).map_err(failed)?;
     let start = Instant::now();
     loop {
         if let Some(c) = config.latest() {
@@ -229,4 +229,136 @@ pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
             std::thread::sleep(Duration::from_millis(2));
         }
     })
+}
+
+/// `supervisor io`: without `name`, the named digital IO of the running `instance` and their
+/// values. With `name` and `value` (0 or 1): an output is requested from iobridge, as a
+/// program's `OUT` does; an input is reported as a field device of the simulated field would
+/// (a button pressed, a sensor); either way it waits until iobridge's image shows the value.
+pub fn io(instance: &str, name: Option<&str>, value: Option<&str>) -> Result<String, ControlError> {
+    let value = match value {
+        None => None,
+        Some("0") => Some(false),
+        Some("1") => Some(true),
+        Some(v) => {
+            let v: String = v.chars().take(20).collect();
+            return Err(ControlError::Input(format!("value {v:?}: 0 or 1 expected")));
+        }
+    };
+    attached(instance, "io", |&instance, node| {
+        let cell = running_cell(node, &instance)?;
+        let state =
+            Sub::<DigitalIoV1>::new(node, &instance, ServiceId::IoState, 1).map_err(failed)?;
+        let Some(name) = name else {
+            let start = Instant::now();
+            let image = loop {
+                if let Some(s) = state.latest() {
+                    break Some(s);
+                }
+                if start.elapsed() > PATIENCE {
+                    break None;
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            };
+            return Ok(io_table(&cell, image.as_ref()));
+        };
+        let names: Vec<&str> = cell.io().iter().map(|e| str_of(&e.name)).collect();
+        let k = cell.io_named(name).ok_or_else(|| {
+            let shown: String = name.chars().take(40).collect();
+            ControlError::Input(if names.is_empty() {
+                format!("IO {shown:?}: the cell has no `[[io]]`")
+            } else {
+                format!("IO {shown:?}: the cell has {}", names.join(", "))
+            })
+        })?;
+        let Some(value) = value else {
+            return Err(ControlError::Input(format!(
+                "IO {name}: give a value, 0 or 1 (or no name to list the IO)"
+            )));
+        };
+        let output = IoDirection::from_u32(cell.io[k].direction) == Some(IoDirection::Output);
+        let port = Pub::<IoWriteV1>::new(
+            node,
+            &instance,
+            if output {
+                ServiceId::IoRequest
+            } else {
+                ServiceId::FieldInputs
+            },
+        )
+        .map_err(failed)?;
+        let write = IoWriteV1 {
+            stamp_ns: runtime::time::now_ns(),
+            mask: 1 << k,
+            values: u64::from(value) << k,
+            source: SOURCE_SUPERVISOR,
+            line: 0,
+        };
+        let start = Instant::now();
+        let mut sent_at: Option<Instant> = None;
+        loop {
+            // Resent until the image shows it: a brand-new publisher's first sample can be
+            // lost while its connections settle.
+            if sent_at.is_none_or(|t| t.elapsed() > Duration::from_millis(50)) {
+                port.update_connections();
+                port.send(&write);
+                sent_at = Some(Instant::now());
+            }
+            if let Some(s) = state.latest().filter(|s| s.stamp_ns > write.stamp_ns) {
+                if (s.values >> k) & 1 == u64::from(value) {
+                    let what = if output {
+                        "output"
+                    } else {
+                        "input (simulated field)"
+                    };
+                    return Ok(format!(
+                        "{name} = {} on instance {instance}: {what}",
+                        u8::from(value)
+                    ));
+                }
+                if output && s.outputs_safe != 0 {
+                    return Err(ControlError::Failed(format!(
+                        "{name} not set: iobridge holds the outputs at their safe values while it \
+                         reacts to the e-stop (`supervisor reset` first)"
+                    )));
+                }
+            }
+            if start.elapsed() > PATIENCE {
+                return Err(ControlError::Failed(format!(
+                    "iobridge of instance {instance} did not show {name} = {} within {} s",
+                    u8::from(value),
+                    PATIENCE.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    })
+}
+
+/// The IO table as text: name, direction, value.
+fn io_table(cell: &CellConfigV4, image: Option<&DigitalIoV1>) -> String {
+    if cell.io().is_empty() {
+        return "the cell has no named IO (`[[io]]`)".into();
+    }
+    let v = crate::status::io_json(cell, image);
+    let mut out = String::from("name                     direction  value  notes\n");
+    for e in v["entries"].as_array().into_iter().flatten() {
+        let notes = match e["direction"].as_str() {
+            Some("output") => format!("safe {}", e["safe"].to_string().trim_matches('"')),
+            _ if e["estop"] == true => "e-stop circuit (1 closed)".into(),
+            _ => String::new(),
+        };
+        out += &format!(
+            "{:<24} {:<10} {:<6} {notes}\n",
+            e["name"].as_str().unwrap_or("?"),
+            e["direction"].as_str().unwrap_or("?"),
+            e["value"].as_u64().map_or("?".into(), |v| v.to_string()),
+        );
+    }
+    if image.is_none() {
+        out += "(iobridge published no IO image: values unknown)\n";
+    } else if v["outputs_safe"] == true {
+        out += "outputs held at their safe values: iobridge reacts to the e-stop\n";
+    }
+    out.trim_end().to_string()
 }

@@ -254,6 +254,17 @@ enum Cmd {
         #[arg(long, default_value = "operator e-stop")]
         reason: String,
     },
+    /// List the named digital IO of a running instance, or set one: an output as a program's
+    /// OUT does, an input as a device of the simulated field would (docs/io.md).
+    Io {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// The IO's name (`[[io]]`); none lists them all.
+        name: Option<String>,
+        /// 0 or 1.
+        value: Option<String>,
+    },
     /// The sending side of a latency hop (started by `supervisor latency`).
     #[command(hide = true, name = "latency-peer")]
     LatencyPeer {
@@ -640,6 +651,15 @@ fn main() -> ExitCode {
         Cmd::Estop { instance, reason } => {
             control_done(supervisor::control::estop(&instance, &reason))
         }
+        Cmd::Io {
+            instance,
+            name,
+            value,
+        } => control_done(supervisor::control::io(
+            &instance,
+            name.as_deref(),
+            value.as_deref(),
+        )),
         Cmd::DefaultConfig => {
             print!("{DEFAULT_TOML}");
             ExitCode::SUCCESS

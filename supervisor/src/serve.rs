@@ -519,7 +519,9 @@ impl Loop<'_> {
                         "the e-stop is clear; `supervisor start` enables the drives".into(),
                     ));
                 }
-                if since.elapsed() < Duration::from_secs(2) {
+                // A new e-stop since the reset (its cause is still there: an e-stop input still
+                // open) fails the reset at once; the rest gets two seconds to clear.
+                if self.cell.estop.is_none() && since.elapsed() < Duration::from_secs(2) {
                     return None;
                 }
                 let mut left = Vec::new();
@@ -529,14 +531,13 @@ impl Loop<'_> {
                         self.cell.fault_text(&s)
                     ));
                 }
-                if !latched.is_empty() {
-                    left.push(format!(
+                match self.cell.estop_text() {
+                    Some(t) => left.push(format!("the e-stop was raised again: {t}")),
+                    None if !latched.is_empty() => left.push(format!(
                         "{} still show the e-stop latched",
                         latched.join(", ")
-                    ));
-                }
-                if let Some(t) = self.cell.estop_text() {
-                    left.push(format!("a new e-stop was raised: {t}"));
+                    )),
+                    None => {}
                 }
                 Some(Reply::Failed(format!(
                     "reset did not clear everything:\n  {}",

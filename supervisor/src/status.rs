@@ -10,9 +10,9 @@ use serde_json::{Map, Value, json};
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopState, HostStateV1};
 use shm_schema::{
-    CellConfigV3, DetectorV1, EstopOrigin, InstanceName, LatencyHistogramV1, MotionState, Power,
-    ProcState, ProcessName, ProcessStatusV2, ServiceId, ServoStateV3, SetpointV1, estop_seen,
-    str_of,
+    CellConfigV4, DetectorV1, DigitalIoV1, EstopOrigin, InstanceName, IoDirection,
+    LatencyHistogramV1, MotionState, Power, ProcState, ProcessName, ProcessStatusV2, SafeValue,
+    ServiceId, ServoStateV3, SetpointV1, estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -41,13 +41,15 @@ pub struct Snapshot {
     /// Servo's latest state.
     pub servo: Option<ServoStateV3>,
     /// The cell configuration (axis names and units).
-    pub cell: Option<Box<CellConfigV3>>,
+    pub cell: Option<Box<CellConfigV4>>,
     /// The drives' sense-to-command latency since they started.
     pub sense_to_command: Option<Box<LatencyHistogramV1>>,
     /// The supervisor's heartbeat and latched e-stop.
     pub host: Option<HostStateV1>,
     /// trajgen's newest setpoint (the running program, its line, its motion time).
     pub setpoint: Option<SetpointV1>,
+    /// iobridge's newest image of the named digital IO.
+    pub io: Option<DigitalIoV1>,
 }
 
 /// Reads the status and latency of every process of `instance`. Errors when nothing of the
@@ -63,7 +65,7 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     let f = |e: ipc::IpcError| e.to_string();
     let node = ipc::node(instance, &format!("status-{}", std::process::id())).map_err(f)?;
     let cell_sub =
-        Sub::<CellConfigV3>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+        Sub::<CellConfigV4>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
     let start = Instant::now();
     let cell = loop {
         if let Some(c) = cell_sub.latest() {
@@ -106,7 +108,8 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     let host_sub = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(f)?;
     let setpoint_sub =
         Sub::<SetpointV1>::new(&node, instance, ServiceId::Setpoint, 4).map_err(f)?;
-    let (mut servo, mut sense, mut host, mut setpoint) = (None, None, None, None);
+    let io_sub = Sub::<DigitalIoV1>::new(&node, instance, ServiceId::IoState, 1).map_err(f)?;
+    let (mut servo, mut sense, mut host, mut setpoint, mut io) = (None, None, None, None, None);
     let mut heard = vec![false; seen.len()];
     let start = Instant::now();
     while start.elapsed() < LISTEN {
@@ -134,6 +137,9 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
         if let Some(x) = setpoint_sub.latest() {
             setpoint = Some(x);
         }
+        if let Some(x) = io_sub.latest() {
+            io = Some(x);
+        }
         if heard.iter().all(|h| *h)
             && seen
                 .iter()
@@ -142,12 +148,13 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
             && sense.is_some()
             && host.is_some()
             && setpoint.is_some()
+            && (io.is_some() || cell.io().is_empty())
         {
             break;
         }
         std::thread::sleep(Duration::from_millis(10));
     }
-    drop((host_sub, setpoint_sub));
+    drop((host_sub, setpoint_sub, io_sub));
     drop((ports, servo_sub, cell_sub, sense_sub));
     drop(node);
     ipc::cleanup_after_client(instance);
@@ -169,6 +176,44 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
         sense_to_command: sense,
         host,
         setpoint,
+        io,
+    })
+}
+
+/// The named digital IO: per entry its name, direction, value (null before iobridge's first
+/// image), and for an output its safe value, for an input whether it is an e-stop circuit.
+pub fn io_json(cell: &CellConfigV4, io: Option<&DigitalIoV1>) -> Value {
+    let entries: Vec<Value> = cell
+        .io()
+        .iter()
+        .enumerate()
+        .map(|(k, e)| {
+            let value = io.map(|i| u8::from(i.values & (1 << k) != 0));
+            match IoDirection::from_u32(e.direction) {
+                Some(IoDirection::Output) => json!({
+                    "name": str_of(&e.name),
+                    "direction": "output",
+                    "value": value,
+                    "safe": match SafeValue::from_u32(e.safe) {
+                        Some(SafeValue::On) => json!(1),
+                        Some(SafeValue::Hold) => json!("hold"),
+                        _ => json!(0),
+                    },
+                }),
+                _ => json!({
+                    "name": str_of(&e.name),
+                    "direction": "input",
+                    "value": value,
+                    "estop": e.estop != 0,
+                }),
+            }
+        })
+        .collect();
+    json!({
+        "entries": entries,
+        "outputs_safe": io.map(|i| i.outputs_safe != 0),
+        "requests_taken": io.map(|i| i.taken),
+        "writes_refused": io.map(|i| i.refused),
     })
 }
 
@@ -191,7 +236,7 @@ fn drive_state(sw: u16) -> &'static str {
 }
 
 /// Servo's state as JSON: the arm and every axis.
-fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV3>) -> Value {
+fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV4>) -> Value {
     let n = (s.axes as usize).min(shm_schema::MAX_AXES);
     let names: Vec<String> = (0..n)
         .map(|i| match cell {
@@ -317,6 +362,7 @@ pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
         "program": program_json(snap),
         "processes": procs,
         "servo": snap.servo.as_ref().map(|s| servo_json(s, snap.cell.as_deref())),
+        "io": snap.cell.as_deref().map(|c| io_json(c, snap.io.as_ref())),
         "sense_to_command_us": snap.sense_to_command.as_ref().filter(|h| h.count > 0).map(|h| Summary::of(h).to_json()),
     })
 }
@@ -460,6 +506,27 @@ pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
                 );
             }
         }
+    }
+    if let Some(cell) = snap.cell.as_deref().filter(|c| !c.io().is_empty()) {
+        let v = io_json(cell, snap.io.as_ref());
+        let words: Vec<String> = v["entries"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|e| {
+                let value = e["value"].as_u64().map_or("?".into(), |v| v.to_string());
+                format!("{}={value}", e["name"].as_str().unwrap_or("?"))
+            })
+            .collect();
+        out += &format!(
+            "io: {}{}\n",
+            words.join("  "),
+            if v["outputs_safe"] == true {
+                "  (outputs held safe by the e-stop)"
+            } else {
+                ""
+            }
+        );
     }
     out
 }

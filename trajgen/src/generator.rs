@@ -45,7 +45,7 @@ pub struct Params {
 
 impl Params {
     /// Parameters from the cell configuration.
-    pub fn from_cell(cell: &shm_schema::CellConfigV3) -> Self {
+    pub fn from_cell(cell: &shm_schema::CellConfigV4) -> Self {
         let mut p = Params {
             axes: cell.axes as usize,
             vmax: [1.0; MAX_AXES],

@@ -106,6 +106,17 @@ impl Up {
         }
     }
 
+    /// `exec --wait --json PROGRAM` in the background, its output piped.
+    fn exec_in_background(&self, program: impl AsRef<std::ffi::OsStr>) -> Child {
+        supervisor()
+            .args(["exec", "--wait", "--json", "--instance", &self.inst])
+            .arg(program)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("exec")
+    }
+
     /// `down`, then the supervisor exits 0 and nothing of the instance is left.
     fn down(mut self) {
         self.ok(&["down"]);
@@ -367,13 +378,7 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     let test = "ops-swap";
     let up = Up::start(test, &cell(test));
     let triangle = integration_tests::examples().join("triangle.prog");
-    let mut run = supervisor()
-        .args(["exec", "--wait", "--json", "--instance", &up.inst])
-        .arg(&triangle)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("exec");
+    let mut run = up.exec_in_background(&triangle);
     up.until("moving", moving);
     let out = up.ok(&["swap", "iobridge"]);
     println!("{}", out.trim());
@@ -635,4 +640,87 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
     let error = j["error"].as_str().unwrap_or("");
     assert!(error.contains("servo"), "{j}");
     assert_clean(&inst);
+}
+
+/// The value of IO `name` in `status --json`.
+fn io_value(s: &Value, name: &str) -> Option<u64> {
+    s["io"]["entries"]
+        .as_array()
+        .and_then(|e| e.iter().find(|e| e["name"] == name))
+        .and_then(|e| e["value"].as_u64())
+}
+
+/// An e-stop input opened mid-motion on a cell whose devices' own e-stops are not propagated
+/// (`propagate_estop = false`): the user's e-stop it raises stops the motion only with
+/// `propagate_external_estop`; iobridge, which raised it, sets its outputs safe either way;
+/// reset refuses while the input stays open, and the cell recovers once it closes.
+fn an_estop_input_mid_motion(test: &str, external: bool) {
+    let src = with_stall_room(&default_cell()).replace(
+        "propagate_estop = true\npropagate_external_estop = false",
+        &format!("propagate_estop = false\npropagate_external_estop = {external}"),
+    );
+    assert!(src.contains("propagate_estop = false"));
+    let up = Up::start(test, &scratch(test, "cell.toml", &src));
+    up.ok(&["io", "gripper", "1"]);
+    up.ok(&["io", "cycle_lamp", "1"]);
+    let s = up.until("the gripper closed", |s| {
+        io_value(s, "gripper_closed") == Some(1)
+    });
+    assert_eq!(io_value(&s, "cycle_lamp"), Some(1), "{s}");
+    let run = up.exec_in_background(program(test, SHORT));
+    up.until("moving", moving);
+    up.ok(&["io", "estop_ok", "0"]);
+    let s = up.until("latched, outputs safe", |s| {
+        latched(s) && s["io"]["outputs_safe"] == true
+    });
+    let e = &s["supervisor"]["estop"];
+    assert_eq!(e["origin"], "external", "{s}");
+    assert_eq!(e["source"], "iobridge", "{s}");
+    assert!(
+        e["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("estop_ok is open")),
+        "{s}"
+    );
+    // Each output at its safe value: the lamp off, the gripper holding its part.
+    assert_eq!(io_value(&s, "cycle_lamp"), Some(0), "{s}");
+    assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
+    let err = String::from_utf8_lossy(&up.ctl(&["io", "cycle_lamp", "1"]).stderr).to_string();
+    assert!(err.contains("safe values"), "{err}");
+    let out = run.wait_with_output().expect("exec");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    let report: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim())
+        .unwrap_or_else(|e| panic!("{e}: {err}"));
+    let servo_safe = report["events"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .any(|e| e["name"] == "estop-safe" && e["source"] == "servo");
+    assert_eq!(err.contains("the motion completed"), !external, "{err}");
+    assert_eq!(servo_safe, external, "{report}");
+    // Reset fails at once while the input is open, and says which and why.
+    let out = up.ctl(&["reset"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("e-stop input estop_ok is open"), "{err}");
+    up.ok(&["io", "estop_ok", "1"]);
+    up.ok(&["reset"]);
+    // The outputs stay where the e-stop put them; requests are taken again.
+    let s = up.status();
+    assert_eq!(io_value(&s, "cycle_lamp"), Some(0), "{s}");
+    up.ok(&["io", "cycle_lamp", "1"]);
+    up.ok(&["start"]);
+    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    up.down();
+}
+
+#[test]
+fn an_estop_input_stops_the_motion_with_propagate_external_estop() {
+    an_estop_input_mid_motion("ops-input-ext", true);
+}
+
+#[test]
+fn an_estop_input_without_propagate_external_estop_only_sets_the_outputs_safe() {
+    an_estop_input_mid_motion("ops-input-noext", false);
 }
