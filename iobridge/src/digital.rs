@@ -62,6 +62,19 @@ impl DigitalIo {
         io
     }
 
+    /// Takes over the IO of a predecessor's image (`<i>/io/state`, a swap or a restart while
+    /// the image is still there), so replacing iobridge changes no output and forgets no
+    /// input. An image of another IO table is ignored; returns whether it was taken.
+    pub fn adopt(&mut self, image: &DigitalIoV1) -> bool {
+        if image.count as usize != self.count {
+            return false;
+        }
+        let known = self.inputs | self.outputs;
+        self.values = image.values & known;
+        self.published = self.values;
+        true
+    }
+
     /// The name of entry `k`.
     pub fn name(&self, k: usize) -> &str {
         self.entries.get(k).map_or("?", |e| str_of(&e.name))
@@ -241,6 +254,23 @@ mod tests {
         assert_eq!(io.values(), 0b1011, "a reset changes no output");
         io.request(&write(0b0100, 0b0100), 0, &mut ev);
         assert_eq!(io.values(), 0b1111);
+    }
+
+    #[test]
+    fn a_successor_takes_over_the_outputs_and_inputs_of_its_predecessors_image() {
+        let mut old = DigitalIo::new(&cell());
+        let mut ev = EventQueue::default();
+        old.request(&write(0b0010, 0b0010), 0, &mut ev);
+        old.field(&write(0b0001, 0), 0, &mut ev);
+        let image = old.image(7, 0, &mut ev);
+        let mut new = DigitalIo::new(&cell());
+        assert!(new.adopt(&image));
+        assert_eq!(new.values(), 0b0010, "gripper closed, e-stop circuit open");
+        let mut ev = EventQueue::default();
+        assert_eq!(new.image(1, 0, &mut ev).changed, 0);
+        assert!(ev.is_empty(), "nothing changed");
+        let other = DigitalIoV1 { count: 3, ..image };
+        assert!(!DigitalIo::new(&cell()).adopt(&other));
     }
 
     #[test]

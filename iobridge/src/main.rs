@@ -10,6 +10,10 @@ use shm_schema::{
     DigitalIoV1, EstopOrigin, EventV1, FieldbusImageV1, IoWriteV1, ServiceId, ServoStateV3,
 };
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// How long set-up waits for a predecessor's IO image.
+const ADOPT_WAIT: Duration = Duration::from_millis(50);
 
 struct Bridge {
     /// Fieldbus images written.
@@ -69,6 +73,23 @@ fn main() -> ExitCode {
         "fieldbus output image with measurement timestamps, and the named digital IO",
         |ctx: &Context| {
             let i = &ctx.instance;
+            let io_seen = Sub::<DigitalIoV1>::new(&ctx.node, i, ServiceId::IoState, 1)?;
+            let mut io = DigitalIo::new(&ctx.cell);
+            // A predecessor's image (it still runs during a swap; its publisher keeps the last
+            // one): its IO carries over, so a swap neither drops the gripper's part nor
+            // forgets an open e-stop circuit. Its publisher delivers the image on its next
+            // cycle; a cell starting afresh has none and waits this long for nothing.
+            let until = Instant::now() + ADOPT_WAIT;
+            while Instant::now() < until {
+                if let Some(image) = io_seen.latest() {
+                    if io.adopt(&image) {
+                        tracing::info!("took over the IO of the previous iobridge's image");
+                    }
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            drop(io_seen);
             Ok::<_, SetupError>(Bridge {
                 seq: 0,
                 cycles: 0,
@@ -78,7 +99,7 @@ fn main() -> ExitCode {
                     ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
                 ),
                 output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
-                io: DigitalIo::new(&ctx.cell),
+                io,
                 field: Sub::new(&ctx.node, i, ServiceId::FieldInputs, 64)?,
                 requests: Sub::new(&ctx.node, i, ServiceId::IoRequest, 64)?,
                 io_state: Pub::new(&ctx.node, i, ServiceId::IoState)?,

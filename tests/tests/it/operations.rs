@@ -377,12 +377,16 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
 fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     let test = "ops-swap";
     let up = Up::start(test, &cell(test));
+    // The gripper holds a part: no swap may open it.
+    up.ok(&["io", "gripper", "1"]);
     let triangle = integration_tests::examples().join("triangle.prog");
     let mut run = up.exec_in_background(&triangle);
     up.until("moving", moving);
     let out = up.ok(&["swap", "iobridge"]);
     println!("{}", out.trim());
     assert!(out.contains("largest gap"), "{out}");
+    let s = up.status();
+    assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
     // trajgen carries the motion: swapped during it, the program goes on along the path.
     let out = up.ok(&["swap", "trajgen"]);
     println!("{}", out.trim());
@@ -411,6 +415,13 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     // No e-stop, the following error within its limit (or servo would have cut power), and
     // the motion time grew by about what the swap took (the pause's ramps included).
     let r: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).expect("json");
+    let opened = r["events"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|e| e["text"] == "gripper = 0" || e["text"] == "gripper_closed = 0")
+        .count();
+    assert_eq!(opened, 0, "the new iobridge took over the gripper: {r}");
     let extra_ms = r["difference_s"].as_f64().expect("difference") * 1e3;
     println!(
         "motion time grew by {extra_ms:.0} ms; the trajgen swap took {swap_ms:.0} ms; max following error {}",
