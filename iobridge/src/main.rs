@@ -48,7 +48,10 @@ impl Task for Bridge {
         while let Some(w) = self.field.next() {
             self.io.field(&w, now, cx.events);
         }
-        self.io.react(cx.estop.react.is_some());
+        // Leaving during a swap (no e-stop, a handover announced): the successor takes over
+        // the outputs as they are, so the old one must not switch them to their safe values.
+        let swapped_out = !cx.estop.latched && cx.handover;
+        self.io.react(cx.estop.react.is_some() && !swapped_out);
         while let Some(w) = self.requests.next() {
             self.io.request(&w, now, cx.events);
         }

@@ -12,7 +12,7 @@ use runtime::ipc::{self, Listener, Sub};
 use runtime::rt::{self, RtRequest};
 use runtime::signals;
 use runtime::time::now_ns;
-use shm_schema::{InstanceName, LatencyHistogramV1, ServiceId, SetpointV1};
+use shm_schema::{InstanceName, LatencyHistogramV1, ServiceId, SetpointV2};
 use std::os::fd::{AsRawFd, OwnedFd};
 use std::os::unix::net::UnixDatagram;
 use std::os::unix::thread::JoinHandleExt;
@@ -560,7 +560,7 @@ fn hop_thread(
         let f = |e: ipc::IpcError| e.to_string();
         let node = ipc::node(instance, "latency-rx").map_err(f)?;
         let setpoints =
-            Sub::<SetpointV1>::new(&node, instance, ServiceId::Setpoint, 16).map_err(f)?;
+            Sub::<SetpointV2>::new(&node, instance, ServiceId::Setpoint, 16).map_err(f)?;
         let ready = Listener::new(&node, instance, ServiceId::SetpointReady).map_err(f)?;
         let mut peer = spawn_peer(opts, test, tx_cpu, instance, Stdio::null())?;
         report = rt::setup_thread(RtRequest {
@@ -569,7 +569,7 @@ fn hop_thread(
         });
         // A setpoint published after this wake-up's clock read belongs to the next wake-up
         // (its notification is still pending): it waits here.
-        let mut early: Option<SetpointV1> = None;
+        let mut early: Option<SetpointV2> = None;
         // The measuring loop: servo's side of the hop. One blocking wait, one clock read,
         // then the samples that arrived before it.
         while !stopped(stop) {

@@ -13,7 +13,7 @@ use runtime::ipc::{self, Notifier, Pub};
 use runtime::rt::{self, RtRequest};
 use runtime::signals;
 use runtime::time::now_ns;
-use shm_schema::{InstanceName, ServiceId, SetpointV1};
+use shm_schema::{InstanceName, ServiceId, SetpointV2};
 
 /// What the sender is told.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -103,7 +103,7 @@ pub fn run(args: &Args) -> Result<(), String> {
             let f = |e: ipc::IpcError| e.to_string();
             let node = ipc::node(&instance, "latency-tx").map_err(f)?;
             let setpoints =
-                Pub::<SetpointV1>::new(&node, &instance, ServiceId::Setpoint).map_err(f)?;
+                Pub::<SetpointV2>::new(&node, &instance, ServiceId::Setpoint).map_err(f)?;
             let ready = Notifier::new(&node, &instance, ServiceId::SetpointReady).map_err(f)?;
             Some((setpoints, ready, node))
         }
@@ -114,7 +114,7 @@ pub fn run(args: &Args) -> Result<(), String> {
         cpu: Some(args.cpu),
     });
     let mut clock = CycleClock::new(args.interval_us * 1000, args.phase_us * 1000, now_ns());
-    let mut sp = SetpointV1::default();
+    let mut sp = SetpointV2::default();
     // The cycle: wait, stamp, send (+ notify). No allocation of ours, no lock, no log.
     while !signals::stop_requested() {
         let wake = match clock.wait() {

@@ -22,11 +22,13 @@ pub struct Field {
     /// Per device: the output value it is moving to and when it gets there.
     moving: [Option<(bool, u64)>; MAX_IO],
     last_sent_ns: Option<u64>,
+    source: u32,
 }
 
 impl Field {
-    /// The devices of `cell`; every sensor starts at its input's `sim` value.
-    pub fn new(cell: &CellConfigV4) -> Self {
+    /// The devices of `cell`; every sensor starts at its input's `sim` value. `source` is the
+    /// machine's index in the process table (who reports the sensors).
+    pub fn new(cell: &CellConfigV4, source: u32) -> Self {
         let mut f = Self {
             devices: [(0, 0, 0); MAX_IO],
             count: 0,
@@ -34,6 +36,7 @@ impl Field {
             values: 0,
             moving: [None; MAX_IO],
             last_sent_ns: None,
+            source,
         };
         for (k, e) in cell.io().iter().enumerate() {
             let input = IoDirection::from_u32(e.direction) == Some(IoDirection::Input);
@@ -97,7 +100,7 @@ impl Field {
             stamp_ns: now_ns,
             mask: self.mask,
             values: self.values,
-            source: 0,
+            source: self.source,
             line: 0,
         })
     }
@@ -125,7 +128,7 @@ mod tests {
             ..Default::default()
         };
         c.io_count = 2;
-        let mut f = Field::new(&c);
+        let mut f = Field::new(&c, 0);
         let ms = 1_000_000;
         assert_eq!(f.step(0, None).map(|w| (w.mask, w.values)), Some((0b10, 0)));
         assert_eq!(f.step(ms, Some(0)), None);

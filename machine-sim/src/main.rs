@@ -92,7 +92,7 @@ fn main() -> ExitCode {
                 injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
                 sense_to_command_pub: Pub::new(&ctx.node, i, ServiceId::SenseToCommand)?,
-                field: Field::new(&ctx.cell),
+                field: Field::new(&ctx.cell, ctx.index as u32),
                 io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
                 sensors: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
             })

@@ -1,133 +1,564 @@
-//! Line-by-line parser of the motion language.
+//! Line-by-line parser of the motion language (grammar in `docs/language.md`).
 
-use crate::{Instruction, Op, Program, ProgramError};
+use crate::{
+    CellSpec, Instruction, MAX_NAME_LEN, MAX_NESTING, MAX_REPEAT, MAX_SEGMENT_TIME_S,
+    MAX_SOURCE_BYTES, MAX_WAIT_S, Op, Program, ProgramError, Space, cut,
+};
 use shm_schema::MAX_AXES;
+use std::collections::HashMap;
 
-/// Parses `src` for a cell with `axes` axes.
-pub fn parse(src: &str, axes: usize) -> Result<Program, ProgramError> {
-    assert!((1..=MAX_AXES).contains(&axes), "axes out of range");
-    let mut instructions = Vec::new();
-    let mut end_seen: Option<u32> = None;
-    let mut last_line = 0u32;
-    for (idx, raw) in src.lines().enumerate() {
-        let line = idx as u32 + 1;
-        last_line = line;
-        let mut cur = Cursor {
-            text: raw,
-            pos: 0,
-            line,
-        };
-        cur.skip_ws();
-        if cur.at_end_of_statement() {
-            continue;
+/// The keywords (case-insensitive); none may name a position.
+const KEYWORDS: [&str; 11] = [
+    "MOVE",
+    "MOVEJ",
+    "STOP",
+    "END",
+    "OUT",
+    "WAIT",
+    "DELAY",
+    "SPEED",
+    "REPEAT",
+    "ENDREPEAT",
+    "T",
+];
+
+const EXPECTED: &str =
+    "MOVE, MOVEJ, STOP, END, OUT, WAIT, DELAY, SPEED, REPEAT, ENDREPEAT or NAME = (…)";
+
+/// Parses `src` (the bytes of a program file) for a cell described by `cell`. Never panics.
+pub fn parse(src: &[u8], cell: &CellSpec) -> Result<Program, ProgramError> {
+    let whole = |message: String| ProgramError {
+        line: 1,
+        col: 1,
+        message,
+    };
+    if src.len() > MAX_SOURCE_BYTES {
+        return Err(whole(format!(
+            "the program is {} bytes; at most {MAX_SOURCE_BYTES} are accepted",
+            src.len()
+        )));
+    }
+    let text = match std::str::from_utf8(src) {
+        Ok(t) => t,
+        Err(e) => {
+            let at = e.valid_up_to();
+            let before = String::from_utf8_lossy(&src[..at]);
+            let line = before.matches('\n').count() as u32 + 1;
+            let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) as u32 + 1;
+            return Err(ProgramError {
+                line,
+                col,
+                message: format!(
+                    "byte 0x{:02X} is not UTF-8 text: a program is a text file",
+                    src[at]
+                ),
+            });
         }
-        if let Some(end_line) = end_seen {
-            return Err(cur.error(format!(
-                "instruction after END (line {end_line}); only comments may follow END"
+    };
+    for (what, n) in [
+        ("coordinates", cell.coords.len()),
+        ("joints", cell.joints.len()),
+    ] {
+        if !(1..=MAX_AXES).contains(&n) {
+            return Err(whole(format!(
+                "the cell has {n} {what}; 1..={MAX_AXES} are supported"
             )));
         }
-        let col = cur.col();
+    }
+    Parser {
+        cell,
+        positions: HashMap::new(),
+        stack: vec![Block {
+            body: Vec::new(),
+            opened: None,
+        }],
+        end: None,
+        forever_closed: None,
+        last_line: 0,
+    }
+    .run(text)
+}
+
+/// A body being filled: the program's, or a `REPEAT`'s (with its line, column and count).
+struct Block {
+    body: Vec<Instruction>,
+    opened: Option<(u32, u32, Option<u32>)>,
+}
+
+struct Parser<'c> {
+    cell: &'c CellSpec,
+    /// Named positions: values, their count and the line they were defined on.
+    positions: HashMap<String, (Vec<f64>, u32)>,
+    stack: Vec<Block>,
+    end: Option<u32>,
+    /// The line of a `REPEAT` for ever that has been closed: nothing but `END` may follow.
+    forever_closed: Option<u32>,
+    last_line: u32,
+}
+
+impl Parser<'_> {
+    fn run(mut self, text: &str) -> Result<Program, ProgramError> {
+        for (idx, raw) in text.lines().enumerate() {
+            let line = idx as u32 + 1;
+            self.last_line = line;
+            let mut cur = Cursor {
+                text: raw,
+                pos: 0,
+                line,
+            };
+            cur.skip_ws();
+            if cur.at_end_of_statement() {
+                continue;
+            }
+            if let Some(end_line) = self.end {
+                return Err(cur.error(format!(
+                    "instruction after END (line {end_line}); only comments may follow END"
+                )));
+            }
+            self.statement(&mut cur)?;
+            cur.skip_ws();
+            if !cur.at_end_of_statement() {
+                return Err(cur.error(format!("unexpected {} after the instruction", cur.found())));
+            }
+        }
+        if let Some(Block {
+            opened: Some((l, c, _)),
+            ..
+        }) = self.stack.last()
+        {
+            return Err(ProgramError {
+                line: *l,
+                col: *c,
+                message: "this REPEAT has no ENDREPEAT".into(),
+            });
+        }
+        if self.end.is_none() {
+            return Err(ProgramError {
+                line: self.last_line + 1,
+                col: 1,
+                message: "the program has no END".into(),
+            });
+        }
+        let body = self.stack.pop().map(|b| b.body).unwrap_or_default();
+        Ok(Program {
+            coords: self.cell.coords.len(),
+            joints: self.cell.joints.len(),
+            instructions: body,
+        })
+    }
+
+    fn push(&mut self, ins: Instruction) {
+        if let Some(b) = self.stack.last_mut() {
+            b.body.push(ins);
+        }
+    }
+
+    fn statement(&mut self, cur: &mut Cursor<'_>) -> Result<(), ProgramError> {
+        let (line, col) = (cur.line, cur.col());
         let word = cur.word();
-        let op = match word.to_ascii_uppercase().as_str() {
-            "MOVE" => parse_move(&mut cur, axes)?,
+        if word.is_empty() {
+            return Err(cur.error(format!("expected {EXPECTED}, found {}", cur.found())));
+        }
+        let upper = word.to_ascii_uppercase();
+        let save = cur.pos;
+        cur.skip_ws();
+        let defines = cur.peek() == Some('=');
+        cur.pos = save;
+        if let Some(l) = self.forever_closed.filter(|_| upper != "END") {
+            return Err(ProgramError {
+                line,
+                col,
+                message: format!(
+                    "unreachable: the REPEAT without a count on line {l} never ends; only END may follow it"
+                ),
+            });
+        }
+        if defines {
+            cur.skip_ws();
+            cur.pos += 1;
+            return self.define(cur, word, line, col);
+        }
+        let op = match upper.as_str() {
+            "MOVE" => self.parse_move(cur, Space::Cartesian)?,
+            "MOVEJ" => self.parse_move(cur, Space::Joint)?,
             "STOP" => Op::Stop,
             "END" => {
-                end_seen = Some(line);
+                if let Some(Block {
+                    opened: Some((l, _, _)),
+                    ..
+                }) = self.stack.last()
+                {
+                    return Err(ProgramError {
+                        line,
+                        col,
+                        message: format!("END inside the REPEAT of line {l}; ENDREPEAT first"),
+                    });
+                }
+                self.end = Some(line);
                 Op::End
             }
-            "" => {
-                return Err(cur.error(format!("expected MOVE, STOP or END, found {}", cur.found())));
+            "OUT" => {
+                cur.open("OUT")?;
+                let io = self.io(cur, true)?;
+                cur.comma("the value, 0 or 1")?;
+                let value = cur.bit()?;
+                cur.close("the value")?;
+                Op::Out { io, value }
             }
-            other => {
+            "WAIT" => {
+                cur.open("WAIT")?;
+                let io = self.io(cur, false)?;
+                cur.comma("the value, 0 or 1")?;
+                let value = cur.bit()?;
+                cur.skip_ws();
+                let timeout_s = if cur.peek() == Some(',') {
+                    cur.pos += 1;
+                    cur.skip_ws();
+                    Some(cur.bounded("the timeout (s)", f64::MIN_POSITIVE, MAX_WAIT_S)?)
+                } else {
+                    None
+                };
+                cur.close("the value or the timeout")?;
+                Op::Wait {
+                    io,
+                    value,
+                    timeout_s,
+                }
+            }
+            "DELAY" => {
+                cur.open("DELAY")?;
+                let seconds = cur.bounded("the delay (s)", 0.0, MAX_WAIT_S)?;
+                cur.close("the delay")?;
+                Op::Delay { seconds }
+            }
+            "SPEED" => {
+                cur.open("SPEED")?;
+                let percent = cur.bounded("the speed (percent of vmax)", 1.0, 100.0)?;
+                cur.close("the speed")?;
+                Op::Speed { percent }
+            }
+            "REPEAT" => {
+                cur.skip_ws();
+                let count = if cur.at_end_of_statement() {
+                    None
+                } else {
+                    Some(cur.count()?)
+                };
+                if self.stack.len() > MAX_NESTING {
+                    return Err(ProgramError {
+                        line,
+                        col,
+                        message: format!("REPEAT nested more than {MAX_NESTING} deep"),
+                    });
+                }
+                self.stack.push(Block {
+                    body: Vec::new(),
+                    opened: Some((line, col, count)),
+                });
+                return Ok(());
+            }
+            "ENDREPEAT" => {
+                let Some(Block {
+                    body,
+                    opened: Some((l, c, count)),
+                }) = self.stack.pop_if(|b| b.opened.is_some())
+                else {
+                    return Err(ProgramError {
+                        line,
+                        col,
+                        message: "ENDREPEAT without a REPEAT".into(),
+                    });
+                };
+                if !body.iter().any(|i| moves_or_waits(&i.op)) {
+                    return Err(ProgramError {
+                        line: l,
+                        col: c,
+                        message: "this REPEAT's body neither moves nor waits: \
+                                  it would run without end in no time"
+                            .into(),
+                    });
+                }
+                if count.is_none() {
+                    self.forever_closed = Some(l);
+                }
+                self.push(Instruction {
+                    line: l,
+                    col: c,
+                    op: Op::Repeat { count, body },
+                });
+                return Ok(());
+            }
+            _ => {
                 return Err(ProgramError {
                     line,
                     col,
-                    message: format!("unknown instruction {other:?}; expected MOVE, STOP or END"),
+                    message: format!(
+                        "unknown instruction {:?}; expected {EXPECTED}",
+                        cut(word, 24)
+                    ),
                 });
             }
         };
-        cur.skip_ws();
-        if !cur.at_end_of_statement() {
-            return Err(cur.error(format!("unexpected {} after the instruction", cur.found())));
-        }
-        instructions.push(Instruction { line, col, op });
+        self.push(Instruction { line, col, op });
+        Ok(())
     }
-    if end_seen.is_none() {
-        return Err(ProgramError {
-            line: last_line + 1,
-            col: 1,
-            message: "the program has no END".into(),
-        });
-    }
-    Ok(Program { axes, instructions })
-}
 
-fn parse_move(cur: &mut Cursor<'_>, axes: usize) -> Result<Op, ProgramError> {
-    let mut target = [0.0; MAX_AXES];
-    let mut cols = [0u32; MAX_AXES];
-    let mut user_time_s = None;
-    cur.skip_ws();
-    cur.expect('(', "'(' after MOVE")?;
-    let mut n = 0usize;
-    loop {
-        cur.skip_ws();
-        let col = cur.col();
-        if cur.peek_named_time() {
-            if n < axes {
-                return Err(cur.error(format!(
-                    "MOVE has {n} coordinate(s) before T=, the cell has {axes} axes"
-                )));
-            }
-            cur.pos += 1; // 'T' or 't'
-            cur.skip_ws();
-            cur.expect('=', "'=' after T")?;
-            cur.skip_ws();
-            let tcol = cur.col();
-            let t = cur.number("the segment time T (s)")?;
-            if t <= 0.0 {
-                return Err(ProgramError {
-                    line: cur.line,
-                    col: tcol,
-                    message: format!("segment time T = {t} s must be positive"),
-                });
-            }
-            user_time_s = Some(t);
-            cur.skip_ws();
-            cur.expect(')', "')' after T=<seconds>")?;
-            break;
-        }
-        let v = cur.number(&format!("coordinate {} of {axes}", n + 1))?;
-        if n >= axes {
+    /// `NAME = (v, v, …)`.
+    fn define(
+        &mut self,
+        cur: &mut Cursor<'_>,
+        name: &str,
+        line: u32,
+        col: u32,
+    ) -> Result<(), ProgramError> {
+        if KEYWORDS.iter().any(|k| k.eq_ignore_ascii_case(name)) {
             return Err(ProgramError {
-                line: cur.line,
+                line,
                 col,
-                message: format!("MOVE has more than {axes} coordinates; the cell has {axes} axes"),
+                message: format!("{name} is a keyword and cannot name a position"),
             });
         }
-        target[n] = v;
-        cols[n] = col;
-        n += 1;
+        if name.len() > MAX_NAME_LEN {
+            return Err(ProgramError {
+                line,
+                col,
+                message: format!(
+                    "the name {:?} is longer than {MAX_NAME_LEN} characters",
+                    cut(name, 24)
+                ),
+            });
+        }
+        if let Some((_, l)) = self.positions.get(name) {
+            return Err(ProgramError {
+                line,
+                col,
+                message: format!("position {name} is defined twice (first on line {l})"),
+            });
+        }
+        if self
+            .cell
+            .outputs
+            .iter()
+            .chain(&self.cell.inputs)
+            .any(|(n, _)| n == name)
+        {
+            return Err(ProgramError {
+                line,
+                col,
+                message: format!("{name} is an IO of the cell and cannot name a position"),
+            });
+        }
         cur.skip_ws();
-        match cur.peek() {
-            Some(',') => cur.pos += 1,
-            Some(')') => {
-                cur.pos += 1;
-                if n < axes {
-                    return Err(cur.error_at(
-                        cur.col() - 1,
-                        format!("MOVE has {n} coordinate(s), the cell has {axes} axes"),
-                    ));
+        cur.expect('(', "'(' to start the position's values")?;
+        let mut values = Vec::new();
+        loop {
+            cur.skip_ws();
+            if values.len() == MAX_AXES {
+                return Err(cur.error(format!("a position has at most {MAX_AXES} values")));
+            }
+            values.push(cur.number(&format!("value {} of {name}", values.len() + 1))?);
+            cur.skip_ws();
+            match cur.peek() {
+                Some(',') => cur.pos += 1,
+                Some(')') => {
+                    cur.pos += 1;
+                    break;
                 }
+                _ => {
+                    return Err(cur.error(format!("expected ',' or ')', found {}", cur.found())));
+                }
+            }
+        }
+        self.positions.insert(name.to_string(), (values, line));
+        Ok(())
+    }
+
+    fn parse_move(&self, cur: &mut Cursor<'_>, space: Space) -> Result<Op, ProgramError> {
+        let (kw, names) = match space {
+            Space::Cartesian => ("MOVE", &self.cell.coords),
+            Space::Joint => ("MOVEJ", &self.cell.joints),
+        };
+        let n = names.len();
+        let what = match space {
+            Space::Cartesian => "coordinates",
+            Space::Joint => "joints",
+        };
+        let mut target = [0.0; MAX_AXES];
+        let mut cols = [0u32; MAX_AXES];
+        let mut user_time_s = None;
+        cur.skip_ws();
+        cur.expect('(', &format!("'(' after {kw}"))?;
+        cur.skip_ws();
+        let name_col = cur.col();
+        let mut got = 0usize;
+        if cur
+            .peek()
+            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+            && !cur.peek_named_time()
+        {
+            let name = cur.name();
+            let Some((values, line)) = self.positions.get(name) else {
+                return Err(cur.error_at(
+                    name_col,
+                    format!(
+                        "no position called {:?} is defined before this line",
+                        cut(name, 24)
+                    ),
+                ));
+            };
+            if values.len() != n {
+                return Err(cur.error_at(
+                    name_col,
+                    format!(
+                        "{name} (line {line}) has {} values; {kw} needs {n} {what} ({})",
+                        values.len(),
+                        joined(names)
+                    ),
+                ));
+            }
+            target[..n].copy_from_slice(values);
+            cols[..n].fill(name_col);
+            got = n;
+            cur.skip_ws();
+            match cur.peek() {
+                Some(',') => cur.pos += 1,
+                Some(')') => {
+                    cur.pos += 1;
+                    return Ok(Op::Move {
+                        space,
+                        target,
+                        cols,
+                        user_time_s,
+                    });
+                }
+                _ => {
+                    return Err(cur.error(format!(
+                        "expected ',' or ')' after {name}, found {}",
+                        cur.found()
+                    )));
+                }
+            }
+        }
+        loop {
+            cur.skip_ws();
+            let col = cur.col();
+            if cur.peek_named_time() {
+                if got < n {
+                    return Err(cur.error(format!(
+                        "{kw} has {got} {what} before T=; the cell has {n} ({})",
+                        joined(names)
+                    )));
+                }
+                cur.pos += 1; // 'T' or 't'
+                cur.skip_ws();
+                cur.expect('=', "'=' after T")?;
+                cur.skip_ws();
+                let t = cur.bounded(
+                    "the segment time T (s)",
+                    f64::MIN_POSITIVE,
+                    MAX_SEGMENT_TIME_S,
+                )?;
+                user_time_s = Some(t);
+                cur.skip_ws();
+                cur.expect(')', "')' after T=<seconds>")?;
                 break;
             }
-            _ => return Err(cur.error(format!("expected ',' or ')', found {}", cur.found()))),
+            if got >= n {
+                return Err(cur.error(format!(
+                    "{kw} has more than {n} {what}; the cell has {n} ({})",
+                    joined(names)
+                )));
+            }
+            let v = cur.number(&format!("{} ({} of {n})", names[got].0, got + 1))?;
+            target[got] = v;
+            cols[got] = col;
+            got += 1;
+            cur.skip_ws();
+            match cur.peek() {
+                Some(',') => cur.pos += 1,
+                Some(')') => {
+                    cur.pos += 1;
+                    if got < n {
+                        return Err(cur.error_at(
+                            cur.col() - 1,
+                            format!(
+                                "{kw} has {got} {what}; the cell has {n} ({})",
+                                joined(names)
+                            ),
+                        ));
+                    }
+                    break;
+                }
+                _ => {
+                    return Err(cur.error(format!("expected ',' or ')', found {}", cur.found())));
+                }
+            }
         }
+        Ok(Op::Move {
+            space,
+            target,
+            cols,
+            user_time_s,
+        })
     }
-    Ok(Op::Move {
-        target,
-        cols,
-        user_time_s,
-    })
+
+    /// An IO name: an output for `OUT`, an input for `WAIT`.
+    fn io(&self, cur: &mut Cursor<'_>, output: bool) -> Result<u32, ProgramError> {
+        cur.skip_ws();
+        let col = cur.col();
+        let name = cur.name();
+        let (want, other, kind) = if output {
+            (&self.cell.outputs, &self.cell.inputs, "output")
+        } else {
+            (&self.cell.inputs, &self.cell.outputs, "input")
+        };
+        if name.is_empty() {
+            return Err(cur.error(format!(
+                "expected the name of an {kind}, found {}",
+                cur.found()
+            )));
+        }
+        if let Some((_, k)) = want.iter().find(|(n, _)| n == name) {
+            return Ok(*k);
+        }
+        let message = if other.iter().any(|(n, _)| n == name) {
+            format!(
+                "{name} is an {}, not an {kind}",
+                if output { "input" } else { "output" }
+            )
+        } else if want.is_empty() {
+            format!(
+                "the cell has no {kind} called {:?} (it has none: `[[io]]` in the configuration)",
+                cut(name, 24)
+            )
+        } else {
+            let names: Vec<&str> = want.iter().map(|(n, _)| n.as_str()).collect();
+            format!(
+                "the cell has no {kind} called {:?}; its {kind}s: {}",
+                cut(name, 24),
+                names.join(", ")
+            )
+        };
+        Err(cur.error_at(col, message))
+    }
+}
+
+/// True for instructions that take time: a loop of nothing else would spin.
+fn moves_or_waits(op: &Op) -> bool {
+    match op {
+        Op::Move { .. } | Op::Stop | Op::Wait { .. } => true,
+        Op::Delay { seconds } => *seconds > 0.0,
+        Op::Repeat { body, .. } => body.iter().any(|i| moves_or_waits(&i.op)),
+        _ => false,
+    }
+}
+
+fn joined(names: &[(String, String)]) -> String {
+    names
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 struct Cursor<'a> {
@@ -136,9 +567,9 @@ struct Cursor<'a> {
     line: u32,
 }
 
-impl Cursor<'_> {
-    fn rest(&self) -> &str {
-        &self.text[self.pos..]
+impl<'a> Cursor<'a> {
+    fn rest(&self) -> &'a str {
+        self.text.get(self.pos..).unwrap_or("")
     }
 
     fn peek(&self) -> Option<char> {
@@ -146,7 +577,7 @@ impl Cursor<'_> {
     }
 
     fn col(&self) -> u32 {
-        self.text[..self.pos].chars().count() as u32 + 1
+        self.text.get(..self.pos).map_or(0, |s| s.chars().count()) as u32 + 1
     }
 
     fn skip_ws(&mut self) {
@@ -159,14 +590,25 @@ impl Cursor<'_> {
         r.is_empty() || r.starts_with("//")
     }
 
-    fn word(&mut self) -> &str {
+    /// A run of letters, digits and `_` starting with a letter or `_` (empty if none).
+    fn word(&mut self) -> &'a str {
+        if !self
+            .peek()
+            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        {
+            return "";
+        }
+        self.name()
+    }
+
+    fn name(&mut self) -> &'a str {
         let start = self.pos;
         let len = self
             .rest()
-            .find(|c: char| !c.is_ascii_alphabetic())
+            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
             .unwrap_or(self.rest().len());
         self.pos += len;
-        &self.text[start..self.pos]
+        self.text.get(start..self.pos).unwrap_or("")
     }
 
     fn peek_named_time(&self) -> bool {
@@ -191,21 +633,97 @@ impl Cursor<'_> {
         }
     }
 
-    fn number(&mut self, what: &str) -> Result<f64, ProgramError> {
+    fn open(&mut self, kw: &str) -> Result<(), ProgramError> {
+        self.skip_ws();
+        self.expect('(', &format!("'(' after {kw}"))
+    }
+
+    fn comma(&mut self, next: &str) -> Result<(), ProgramError> {
+        self.skip_ws();
+        self.expect(',', &format!("',' then {next}"))?;
+        self.skip_ws();
+        Ok(())
+    }
+
+    fn close(&mut self, after: &str) -> Result<(), ProgramError> {
+        self.skip_ws();
+        self.expect(')', &format!("')' after {after}"))
+    }
+
+    fn token(&self) -> &'a str {
         let len = self
             .rest()
-            .find(|c: char| !(c.is_ascii_digit() || matches!(c, '.' | '-' | '+' | 'e' | 'E')))
+            .find(|c: char| !(c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '+')))
             .unwrap_or(self.rest().len());
-        let tok = &self.rest()[..len];
+        self.rest().get(..len).unwrap_or("")
+    }
+
+    fn number(&mut self, what: &str) -> Result<f64, ProgramError> {
+        let tok = self.token();
         match tok.parse::<f64>() {
             Ok(v) if v.is_finite() => {
-                self.pos += len;
+                self.pos += tok.len();
                 Ok(v)
             }
             _ if tok.is_empty() => {
                 Err(self.error(format!("expected {what}, found {}", self.found())))
             }
-            _ => Err(self.error(format!("{tok:?} is not a number (expected {what})"))),
+            _ => Err(self.error(format!(
+                "{:?} is not a number (expected {what})",
+                cut(tok, 24)
+            ))),
+        }
+    }
+
+    /// A number within `lo..=hi`.
+    fn bounded(&mut self, what: &str, lo: f64, hi: f64) -> Result<f64, ProgramError> {
+        let col = self.col();
+        let v = self.number(what)?;
+        if v < lo || v > hi {
+            let lo_text = if lo == f64::MIN_POSITIVE {
+                "above 0".to_string()
+            } else {
+                format!("at least {lo}")
+            };
+            return Err(self.error_at(
+                col,
+                format!("{what} = {v} must be {lo_text} and at most {hi}"),
+            ));
+        }
+        Ok(v)
+    }
+
+    fn bit(&mut self) -> Result<bool, ProgramError> {
+        self.skip_ws();
+        match self.token() {
+            "0" => {
+                self.pos += 1;
+                Ok(false)
+            }
+            "1" => {
+                self.pos += 1;
+                Ok(true)
+            }
+            "" => Err(self.error(format!("expected 0 or 1, found {}", self.found()))),
+            t => Err(self.error(format!("expected 0 or 1, found {:?}", cut(t, 24)))),
+        }
+    }
+
+    fn count(&mut self) -> Result<u32, ProgramError> {
+        let tok = self.token();
+        match tok.parse::<u32>() {
+            Ok(n) if (1..=MAX_REPEAT).contains(&n) => {
+                self.pos += tok.len();
+                Ok(n)
+            }
+            _ => Err(self.error(format!(
+                "expected a count 1..={MAX_REPEAT} (or nothing: for ever), found {}",
+                if tok.is_empty() {
+                    self.found()
+                } else {
+                    format!("{:?}", cut(tok, 24))
+                }
+            ))),
         }
     }
 
@@ -219,127 +737,5 @@ impl Cursor<'_> {
             col,
             message,
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    const TRIANGLE: &str = "MOVE(40,40,0) // X = 40, Y = 40, θ = 0\nMOVE(140,40,0)\nMOVE(90,126,0)\nMOVE(40,40,0)\nSTOP\nEND\n";
-
-    #[test]
-    fn parses_the_seed_triangle() {
-        let p = parse(TRIANGLE, 3).expect("parses");
-        assert_eq!(p.instructions.len(), 6);
-        assert!(
-            matches!(p.instructions[2].op, Op::Move { target, .. } if target[..3] == [90.0, 126.0, 0.0])
-        );
-        assert_eq!(p.instructions[4].op, Op::Stop);
-        assert_eq!(
-            p.instructions[5],
-            Instruction {
-                line: 6,
-                col: 1,
-                op: Op::End
-            }
-        );
-    }
-
-    #[test]
-    fn accepts_user_time_blank_lines_comments_and_lower_case() {
-        let p = parse(
-            "\n  // header\nmove( 1.5 , -2e1, +3 , T = 2.5 ) // c\nend\n// after\n",
-            3,
-        )
-        .expect("parses");
-        match p.instructions[0].op {
-            Op::Move {
-                target,
-                cols,
-                user_time_s,
-            } => {
-                assert_eq!(target[..3], [1.5, -20.0, 3.0]);
-                assert_eq!(cols[..3], [7, 13, 19]);
-                assert_eq!(user_time_s, Some(2.5));
-            }
-            ref other => panic!("{other:?}"),
-        }
-        assert_eq!(p.instructions[0].line, 3);
-    }
-
-    /// Data-driven: the program, and the `line:column: message` start it must fail with.
-    fn check(src: &str, expected: &str) {
-        let e = parse(src, 3).expect_err(src);
-        let got = format!("{}:{}: {}", e.line, e.col, e.message);
-        assert!(
-            got.starts_with(expected),
-            "for {src:?}\n got: {got}\nwant: {expected}"
-        );
-    }
-
-    #[test]
-    fn errors_name_line_and_column() {
-        check(
-            "MOVE(1,2)\nEND",
-            "1:9: MOVE has 2 coordinate(s), the cell has 3 axes",
-        );
-        check(
-            "MOVE(1,2,3,4)\nEND",
-            "1:12: MOVE has more than 3 coordinates",
-        );
-        check("MOVE(1,2;3)\nEND", "1:9: expected ',' or ')', found ';'");
-        check(
-            "MOVE(1,x,3)\nEND",
-            "1:8: expected coordinate 2 of 3, found 'x'",
-        );
-        check(
-            "MOVE(1,2,3",
-            "1:11: expected ',' or ')', found the end of the line",
-        );
-        check("MOVE 1,2,3)\nEND", "1:6: expected '(' after MOVE");
-        check(
-            "MOVE(1,2,3) STOP\nEND",
-            "1:13: unexpected 'S' after the instruction",
-        );
-        check("\n  JUMP(1,2,3)\nEND", "2:3: unknown instruction \"JUMP\"");
-        check("MOVE(1,2,3)\n", "2:1: the program has no END");
-        check("END\nMOVE(1,2,3)", "2:1: instruction after END (line 1)");
-        check(
-            "MOVE(1,2,3, T=0)\nEND",
-            "1:15: segment time T = 0 s must be positive",
-        );
-        check(
-            "MOVE(1,2, T=1)\nEND",
-            "1:11: MOVE has 2 coordinate(s) before T=",
-        );
-        check("MOVE(1,2,1e999)\nEND", "1:10: \"1e999\" is not a number");
-        check("MOVE(1,2,--3)\nEND", "1:10: \"--3\" is not a number");
-        check("(1,2,3)\nEND", "1:1: expected MOVE, STOP or END, found '('");
-    }
-
-    #[test]
-    fn limits_are_checked_with_the_coordinate_column() {
-        let axes = ["x", "y", "theta"].map(|n| crate::AxisSpec {
-            name: n.into(),
-            unit: "mm".into(),
-            min: 0.0,
-            max: 100.0,
-            vmax: 10.0,
-        });
-        let p = parse("MOVE(1,2,3)\nMOVE(5, 150, 3)\nEND", 3).expect("parses");
-        let e = p.check_limits(&axes).expect_err("out of limits");
-        assert_eq!((e.line, e.col), (2, 9));
-        assert!(
-            e.message
-                .starts_with("y = 150 mm is outside the axis limits 0 .. 100 mm"),
-            "{e}"
-        );
-        assert!(
-            parse("MOVE(0,100,50)\nEND", 3)
-                .expect("parses")
-                .check_limits(&axes)
-                .is_ok()
-        );
     }
 }

@@ -5,15 +5,15 @@
 
 use iceoryx2::prelude::*;
 use runtime::ipc::{self, Pub, Sub};
-use shm_schema::{InstanceName, ServiceId, SetpointV1};
+use shm_schema::{InstanceName, ServiceId, SetpointV2};
 
 #[test]
 fn a_stock_iceoryx2_process_reads_and_writes_our_publish_subscribe_services() {
     let instance = InstanceName::new(&format!("flavour{}", std::process::id())).expect("valid");
     {
         let ours = ipc::node(&instance, "ours").expect("node");
-        let tx: Pub<SetpointV1> = Pub::new(&ours, &instance, ServiceId::Setpoint).expect("pub");
-        let rx: Sub<SetpointV1> = Sub::new(&ours, &instance, ServiceId::Setpoint, 8).expect("sub");
+        let tx: Pub<SetpointV2> = Pub::new(&ours, &instance, ServiceId::Setpoint).expect("pub");
+        let rx: Sub<SetpointV2> = Sub::new(&ours, &instance, ServiceId::Setpoint, 8).expect("sub");
 
         // The stock flavour, with the same per-instance configuration and the same QoS.
         let cfg = ipc::config_for(&instance).expect("config");
@@ -26,7 +26,7 @@ fn a_stock_iceoryx2_process_reads_and_writes_our_publish_subscribe_services() {
         let q = ServiceId::Setpoint.qos();
         let service = stock
             .service_builder(&ServiceName::new(name.as_str()).expect("name"))
-            .publish_subscribe::<SetpointV1>()
+            .publish_subscribe::<SetpointV2>()
             .max_publishers(q.max_publishers)
             .max_subscribers(q.max_subscribers)
             .history_size(q.history)
@@ -44,9 +44,9 @@ fn a_stock_iceoryx2_process_reads_and_writes_our_publish_subscribe_services() {
             .create()
             .expect("stock publisher");
 
-        let sp = SetpointV1 {
+        let sp = SetpointV2 {
             seq: 42,
-            ..SetpointV1::default()
+            ..SetpointV2::default()
         };
         assert!(tx.send(&sp));
         let got = stock_rx.receive().expect("receive").expect("a sample");
@@ -55,9 +55,9 @@ fn a_stock_iceoryx2_process_reads_and_writes_our_publish_subscribe_services() {
 
         let sample = stock_tx.loan_uninit().expect("loan");
         sample
-            .write_payload(SetpointV1 {
+            .write_payload(SetpointV2 {
                 seq: 43,
-                ..SetpointV1::default()
+                ..SetpointV2::default()
             })
             .send()
             .expect("send");

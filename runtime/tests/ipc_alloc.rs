@@ -4,7 +4,7 @@
 
 use runtime::alloc_count::{CountingAllocator, count};
 use runtime::ipc::{self, Listener, Notifier, Pub, Sub};
-use shm_schema::{InstanceName, ServiceId, SetpointV1};
+use shm_schema::{InstanceName, ServiceId, SetpointV2};
 
 #[global_allocator]
 static A: CountingAllocator = CountingAllocator;
@@ -15,9 +15,9 @@ fn steady_state_ipc_allocations() {
     let instance = InstanceName::new(&name).expect("valid");
     {
         let node = ipc::node(&instance, "alloc-test").expect("node");
-        let tx: Pub<SetpointV1> = Pub::new(&node, &instance, ServiceId::Setpoint).expect("pub");
-        let rx: Sub<SetpointV1> = Sub::new(&node, &instance, ServiceId::Setpoint, 8).expect("sub");
-        let mut sp: SetpointV1 = unsafe { core::mem::zeroed() };
+        let tx: Pub<SetpointV2> = Pub::new(&node, &instance, ServiceId::Setpoint).expect("pub");
+        let rx: Sub<SetpointV2> = Sub::new(&node, &instance, ServiceId::Setpoint, 8).expect("sub");
+        let mut sp: SetpointV2 = unsafe { core::mem::zeroed() };
         // Warm-up: the first sends after a connection change allocate.
         for i in 0..100 {
             sp.seq = i;

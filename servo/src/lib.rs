@@ -55,7 +55,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
     AxisConfigV2, CellConfigV4, DriveCommandV2, DriveFeedbackV2, EstopReaction, EventV1, MAX_AXES,
-    Power, RequestKind, ServoRequestV1, ServoStateV3, SetpointV1, bound, str_of,
+    Power, RequestKind, ServoRequestV1, ServoStateV3, SetpointV2, bound, str_of,
 };
 
 /// Parameters of the controller.
@@ -127,7 +127,7 @@ pub struct Controller {
     resetting_since: Option<u64>,
     fault_reset: [FaultReset; MAX_AXES],
     request_seq: u64,
-    setpoint: Option<SetpointV1>,
+    setpoint: Option<SetpointV2>,
     /// The reference of the last cycle: position, velocity.
     ref_pos: [f64; MAX_AXES],
     ref_vel: [f64; MAX_AXES],
@@ -196,7 +196,7 @@ impl Peak {
 ///
 /// # Real-time
 /// Arithmetic only; never panics (no clamp with crossed bounds).
-fn extrapolate(sp: &SetpointV1, i: usize, h: f64, vmax: f64) -> (f64, f64, f64) {
+fn extrapolate(sp: &SetpointV2, i: usize, h: f64, vmax: f64) -> (f64, f64, f64) {
     let (p, v, a) = (sp.position[i], sp.velocity[i], sp.acceleration[i]);
     let v_end = v + a * h;
     // Backwards (h < 0, a setpoint newer than servo's cycle) the trajectory was within vmax.
@@ -628,14 +628,14 @@ impl Controller {
     /// over the time trajgen was late. A small difference (within the in-position band and 5 %
     /// of vmax) is blended out over two trajgen periods; a larger one is left for command
     /// validation to judge (it is a step, not a late setpoint).
-    fn rejoin_to(&mut self, sp: &SetpointV1, now_ns: u64) {
+    fn rejoin_to(&mut self, sp: &SetpointV2, now_ns: u64) {
         let Some(prev) = self.setpoint else {
             self.rejoin = Rejoin::default();
             return;
         };
         let (off_p, off_v) = self.rejoin.offset(now_ns);
         let age =
-            |s: &SetpointV1| self.bounded_age((now_ns as i128 - s.stamp_ns as i128) as f64 * 1e-9);
+            |s: &SetpointV2| self.bounded_age((now_ns as i128 - s.stamp_ns as i128) as f64 * 1e-9);
         let mut d_p = [0.0; MAX_AXES];
         let mut d_v = [0.0; MAX_AXES];
         let mut small = true;
@@ -674,7 +674,7 @@ impl Controller {
     /// velocity within one velocity step. Returns the offending axis and distance. Setpoints
     /// of the same source are checked by command validation instead (a step too large cuts
     /// power).
-    fn jump(&self, sp: &SetpointV1, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
+    fn jump(&self, sp: &SetpointV2, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
         if self
             .setpoint
             .is_some_and(|prev| prev.seq != sp.seq && sp.stamp_ns >= prev.stamp_ns)
@@ -764,7 +764,7 @@ impl Controller {
         &mut self,
         now_ns: u64,
         request: Option<&ServoRequestV1>,
-        new_setpoint: Option<&SetpointV1>,
+        new_setpoint: Option<&SetpointV2>,
         feedback: Option<&DriveFeedbackV2>,
         events: &mut EventQueue,
     ) -> (DriveCommandV2, ServoStateV3) {
@@ -952,7 +952,7 @@ impl Controller {
         &mut self,
         now_ns: u64,
         dt: f64,
-        new_setpoint: Option<&SetpointV1>,
+        new_setpoint: Option<&SetpointV2>,
         fb: &DriveFeedbackV2,
         out: &mut Out,
         events: &mut EventQueue,

@@ -6,7 +6,7 @@ use runtime::process::{self, Context, Cycle, SetupError, Task};
 use servo::{Controller, Params};
 use shm_schema::{
     DriveCommandV2, DriveFeedbackV2, EstopOrigin, ServiceId, ServoRequestV1, ServoStateV3,
-    SetpointV1,
+    SetpointV2,
 };
 use std::process::ExitCode;
 
@@ -20,7 +20,7 @@ struct Servo {
     /// A device e-stop was raised for the fault latched now.
     raised: bool,
     requests: Sub<ServoRequestV1>,
-    setpoints: Sub<SetpointV1>,
+    setpoints: Sub<SetpointV2>,
     drive_feedback: Sub<DriveFeedbackV2>,
     drive_commands: Pub<DriveCommandV2>,
     state: Pub<ServoStateV3>,

@@ -147,7 +147,8 @@ pub fn text_of<const N: usize>(parts: &[&str]) -> [u8; N] {
 }
 
 /// Event codes. Hundreds group them: 1xx drives (device side), 2xx servo refusals and
-/// faults, 3xx the arm's power, 4xx timing, 5xx the supervisor.
+/// faults, 3xx the arm's power, 4xx timing, 5xx the supervisor, 6xx the e-stop and health,
+/// 7xx the named digital IO.
 pub mod code {
     /// A drive took a CiA 402 transition; value: the transition number.
     pub const DRIVE_TRANSITION: u32 = 101;
@@ -547,7 +548,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "io-refused",
         severity: Severity::Warning,
         unit: "",
-        meaning: "iobridge refused a write of the IO and changed nothing: an output requested while its e-stop reaction holds the outputs at their safe values, an input written as an output or the reverse, or a bit beyond the IO table; the text says which.",
+        meaning: "iobridge refused (part of) a write of the IO: an output requested while its e-stop reaction holds the outputs at their safe values (nothing of that request is taken), an input written as an output or the reverse, or a bit beyond the IO table (those bits are ignored, the others taken); the text names the first refused entry and why.",
     },
 ];
 

@@ -1,7 +1,7 @@
 //! The one definition of everything that crosses a process boundary.
 //!
 //! Every payload here is `#[repr(C)]`, `Copy`, fixed size (arrays of [`MAX_AXES`]), free of
-//! pointers, and carries an explicit versioned iceoryx2 `type_name` (`"rtc::SetpointV1"`), so a
+//! pointers, and carries an explicit versioned iceoryx2 `type_name` (`"rtc::SetpointV2"`), so a
 //! process written in another language can join by copying the layout from
 //! `docs/services.md`. Changing a field means a new type name (`...V2`), never an edit in place:
 //! iceoryx2 checks the type name and size of a service, not its field layout.
@@ -37,8 +37,8 @@ pub use event::{EventQueue, EventV1, Severity};
 pub use io::{DigitalIoV1, IoConfigV1, IoDirection, IoWriteV1, MAX_IO, SafeValue};
 pub use latency::LatencyHistogramV1;
 pub use motion::{
-    CommandKind, ControlKind, MotionCommandV1, MotionControlV1, MotionState, SetpointV1,
-    TrajgenHandoverV1,
+    CommandKind, ControlKind, MotionCommandV2, MotionControlV2, MotionState, SetpointV2,
+    TrajgenHandoverV2,
 };
 pub use names::{InstanceError, InstanceName, ServiceId, ServiceNameBuf};
 pub use status::{

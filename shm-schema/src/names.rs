@@ -177,15 +177,15 @@ pub enum ServiceId {
     /// `<i>/cell/config`: [`crate::CellConfigV4`], published once by the supervisor with
     /// history 1, so a process that starts later still receives it.
     CellConfig,
-    /// `<i>/trajgen/command`: [`crate::MotionCommandV1`], a client (the supervisor) to trajgen.
+    /// `<i>/trajgen/command`: [`crate::MotionCommandV2`], a client (the supervisor) to trajgen.
     MotionCommand,
-    /// `<i>/trajgen/control`: [`crate::MotionControlV1`], a client to trajgen: pause, resume,
+    /// `<i>/trajgen/control`: [`crate::MotionControlV2`], a client to trajgen: pause, resume,
     /// abort, taken at once.
     MotionControl,
-    /// `<i>/trajgen/handover`: [`crate::TrajgenHandoverV1`], trajgen's paused motion for its
+    /// `<i>/trajgen/handover`: [`crate::TrajgenHandoverV2`], trajgen's paused motion for its
     /// successor (history 1).
     TrajgenHandover,
-    /// `<i>/trajgen/setpoint`: [`crate::SetpointV1`], trajgen to servo (and observers).
+    /// `<i>/trajgen/setpoint`: [`crate::SetpointV2`], trajgen to servo (and observers).
     Setpoint,
     /// `<i>/servo/state`: [`crate::ServoStateV3`], servo to iobridge (and observers).
     ServoState,

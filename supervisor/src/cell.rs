@@ -19,8 +19,8 @@ use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
     CellConfigV4, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
-    LatencyHistogramV1, MotionCommandV1, MotionControlV1, ProcState, ProcessName, ProcessStatusV2,
-    RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV1, TrajgenHandoverV1,
+    LatencyHistogramV1, MotionCommandV2, MotionControlV2, ProcState, ProcessName, ProcessStatusV2,
+    RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV2, TrajgenHandoverV2,
     estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
@@ -224,15 +224,15 @@ pub(crate) struct Cell {
     pub(crate) events: Vec<EventV1>,
     pub(crate) axes: Axes,
     pub(crate) t0_ns: u64,
-    pub(crate) last_sp: Option<SetpointV1>,
+    pub(crate) last_sp: Option<SetpointV2>,
     pub(crate) last_servo: Option<ServoStateV3>,
     request_seq: u64,
     control_seq: u64,
     event_seq: u64,
     // Field order is drop order: ports before the node.
     config_pub: Pub<CellConfigV4>,
-    pub(crate) command_pub: Pub<MotionCommandV1>,
-    control_pub: Pub<MotionControlV1>,
+    pub(crate) command_pub: Pub<MotionCommandV2>,
+    control_pub: Pub<MotionControlV2>,
     request_pub: Pub<ServoRequestV1>,
     events_sub: Sub<EventV1>,
     events_pub: Pub<EventV1>,
@@ -240,13 +240,13 @@ pub(crate) struct Cell {
     estop_pub: Pub<EstopV1>,
     host_pub: Pub<HostStateV1>,
     sense_sub: Sub<LatencyHistogramV1>,
-    pub(crate) setpoint_sub: Sub<SetpointV1>,
+    pub(crate) setpoint_sub: Sub<SetpointV2>,
     pub(crate) servo_sub: Sub<ServoStateV3>,
     pub(crate) image_sub: Sub<FieldbusImageV1>,
-    pub(crate) handover_sub: Sub<TrajgenHandoverV1>,
+    pub(crate) handover_sub: Sub<TrajgenHandoverV2>,
     /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
     /// its history, die with it).
-    handover_pub: Pub<TrajgenHandoverV1>,
+    handover_pub: Pub<TrajgenHandoverV2>,
     status_subs: Vec<Sub<ProcessStatusV2>>,
     latency_subs: Vec<Sub<LatencyHistogramV1>>,
     exec_subs: Vec<Sub<LatencyHistogramV1>>,
@@ -453,13 +453,19 @@ impl Cell {
     }
 
     /// Asks trajgen to pause, resume or abort; returns the request's sequence number
-    /// (trajgen echoes it in `SetpointV1::control_seq` once taken).
+    /// (trajgen echoes it in `SetpointV2::control_seq` once taken).
     pub(crate) fn motion_control(&mut self, kind: ControlKind) -> u64 {
+        self.motion_control_with(kind, 0.0)
+    }
+
+    /// Like [`Cell::motion_control`], with a value (the speed override).
+    pub(crate) fn motion_control_with(&mut self, kind: ControlKind, value: f64) -> u64 {
         self.control_seq += 1;
-        self.control_pub.send(&MotionControlV1 {
+        self.control_pub.send(&MotionControlV2 {
             seq: self.control_seq,
             kind: kind as u32,
             reserved: 0,
+            value,
         });
         self.control_seq
     }
@@ -700,7 +706,7 @@ impl Cell {
     }
 
     /// Offers `h` to a new trajgen (history 1); `valid` 0 withdraws the offer.
-    pub(crate) fn offer_handover(&mut self, h: &TrajgenHandoverV1) {
+    pub(crate) fn offer_handover(&mut self, h: &TrajgenHandoverV2) {
         self.handover_pub.send(h);
     }
 

@@ -1208,20 +1208,6 @@ impl Config {
         None
     }
 
-    /// The axes as the motion language needs them.
-    pub fn axis_specs(&self) -> Vec<motion_program::AxisSpec> {
-        self.axis
-            .iter()
-            .map(|a| motion_program::AxisSpec {
-                name: a.name.clone(),
-                unit: a.unit.clone(),
-                min: a.min,
-                max: a.max,
-                vmax: a.vmax,
-            })
-            .collect()
-    }
-
     /// The configuration as every process reads it from shared memory.
     pub fn to_shm(&self) -> CellConfigV4 {
         let ns = |s: f64| (s * 1e9) as u64;

@@ -305,6 +305,13 @@ pub fn io(instance: &str, name: Option<&str>, value: Option<&str>) -> Result<Str
                 sent_at = Some(Instant::now());
             }
             if let Some(s) = state.latest().filter(|s| s.stamp_ns > write.stamp_ns) {
+                // Refused even when the output already has the value: nothing was taken.
+                if output && s.outputs_safe != 0 {
+                    return Err(ControlError::Failed(format!(
+                        "{name} not set: iobridge holds the outputs at their safe values while it \
+                         reacts to the e-stop (`supervisor reset` first)"
+                    )));
+                }
                 if (s.values >> k) & 1 == u64::from(value) {
                     let what = if output {
                         "output"
@@ -315,12 +322,6 @@ pub fn io(instance: &str, name: Option<&str>, value: Option<&str>) -> Result<Str
                         "{name} = {} on instance {instance}: {what}",
                         u8::from(value)
                     ));
-                }
-                if output && s.outputs_safe != 0 {
-                    return Err(ControlError::Failed(format!(
-                        "{name} not set: iobridge holds the outputs at their safe values while it \
-                         reacts to the e-stop (`supervisor reset` first)"
-                    )));
                 }
             }
             if start.elapsed() > PATIENCE {

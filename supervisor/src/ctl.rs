@@ -37,8 +37,8 @@ pub enum Request {
     Exec {
         /// The program's name as the user gave it (for messages and the report).
         name: String,
-        /// Its source text.
-        source: String,
+        /// Its source, the file's bytes (checked, with line and column, by the cell).
+        source: Vec<u8>,
         /// Answer when the program ends (with [`Reply::Report`]), not when it starts.
         wait: bool,
         /// With `wait`: include the trace (CSV) in the report.
@@ -50,6 +50,11 @@ pub enum Request {
     Resume,
     /// Come to rest along the path and drop the rest of the program.
     Abort,
+    /// The live speed override: the path at `percent` (1..=100) of its programmed speed.
+    Speed {
+        /// 1..=100.
+        percent: f64,
+    },
     /// Clear the e-stop and what can be cleared.
     Reset,
     /// Enable the drives, holding where they stand.

@@ -4,17 +4,31 @@
 
 use crate::cell::{Cell, Incident};
 use crate::config::Config;
+use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
 use crate::run::{RunError, TICK};
-use motion_program::{Op, Program};
+use motion_program::Commands;
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    MAX_AXES, MotionCommandV1, MotionState, Power, RequestKind, ServoStateV3, SetpointV1,
+    MAX_AXES, MotionCommandV2, MotionState, Power, RequestKind, ServoStateV3, SetpointV2,
 };
+use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
+
+/// The longest stretch of a program the supervisor records for its trace and figures (s):
+/// a program that runs for hours keeps bounded memory; the report says the trace was cut.
+pub(crate) const MAX_RECORD_S: f64 = 600.0;
+
+/// What the trace keeps of a servo state.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ServoSample {
+    stamp_ns: u64,
+    seq: u64,
+    act_position: [f64; MAX_AXES],
+}
 
 /// Enabling the arm: every process cyclic, trajgen publishing, the drives initialized; then an
 /// enable request, and a setpoint from after the arm is enabled (trajgen starts where servo
@@ -38,7 +52,7 @@ impl Enabling {
     }
 
     /// `None` while under way; the first setpoint from after the enable once done.
-    pub(crate) fn step(&mut self, cell: &mut Cell) -> Option<Result<SetpointV1, RunError>> {
+    pub(crate) fn step(&mut self, cell: &mut Cell) -> Option<Result<SetpointV2, RunError>> {
         if let Some(s) = cell.last_servo
             && s.status & st::FAULT_LATCHED != 0
         {
@@ -103,62 +117,65 @@ pub(crate) struct Job {
     pub(crate) name: String,
     /// The program id its commands and setpoints carry.
     pub(crate) program_id: u32,
-    commands: Vec<MotionCommandV1>,
-    sent: usize,
+    /// The program's commands, drawn as trajgen takes them (loops unrolled lazily).
+    commands: Commands,
+    /// The commands sent lately, for a new trajgen that goes on from one of them (a swap).
+    sent_log: VecDeque<MotionCommandV2>,
+    /// The sequence number of the last command sent.
+    sent_seq: u64,
     start_pos: Vec<f64>,
-    predicted: f64,
-    rows: Vec<SetpointV1>,
-    servo_log: Vec<ServoStateV3>,
+    predicted: Predicted,
+    rows: Vec<SetpointV2>,
+    servo_log: Vec<ServoSample>,
+    /// Most rows and servo samples recorded ([`MAX_RECORD_S`]); beyond, the trace is cut.
+    record_cap: (usize, usize),
+    truncated: bool,
     /// Fieldbus images: count, sum of delays, max delay (ns).
     images: (u64, u64, u64),
-    done: Option<SetpointV1>,
+    done: Option<SetpointV2>,
     done_at: Option<Instant>,
     settled_at: Option<(u64, ServoStateV3)>,
     in_pos_since: Option<u64>,
     progress: Progress,
-    last_target: Option<[f64; MAX_AXES]>,
     /// An e-stop stops the motion: the job ends once the reactions complete.
     ending: Option<Instant>,
     /// The newest setpoint of this program.
-    pub(crate) last: Option<SetpointV1>,
+    pub(crate) last: Option<SetpointV2>,
 }
 
 impl Job {
-    /// A job for `program` (already validated) starting from `start` (a setpoint from after
-    /// the arm was enabled).
+    /// A job for `program` (checked, and predicted from `start`), starting from `start` (a
+    /// setpoint from after the arm was enabled).
     pub(crate) fn new(
         cfg: &Config,
-        name: &str,
-        program: &Program,
-        src: &str,
-        start: &SetpointV1,
+        program: &Checked,
+        predicted: Predicted,
+        start: &SetpointV2,
         progress: bool,
     ) -> Self {
         let n = cfg.axis.len();
         let start_pos: Vec<f64> = start.position[..n].to_vec();
-        let vmax: Vec<f64> = cfg.axis.iter().map(|a| a.vmax).collect();
-        let predicted =
-            motion_program::theoretical_time(program, &start_pos, &vmax, cfg.motion.t_acc);
         let program_id = (std::process::id() ^ (start.seq as u32).rotate_left(16)) | 1;
+        let per_s = |name: &str| (MAX_RECORD_S / cfg.period_s(name).max(1e-5)) as usize;
         Self {
-            name: name.to_string(),
+            name: program.name.clone(),
             program_id,
-            commands: program.to_commands(program_id, 1),
-            sent: 0,
+            commands: program.commands(program_id),
+            sent_log: VecDeque::new(),
+            sent_seq: 0,
             start_pos,
+            progress: Progress::new(progress, &predicted, &program.src),
             predicted,
             rows: Vec::new(),
             servo_log: Vec::new(),
+            // Setpoints come at trajgen's period and at its transitions.
+            record_cap: (2 * per_s("trajgen"), per_s("servo")),
+            truncated: false,
             images: (0, 0, 0),
             done: None,
             done_at: None,
             settled_at: None,
             in_pos_since: None,
-            progress: Progress::new(progress, predicted, src),
-            last_target: program.instructions.iter().rev().find_map(|i| match i.op {
-                Op::Move { target, .. } => Some(target),
-                _ => None,
-            }),
             ending: None,
             last: None,
         }
@@ -167,7 +184,57 @@ impl Job {
     /// A new trajgen goes on with the program after the command `seq` (a swap): the commands
     /// after it are sent again.
     pub(crate) fn rewind_to(&mut self, seq: u64) {
-        self.sent = (seq as usize).min(self.commands.len());
+        self.sent_seq = seq.min(self.sent_seq);
+    }
+
+    /// Keeps a setpoint of this program for the trace (up to the record's cap).
+    fn keep(&mut self, sp: SetpointV2) {
+        if self.rows.len() < self.record_cap.0 {
+            self.rows.push(sp);
+        } else {
+            self.truncated = true;
+        }
+    }
+
+    /// Keeps a servo state for the trace (up to the record's cap).
+    fn keep_servo(&mut self, s: &ServoStateV3) {
+        if self.servo_log.len() < self.record_cap.1 {
+            self.servo_log.push(ServoSample {
+                stamp_ns: s.stamp_ns,
+                seq: s.seq,
+                act_position: s.act_position,
+            });
+        } else {
+            self.truncated = true;
+        }
+    }
+
+    /// Sends up to `credit` commands: again those after a rewind, then new ones.
+    fn send(&mut self, cell: &mut Cell, credit: usize) -> Result<(), RunError> {
+        for _ in 0..credit {
+            let next = self.sent_seq + 1;
+            let c = match self.sent_log.iter().find(|c| c.seq == next) {
+                Some(c) => *c,
+                None => match self.commands.next() {
+                    Some(c) => {
+                        self.sent_log.push_back(c);
+                        // Enough for a successor: trajgen holds at most its queue.
+                        while self.sent_log.len() > 2 * motion_core::generator::QUEUE_CAP {
+                            self.sent_log.pop_front();
+                        }
+                        c
+                    }
+                    None => return Ok(()),
+                },
+            };
+            if !cell.command_pub.send(&c) {
+                return Err(RunError::failed(
+                    "trajgen's command service refused a command",
+                ));
+            }
+            self.sent_seq = c.seq;
+        }
+        Ok(())
     }
 
     /// Records what arrived without acting on it (while a swap holds the loop): the
@@ -178,13 +245,13 @@ impl Job {
             cell.last_sp = Some(sp);
             if sp.program_id == self.program_id && sp.state == MotionState::Moving as u32 {
                 self.last = Some(sp);
-                self.rows.push(sp);
+                self.keep(sp);
             }
         }
         while let Some(s) = cell.servo_sub.next() {
             cell.last_servo = Some(s);
-            if !self.rows.is_empty() {
-                self.servo_log.push(s);
+            if self.last.is_some() {
+                self.keep_servo(&s);
             }
         }
     }
@@ -196,7 +263,7 @@ impl Job {
 
     /// The predicted duration (s).
     pub(crate) fn predicted(&self) -> f64 {
-        self.predicted
+        self.predicted.duration_s
     }
 
     /// One tick: `None` while the program runs; its report, or why it failed, at its end.
@@ -280,9 +347,9 @@ impl Job {
                 )));
             }
             match MotionState::from_u32(sp.state) {
-                Some(MotionState::Moving) => self.rows.push(sp),
+                Some(MotionState::Moving) => self.keep(sp),
                 Some(MotionState::Done) if self.done.is_none() => {
-                    self.rows.push(sp);
+                    self.keep(sp);
                     self.done = Some(sp);
                     self.done_at = Some(Instant::now());
                 }
@@ -291,17 +358,9 @@ impl Job {
         }
         // Flow control: never more in flight than trajgen has free places.
         if let Some(sp) = newest {
-            let sent = self.sent as u64;
-            let in_flight = sent - sp.commands_taken.min(sent);
+            let in_flight = self.sent_seq - sp.commands_taken.min(self.sent_seq);
             let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
-            for c in self.commands.iter().skip(self.sent).take(credit) {
-                if !cell.command_pub.send(c) {
-                    return Err(RunError::failed(
-                        "trajgen's command service refused a command",
-                    ));
-                }
-                self.sent += 1;
-            }
+            self.send(cell, credit)?;
             if sp.program_id == self.program_id {
                 self.progress.show(&sp);
             }
@@ -310,7 +369,7 @@ impl Job {
         let settle_ns = (cfg.motion.settle_time * 1e9) as u64;
         while let Some(s) = cell.servo_sub.next() {
             cell.last_servo = Some(s);
-            if self.rows.is_empty() {
+            if self.last.is_none() {
                 continue;
             }
             if s.status & st::FAULT_LATCHED != 0 {
@@ -331,7 +390,7 @@ impl Job {
                     "servo refused a setpoint as a jump (see the setpoint-jump event)",
                 ));
             }
-            self.servo_log.push(s);
+            self.keep_servo(&s);
             if let Some(d) = &self.done {
                 let inside = (0..n).all(|i| {
                     s.following_error[i].abs() <= cfg.axis[i].in_position
@@ -349,7 +408,7 @@ impl Job {
             }
         }
         while let Some(img) = cell.image_sub.next() {
-            if !self.rows.is_empty() {
+            if self.last.is_some() {
                 let d = img.written_ns.saturating_sub(img.measured_ns);
                 let im = &mut self.images;
                 *im = (im.0 + 1, im.1 + d, im.2.max(d));
@@ -359,7 +418,7 @@ impl Job {
             && self.settled_at.is_none()
             && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout
         {
-            let s = self.servo_log.last().copied();
+            let s = cell.last_servo;
             let errs = s.map_or(String::new(), |s| {
                 (0..n)
                     .map(|i| {
@@ -422,14 +481,16 @@ impl Job {
                 .map(|p| (p.name.clone(), p.period_us))
                 .collect(),
             theoretical_s: done.theoretical_s,
-            predicted_s: self.predicted,
-            measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9,
+            predicted_s: self.predicted.duration_s,
+            measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9 - done.waited_s,
+            waited_s: done.waited_s,
             trajgen_period_s: cfg.period_s("trajgen"),
             settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
             final_position: final_state.act_position[..n].to_vec(),
-            final_error: self.last_target.map_or(vec![0.0; n], |t| {
-                (0..n).map(|i| final_state.act_position[i] - t[i]).collect()
-            }),
+            // The generator's resting point at the end is the last target.
+            final_error: (0..n)
+                .map(|i| final_state.act_position[i] - done.position[i])
+                .collect(),
             max_following_error: max_fe[..n].to_vec(),
             setpoints: self.rows.len(),
             lost_setpoints: lost_setpoints(&self.rows),
@@ -438,6 +499,7 @@ impl Job {
                 .windows(2)
                 .map(|w| w[1].seq.saturating_sub(w[0].seq + 1))
                 .sum(),
+            trace_truncated: self.truncated,
             starved: done.starved,
             iobridge_delay_us: (images.0 > 0).then(|| {
                 (
@@ -456,7 +518,7 @@ impl Job {
 /// One row per setpoint: its command, and the measured position at the servo cycle that used
 /// it (the first servo cycle at or after its time: servo takes the newest setpoint). By time,
 /// not by sequence number: a swapped trajgen numbers its setpoints from 1 again.
-fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV3]) -> Vec<TraceRow> {
+fn trace_rows(rows: &[SetpointV2], servo: &[ServoSample]) -> Vec<TraceRow> {
     rows.iter()
         .map(|sp| {
             let idx = servo.partition_point(|s| s.stamp_ns < sp.stamp_ns);
@@ -473,7 +535,7 @@ fn trace_rows(rows: &[SetpointV1], servo: &[ServoStateV3]) -> Vec<TraceRow> {
         .collect()
 }
 
-fn lost_setpoints(rows: &[SetpointV1]) -> u64 {
+fn lost_setpoints(rows: &[SetpointV2]) -> u64 {
     rows.windows(2)
         .map(|w| w[1].seq.saturating_sub(w[0].seq + 1))
         .sum()
@@ -483,19 +545,35 @@ fn lost_setpoints(rows: &[SetpointV1]) -> u64 {
 struct Progress {
     on: bool,
     tty: bool,
-    total: f64,
+    total: String,
     lines: Vec<String>,
     last: Option<Instant>,
 }
 
+/// The most of a program line a progress line shows.
+const PROGRESS_TEXT: usize = 60;
+
 impl Progress {
-    fn new(on: bool, total: f64, src: &str) -> Self {
+    fn new(on: bool, predicted: &Predicted, src: &str) -> Self {
         Self {
             on,
             tty: std::io::stderr().is_terminal(),
-            total,
+            total: match predicted.iteration_s {
+                Some(i) => format!(
+                    "{:.2} s + {i:.2} s per iteration, for ever",
+                    predicted.duration_s
+                ),
+                None => format!("{:.2} s", predicted.duration_s),
+            },
             lines: if on {
-                src.lines().map(str::to_string).collect()
+                src.lines()
+                    .map(|l| {
+                        motion_program::cut(
+                            l.split("//").next().unwrap_or("").trim(),
+                            PROGRESS_TEXT,
+                        )
+                    })
+                    .collect()
             } else {
                 Vec::new()
             },
@@ -503,7 +581,7 @@ impl Progress {
         }
     }
 
-    fn show(&mut self, sp: &SetpointV1) {
+    fn show(&mut self, sp: &SetpointV2) {
         let every = if self.tty { 0.2 } else { 1.0 };
         if !self.on
             || sp.state != MotionState::Moving as u32
@@ -515,9 +593,9 @@ impl Progress {
         let text = self
             .lines
             .get(sp.line.saturating_sub(1) as usize)
-            .map_or("", |l| l.split("//").next().unwrap_or("").trim());
+            .map_or("", String::as_str);
         let msg = format!(
-            "motion {:6.2} / {:.2} s   line {}: {}",
+            "motion {:6.2} s / {}   line {}: {}",
             sp.motion_time_s, self.total, sp.line, text
         );
         if self.tty {

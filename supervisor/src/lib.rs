@@ -10,6 +10,7 @@ pub mod job;
 pub mod latency_cmd;
 pub mod launch;
 pub mod out;
+pub mod program;
 pub mod report;
 pub mod run;
 pub mod serve;

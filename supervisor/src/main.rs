@@ -70,6 +70,25 @@ enum Cmd {
         #[arg(long, requires = "wait")]
         trace: Option<PathBuf>,
     },
+    /// The live speed override: run the path at PERCENT (1..=100) of its programmed speed
+    /// from now on, smoothly (within t_acc), without leaving it.
+    Speed {
+        /// 1 to 100.
+        percent: f64,
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+    },
+    /// Check a program without starting anything: the same validation `run` and `exec` make
+    /// (syntax, names, limits, the whole blended path through trajgen's generator) and its
+    /// predicted duration from the axes' configured start. Exit 0, or 2 with the errors.
+    Check {
+        /// Program file.
+        program: PathBuf,
+        /// Cell configuration (TOML); the embedded default when omitted.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// Decelerate every axis to rest along the path (within t_acc) and hold.
     Pause {
         /// Instance name.
@@ -412,6 +431,52 @@ fn ctl_reply(reply: Reply, json: bool, trace: Option<&std::path::Path>) -> ExitC
 
 /// `supervisor status`: the supervisor's view (control channel) and the processes' own
 /// (shared memory).
+/// `supervisor check`: see [`Cmd::Check`].
+fn check(program: &std::path::Path, config: Option<&std::path::Path>) -> ExitCode {
+    let cfg = match Config::load(config) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match supervisor::run::check_program(&cfg, program) {
+        Ok((_, p)) => {
+            match p.iteration_s {
+                Some(i) => println!(
+                    "ok: {}: {:.3} s to the end of its first iteration, then {i:.3} s per \
+                     iteration, for ever (WAITs excluded)",
+                    program.display(),
+                    p.duration_s
+                ),
+                None => println!(
+                    "ok: {}: predicted motion time {:.3} s (WAITs excluded)",
+                    program.display(),
+                    p.duration_s
+                ),
+            }
+            for o in &p.outputs {
+                for k in 0..64 {
+                    if o.mask & (1 << k) != 0 {
+                        let name = cfg.io.get(k).map_or("?", |e| e.name.as_str());
+                        println!(
+                            "  {:9.3} s  line {:<4} {name} = {}",
+                            o.t_s,
+                            o.line,
+                            (o.values >> k) & 1
+                        );
+                    }
+                }
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
 fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
     let instance = match instance_of(instance) {
         Ok(i) => i,
@@ -498,7 +563,7 @@ fn main() -> ExitCode {
                 Ok(i) => i,
                 Err(c) => return c,
             };
-            let source = match std::fs::read_to_string(&program) {
+            let source = match std::fs::read(&program) {
                 Ok(s) => s,
                 Err(e) => {
                     eprintln!("error: {}: cannot read: {e}", program.display());
@@ -520,6 +585,8 @@ fn main() -> ExitCode {
             }
         }
         Cmd::Pause { instance } => ctl_call(&instance, Request::Pause),
+        Cmd::Speed { percent, instance } => ctl_call(&instance, Request::Speed { percent }),
+        Cmd::Check { program, config } => check(&program, config.as_deref()),
         Cmd::Resume { instance } => ctl_call(&instance, Request::Resume),
         Cmd::Abort { instance } => ctl_call(&instance, Request::Abort),
         Cmd::Reset { instance } => ctl_call(&instance, Request::Reset),

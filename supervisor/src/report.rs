@@ -119,10 +119,13 @@ pub struct Report {
     pub periods_us: Vec<(String, u64)>,
     /// Sum of segment times, from trajgen (s).
     pub theoretical_s: f64,
-    /// The same, computed by the supervisor from the program before the motion (s).
+    /// The same, predicted by the supervisor before the motion with trajgen's generator (s).
     pub predicted_s: f64,
-    /// Wall-clock time from the first setpoint of the motion to its last (s).
+    /// Wall-clock time from the first setpoint of the motion to its last, less the time
+    /// spent in `WAIT`s (s).
     pub measured_s: f64,
+    /// Real time the program spent in `WAIT`s (s).
+    pub waited_s: f64,
     /// trajgen's period (s).
     pub trajgen_period_s: f64,
     /// From the last setpoint until the axes were in position (s).
@@ -138,6 +141,8 @@ pub struct Report {
     pub setpoints: usize,
     /// Setpoints missing from the record (sequence gaps).
     pub lost_setpoints: u64,
+    /// The trace covers only the program's first [`crate::job::MAX_RECORD_S`] seconds.
+    pub trace_truncated: bool,
     /// servo states the supervisor did not receive (sequence gaps: it was stalled, or its
     /// buffer overflowed). The trace misses them; the following-error figures and the verdict
     /// do not, since servo judges and latches every cycle itself.
@@ -190,6 +195,7 @@ impl Report {
             "theoretical_s": self.theoretical_s,
             "predicted_s": self.predicted_s,
             "measured_s": self.measured_s,
+            "waited_s": self.waited_s,
             "difference_s": self.difference_s(),
             "trajgen_period_s": self.trajgen_period_s,
             "settle_s": self.settle_s,
@@ -205,6 +211,7 @@ impl Report {
             "setpoints": self.setpoints,
             "lost_setpoints": self.lost_setpoints,
             "lost_servo_states": self.lost_servo_states,
+            "trace_truncated": self.trace_truncated,
             "starved": self.starved,
             "iobridge_delay_us": self.iobridge_delay_us.map(|(mean, max)| json!({"mean": mean, "max": max})),
             "processes": procs,
@@ -236,6 +243,12 @@ impl Report {
             self.difference_s() * 1e3,
             self.trajgen_period_s * 1e3
         );
+        if self.waited_s > 0.0 {
+            s += &format!(
+                "  waited             {:.4} s in WAITs (not in the motion time above)\n",
+                self.waited_s
+            );
+        }
         s += &format!(
             "  settled            {:.3} s after the last setpoint\n",
             self.settle_s

@@ -12,11 +12,11 @@
 use crate::cell::{Cell, Mode, open_cell};
 use crate::config::Config;
 use crate::job::Enabling;
+use crate::program::{Checked, Predicted};
 use crate::report::Report;
 use crate::serve::{self, End, ProgramJob};
-use motion_program::Program;
 use runtime::signals;
-use shm_schema::{InstanceName, SetpointV1};
+use shm_schema::{InstanceName, SetpointV2};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -80,27 +80,30 @@ impl std::fmt::Display for RunError {
 
 pub(crate) const TICK: Duration = Duration::from_millis(10);
 
-/// Parses `src` (named `name` in messages) and checks it against the cell's limits.
-pub(crate) fn parse_program(cfg: &Config, name: &str, src: &str) -> Result<Program, RunError> {
-    motion_program::parse(src, cfg.axis.len())
-        .and_then(|p| p.check_limits(&cfg.axis_specs()).map(|()| p))
-        .map_err(|e| RunError::Input(format!("{name}:{}:{}: {}", e.line, e.col, e.message)))
+/// Reads and checks the program at `path` on `cfg`'s cell from the axes' configured start
+/// (`supervisor check`, and `run` before anything starts): parsed, every target within the
+/// limits, run through trajgen's generator. Returns it with its prediction.
+pub fn check_program(
+    cfg: &Config,
+    path: &std::path::Path,
+) -> Result<(Checked, Predicted), RunError> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| RunError::Input(format!("{}: cannot read: {e}", path.display())))?;
+    let program = Checked::new(cfg, &path.display().to_string(), &bytes)?;
+    let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
+    let predicted = program.predict(cfg, &start)?;
+    Ok((program, predicted))
 }
 
 /// Runs a program; see the module documentation.
 pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let cfg = Config::load(opts.config.as_deref()).map_err(|e| RunError::Input(e.to_string()))?;
-    let src = std::fs::read_to_string(&opts.program)
-        .map_err(|e| RunError::Input(format!("{}: cannot read: {e}", opts.program.display())))?;
-    let name = opts.program.display().to_string();
-    let program = parse_program(&cfg, &name, &src)?;
+    let (program, _) = check_program(&cfg, &opts.program)?;
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
     let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
     let first = ProgramJob {
-        name,
         program,
-        src,
         progress: opts.progress,
     };
     let end = serve::serve(&cfg, &mut cell, &mut server, Some(first));
@@ -183,7 +186,7 @@ impl Cell {
     }
 
     /// Enables the arm; the first setpoint from after the enable.
-    pub(crate) fn startup(&mut self, cfg: &Config) -> Result<SetpointV1, RunError> {
+    pub(crate) fn startup(&mut self, cfg: &Config) -> Result<SetpointV2, RunError> {
         let mut en = Enabling::new(cfg);
         loop {
             self.check_health(cfg)?;

@@ -15,9 +15,9 @@ use crate::ctl::{ConnId, Reply, Request, Server};
 use crate::events;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
+use crate::program::Checked;
 use crate::report::{ProcessReport, Report};
 use crate::run::{RunError, TICK};
-use motion_program::Program;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
@@ -28,12 +28,8 @@ use std::time::{Duration, Instant};
 
 /// A program to run.
 pub(crate) struct ProgramJob {
-    /// Its name as the user gave it.
-    pub name: String,
     /// Parsed and checked against the cell's limits.
-    pub program: Program,
-    /// Its source.
-    pub src: String,
+    pub program: Checked,
     /// Print progress on stderr.
     pub progress: bool,
 }
@@ -180,8 +176,17 @@ impl Loop<'_> {
                 }
                 match (result, self.queued.take()) {
                     (Ok(sp), Some(p)) => {
-                        let job = Job::new(self.cfg, &p.name, &p.program, &p.src, &sp, p.progress);
-                        self.begin(job, Vec::new());
+                        let n = self.cfg.axis.len();
+                        match p.program.predict(self.cfg, &sp.position[..n]) {
+                            Ok(predicted) => {
+                                let job =
+                                    Job::new(self.cfg, &p.program, predicted, &sp, p.progress);
+                                self.begin(job, Vec::new());
+                            }
+                            Err(e) => {
+                                return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
+                            }
+                        }
                     }
                     (Err(e), Some(_)) => {
                         return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
@@ -327,6 +332,7 @@ impl Loop<'_> {
             Request::Pause => self.control(conn, ControlKind::Pause),
             Request::Resume => self.control(conn, ControlKind::Resume),
             Request::Abort => self.control(conn, ControlKind::Abort),
+            Request::Speed { percent } => self.speed(conn, percent),
             Request::Reset => self.reset(conn),
             Request::Start => self.start(conn),
             Request::Restart { process } => Some(self.replace(&process, None, false)),
@@ -393,11 +399,11 @@ impl Loop<'_> {
         &mut self,
         conn: ConnId,
         name: String,
-        src: &str,
+        src: &[u8],
         wait: bool,
         trace: bool,
     ) -> Option<Reply> {
-        let program = match crate::run::parse_program(self.cfg, &name, src) {
+        let program = match Checked::new(self.cfg, &name, src) {
             Ok(p) => p,
             Err(e) => return Some(Reply::Refused(e.to_string())),
         };
@@ -407,8 +413,20 @@ impl Loop<'_> {
         let Some(sp) = self.cell.last_sp else {
             return Some(Reply::Refused("trajgen publishes no setpoint".into()));
         };
-        let job = Job::new(self.cfg, &name, &program, src, &sp, false);
-        let text = format!("started {name}: predicted {:.2} s", job.predicted());
+        // Validated from where the axes stand, with trajgen's own generator.
+        let n = self.cfg.axis.len();
+        let predicted = match program.predict(self.cfg, &sp.position[..n]) {
+            Ok(p) => p,
+            Err(e) => return Some(Reply::Refused(e.to_string())),
+        };
+        let text = match predicted.iteration_s {
+            Some(i) => format!(
+                "started {name}: predicted {:.2} s, then {i:.2} s per iteration, for ever",
+                predicted.duration_s
+            ),
+            None => format!("started {name}: predicted {:.2} s", predicted.duration_s),
+        };
+        let job = Job::new(self.cfg, &program, predicted, &sp, false);
         self.cell.events.clear();
         self.begin(
             job,
@@ -419,6 +437,26 @@ impl Loop<'_> {
             },
         );
         (!wait).then_some(Reply::Done(text))
+    }
+
+    /// The live speed override: taken by trajgen at once, running program or not (it stays
+    /// until changed).
+    fn speed(&mut self, conn: ConnId, percent: f64) -> Option<Reply> {
+        if !(percent.is_finite() && (1.0..=100.0).contains(&percent)) {
+            return Some(Reply::Refused(format!(
+                "speed {percent} %: 1 to 100 % of the programmed speed"
+            )));
+        }
+        let seq = self
+            .cell
+            .motion_control_with(ControlKind::Speed, percent / 100.0);
+        self.pending.push(Pending::Control {
+            conn,
+            seq,
+            kind: ControlKind::Speed,
+            since: Instant::now(),
+        });
+        None
     }
 
     fn control(&mut self, conn: ConnId, kind: ControlKind) -> Option<Reply> {
@@ -555,6 +593,10 @@ impl Loop<'_> {
                         sp.line, sp.motion_time_s
                     )),
                     ControlKind::Resume if taken => Some("resumed along the path".into()),
+                    ControlKind::Speed if taken => Some(format!(
+                        "speed override {:.0} %: the path speed ramps to it within t_acc",
+                        sp.speed_override * 100.0
+                    )),
                     ControlKind::Abort if taken && self.running.is_none() => Some(
                         "aborted: the axes rest on the path; the rest of the program is dropped"
                             .into(),

@@ -12,7 +12,7 @@ use shm_schema::estop::{EstopState, HostStateV1};
 use shm_schema::{
     CellConfigV4, DetectorV1, DigitalIoV1, EstopOrigin, InstanceName, IoDirection,
     LatencyHistogramV1, MotionState, Power, ProcState, ProcessName, ProcessStatusV2, SafeValue,
-    ServiceId, ServoStateV3, SetpointV1, estop_seen, str_of,
+    ServiceId, ServoStateV3, SetpointV2, estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -47,7 +47,7 @@ pub struct Snapshot {
     /// The supervisor's heartbeat and latched e-stop.
     pub host: Option<HostStateV1>,
     /// trajgen's newest setpoint (the running program, its line, its motion time).
-    pub setpoint: Option<SetpointV1>,
+    pub setpoint: Option<SetpointV2>,
     /// iobridge's newest image of the named digital IO.
     pub io: Option<DigitalIoV1>,
 }
@@ -107,7 +107,7 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
         Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::SenseToCommand, 1).map_err(f)?;
     let host_sub = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(f)?;
     let setpoint_sub =
-        Sub::<SetpointV1>::new(&node, instance, ServiceId::Setpoint, 4).map_err(f)?;
+        Sub::<SetpointV2>::new(&node, instance, ServiceId::Setpoint, 4).map_err(f)?;
     let io_sub = Sub::<DigitalIoV1>::new(&node, instance, ServiceId::IoState, 1).map_err(f)?;
     let (mut servo, mut sense, mut host, mut setpoint, mut io) = (None, None, None, None, None);
     let mut heard = vec![false; seen.len()];

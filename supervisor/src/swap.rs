@@ -188,7 +188,7 @@ pub(crate) fn trajgen_during_program(
     });
     cell.set_handover(k, false);
     // Withdrawn: a trajgen started later (a restart) must not take an old motion over.
-    cell.offer_handover(&shm_schema::TrajgenHandoverV1::default());
+    cell.offer_handover(&shm_schema::TrajgenHandoverV2::default());
     if let Err(e) = resumed {
         cell.set_command(k, previous);
         return Err(TrajgenSwapError {

@@ -19,7 +19,7 @@ use latency::plot::{Panel, series_png};
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;
 use shm_schema::{
-    CommandKind, InstanceName, MAX_AXES, MotionCommandV1, MotionState, RequestKind, ServoStateV3,
+    CommandKind, InstanceName, MAX_AXES, MotionCommandV2, MotionState, RequestKind, ServoStateV3,
 };
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -349,18 +349,19 @@ fn ramp(
     let mut out = home;
     out[i] += d;
     let program_id = (std::process::id() ^ (salt as u32).rotate_left(8)) | 1;
-    let cmd = |seq: u64, kind: CommandKind, target: [f64; MAX_AXES]| MotionCommandV1 {
+    let cmd = |seq: u64, kind: CommandKind, target: [f64; MAX_AXES]| MotionCommandV2 {
         seq,
         program_id,
         line: seq as u32,
         kind: kind as u32,
-        axes: n as u32,
+        count: n as u32,
         target,
-        user_time_s: 0.0,
+        ..MotionCommandV2::default()
     };
+    // A joint move: the step is one axis' own, whatever the kinematics.
     for c in [
-        cmd(1, CommandKind::Move, out),
-        cmd(2, CommandKind::Move, home),
+        cmd(1, CommandKind::MoveJ, out),
+        cmd(2, CommandKind::MoveJ, home),
         cmd(3, CommandKind::End, home),
     ] {
         if !session.command_pub.send(&c) {

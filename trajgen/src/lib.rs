@@ -2,8 +2,6 @@
 //! zones, `T1 = max(max_i |C_i - B_i| / vmax_i, 2 t_acc, T_user)`, every reference computed
 //! from real elapsed time.
 //!
-//! [`blend`] is the maths of one segment, [`generator`] the real-time state machine that
-//! chains segments from a command queue; `main.rs` binds them to the cell's services.
-
-pub mod blend;
-pub mod generator;
+//! The motion itself is [`motion_core`]'s generator, the one the supervisor predicts with;
+//! `main.rs` binds it to the cell's services: commands and controls in, setpoints out, the
+//! program's outputs to iobridge and its inputs from iobridge's image.

@@ -1,5 +1,6 @@
 //! `trajgen`: the trajectory generator process. See the crate documentation.
 
+use motion_core::generator::{Generator, Params, QUEUE_CAP};
 use runtime::ipc::{Notifier, Pub, Sub};
 use runtime::process::{self, Context, Cycle, SetupError, Task};
 use shm_schema::EventV1;
@@ -7,20 +8,20 @@ use shm_schema::drive::servo_status;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
 use shm_schema::{
-    MotionCommandV1, MotionControlV1, ServiceId, ServoStateV3, SetpointV1, TrajgenHandoverV1,
+    DigitalIoV1, IoWriteV1, MotionCommandV2, MotionControlV2, ServiceId, ServoStateV3, SetpointV2,
+    TrajgenHandoverV2,
 };
 use std::process::ExitCode;
-use trajgen::generator::{Generator, Params, QUEUE_CAP};
 
 struct Trajgen {
     params: Params,
     /// `None` until servo's commanded position is known: the motion starts where servo is.
     generator: Option<Generator>,
-    commands: Sub<MotionCommandV1>,
+    commands: Sub<MotionCommandV2>,
     /// Pause, resume, abort: taken at once, not queued.
-    control: Sub<MotionControlV1>,
+    control: Sub<MotionControlV2>,
     servo: Sub<ServoStateV3>,
-    setpoints: Pub<SetpointV1>,
+    setpoints: Pub<SetpointV2>,
     /// Wakes event-driven consumers after each setpoint (none in the default cell: servo
     /// runs on its own phase of the shared grid).
     ready: Notifier,
@@ -29,10 +30,15 @@ struct Trajgen {
     /// Servo's newest state.
     last_servo: Option<ServoStateV3>,
     /// The paused motion, for a successor (and from a predecessor, at start).
-    handover_pub: Pub<TrajgenHandoverV1>,
-    handover_sub: Sub<TrajgenHandoverV1>,
+    handover_pub: Pub<TrajgenHandoverV2>,
+    handover_sub: Sub<TrajgenHandoverV2>,
     /// A valid handover record is the newest published.
     handing_over: bool,
+    /// The program's outputs, to iobridge; its inputs, from iobridge's image.
+    io_requests: Pub<IoWriteV1>,
+    io_state: Sub<DigitalIoV1>,
+    inputs: Option<u64>,
+    index: u32,
 }
 
 impl Trajgen {
@@ -51,6 +57,10 @@ impl Trajgen {
             handover_pub: Pub::new(&ctx.node, i, ServiceId::TrajgenHandover)?,
             handover_sub: Sub::new(&ctx.node, i, ServiceId::TrajgenHandover, 1)?,
             handing_over: false,
+            io_requests: Pub::new(&ctx.node, i, ServiceId::IoRequest)?,
+            io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
+            inputs: None,
+            index: ctx.index as u32,
         })
     }
 }
@@ -116,15 +126,28 @@ impl Task for Trajgen {
                 generator.control(&c, now);
             }
         }
-        let sp = generator.step(now);
+        if let Some(io) = self.io_state.latest() {
+            self.inputs = Some(io.values);
+        }
+        let mut sp = generator.step(now, self.inputs);
+        to_joints(&mut sp);
         self.setpoints.send(&sp);
+        if let Some(o) = generator.take_outputs() {
+            self.io_requests.send(&IoWriteV1 {
+                stamp_ns: now,
+                mask: o.mask,
+                values: o.values,
+                source: self.index,
+                line: o.line,
+            });
+        }
         match generator.handover(now) {
             Some(h) => {
                 self.handover_pub.send(&h);
                 self.handing_over = true;
             }
             None if self.handing_over => {
-                self.handover_pub.send(&TrajgenHandoverV1::default());
+                self.handover_pub.send(&TrajgenHandoverV2::default());
                 self.handing_over = false;
             }
             None => {}
@@ -154,9 +177,19 @@ impl Task for Trajgen {
     }
 }
 
+/// The generator's reference is in its segment's space; servo follows joints. The gantry's
+/// Cartesian coordinates are its joints: both halves of the setpoint carry the same values.
+///
+/// # Real-time
+/// Copies only.
+fn to_joints(sp: &mut SetpointV2) {
+    sp.cartesian = sp.position;
+    sp.cartesian_velocity = sp.velocity;
+}
+
 /// The generator that goes on with `h`, a predecessor's paused motion, if `h` is valid,
 /// recent, and rests where servo holds (so its first setpoint is no jump).
-fn successor(h: &TrajgenHandoverV1, s: &ServoStateV3, now: u64, p: Params) -> Option<Generator> {
+fn successor(h: &TrajgenHandoverV2, s: &ServoStateV3, now: u64, p: Params) -> Option<Generator> {
     const RECENT_NS: u64 = 30_000_000_000;
     if h.valid != 1 || now.saturating_sub(h.stamp_ns) > RECENT_NS {
         return None;

@@ -201,7 +201,7 @@ fn a_program_error_names_line_and_column_and_starts_nothing() {
     refused(
         "badprog",
         "MOVE(40,40,0)\nMOVE(140,40)\nEND\n",
-        "2:12: MOVE has 2 coordinate(s), the cell has 3 axes",
+        "2:12: MOVE has 2 coordinates; the cell has 3 (x, y, theta)",
     );
 }
 

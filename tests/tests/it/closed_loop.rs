@@ -3,10 +3,10 @@
 //! closes the loop) and in CSP (the drives close it), at 1 kHz and at 4 kHz.
 
 use crate::loop_sim::{Loop, MS};
+use motion_core::generator::{Generator, Params};
 use shm_schema::MotionState;
 use shm_schema::drive::servo_status as st;
 use supervisor::config::Config;
-use trajgen::generator::{Generator, Params};
 
 /// Runs the triangle; returns the largest |following error| per axis.
 fn triangle(cfg: &Config) -> [f64; 3] {
@@ -15,9 +15,8 @@ fn triangle(cfg: &Config) -> [f64; 3] {
     lp.enable();
     let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
     let mut generator = Generator::new(Params::from_cell(&cell), &start);
-    let prog =
-        motion_program::parse(include_str!("../../../examples/triangle.prog"), 3).expect("parses");
-    for c in prog.to_commands(1, 1) {
+    let prog = crate::gantry_commands(include_str!("../../../examples/triangle.prog"), 1);
+    for c in prog {
         generator.push_command(&c);
     }
     let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
@@ -25,7 +24,7 @@ fn triangle(cfg: &Config) -> [f64; 3] {
     let mut done_at = None;
     let mut sp = None;
     for k in 1..(30_000 * MS / lp.period) {
-        let fresh = (k % tg == 0).then(|| generator.step(lp.now + 100_000));
+        let fresh = (k % tg == 0).then(|| generator.step(lp.now + 100_000, None));
         if fresh.is_some() {
             sp = fresh;
         }

@@ -7,7 +7,7 @@ use servo::{Controller, Params as ServoParams};
 use shm_schema::drive::servo_status as st;
 use shm_schema::{
     CellConfigV4, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
-    RequestKind, ServoRequestV1, ServoStateV3, SetpointV1,
+    RequestKind, ServoRequestV1, ServoStateV3, SetpointV2,
 };
 
 pub const MS: u64 = 1_000_000;
@@ -52,7 +52,7 @@ impl Loop {
     pub fn step_with(
         &mut self,
         request: Option<RequestKind>,
-        setpoint: Option<&SetpointV1>,
+        setpoint: Option<&SetpointV2>,
         inject: Option<&FaultInjectionV1>,
     ) -> ServoStateV3 {
         let fb = self

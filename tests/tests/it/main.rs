@@ -12,7 +12,17 @@ mod latency;
 mod loop_sim;
 mod no_alloc;
 mod operations;
+mod programs;
 mod servo_layer;
 
 #[global_allocator]
 static ALLOC: runtime::alloc_count::CountingAllocator = runtime::alloc_count::CountingAllocator;
+
+/// `src` as the commands trajgen takes on the default Gantry UBA cell (program `id`).
+pub(crate) fn gantry_commands(src: &str, id: u32) -> Vec<shm_schema::MotionCommandV2> {
+    let cfg = supervisor::config::Config::default_cell();
+    motion_program::parse(src.as_bytes(), &supervisor::program::cell_spec(&cfg))
+        .expect("the program parses")
+        .commands(id)
+        .collect()
+}

@@ -5,6 +5,7 @@
 //! reset and enable again.
 
 use machine_sim::Machine;
+use motion_core::generator::{Generator, Params};
 use runtime::alloc_count::count;
 use runtime::cycle::CycleClock;
 use servo::{Controller, Params as ServoParams};
@@ -12,7 +13,6 @@ use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
 use shm_schema::{EventQueue, FaultInjectionV1, RequestKind, ServoRequestV1};
 use supervisor::config::Config;
-use trajgen::generator::{Generator, Params};
 
 #[test]
 fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
@@ -23,9 +23,7 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
         cell.period_of("servo").expect("servo"),
     ));
     let mut generator = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
-    let cmds = motion_program::parse("MOVE(60,50,10)\nSTOP\nEND", 3)
-        .expect("parses")
-        .to_commands(1, 1);
+    let cmds = crate::gantry_commands("MOVE(60,50,10)\nSTOP\nEND", 1);
     for c in &cmds {
         generator.push_command(c);
     }
@@ -72,7 +70,7 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
                 4_100 => Some(inject(2, 0)),
                 _ => None,
             };
-            let mut sp = (k % 4 == 0).then(|| generator.step(now));
+            let mut sp = (k % 4 == 0).then(|| generator.step(now, None));
             if k == 10_000
                 && let Some(s) = sp.as_mut()
             {

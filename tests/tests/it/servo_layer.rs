@@ -5,11 +5,11 @@
 
 use crate::loop_sim::{Loop, MS};
 use cia402::{State, cw};
+use motion_core::generator::{Generator, Params};
 use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
-use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, SetpointV1};
+use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, SetpointV2};
 use supervisor::config::Config;
-use trajgen::generator::{Generator, Params};
 
 fn cfg_with(from: &str, to: &str) -> Config {
     let src = supervisor::config::DEFAULT_TOML.to_string();
@@ -20,10 +20,7 @@ fn cfg_with(from: &str, to: &str) -> Config {
 /// A trajectory generator at the default start with `program` queued.
 fn generator(cell: &shm_schema::CellConfigV4, program: &str) -> Generator {
     let mut g = Generator::new(Params::from_cell(cell), &[40.0, 40.0, 0.0]);
-    for c in motion_program::parse(program, 3)
-        .expect("parses")
-        .to_commands(1, 1)
-    {
+    for c in crate::gantry_commands(program, 1) {
         g.push_command(&c);
     }
     g
@@ -37,8 +34,8 @@ fn states(lp: &Loop) -> Vec<State> {
 }
 
 /// A setpoint at servo's next cycle, at `pos` with `vel` on x (y, theta at their start).
-fn setpoint(lp: &Loop, seq: u64, x: f64, vx: f64) -> SetpointV1 {
-    let mut sp = SetpointV1 {
+fn setpoint(lp: &Loop, seq: u64, x: f64, vx: f64) -> SetpointV2 {
+    let mut sp = SetpointV2 {
         seq,
         stamp_ns: lp.now + 300_000,
         axes: 3,
@@ -230,7 +227,7 @@ fn a_following_error_latches_like_a_device_estop() {
     let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
     let mut latched = false;
     for k in 0..20_000u64 {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         if s.status & st::FAULT_LATCHED != 0 {
             latched = true;
@@ -415,7 +412,7 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     // 2 s of motion at full speed, then trajgen dies.
     for k in 0..2000 {
-        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000));
+        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
         lp.step_with(None, sp.as_ref(), None);
     }
     assert!(
@@ -471,7 +468,7 @@ fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
     let mut prev = lp.state;
     for k in 0..8000u64 {
         let silent = (1000..1120).contains(&k) || (3000..3160).contains(&k);
-        let sp = (k % tg == 0 && !silent).then(|| g.step(lp.now + 100_000));
+        let sp = (k % tg == 0 && !silent).then(|| g.step(lp.now + 100_000, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
         if k > 10 {
@@ -510,7 +507,7 @@ fn a_late_servo_cycle_is_not_a_step() {
             assert!(lp.state.cmd_velocity[0] > 15.0);
             lp.servo_stalls(12);
         }
-        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000));
+        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
     }
@@ -568,7 +565,7 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
     let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
     let mut k = 0u64;
     loop {
-        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000));
+        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         if s.status & st::FAULT_LATCHED != 0 {
             break;
@@ -642,7 +639,7 @@ fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
     lp.enable();
     let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
     for k in 0..2000u64 {
-        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000));
+        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
         lp.step_with(None, sp.as_ref(), None);
     }
     let v0 = lp.state.cmd_velocity[0];
@@ -690,7 +687,7 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
     for k in 0..12_000u64 {
         // One setpoint from the future of servo's cycle, at full speed.
         let ahead = if k == 10_000 { 6_000_000 } else { 0 };
-        let sp = (k % tg == 0 || k == 10_000).then(|| g.step(lp.now + 100_000 + ahead));
+        let sp = (k % tg == 0 || k == 10_000).then(|| g.step(lp.now + 100_000 + ahead, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
     }
@@ -706,7 +703,7 @@ fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
     let mut seen = [0.0f64; 3];
     let mut last = None;
     for k in 0..12_000u64 {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         for (m, e) in seen.iter_mut().zip(&s.following_error[..3]) {
             *m = m.max(e.abs());
@@ -718,15 +715,12 @@ fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
     assert!(seen[0] > 1e-4, "x moved: {seen:?}");
     assert_eq!(&s.peak_following_error[..3], &seen[..]);
     // The next program's first setpoint starts a new figure.
-    for c in motion_program::parse("MOVE(141,40,0)\nEND", 3)
-        .expect("parses")
-        .to_commands(2, 1)
-    {
+    for c in crate::gantry_commands("MOVE(141,40,0)\nEND", 2) {
         g.push_command(&c);
     }
     let mut first = None;
     for k in 0..4_000u64 {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000));
+        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
         let s = lp.step_with(None, sp.as_ref(), None);
         if s.peak_program == 2 && first.is_none() {
             first = Some(s);

@@ -1,10 +1,10 @@
 //! The generator against the formula, with regular, late and exact cycles.
 
-use motion_program::{parse, theoretical_time};
+use motion_core::blend::{Axes, Segment};
+use motion_core::generator::{Generator, Params};
+use motion_program::{CellSpec, Op, Program, parse, segment_time};
 use shm_schema::motion::trajgen_fault;
-use shm_schema::{MAX_AXES, MotionCommandV1, MotionState, SetpointV1};
-use trajgen::blend::{Axes, Segment};
-use trajgen::generator::{Generator, Params};
+use shm_schema::{MAX_AXES, MotionCommandV2, MotionState, SetpointV2};
 
 const TRIANGLE: &str = include_str!("../../examples/triangle.prog");
 const START: [f64; 3] = [40.0, 40.0, 0.0];
@@ -13,19 +13,63 @@ const T0: u64 = 1_000_000_000_000; // an arbitrary CLOCK_MONOTONIC origin
 fn params() -> Params {
     let mut p = Params {
         axes: 3,
+        coords: 3,
         vmax: [1.0; MAX_AXES],
+        coord_vmax: [1.0; MAX_AXES],
         min: [0.0; MAX_AXES],
         max: [0.0; MAX_AXES],
         t_acc: 0.525,
     };
     p.vmax[..3].copy_from_slice(&[16.0, 16.0, 30.0]);
+    p.coord_vmax = p.vmax;
     p.min[..3].copy_from_slice(&[0.0, 0.0, -180.0]);
     p.max[..3].copy_from_slice(&[200.0, 150.0, 180.0]);
     p
 }
 
-fn commands(src: &str) -> Vec<MotionCommandV1> {
-    parse(src, 3).expect("program parses").to_commands(7, 1)
+fn commands(src: &str) -> Vec<MotionCommandV2> {
+    program(src).commands(7).collect()
+}
+
+fn program(src: &str) -> Program {
+    let cell = CellSpec::cartesian(&[("x", "mm"), ("y", "mm"), ("theta", "deg")]);
+    parse(src.as_bytes(), &cell).expect("program parses")
+}
+
+/// The theoretical duration of a straight program (MOVE, STOP, END) from `START`, summed
+/// independently of the generator: each MOVE and STOP is one segment; END adds a stopping
+/// segment unless the axes are already coming to rest on the last target.
+fn planned(src: &str) -> f64 {
+    let (vmax, t_acc) = (params().vmax, params().t_acc);
+    let mut b = START.to_vec();
+    let (mut total, mut moving, mut resting) = (0.0, false, true);
+    for ins in &program(src).instructions {
+        match &ins.op {
+            Op::Move {
+                target,
+                user_time_s,
+                ..
+            } => {
+                total += segment_time(
+                    &b,
+                    &target[..3],
+                    &vmax[..3],
+                    t_acc,
+                    user_time_s.unwrap_or(0.0),
+                );
+                resting = b[..] == target[..3];
+                b.copy_from_slice(&target[..3]);
+                moving = true;
+            }
+            Op::Stop if moving => {
+                total += 2.0 * t_acc;
+                resting = true;
+            }
+            Op::End if moving && !resting => total += 2.0 * t_acc,
+            _ => {}
+        }
+    }
+    total
 }
 
 fn loaded(src: &str) -> Generator {
@@ -83,10 +127,10 @@ fn formula_at(plan: &[(f64, Segment)], mt: f64) -> (Axes, Axes) {
     s.eval(mt - o)
 }
 
-fn run(g: &mut Generator, times: impl Iterator<Item = u64>) -> Vec<SetpointV1> {
+fn run(g: &mut Generator, times: impl Iterator<Item = u64>) -> Vec<SetpointV2> {
     let mut out = Vec::new();
     for t in times {
-        let sp = g.step(t);
+        let sp = g.step(t, None);
         let done = sp.state != MotionState::Moving as u32;
         out.push(sp);
         if done && out.len() > 1 {
@@ -178,7 +222,7 @@ fn late_cycles_shorten_nothing_and_lengthen_nothing() {
 fn waking_at_the_requested_transitions_ends_exactly_on_time() {
     let mut g = loaded(TRIANGLE);
     let mut now = T0;
-    let mut last = g.step(now);
+    let mut last = g.step(now, None);
     let period = 4_000_000;
     let mut transitions = 0;
     while last.state == MotionState::Moving as u32 {
@@ -190,7 +234,7 @@ fn waking_at_the_requested_transitions_ends_exactly_on_time() {
             }
             _ => grid,
         };
-        last = g.step(now);
+        last = g.step(now, None);
     }
     assert!(transitions >= 4, "{transitions}");
     let measured = (last.motion_end_ns - T0) as f64 * 1e-9;
@@ -206,8 +250,7 @@ fn theoretical_time_of_the_generator_matches_the_planner() {
     ] {
         let mut g = loaded(src);
         let sps = run(&mut g, (0..).map(|k| T0 + k * 1_000_000));
-        let prog = parse(src, 3).expect("parses");
-        let expected = theoretical_time(&prog, &START, &params().vmax[..3], 0.525);
+        let expected = planned(src);
         let last = sps.last().expect("setpoints");
         assert_eq!(last.state, MotionState::Done as u32, "{src}");
         assert!(
@@ -244,7 +287,7 @@ fn a_repeated_target_stops_exactly_on_the_point() {
     let t_first = 60.0 / 16.0; // segment 1 (T1)
     let mut at_rest = None;
     for k in 0..20_000u64 {
-        let sp = g.step(T0 + k * 1_000_000);
+        let sp = g.step(T0 + k * 1_000_000, None);
         // During the repeated-target segment the axes reach the point and rest.
         let mt = k as f64 * 1e-3;
         if (mt - (t_first + 0.525 * 2.0)).abs() < 0.0005 {
@@ -263,7 +306,7 @@ fn a_repeated_target_stops_exactly_on_the_point() {
     assert_close(&sp.velocity[..3], &[0.0; 3], 1e-12, "velocity at the point");
 }
 
-fn fault_of(src_cmds: Vec<MotionCommandV1>) -> (SetpointV1, Generator) {
+fn fault_of(src_cmds: Vec<MotionCommandV2>) -> (SetpointV2, Generator) {
     let mut g = Generator::new(params(), &START);
     for c in &src_cmds {
         g.push_command(c);
@@ -309,7 +352,7 @@ fn refused_commands_fault_and_nothing_moves_beyond_the_current_target() {
     assert_eq!(fault_of(cmds).0.fault, trajgen_fault::SEQUENCE_GAP);
 
     let mut cmds = commands("MOVE(100,40,0)\nEND");
-    cmds[0].axes = 2;
+    cmds[0].count = 2;
     let (sp, _) = fault_of(cmds);
     assert_eq!(sp.fault, trajgen_fault::AXES_MISMATCH);
     assert_eq!(&sp.position[..3], &START[..], "nothing moved");
@@ -321,7 +364,7 @@ fn refused_commands_fault_and_nothing_moves_beyond_the_current_target() {
     // A new session (seq 1) clears the fault and runs.
     let (_, mut g) = fault_of({
         let mut c = commands("MOVE(100,40,0)\nEND");
-        c[0].axes = 1;
+        c[0].count = 1;
         c
     });
     for c in commands("MOVE(60,40,0)\nEND") {
@@ -338,7 +381,7 @@ fn refused_commands_fault_and_nothing_moves_beyond_the_current_target() {
 fn queue_overflow_is_refused_not_lost_silently() {
     let mut g = Generator::new(params(), &START);
     let mut cmds = Vec::new();
-    for i in 0..(trajgen::generator::QUEUE_CAP as u64 + 1) {
+    for i in 0..(motion_core::generator::QUEUE_CAP as u64 + 1) {
         let mut c = commands("MOVE(50,50,0)\nEND")[0];
         c.seq = i + 1;
         cmds.push(c);
@@ -346,14 +389,15 @@ fn queue_overflow_is_refused_not_lost_silently() {
     for c in &cmds {
         g.push_command(c);
     }
-    assert_eq!(g.step(T0).fault, trajgen_fault::QUEUE_OVERFLOW);
+    assert_eq!(g.step(T0, None).fault, trajgen_fault::QUEUE_OVERFLOW);
 }
 
-fn control(seq: u64, kind: shm_schema::ControlKind) -> shm_schema::MotionControlV1 {
-    shm_schema::MotionControlV1 {
+fn control(seq: u64, kind: shm_schema::ControlKind) -> shm_schema::MotionControlV2 {
+    shm_schema::MotionControlV2 {
         seq,
         kind: kind as u32,
         reserved: 0,
+        value: 0.0,
     }
 }
 
@@ -384,14 +428,14 @@ fn a_pause_comes_to_rest_on_the_path_within_t_acc_and_resume_goes_on_along_it() 
     let mut trace = Vec::new();
     // Into the first blend zone, then pause.
     while t < T0 + 6_500_000_000 {
-        trace.push(g.step(t));
+        trace.push(g.step(t, None));
         t = next_wake(&g, t);
     }
     g.control(&control(1, shm_schema::ControlKind::Pause), t);
     let paused_at = t;
     let mut rest_at = None;
     while t < paused_at + 3_000_000_000 {
-        let sp = g.step(t);
+        let sp = g.step(t, None);
         assert_eq!(sp.state, MotionState::Moving as u32, "a pause is no end");
         assert_eq!(sp.control_seq, 1);
         if rest_at.is_none() && sp.velocity[..3].iter().all(|v| *v == 0.0) {
@@ -411,7 +455,7 @@ fn a_pause_comes_to_rest_on_the_path_within_t_acc_and_resume_goes_on_along_it() 
     assert!(g.paused());
     g.control(&control(2, shm_schema::ControlKind::Resume), t);
     loop {
-        let sp = g.step(t);
+        let sp = g.step(t, None);
         trace.push(sp);
         if sp.state == MotionState::Done as u32 {
             break;
@@ -452,16 +496,16 @@ fn an_abort_comes_to_rest_on_the_path_and_drops_the_program() {
     let mut g = loaded(TRIANGLE);
     let mut t = T0;
     while t < T0 + 3_000_000_000 {
-        g.step(t);
+        g.step(t, None);
         t += 1_000_000;
     }
     g.control(&control(1, shm_schema::ControlKind::Abort), t);
     // A resume cannot undo an abort.
     g.control(&control(2, shm_schema::ControlKind::Resume), t);
-    let mut last = g.step(t);
+    let mut last = g.step(t, None);
     for _ in 0..2000 {
         t += 1_000_000;
-        last = g.step(t);
+        last = g.step(t, None);
     }
     assert_eq!(last.state, MotionState::Fault as u32);
     assert_eq!(last.fault, trajgen_fault::ABORTED);
@@ -475,7 +519,7 @@ fn an_abort_comes_to_rest_on_the_path_and_drops_the_program() {
     for c in &cmds {
         g.push_command(c);
     }
-    let sp = g.step(t + 1_000_000);
+    let sp = g.step(t + 1_000_000, None);
     assert_eq!(sp.state, MotionState::Moving as u32);
     assert_eq!(sp.fault, trajgen_fault::NONE);
     assert_close(
@@ -494,21 +538,21 @@ fn a_successor_goes_on_from_a_paused_motion_along_the_same_path() {
     let mut t = T0;
     // Pause inside the second segment's blend zone.
     while t < T0 + 7_000_000_000 {
-        g.step(t);
+        g.step(t, None);
         t = next_wake(&g, t);
     }
     g.control(&control(1, shm_schema::ControlKind::Pause), t);
     while !g.paused() {
-        g.step(t);
+        g.step(t, None);
         t = next_wake(&g, t);
     }
-    let last_old = g.step(t);
+    let last_old = g.step(t, None);
     let h = g.handover(t).expect("paused on a segment");
     assert_eq!(h.valid, 1);
     // The old process goes; a new one starts 300 ms later from the record alone.
     t += 300_000_000;
     let mut n = Generator::resume_from(params(), &h, t);
-    let first = n.step(t);
+    let first = n.step(t, None);
     assert_close(
         &first.position[..3],
         &last_old.position[..3],
@@ -524,14 +568,14 @@ fn a_successor_goes_on_from_a_paused_motion_along_the_same_path() {
         n.push_command(c);
     }
     assert_eq!(
-        n.step(t).fault,
+        n.step(t, None).fault,
         trajgen_fault::NONE,
         "the commands after it are taken"
     );
     n.control(&control(2, shm_schema::ControlKind::Resume), t);
     let mut trace = Vec::new();
     loop {
-        let sp = n.step(t);
+        let sp = n.step(t, None);
         trace.push(sp);
         if sp.state == MotionState::Done as u32 {
             break;
@@ -545,8 +589,7 @@ fn a_successor_goes_on_from_a_paused_motion_along_the_same_path() {
     }
     let done = trace.last().expect("done");
     assert_close(&done.position[..3], &START, 1e-9, "ends on the last target");
-    let p = parse(TRIANGLE, 3).expect("parses");
-    let theoretical = theoretical_time(&p, &START, &params().vmax[..3], params().t_acc);
+    let theoretical = planned(TRIANGLE);
     assert!(
         (done.theoretical_s - theoretical).abs() < 1e-9,
         "the same segments"

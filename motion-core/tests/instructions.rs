@@ -1,0 +1,363 @@
+//! The instructions beyond MOVE/STOP/END in the generator: when an OUT takes effect relative
+//! to the blend, WAIT and DELAY at rest, a WAIT's timeout, SPEED, the live override, MOVEJ,
+//! and the prediction the supervisor makes with the same generator.
+
+use motion_core::generator::{Generator, Params};
+use motion_core::predict::{Outcome, simulate};
+use motion_program::CellSpec;
+use shm_schema::motion::{hold, trajgen_fault};
+use shm_schema::{
+    ControlKind, MAX_AXES, MotionCommandV2, MotionControlV2, MotionState, SetpointV2,
+};
+
+const START: [f64; 3] = [40.0, 40.0, 0.0];
+const T0: u64 = 1_000_000_000_000;
+const MS: u64 = 1_000_000;
+const T_ACC: f64 = 0.525;
+
+fn params() -> Params {
+    let mut p = Params {
+        axes: 3,
+        coords: 3,
+        vmax: [1.0; MAX_AXES],
+        coord_vmax: [1.0; MAX_AXES],
+        min: [0.0; MAX_AXES],
+        max: [0.0; MAX_AXES],
+        t_acc: T_ACC,
+    };
+    p.vmax[..3].copy_from_slice(&[16.0, 16.0, 30.0]);
+    p.coord_vmax = p.vmax;
+    p.min[..3].copy_from_slice(&[0.0, 0.0, -180.0]);
+    p.max[..3].copy_from_slice(&[200.0, 150.0, 180.0]);
+    p
+}
+
+fn cell() -> CellSpec {
+    let mut c = CellSpec::cartesian(&[("x", "mm"), ("y", "mm"), ("theta", "deg")]);
+    c.outputs = vec![("gripper".into(), 1)];
+    c.inputs = vec![("gripper_closed".into(), 2)];
+    c
+}
+
+fn commands(src: &str) -> Vec<MotionCommandV2> {
+    motion_program::parse(src.as_bytes(), &cell())
+        .expect("parses")
+        .commands(3)
+        .collect()
+}
+
+fn loaded(src: &str) -> Generator {
+    let mut g = Generator::new(params(), &START);
+    for c in commands(src) {
+        g.push_command(&c);
+    }
+    g
+}
+
+fn motion_s(now: u64) -> f64 {
+    (now - T0) as f64 * 1e-9
+}
+
+#[test]
+fn an_out_between_moves_takes_effect_at_the_look_ahead_while_the_axes_move() {
+    // 100 mm at 16 mm/s: T1 = 6.25 s; the look-ahead reads OUT at T1 - t_acc of the first
+    // segment, whose local time 0 is t_acc after the start: motion time 6.25 s exactly.
+    let mut g = loaded("MOVE(140,40,0)\nOUT(gripper, 1)\nMOVE(140,140,0)\nEND");
+    let mut set_at = None;
+    let mut k = 0;
+    while set_at.is_none() {
+        let now = T0 + k * MS;
+        let sp = g.step(now, Some(0));
+        if let Some(o) = g.take_outputs() {
+            assert_eq!((o.mask, o.values, o.line), (2, 2, 2));
+            assert!(sp.velocity[0].abs() > 1.0, "moving: {:?}", sp.velocity);
+            set_at = Some(motion_s(now));
+        }
+        if let Some(t) = g.next_transition_ns().filter(|t| *t < now + MS) {
+            let sp = g.step(t, Some(0));
+            if let Some(o) = g.take_outputs() {
+                assert_eq!(o.mask, 2);
+                assert!(sp.velocity[0].abs() > 1.0);
+                set_at = Some(motion_s(t));
+            }
+        }
+        k += 1;
+    }
+    let t = set_at.expect("set");
+    assert!((t - 6.25).abs() < 1e-6, "{t}");
+}
+
+/// Runs `g` with 1 ms cycles and the transitions it asks for, the inputs given by
+/// `inputs(motion time)`, until the program ends; returns every setpoint.
+fn run(g: &mut Generator, inputs: impl Fn(f64) -> u64) -> Vec<SetpointV2> {
+    let mut out = Vec::new();
+    let mut now = T0;
+    loop {
+        let sp = g.step(now, Some(inputs(motion_s(now))));
+        let state = sp.state;
+        out.push(sp);
+        if state != MotionState::Moving as u32 || now > T0 + 600_000 * MS {
+            return out;
+        }
+        let next = now + MS;
+        now = g
+            .next_transition_ns()
+            .filter(|t| *t > now && *t < next)
+            .unwrap_or(next);
+    }
+}
+
+#[test]
+fn wait_holds_exactly_on_the_target_until_the_input_then_goes_on() {
+    // The input arrives at motion time 20 s, long after the axes came to rest: the look-ahead
+    // reads WAIT at 6.25 s (T1 - t_acc of the MOVE), the stop it implies ends 2 t_acc later.
+    let src = "MOVE(140,40,0)\nWAIT(gripper_closed, 1)\nMOVE(140,140,0)\nEND";
+    let mut g = loaded(src);
+    let sps = run(&mut g, |t| if t >= 20.0 { 4 } else { 0 });
+    let waiting: Vec<&SetpointV2> = sps.iter().filter(|s| s.hold == hold::WAIT).collect();
+    let first = waiting.first().expect("waited");
+    assert_eq!(first.hold_io, 2);
+    assert_eq!(first.line, 2);
+    assert!(
+        waiting
+            .iter()
+            .all(|s| s.position[..3] == [140.0, 40.0, 0.0] && s.velocity[..3] == [0.0; 3]),
+        "at rest on the target"
+    );
+    // It came to rest at 6.25 + 2 t_acc (the stop segment's end) and waited until 20 s.
+    let rest = 6.25 + 2.0 * T_ACC;
+    assert!(
+        (first.motion_time_s - rest).abs() < 2e-3,
+        "{}",
+        first.motion_time_s
+    );
+    let done = sps.last().expect("done");
+    assert_eq!(done.state, MotionState::Done as u32);
+    assert!(
+        (done.waited_s - (20.0 - rest)).abs() < 2e-3,
+        "{}",
+        done.waited_s
+    );
+    // The motion after the wait is the prediction's: total = predicted + waited.
+    let predicted = simulate(params(), &START, commands(src), 0.004, 3600.0, &mut |_| {});
+    assert_eq!(predicted.outcome, Outcome::Done);
+    let motion = done.motion_time_s - done.waited_s;
+    assert!(
+        (motion - predicted.duration_s).abs() < 2e-3,
+        "{motion} vs {}",
+        predicted.duration_s
+    );
+}
+
+#[test]
+fn a_wait_that_times_out_is_a_program_fault_naming_its_line() {
+    let mut g = loaded("MOVE(140,40,0)\nWAIT(gripper_closed, 1, 1.5)\nMOVE(140,140,0)\nEND");
+    let sps = run(&mut g, |_| 0);
+    let last = sps.last().expect("ended");
+    assert_eq!(last.state, MotionState::Fault as u32);
+    assert_eq!(
+        (last.fault, last.fault_line),
+        (trajgen_fault::WAIT_TIMEOUT, 2)
+    );
+    assert_eq!(
+        &last.position[..3],
+        &[140.0, 40.0, 0.0],
+        "at rest where it waited"
+    );
+    assert!((last.waited_s - 1.5).abs() < 2e-3, "{}", last.waited_s);
+}
+
+#[test]
+fn delay_holds_at_rest_for_its_time_and_counts_in_the_theoretical_time() {
+    let src = "MOVE(140,40,0)\nDELAY(2.5)\nMOVE(40,40,0)\nEND";
+    let plain = simulate(
+        params(),
+        &START,
+        commands("MOVE(140,40,0)\nSTOP\nMOVE(40,40,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    let mut g = loaded(src);
+    let sps = run(&mut g, |_| 0);
+    let delayed: Vec<&SetpointV2> = sps.iter().filter(|s| s.hold == hold::DELAY).collect();
+    let span = delayed.last().expect("held").motion_time_s - delayed[0].motion_time_s;
+    assert!((span - 2.5).abs() < 2e-3, "{span}");
+    assert!(delayed.iter().all(|s| s.velocity[..3] == [0.0; 3]));
+    let done = sps.last().expect("done");
+    // STOP and the stop a DELAY implies are the same segment: the DELAY adds its time.
+    assert!((done.motion_time_s - plain.duration_s - 2.5).abs() < 2e-3);
+    assert!((done.theoretical_s - plain.theoretical_s - 2.5).abs() < 1e-9);
+}
+
+#[test]
+fn speed_stretches_the_segment_times_that_follow() {
+    let full = simulate(
+        params(),
+        &START,
+        commands("MOVE(140,40,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    let half = simulate(
+        params(),
+        &START,
+        commands("SPEED(50)\nMOVE(140,40,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    // 100 mm: 6.25 s at 16 mm/s, 12.5 s at 8 mm/s; the stop (2 t_acc) does not stretch.
+    assert!((full.theoretical_s - (6.25 + 2.0 * T_ACC)).abs() < 1e-9);
+    assert!(
+        (half.theoretical_s - (12.5 + 2.0 * T_ACC)).abs() < 1e-9,
+        "{}",
+        half.theoretical_s
+    );
+    // A user's T stretches too.
+    let t = simulate(
+        params(),
+        &START,
+        commands("SPEED(50)\nMOVE(41,40,0, T=4)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    assert!(
+        (t.theoretical_s - (8.0 + 2.0 * T_ACC)).abs() < 1e-9,
+        "{}",
+        t.theoretical_s
+    );
+}
+
+#[test]
+fn the_live_override_slows_the_path_without_leaving_it() {
+    let src = "MOVE(140,40,0)\nMOVE(140,140,0)\nEND";
+    let mut reference = loaded(src);
+    let full = run(&mut reference, |_| 0);
+    let mut g = loaded(src);
+    let mut now = T0;
+    let mut out = Vec::new();
+    for k in 0.. {
+        if k == 2000 {
+            g.control(
+                &MotionControlV2 {
+                    seq: 1,
+                    kind: ControlKind::Speed as u32,
+                    reserved: 0,
+                    value: 0.5,
+                },
+                now,
+            );
+        }
+        let sp = g.step(now, Some(0));
+        let state = sp.state;
+        out.push(sp);
+        if state != MotionState::Moving as u32 {
+            break;
+        }
+        now += MS;
+    }
+    let done = out.last().expect("done");
+    let base = full.last().expect("done");
+    assert_eq!(&done.position[..3], &base.position[..3]);
+    // From 2 s on the path runs at half speed: about (duration - 2) s longer, less the ramp.
+    let extra = done.motion_time_s - base.motion_time_s;
+    let rest = base.motion_time_s - 2.0;
+    assert!((extra - rest).abs() < T_ACC, "{extra} vs {rest}");
+    assert!(
+        out.iter()
+            .all(|s| s.speed_override == if s.control_seq == 1 { 0.5 } else { 1.0 })
+    );
+    let fastest = out[3000..]
+        .iter()
+        .map(|s| s.velocity[0].abs())
+        .fold(0.0, f64::max);
+    assert!(fastest <= 8.0 + 1e-9, "{fastest}");
+    // Every point lies on the unslowed path (its x, y pairs).
+    for s in out.iter().step_by(50) {
+        let on = full.iter().any(|f| {
+            (f.position[0] - s.position[0]).abs() < 0.02
+                && (f.position[1] - s.position[1]).abs() < 0.02
+        });
+        assert!(on, "{:?} is off the path", &s.position[..2]);
+    }
+}
+
+#[test]
+fn movej_blends_in_joint_space_and_a_change_of_space_stops_between() {
+    let p = simulate(
+        params(),
+        &START,
+        commands("MOVE(140,40,0)\nMOVEJ(140,140,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    let blended = simulate(
+        params(),
+        &START,
+        commands("MOVE(140,40,0)\nMOVE(140,140,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    // The change of space inserts an exact stop: the stop segment (2 t_acc) more.
+    assert!((p.theoretical_s - blended.theoretical_s - 2.0 * T_ACC).abs() < 1e-9);
+    let mut spaces = Vec::new();
+    simulate(
+        params(),
+        &START,
+        commands("MOVEJ(140,40,0)\nMOVEJ(140,140,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |sp| spaces.push(sp.space),
+    );
+    assert!(
+        spaces.iter().skip(1).all(|s| *s == 1),
+        "joint space throughout"
+    );
+}
+
+#[test]
+fn the_prediction_is_the_generators_own_run() {
+    let triangle = include_str!("../../examples/triangle.prog");
+    let p = simulate(
+        params(),
+        &START,
+        commands(triangle),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    assert_eq!(p.outcome, Outcome::Done);
+    assert!((p.duration_s - 19.10).abs() < 1e-6, "{}", p.duration_s);
+    assert!((p.theoretical_s - 19.10).abs() < 1e-9);
+    // A target outside the limits is refused, as trajgen refuses it, naming the line.
+    let bad = simulate(
+        params(),
+        &START,
+        commands("MOVE(140,40,0)\nMOVE(140,400,0)\nEND"),
+        0.004,
+        3600.0,
+        &mut |_| {},
+    );
+    assert_eq!(
+        bad.outcome,
+        Outcome::Fault {
+            code: trajgen_fault::TARGET_OUT_OF_LIMITS,
+            line: 2
+        }
+    );
+    // A program longer than the limit is said so.
+    let long = simulate(
+        params(),
+        &START,
+        commands("DELAY(100)\nEND"),
+        0.004,
+        50.0,
+        &mut |_| {},
+    );
+    assert_eq!(long.outcome, Outcome::TooLong);
+}

@@ -1,0 +1,183 @@
+//! A program checked whole before anything moves (`supervisor check`, `run`, `exec`):
+//! parsed against the cell (its coordinates, joints and named IO), every target within the
+//! axes' limits, then run through the same generator trajgen runs ([`motion_core::predict`])
+//! from where the axes stand, so the prediction is trajgen's own motion time and every
+//! reference of the path is checked against the joint limits and velocities.
+
+use crate::config::Config;
+use crate::config::io::Direction;
+use crate::run::RunError;
+use motion_core::Params;
+use motion_core::predict::{Outcome, Prediction, simulate};
+use motion_program::{CellSpec, Commands, Op, Program};
+use shm_schema::MAX_AXES;
+use shm_schema::motion::trajgen_fault;
+use std::sync::Arc;
+
+/// The longest a program without `REPEAT` for ever may run (s): 24 h.
+pub const MAX_PROGRAM_S: f64 = 86_400.0;
+
+/// A parsed program that passed the checks that need no start position.
+#[derive(Clone, Debug)]
+pub struct Checked {
+    /// Its name as the user gave it (a file name).
+    pub name: String,
+    /// Its source, as text.
+    pub src: String,
+    /// The program.
+    pub program: Arc<Program>,
+}
+
+/// What [`Checked::predict`] found: the motion time trajgen will take.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Predicted {
+    /// Motion time to `END` (s), `WAIT`s excluded; for a program that runs for ever, its
+    /// first iteration and what precedes it.
+    pub duration_s: f64,
+    /// For a program that runs for ever: the time of one more iteration (s).
+    pub iteration_s: Option<f64>,
+    /// The outputs the program sets, and when (motion time): the IO timeline.
+    pub outputs: Vec<motion_core::predict::OutputEvent>,
+}
+
+/// What the motion language may name on this cell.
+pub fn cell_spec(cfg: &Config) -> CellSpec {
+    let named = |dir: Direction| -> Vec<(String, u32)> {
+        cfg.io
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.direction == dir)
+            .map(|(k, e)| (e.name.clone(), k as u32))
+            .collect()
+    };
+    let axes: Vec<(String, String)> = cfg
+        .axis
+        .iter()
+        .map(|a| (a.name.clone(), a.unit.clone()))
+        .collect();
+    CellSpec {
+        coords: axes.clone(),
+        joints: axes,
+        outputs: named(Direction::Output),
+        inputs: named(Direction::Input),
+    }
+}
+
+/// The generator's parameters for this cell (trajgen builds the same from the shared
+/// configuration).
+pub fn params(cfg: &Config) -> Params {
+    Params::from_cell(&cfg.to_shm())
+}
+
+impl Checked {
+    /// Parses `bytes` (named `name` in messages) and checks every target against the axes'
+    /// limits.
+    pub fn new(cfg: &Config, name: &str, bytes: &[u8]) -> Result<Self, RunError> {
+        let at = |line: u32, col: u32, message: &str| {
+            RunError::Input(format!("{name}:{line}:{col}: {message}"))
+        };
+        let program = motion_program::parse(bytes, &cell_spec(cfg))
+            .map_err(|e| at(e.line, e.col, &e.message))?;
+        for ins in program.flat() {
+            // The gantry's coordinates are its joints: MOVE and MOVEJ have the axes' limits.
+            let Op::Move { target, cols, .. } = &ins.op else {
+                continue;
+            };
+            for (i, a) in cfg.axis.iter().enumerate() {
+                let v = target[i];
+                if v < a.min || v > a.max {
+                    return Err(at(
+                        ins.line,
+                        cols[i],
+                        &format!(
+                            "{} = {} {} is outside the axis limits {} .. {} {}",
+                            a.name, v, a.unit, a.min, a.max, a.unit
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(Self {
+            name: name.to_string(),
+            src: String::from_utf8_lossy(bytes).into_owned(),
+            program: Arc::new(program),
+        })
+    }
+
+    /// The commands trajgen runs (loops unrolled as drawn).
+    pub fn commands(&self, program_id: u32) -> Commands {
+        Commands::new(self.program.clone(), program_id)
+    }
+
+    /// Runs the program through trajgen's generator from `start` (joint positions): its
+    /// motion time, and every reference checked against the joint limits and velocities.
+    pub fn predict(&self, cfg: &Config, start: &[f64]) -> Result<Predicted, RunError> {
+        let forever = self.program.forever();
+        let once = self.simulate(cfg, start, forever.then_some(1))?;
+        let iteration_s = if forever {
+            let twice = self.simulate(cfg, start, Some(2))?;
+            Some(twice.duration_s - once.duration_s)
+        } else {
+            None
+        };
+        Ok(Predicted {
+            duration_s: once.duration_s,
+            iteration_s,
+            outputs: once.outputs,
+        })
+    }
+
+    fn simulate(
+        &self,
+        cfg: &Config,
+        start: &[f64],
+        forever_as: Option<u32>,
+    ) -> Result<Prediction, RunError> {
+        let p = params(cfg);
+        let n = cfg.axis.len();
+        let dt = cfg.period_s("trajgen").min(p.t_acc / 20.0).max(1e-4);
+        let mut violation: Option<String> = None;
+        let mut check = |sp: &shm_schema::SetpointV2| {
+            if violation.is_some() {
+                return;
+            }
+            for (i, a) in cfg.axis.iter().enumerate().take(n.min(MAX_AXES)) {
+                let (q, v) = (sp.position[i], sp.velocity[i]);
+                if !(q.is_finite() && v.is_finite()) || q < a.min - 1e-9 || q > a.max + 1e-9 {
+                    violation = Some(format!(
+                        "{}:{}: the path reaches {} = {q:.4} {}, outside the axis limits {} .. {} {} \
+                         (motion time {:.3} s)",
+                        self.name, sp.line, a.name, a.unit, a.min, a.max, a.unit, sp.motion_time_s
+                    ));
+                    return;
+                }
+                if v.abs() > a.vmax * (1.0 + 1e-9) {
+                    violation = Some(format!(
+                        "{}:{}: {} reaches {v:.4} {}/s, above its vmax {} {}/s (motion time {:.3} s)",
+                        self.name, sp.line, a.name, a.unit, a.vmax, a.unit, sp.motion_time_s
+                    ));
+                    return;
+                }
+            }
+        };
+        let commands = Commands::bounded(self.program.clone(), 1, forever_as);
+        let prediction = simulate(p, start, commands, dt, MAX_PROGRAM_S, &mut check);
+        if let Some(v) = violation {
+            return Err(RunError::Input(v));
+        }
+        match prediction.outcome {
+            Outcome::Done => Ok(prediction),
+            Outcome::Fault { code, line } => Err(RunError::Input(format!(
+                "{}:{line}: trajgen would refuse it: {}",
+                self.name,
+                trajgen_fault::text(code)
+            ))),
+            Outcome::TooLong => Err(RunError::Input(format!(
+                "{}: the program runs longer than {} h; a program that runs for hours is a \
+                 REPEAT without a count",
+                self.name,
+                MAX_PROGRAM_S / 3600.0
+            ))),
+        }
+    }
+}
