@@ -33,7 +33,7 @@ def payload(type_name, size, fields):
 ProcessConfigV2 = payload("rtc::ProcessConfigV2", 48, [
     ("name", C.c_char * 16), ("period_ns", u64), ("phase_ns", u64), ("priority", i32),
     ("cpu", i32), ("network_estop_config", u32), ("reserved", u32)])
-CellConfigV4 = payload("rtc::CellConfigV4", 6536, [
+CellConfigV5 = payload("rtc::CellConfigV5", 6824, [
     ("axes", u32), ("machine_substeps", u32), ("t_acc_s", f64),
     ("drive_command_timeout_ns", u64), ("setpoint_timeout_ns", u64),
     ("feedback_timeout_ns", u64), ("enable_timeout_ns", u64), ("settle_time_ns", u64),
@@ -41,7 +41,8 @@ CellConfigV4 = payload("rtc::CellConfigV4", 6536, [
     ("propagate_estop", u32), ("propagate_external_estop", u32), ("process_count", u32),
     ("reserved", u32), ("health", f64 * 9), ("process", ProcessConfigV2 * 16),
     ("axis", u8 * (8 * 240)), ("inject", u8 * (4 * 24)),  # axes/faults unused here
-    ("io_count", u32), ("reserved2", u32), ("io", u8 * (64 * 56))])  # IO unused here
+    ("io_count", u32), ("reserved2", u32), ("io", u8 * (64 * 56)),  # IO unused here
+    ("kinematics", u8 * 288)])  # unused here
 ServoStateV3 = payload("rtc::ServoStateV3", 584, [
     ("seq", u64), ("stamp_ns", u64), ("measured_stamp_ns", u64), ("setpoint_seq", u64),
     ("request_seq", u64), ("status", u32), ("axes", u32), ("power", u8),
@@ -158,7 +159,7 @@ class Bridge:
 
     # --- setup -------------------------------------------------------------------------
     def setup(self):
-        config_sub = self.sub("cell/config", CellConfigV4)
+        config_sub = self.sub("cell/config", CellConfigV5)
         deadline = now_ns() + 10_000_000_000
         while not (got := self.take(config_sub)):
             if self.stop or now_ns() > deadline:

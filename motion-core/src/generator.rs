@@ -27,12 +27,14 @@
 //! program's `SPEED` instead sets the segment times of the moves that follow (their `T1`).
 
 use crate::blend::{Axes, Segment};
+use kinematics::{JointLimit, KinError, Kinematics, MAX_COORDS, cartesian_to_axes, joint_velocity};
 use motion_program::segment_time;
 use shm_schema::motion::{hold, trajgen_fault as fault};
 use shm_schema::{
     CommandKind, ControlKind, MAX_AXES, MAX_IO, MotionCommandV2, MotionControlV2, MotionState,
     SetpointV2, TrajgenHandoverV2,
 };
+use std::sync::Arc;
 
 /// Places in the command queue.
 pub const QUEUE_CAP: usize = 256;
@@ -66,9 +68,9 @@ pub struct Params {
 }
 
 impl Params {
-    /// Parameters from the cell configuration: a cell whose Cartesian coordinates are its
-    /// joints (the gantry).
-    pub fn from_cell(cell: &shm_schema::CellConfigV4) -> Self {
+    /// Parameters from the cell configuration: the joints' limits, and the Cartesian
+    /// coordinates of its kinematics (the joints themselves for the gantry).
+    pub fn from_cell(cell: &shm_schema::CellConfigV5) -> Self {
         let mut p = Params {
             axes: cell.axes as usize,
             coords: cell.axes as usize,
@@ -84,6 +86,11 @@ impl Params {
             p.min[i] = a.min;
             p.max[i] = a.max;
         }
+        let k = &cell.kinematics;
+        if k.coords > 0 {
+            p.coords = (k.coords as usize).min(MAX_COORDS);
+            p.coord_vmax = k.coord_vmax;
+        }
         p
     }
 
@@ -93,6 +100,39 @@ impl Params {
         self.coords == self.axes
     }
 }
+
+/// The cell's kinematics, shared by trajgen's generator and the supervisor's prediction.
+#[derive(Clone)]
+pub struct Kin(pub Arc<dyn Kinematics + Send + Sync>);
+
+impl core::fmt::Debug for Kin {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "Kin({})", self.0.name())
+    }
+}
+
+impl Kin {
+    /// The kinematics the cell's configuration selects (`[kinematics]`); `None` for the
+    /// gantry, whose Cartesian coordinates are its joints. Set-up only: it allocates.
+    pub fn of_cell(
+        cell: &shm_schema::CellConfigV5,
+    ) -> Result<Option<Self>, kinematics::BuildError> {
+        let k = &cell.kinematics;
+        let name = shm_schema::str_of(&k.type_name);
+        if name.is_empty() || name == "gantry" {
+            return Ok(None);
+        }
+        let params: Vec<(&str, f64)> = k.params[..(k.param_count as usize).min(k.params.len())]
+            .iter()
+            .map(|p| (shm_schema::str_of(&p.name), p.value))
+            .collect();
+        let built = kinematics::build(name, &kinematics::Params(&params))?;
+        Ok(Some(Self(Arc::from(built))))
+    }
+}
+
+/// The step of the jacobian's rate of change `J̇ q̇ ≈ (J(q + h q̇) − J(q − h q̇)) / 2h` (s).
+const JDOT_STEP_S: f64 = 1e-3;
 
 /// Where a `MOVE` or a `MOVEJ` is blended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -223,16 +263,40 @@ pub struct Generator {
     /// Sequence number of the command whose segment runs.
     exec_seq: u64,
     outputs: Outputs,
+    /// The kinematics; `None`: the Cartesian coordinates are the joints (the gantry).
+    kin: Option<Kin>,
+    /// The joint limits, for the inverse kinematics.
+    limits: [JointLimit; MAX_AXES],
+    /// The joint position of the latest setpoint (the inverse kinematics' reference).
+    joints: Axes,
+    /// The last error of the kinematics (a target or a path out of reach).
+    kin_error: Option<KinError>,
 }
 
 impl Generator {
-    /// A generator at rest on `start` (joint positions).
+    /// A generator at rest on `start` (joint positions), for a cell whose Cartesian
+    /// coordinates are its joints.
     pub fn new(p: Params, start: &[f64]) -> Self {
+        Self::with_kinematics(p, None, start)
+    }
+
+    /// A generator at rest on `start` (joint positions) with the cell's kinematics: `MOVE`
+    /// is blended in its Cartesian coordinates and every reference mapped to the joints
+    /// (nearest the previous joint position, within the limits).
+    pub fn with_kinematics(p: Params, kin: Option<Kin>, start: &[f64]) -> Self {
         let mut rest = Axes::zeros();
         for (i, v) in start.iter().take(p.axes).enumerate() {
             rest[i] = *v;
         }
+        let mut limits = [JointLimit::NONE; MAX_AXES];
+        for (i, l) in limits.iter_mut().enumerate().take(p.axes) {
+            *l = JointLimit::new(p.min[i], p.max[i]);
+        }
         Self {
+            kin,
+            limits,
+            joints: rest,
+            kin_error: None,
             p,
             queue: Queue::new(),
             phase: Phase::AtRest,
@@ -268,6 +332,11 @@ impl Generator {
     /// The current phase.
     pub fn phase(&self) -> Phase {
         self.phase
+    }
+
+    /// The kinematics' last error (why a fault [`fault::UNREACHABLE`] was raised).
+    pub fn kin_error(&self) -> Option<KinError> {
+        self.kin_error
     }
 
     /// The space of the running segment or of the resting point.
@@ -312,8 +381,15 @@ impl Generator {
     }
 
     /// A generator that goes on with a predecessor's paused motion `h` at `now_ns`: paused on
-    /// the same point of the same segment, expecting the commands after `h.command_seq`.
-    pub fn resume_from(p: Params, h: &TrajgenHandoverV2, now_ns: u64) -> Self {
+    /// the same point of the same segment, expecting the commands after `h.command_seq`;
+    /// `joints` is where servo holds (the inverse kinematics' reference).
+    pub fn resume_from(
+        p: Params,
+        kin: Option<Kin>,
+        h: &TrajgenHandoverV2,
+        now_ns: u64,
+        joints: &[f64],
+    ) -> Self {
         let seg = Segment {
             a: axes_of(&p, &h.a),
             b: axes_of(&p, &h.b),
@@ -321,7 +397,7 @@ impl Generator {
             t1: h.t1_s,
             t_acc: h.t_acc_s,
         };
-        let mut g = Self::new(p, &[]);
+        let mut g = Self::with_kinematics(p, kin, joints);
         g.rest = seg.eval(h.local_s).0;
         g.state = MotionState::Moving;
         g.space = if h.space == Space::Cartesian as u32 {
@@ -345,6 +421,11 @@ impl Generator {
         g.target_speed = 0.0;
         g.origin_s = g.path_s_at_path_ns() - h.local_s;
         g.phase = Phase::Moving(seg);
+        // Where the paused reference is, in joints.
+        let rest = g.rest;
+        if let Ok((q, ..)) = g.map(&rest, &Axes::zeros(), &Axes::zeros()) {
+            g.joints = q;
+        }
         g
     }
 
@@ -379,10 +460,11 @@ impl Generator {
         }
     }
 
-    /// Where the reference rests when no segment runs (or where a resumed one was paused).
+    /// The joint position of the reference: where it rests when no segment runs (or where a
+    /// resumed one was paused).
     pub fn rest_position(&self) -> [f64; MAX_AXES] {
         let mut p = [0.0; MAX_AXES];
-        p.copy_from_slice(self.rest.as_slice());
+        p.copy_from_slice(self.joints.as_slice());
         p
     }
 
@@ -398,6 +480,7 @@ impl Generator {
             for (i, v) in pos.iter().take(self.p.axes).enumerate() {
                 self.rest[i] = *v;
             }
+            self.joints = self.rest;
             self.space = Space::Joint;
         }
     }
@@ -418,6 +501,7 @@ impl Generator {
         for (i, v) in pos.iter().take(self.p.axes).enumerate() {
             self.rest[i] = *v;
         }
+        self.joints = self.rest;
         self.space = Space::Joint;
         self.program_speed = 1.0;
         if self.state == MotionState::Moving {
@@ -473,7 +557,9 @@ impl Generator {
         match CommandKind::from_u32(c.kind) {
             None => fault::BAD_COMMAND,
             Some(k @ (CommandKind::Move | CommandKind::MoveJ)) => {
-                let joint = k == CommandKind::MoveJ || self.p.identity();
+                // A Cartesian target's joints depend on the path to it: the supervisor's
+                // prediction checks them, and the cycle refuses one it cannot reach.
+                let joint = k == CommandKind::MoveJ || self.kin.is_none();
                 let n = if k == CommandKind::MoveJ {
                     self.p.axes
                 } else {
@@ -582,7 +668,13 @@ impl Generator {
         let space = Self::space_of(CommandKind::from_u32(cmd.kind));
         if space != self.space {
             // At rest, the resting point changes space: the same point, other coordinates.
-            // Without kinematics the coordinates are the joints (checked by `check`).
+            match self.convert_rest(space) {
+                Ok(rest) => self.rest = rest,
+                Err(e) => {
+                    self.unreachable(now_ns, e, cmd.line);
+                    return;
+                }
+            }
             self.space = space;
         }
         let c = axes_of(&self.p, &cmd.target);
@@ -601,6 +693,92 @@ impl Generator {
             origin,
             cmd.line,
         );
+    }
+
+    /// The resting point (the joints of the latest setpoint) in `space`'s coordinates.
+    fn convert_rest(&self, space: Space) -> Result<Axes, KinError> {
+        match (space, &self.kin) {
+            (Space::Joint, _) | (_, None) => Ok(self.joints),
+            (Space::Cartesian, Some(k)) => {
+                let q = joints_of(&self.joints);
+                let p = k.0.axes_to_cartesian(&q)?;
+                let mut c = Axes::zeros();
+                c.as_mut_slice()[..MAX_COORDS].copy_from_slice(&p);
+                Ok(c)
+            }
+        }
+    }
+
+    /// The kinematics cannot follow (a target or a path out of reach, a singularity): the
+    /// program faults at `line`, the reference rests on the last joint position.
+    fn unreachable(&mut self, now_ns: u64, e: KinError, line: u32) {
+        self.kin_error = Some(e);
+        self.refuse(fault::UNREACHABLE, line);
+        self.phase = Phase::AtRest;
+        self.rest = self.joints;
+        self.space = Space::Joint;
+        self.finish(now_ns, MotionState::Fault);
+    }
+
+    /// The reference (position, velocity, acceleration in the running space) as joint
+    /// position, velocity and acceleration, and Cartesian position and velocity.
+    ///
+    /// # Real-time
+    /// Arithmetic and the kinematics' (allocation-free) calls.
+    #[allow(clippy::type_complexity)]
+    fn map(
+        &self,
+        pos: &Axes,
+        vel: &Axes,
+        acc: &Axes,
+    ) -> Result<(Axes, Axes, Axes, Axes, Axes), KinError> {
+        let Some(k) = &self.kin else {
+            return Ok((*pos, *vel, *acc, *pos, *vel));
+        };
+        let k = &*k.0;
+        let n = self.p.axes;
+        match self.space {
+            Space::Joint => {
+                let q = joints_of(pos);
+                let c = k.axes_to_cartesian(&q)?;
+                let j = k.jacobian(&q)?;
+                let mut cv = Axes::zeros();
+                for r in 0..self.p.coords.min(MAX_COORDS) {
+                    cv[r] = (0..n).map(|i| j[(r, i)] * vel[i]).sum();
+                }
+                let mut cp = Axes::zeros();
+                cp.as_mut_slice()[..MAX_COORDS].copy_from_slice(&c);
+                Ok((*pos, *vel, *acc, cp, cv))
+            }
+            Space::Cartesian => {
+                let p = pose_of(pos);
+                let q = cartesian_to_axes(k, &p, &joints_of(&self.joints), &self.limits[..n])?;
+                let qd = joint_velocity(k, &q, &pose_of(vel))?;
+                // q̈ = J⁻¹ (ẍ − J̇ q̇), J̇ q̇ by a central difference along q̇.
+                let h = JDOT_STEP_S;
+                let shifted = |sign: f64| {
+                    let mut s = q;
+                    for i in 0..n {
+                        s[i] += sign * h * qd[i];
+                    }
+                    s
+                };
+                let (jp, jm) = (k.jacobian(&shifted(1.0))?, k.jacobian(&shifted(-1.0))?);
+                let mut rhs = pose_of(acc);
+                for (r, v) in rhs
+                    .iter_mut()
+                    .enumerate()
+                    .take(self.p.coords.min(MAX_COORDS))
+                {
+                    let jdot_qd: f64 = (0..n)
+                        .map(|i| (jp[(r, i)] - jm[(r, i)]) / (2.0 * h) * qd[i])
+                        .sum();
+                    *v -= jdot_qd;
+                }
+                let qdd = joint_velocity(k, &q, &rhs)?;
+                Ok((axes_from(&q), axes_from(&qd), axes_from(&qdd), *pos, *vel))
+            }
+        }
     }
 
     fn motion_time(&self, now_ns: u64) -> f64 {
@@ -744,6 +922,18 @@ impl Generator {
             }
             _ => (self.rest, Axes::zeros(), Axes::zeros()),
         };
+        let (q, qd, qdd, cp, cv) = match self.map(&pos, &vel, &acc) {
+            Ok(m) => m,
+            Err(e) => {
+                // Out of the kinematics' reach mid-path (the prediction refuses such a
+                // program): the program faults, the reference rests where it was.
+                let line = self.line;
+                self.unreachable(now_ns, e, line);
+                let rest = self.joints;
+                (rest, Axes::zeros(), Axes::zeros(), pos, Axes::zeros())
+            }
+        };
+        self.joints = q;
         self.seq += 1;
         let motion_time_s = match self.state {
             MotionState::Moving => self.motion_time(now_ns),
@@ -786,9 +976,11 @@ impl Generator {
             waited_s: self.waited_s,
             ..SetpointV2::default()
         };
-        sp.position.copy_from_slice(pos.as_slice());
-        sp.velocity.copy_from_slice(vel.as_slice());
-        sp.acceleration.copy_from_slice(acc.as_slice());
+        sp.position.copy_from_slice(q.as_slice());
+        sp.velocity.copy_from_slice(qd.as_slice());
+        sp.acceleration.copy_from_slice(qdd.as_slice());
+        sp.cartesian.copy_from_slice(cp.as_slice());
+        sp.cartesian_velocity.copy_from_slice(cv.as_slice());
         sp
     }
 
@@ -981,6 +1173,25 @@ fn bounded_speed(v: f64) -> f64 {
     } else {
         1.0
     }
+}
+
+/// The kinematics' joint array of `v`.
+fn joints_of(v: &Axes) -> kinematics::Joints {
+    let mut q = [0.0; kinematics::MAX_JOINTS];
+    q.copy_from_slice(v.as_slice());
+    q
+}
+
+/// The kinematics' pose of `v` (its first coordinates).
+fn pose_of(v: &Axes) -> kinematics::Pose {
+    let mut p = [0.0; MAX_COORDS];
+    p.copy_from_slice(&v.as_slice()[..MAX_COORDS]);
+    p
+}
+
+/// `q` as stack axes.
+fn axes_from(q: &kinematics::Joints) -> Axes {
+    Axes::from_column_slice(q)
 }
 
 /// The axes in use of a wire array (the rest zero).

@@ -53,6 +53,8 @@ pub struct Prediction {
     pub steps: u64,
     /// The outputs set, in order.
     pub outputs: Vec<OutputEvent>,
+    /// Why the kinematics could not follow, for a fault `UNREACHABLE`.
+    pub kin_error: Option<kinematics::KinError>,
 }
 
 /// Runs `commands` from rest on `start` (joint positions) with `p`, stepping at most `dt_s`
@@ -66,7 +68,17 @@ pub fn simulate(
     max_s: f64,
     observe: &mut dyn FnMut(&SetpointV2),
 ) -> Prediction {
-    let mut g = Generator::new(p, start);
+    simulate_with(Generator::new(p, start), commands, dt_s, max_s, observe)
+}
+
+/// Like [`simulate`], with a generator built by the caller (with the cell's kinematics).
+pub fn simulate_with(
+    mut g: Generator,
+    commands: impl IntoIterator<Item = MotionCommandV2>,
+    dt_s: f64,
+    max_s: f64,
+    observe: &mut dyn FnMut(&SetpointV2),
+) -> Prediction {
     let mut commands = commands.into_iter().peekable();
     let dt_ns = ((dt_s.max(1e-5)) * 1e9) as u64;
     let mut now = T0;
@@ -113,6 +125,7 @@ pub fn simulate(
                 theoretical_s: sp.theoretical_s,
                 steps,
                 outputs,
+                kin_error: g.kin_error(),
             };
         }
         let next = now + dt_ns;

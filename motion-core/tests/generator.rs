@@ -551,7 +551,7 @@ fn a_successor_goes_on_from_a_paused_motion_along_the_same_path() {
     assert_eq!(h.valid, 1);
     // The old process goes; a new one starts 300 ms later from the record alone.
     t += 300_000_000;
-    let mut n = Generator::resume_from(params(), &h, t);
+    let mut n = Generator::resume_from(params(), None, &h, t, &last_old.position[..3]);
     let first = n.step(t, None);
     assert_close(
         &first.position[..3],

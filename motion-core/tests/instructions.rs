@@ -361,3 +361,102 @@ fn the_prediction_is_the_generators_own_run() {
     );
     assert_eq!(long.outcome, Outcome::TooLong);
 }
+
+/// The five-bar of seed 004 with its joints limited to ±40°, 30°/s.
+fn five_bar() -> (Params, motion_core::generator::Kin) {
+    let mut p = Params {
+        axes: 2,
+        coords: 2,
+        vmax: [1.0; MAX_AXES],
+        coord_vmax: [1.0; MAX_AXES],
+        min: [0.0; MAX_AXES],
+        max: [0.0; MAX_AXES],
+        t_acc: T_ACC,
+    };
+    p.vmax[..2].copy_from_slice(&[30.0, 30.0]);
+    p.coord_vmax[..2].copy_from_slice(&[40.0, 40.0]);
+    p.min[..2].copy_from_slice(&[-40.0, -40.0]);
+    p.max[..2].copy_from_slice(&[40.0, 40.0]);
+    let k = kinematics::FiveBar::seed();
+    (p, motion_core::generator::Kin(std::sync::Arc::new(k)))
+}
+
+#[test]
+fn a_cartesian_blend_maps_to_continuous_joints_through_the_five_bar() {
+    let (p, kin) = five_bar();
+    let cell = CellSpec {
+        coords: vec![("x".into(), "mm".into()), ("y".into(), "mm".into())],
+        joints: vec![("a0".into(), "deg".into()), ("a1".into(), "deg".into())],
+        ..CellSpec::default()
+    };
+    let src = "MOVE(-160,-120)\nMOVE(-235,-110)\nMOVE(-200,-190)\nMOVEJ(0,0)\nEND";
+    let cmds: Vec<MotionCommandV2> = motion_program::parse(src.as_bytes(), &cell)
+        .expect("parses")
+        .commands(1)
+        .collect();
+    let g = Generator::with_kinematics(p, Some(kin.clone()), &[0.0, 0.0]);
+    let mut trace: Vec<SetpointV2> = Vec::new();
+    let pr = motion_core::predict::simulate_with(g, cmds, 0.001, 600.0, &mut |sp| trace.push(*sp));
+    assert_eq!(pr.outcome, Outcome::Done, "{:?}", pr.kin_error);
+    let mut cartesian_steps = 0;
+    for w in trace.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        let dt = (b.stamp_ns - a.stamp_ns) as f64 * 1e-9;
+        if dt <= 0.0 {
+            continue;
+        }
+        for i in 0..2 {
+            // Continuous joints, within their vmax, their velocity the derivative of their
+            // position (the mean of the two ends, to second order).
+            let dq = b.position[i] - a.position[i];
+            assert!(
+                dq.abs() <= 30.0 * dt * (1.0 + 1e-6) + 1e-9,
+                "joint {i} jumps {dq} in {dt} s"
+            );
+            let mean_v = (a.velocity[i] + b.velocity[i]) / 2.0;
+            assert!(
+                (dq / dt - mean_v).abs() < 0.05,
+                "joint {i}: {} vs {mean_v}",
+                dq / dt
+            );
+            assert!((-40.0..=40.0).contains(&b.position[i]));
+        }
+        // The Cartesian half is the forward kinematics of the joint half.
+        let mut q = [0.0; kinematics::MAX_JOINTS];
+        q[..2].copy_from_slice(&b.position[..2]);
+        let c = kin.0.axes_to_cartesian(&q).expect("forward");
+        assert!((c[0] - b.cartesian[0]).abs() < 1e-6 && (c[1] - b.cartesian[1]).abs() < 1e-6);
+        cartesian_steps += usize::from(b.space == 0);
+    }
+    assert!(cartesian_steps > 1000);
+    // Ends where MOVEJ(0, 0) put it: the null posture, tool at (-200, -150).
+    let last = trace.last().expect("done");
+    assert!(last.position[..2].iter().all(|v| v.abs() < 1e-9));
+    assert!((last.cartesian[0] + 200.0).abs() < 1e-6 && (last.cartesian[1] + 150.0).abs() < 1e-6);
+}
+
+#[test]
+fn a_path_that_leaves_the_workspace_is_refused_by_the_prediction_with_its_reason() {
+    let (p, kin) = five_bar();
+    let cell = CellSpec {
+        coords: vec![("x".into(), "mm".into()), ("y".into(), "mm".into())],
+        joints: vec![("a0".into(), "deg".into()), ("a1".into(), "deg".into())],
+        ..CellSpec::default()
+    };
+    // (-400, -150) is beyond every link's reach.
+    let cmds: Vec<MotionCommandV2> =
+        motion_program::parse(b"MOVE(-180,-140)\nMOVE(-400,-150)\nEND", &cell)
+            .expect("parses")
+            .commands(1)
+            .collect();
+    let g = Generator::with_kinematics(p, Some(kin), &[0.0, 0.0]);
+    let pr = motion_core::predict::simulate_with(g, cmds, 0.004, 600.0, &mut |_| {});
+    assert_eq!(
+        pr.outcome,
+        Outcome::Fault {
+            code: trajgen_fault::UNREACHABLE,
+            line: 2
+        }
+    );
+    assert!(pr.kin_error.is_some());
+}

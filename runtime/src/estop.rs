@@ -13,7 +13,7 @@ use iceoryx2::prelude::Node;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV4, EstopOrigin, EstopReaction, EstopV1, EventQueue, EventV1, InstanceName,
+    CellConfigV5, EstopOrigin, EstopReaction, EstopV1, EventQueue, EventV1, InstanceName,
     ServiceId, str_of,
 };
 
@@ -56,7 +56,7 @@ impl EstopWatch {
     pub fn new(
         node: &Node<Ipc>,
         instance: &InstanceName,
-        cell: &CellConfigV4,
+        cell: &CellConfigV5,
         index: usize,
         now_ns: u64,
     ) -> Result<Self, IpcError> {

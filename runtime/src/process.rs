@@ -28,7 +28,7 @@ use crate::time::now_ns;
 use iceoryx2::prelude::Node;
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV4, EstopOrigin, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
+    CellConfigV5, EstopOrigin, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
     ProcessConfigV2, ProcessName, ProcessStatusV2, ServiceId, estop_seen,
 };
 use std::process::ExitCode;
@@ -64,7 +64,7 @@ pub struct Context {
     /// The process' iceoryx2 node; open ports with [`Pub::new`] and [`Sub::new`].
     pub node: Node<Ipc>,
     /// The validated cell configuration.
-    pub cell: CellConfigV4,
+    pub cell: CellConfigV5,
 }
 
 /// What one cycle gets from the runtime and gives back to it.
@@ -491,8 +491,8 @@ impl OverrunReporter {
 fn wait_for_cell_config(
     node: &Node<Ipc>,
     instance: &InstanceName,
-) -> Result<Option<CellConfigV4>, SetupError> {
-    let sub = Sub::<CellConfigV4>::new(node, instance, ServiceId::CellConfig, 1)?;
+) -> Result<Option<CellConfigV5>, SetupError> {
+    let sub = Sub::<CellConfigV5>::new(node, instance, ServiceId::CellConfig, 1)?;
     let start = Instant::now();
     loop {
         if let Some(cell) = sub.latest() {
@@ -515,7 +515,7 @@ fn wait_for_cell_config(
 }
 
 /// Checks what a process relies on; the supervisor validated everything else.
-pub fn validate_cell(cell: &CellConfigV4) -> Result<(), String> {
+pub fn validate_cell(cell: &CellConfigV5) -> Result<(), String> {
     if cell.axes == 0 || cell.axes as usize > shm_schema::MAX_AXES {
         return Err(format!(
             "cell configuration has {} axes, 1..={} allowed",

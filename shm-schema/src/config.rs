@@ -167,6 +167,39 @@ pub struct AxisConfigV2 {
     pub encoder_resolution: f64,
 }
 
+/// Parameters of a kinematics a configuration may give.
+pub const MAX_KIN_PARAMS: usize = 8;
+
+/// One numeric parameter of the kinematics (`l1 = 200.0`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::KinParamV1")]
+pub struct KinParamV1 {
+    /// Its name, NUL-padded.
+    pub name: [u8; 16],
+    /// Its value.
+    pub value: f64,
+}
+
+/// The cell's kinematics (`[kinematics]`, `docs/kinematics.md`): which one, with which
+/// parameters, and the Cartesian speed limits of `MOVE`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::KinematicsConfigV1")]
+pub struct KinematicsConfigV1 {
+    /// Its name in the registry (`"gantry"`, `"scara"`, `"five-bar"`), NUL-padded; empty
+    /// for the gantry.
+    pub type_name: [u8; 24],
+    /// Entries of `params` in use.
+    pub param_count: u32,
+    /// Cartesian coordinates of the kinematics.
+    pub coords: u32,
+    /// The parameters.
+    pub params: [KinParamV1; MAX_KIN_PARAMS],
+    /// Largest velocity per Cartesian coordinate (unit/s): `MOVE`'s segment times.
+    pub coord_vmax: [f64; MAX_AXES],
+}
+
 /// A fault the simulated drives raise by configuration (`[[drives.inject]]`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
@@ -182,14 +215,14 @@ pub struct ConfiguredFaultV1 {
     pub code: u32,
 }
 
-/// Capacity of [`CellConfigV4::inject`].
+/// Capacity of [`CellConfigV5::inject`].
 pub const MAX_CONFIGURED_FAULTS: usize = 4;
 
 /// The whole cell.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
-#[type_name("rtc::CellConfigV4")]
-pub struct CellConfigV4 {
+#[type_name("rtc::CellConfigV5")]
+pub struct CellConfigV5 {
     /// Number of axes in use, 1..=[`MAX_AXES`].
     pub axes: u32,
     /// Integration steps of the simulated machine per machine cycle.
@@ -237,9 +270,11 @@ pub struct CellConfigV4 {
     pub reserved2: u32,
     /// The named digital IO; entry `k` is bit `k` of [`crate::DigitalIoV1`]'s masks.
     pub io: [IoConfigV1; MAX_IO],
+    /// The kinematics.
+    pub kinematics: KinematicsConfigV1,
 }
 
-impl Default for CellConfigV4 {
+impl Default for CellConfigV5 {
     fn default() -> Self {
         Self {
             axes: 0,
@@ -263,11 +298,12 @@ impl Default for CellConfigV4 {
             io_count: 0,
             reserved2: 0,
             io: [IoConfigV1::default(); MAX_IO],
+            kinematics: KinematicsConfigV1::default(),
         }
     }
 }
 
-impl CellConfigV4 {
+impl CellConfigV5 {
     /// The axes in use.
     pub fn axes(&self) -> &[AxisConfigV2] {
         &self.axis[..(self.axes as usize).min(MAX_AXES)]

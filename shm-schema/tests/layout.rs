@@ -31,7 +31,7 @@ const A: usize = MAX_AXES;
 
 fn layouts() -> Vec<Layout> {
     vec![
-        layout!(CellConfigV4 {
+        layout!(CellConfigV5 {
             axes: "uint32_t" = 4,
             machine_substeps: "uint32_t" = 4,
             t_acc_s: "double" = 8,
@@ -53,6 +53,18 @@ fn layouts() -> Vec<Layout> {
             io_count: "uint32_t" = 4,
             reserved2: "uint32_t" = 4,
             io: "IoConfigV1[64]" = MAX_IO * size_of::<IoConfigV1>(),
+            kinematics: "KinematicsConfigV1" = size_of::<KinematicsConfigV1>(),
+        }),
+        layout!(KinematicsConfigV1 {
+            type_name: "char[24]" = 24,
+            param_count: "uint32_t" = 4,
+            coords: "uint32_t" = 4,
+            params: "KinParamV1[8]" = 8 * size_of::<KinParamV1>(),
+            coord_vmax: "double[8]" = 8 * A,
+        }),
+        layout!(KinParamV1 {
+            name: "char[16]" = 16,
+            value: "double" = 8,
         }),
         layout!(IoConfigV1 {
             name: "char[24]" = 24,

@@ -18,7 +18,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
-    CellConfigV4, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
+    CellConfigV5, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
     LatencyHistogramV1, MotionCommandV2, MotionControlV2, ProcState, ProcessName, ProcessStatusV2,
     RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV2, TrajgenHandoverV2,
     estop_seen, str_of,
@@ -230,7 +230,7 @@ pub(crate) struct Cell {
     control_seq: u64,
     event_seq: u64,
     // Field order is drop order: ports before the node.
-    config_pub: Pub<CellConfigV4>,
+    config_pub: Pub<CellConfigV5>,
     pub(crate) command_pub: Pub<MotionCommandV2>,
     control_pub: Pub<MotionControlV2>,
     request_pub: Pub<ServoRequestV1>,

@@ -6,13 +6,14 @@ use serde::Deserialize;
 use shm_schema::config::MAX_CONFIGURED_FAULTS;
 use shm_schema::drive::injected;
 use shm_schema::{
-    AxisConfigV2, CellConfigV4, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
+    AxisConfigV2, CellConfigV5, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
     MAX_PROCESSES, ProcessConfigV2, ProcessName, fixed_str,
 };
 use std::fmt;
 use std::ops::Range;
 
 pub mod io;
+pub mod kinematics;
 mod stability;
 
 /// The embedded default cell (the Gantry UBA).
@@ -636,6 +637,9 @@ pub struct Config {
     /// `[[io]]`: the named digital IO.
     #[serde(default)]
     pub io: Vec<io::Io>,
+    /// `[kinematics]`: the gantry unless given.
+    #[serde(default)]
+    pub kinematics: kinematics::KinematicsSettings,
 }
 
 /// One step of a key path, to find where a value is written.
@@ -785,6 +789,9 @@ impl Config {
             );
         }
         if let Some(e) = io::validate(&self.io) {
+            return Err(e);
+        }
+        if let Some(e) = kinematics::validate(&self.kinematics, &self.axis) {
             return Err(e);
         }
         if let Some(e) = self.validate_processes() {
@@ -1209,9 +1216,9 @@ impl Config {
     }
 
     /// The configuration as every process reads it from shared memory.
-    pub fn to_shm(&self) -> CellConfigV4 {
+    pub fn to_shm(&self) -> CellConfigV5 {
         let ns = |s: f64| (s * 1e9) as u64;
-        let mut c = CellConfigV4 {
+        let mut c = CellConfigV5 {
             axes: self.axis.len() as u32,
             machine_substeps: self.drives.substeps,
             t_acc_s: self.motion.t_acc,
@@ -1233,6 +1240,7 @@ impl Config {
             io_count: self.io.len() as u32,
             reserved2: 0,
             io: io::to_shm(&self.io),
+            kinematics: self.kinematics.to_shm(&self.axis),
         };
         for (j, f) in self.drives.inject.iter().enumerate() {
             c.inject[j] = ConfiguredFaultV1 {
@@ -1434,6 +1442,41 @@ mod tests {
             "period_us = 4000\nphase_us = 600",
             "period_us = 4000\nphase_us = 6000",
             &(src_line(line_of("phase_us = 600")) + "process iobridge: phase_us must be smaller"),
+        );
+    }
+
+    #[test]
+    fn a_bad_kinematics_is_refused_with_the_reason() {
+        let five_bar = include_str!("../../examples/five-bar.toml");
+        assert!(Config::parse(five_bar, "five-bar.toml").is_ok());
+        let refused = |from: &str, to: &str, want: &str| {
+            assert!(five_bar.contains(from), "{from:?}");
+            let e = Config::parse(&five_bar.replacen(from, to, 1), "f.toml").expect_err(to);
+            assert!(e.to_string().contains(want), "\n got: {e}\nwant: {want}");
+        };
+        refused(
+            "type = \"five-bar\"",
+            "type = \"delta\"",
+            "unknown kinematics type `delta`",
+        );
+        refused("l2 = 150.0", "l_2 = 150.0", "l_2");
+        refused(
+            "vmax = [40.0, 40.0]",
+            "vmax = [40.0]",
+            "vmax has 1 values; the kinematics has 2 Cartesian coordinates",
+        );
+        refused("vmax = [40.0, 40.0]", "", "needs `vmax`");
+        refused(
+            "name = \"a1\"\nunit = \"deg\"",
+            "name = \"a1\"\nunit = \"mm\"",
+            "axis a1: joint 2 of five-bar is rotary in deg",
+        );
+        // The gantry takes no parameters and its coordinates' speeds are the axes'.
+        let gantry = DEFAULT_TOML.replace("[behaviour]", "[kinematics]\nl1 = 3.0\n\n[behaviour]");
+        let e = Config::parse(&gantry, "g.toml").expect_err("gantry parameter");
+        assert!(
+            e.to_string().contains("the gantry has no parameters"),
+            "{e}"
         );
     }
 

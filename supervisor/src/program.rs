@@ -8,8 +8,9 @@ use crate::config::Config;
 use crate::config::io::Direction;
 use crate::run::RunError;
 use motion_core::Params;
-use motion_core::predict::{Outcome, Prediction, simulate};
-use motion_program::{CellSpec, Commands, Op, Program};
+use motion_core::generator::{Generator, Kin};
+use motion_core::predict::{Outcome, Prediction, simulate_with};
+use motion_program::{CellSpec, Commands, Op, Program, Space};
 use shm_schema::MAX_AXES;
 use shm_schema::motion::trajgen_fault;
 use std::sync::Arc;
@@ -56,7 +57,7 @@ pub fn cell_spec(cfg: &Config) -> CellSpec {
         .map(|a| (a.name.clone(), a.unit.clone()))
         .collect();
     CellSpec {
-        coords: axes.clone(),
+        coords: cfg.kinematics.coords(&cfg.axis),
         joints: axes,
         outputs: named(Direction::Output),
         inputs: named(Direction::Input),
@@ -69,6 +70,11 @@ pub fn params(cfg: &Config) -> Params {
     Params::from_cell(&cfg.to_shm())
 }
 
+/// The cell's kinematics as trajgen builds it (`None`: the gantry).
+pub fn kin(cfg: &Config) -> Result<Option<Kin>, RunError> {
+    Kin::of_cell(&cfg.to_shm()).map_err(|e| RunError::Input(format!("kinematics: {e}")))
+}
+
 impl Checked {
     /// Parses `bytes` (named `name` in messages) and checks every target against the axes'
     /// limits.
@@ -78,11 +84,36 @@ impl Checked {
         };
         let program = motion_program::parse(bytes, &cell_spec(cfg))
             .map_err(|e| at(e.line, e.col, &e.message))?;
+        let kin = kin(cfg)?;
+        let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
+        let limits: Vec<kinematics::JointLimit> = cfg
+            .axis
+            .iter()
+            .map(|a| kinematics::JointLimit::new(a.min, a.max))
+            .collect();
         for ins in program.flat() {
-            // The gantry's coordinates are its joints: MOVE and MOVEJ have the axes' limits.
-            let Op::Move { target, cols, .. } = &ins.op else {
+            let Op::Move {
+                space,
+                target,
+                cols,
+                ..
+            } = &ins.op
+            else {
                 continue;
             };
+            // A Cartesian target must have a joint solution within the limits (the path to
+            // it is checked by the prediction); a joint target, the axes' limits.
+            if let (Space::Cartesian, Some(k)) = (space, &kin) {
+                let mut p = [0.0; kinematics::MAX_COORDS];
+                let n = p.len().min(program.coords);
+                p[..n].copy_from_slice(&target[..n]);
+                let mut reference = [0.0; kinematics::MAX_JOINTS];
+                reference[..start.len()].copy_from_slice(&start);
+                if let Err(e) = kinematics::cartesian_to_axes(&*k.0, &p, &reference, &limits) {
+                    return Err(at(ins.line, cols[0], &format!("out of reach: {e}")));
+                }
+                continue;
+            }
             for (i, a) in cfg.axis.iter().enumerate() {
                 let v = target[i];
                 if v < a.min || v > a.max {
@@ -134,6 +165,7 @@ impl Checked {
         forever_as: Option<u32>,
     ) -> Result<Prediction, RunError> {
         let p = params(cfg);
+        let generator = Generator::with_kinematics(p, kin(cfg)?, start);
         let n = cfg.axis.len();
         let dt = cfg.period_s("trajgen").min(p.t_acc / 20.0).max(1e-4);
         let mut violation: Option<String> = None;
@@ -161,17 +193,25 @@ impl Checked {
             }
         };
         let commands = Commands::bounded(self.program.clone(), 1, forever_as);
-        let prediction = simulate(p, start, commands, dt, MAX_PROGRAM_S, &mut check);
+        let prediction = simulate_with(generator, commands, dt, MAX_PROGRAM_S, &mut check);
         if let Some(v) = violation {
             return Err(RunError::Input(v));
         }
         match prediction.outcome {
             Outcome::Done => Ok(prediction),
-            Outcome::Fault { code, line } => Err(RunError::Input(format!(
-                "{}:{line}: trajgen would refuse it: {}",
-                self.name,
-                trajgen_fault::text(code)
-            ))),
+            Outcome::Fault { code, line } => Err(RunError::Input(match prediction.kin_error {
+                Some(e) if code == trajgen_fault::UNREACHABLE => {
+                    format!(
+                        "{}:{line}: the path leaves the kinematics' reach: {e}",
+                        self.name
+                    )
+                }
+                _ => format!(
+                    "{}:{line}: trajgen would refuse it: {}",
+                    self.name,
+                    trajgen_fault::text(code)
+                ),
+            })),
             Outcome::TooLong => Err(RunError::Input(format!(
                 "{}: the program runs longer than {} h; a program that runs for hours is a \
                  REPEAT without a count",

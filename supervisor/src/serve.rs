@@ -649,6 +649,23 @@ impl Loop<'_> {
                         .into(),
                 );
             }
+            // The handover record describes a segment; a WAIT or a DELAY has none.
+            if let Some(sp) = r
+                .job
+                .last
+                .filter(|sp| sp.hold != shm_schema::motion::hold::NONE)
+            {
+                let what = if sp.hold == shm_schema::motion::hold::WAIT {
+                    "a WAIT"
+                } else {
+                    "a DELAY"
+                };
+                return Reply::Refused(format!(
+                    "the program holds at {what} (line {}): trajgen is swapped while the program \
+                     moves or with no program; nothing was changed",
+                    sp.line
+                ));
+            }
             return match crate::swap::trajgen_during_program(
                 self.cell, self.cfg, k, command, swap, &mut r.job,
             ) {

@@ -1,6 +1,6 @@
 //! `trajgen`: the trajectory generator process. See the crate documentation.
 
-use motion_core::generator::{Generator, Params, QUEUE_CAP};
+use motion_core::generator::{Generator, Kin, Params, QUEUE_CAP};
 use runtime::ipc::{Notifier, Pub, Sub};
 use runtime::process::{self, Context, Cycle, SetupError, Task};
 use shm_schema::EventV1;
@@ -15,6 +15,8 @@ use std::process::ExitCode;
 
 struct Trajgen {
     params: Params,
+    /// The cell's kinematics (`None`: the gantry, coordinates = joints).
+    kin: Option<Kin>,
     /// `None` until servo's commanded position is known: the motion starts where servo is.
     generator: Option<Generator>,
     commands: Sub<MotionCommandV2>,
@@ -44,7 +46,9 @@ struct Trajgen {
 impl Trajgen {
     fn new(ctx: &Context) -> Result<Self, SetupError> {
         let i = &ctx.instance;
+        let kin = Kin::of_cell(&ctx.cell).map_err(|e| format!("kinematics: {e}"))?;
         Ok(Self {
+            kin,
             params: Params::from_cell(&ctx.cell),
             generator: None,
             commands: Sub::new(&ctx.node, i, ServiceId::MotionCommand, QUEUE_CAP)?,
@@ -95,7 +99,7 @@ impl Task for Trajgen {
                 let successor = self
                     .handover_sub
                     .latest()
-                    .and_then(|h| successor(&h, &s, now, self.params));
+                    .and_then(|h| successor(&h, &s, now, self.params, self.kin.clone()));
                 let g = match successor {
                     // A predecessor paused a motion where servo holds: go on with it.
                     Some(g) => g,
@@ -103,7 +107,9 @@ impl Task for Trajgen {
                     // supervisor's offer may not have reached us yet. Wait for it (or for
                     // the handover to end), publishing nothing.
                     None if cx.handover => return,
-                    None => Generator::new(self.params, &s.cmd_position),
+                    None => {
+                        Generator::with_kinematics(self.params, self.kin.clone(), &s.cmd_position)
+                    }
                 };
                 self.generator.insert(g)
             }
@@ -129,8 +135,7 @@ impl Task for Trajgen {
         if let Some(io) = self.io_state.latest() {
             self.inputs = Some(io.values);
         }
-        let mut sp = generator.step(now, self.inputs);
-        to_joints(&mut sp);
+        let sp = generator.step(now, self.inputs);
         self.setpoints.send(&sp);
         if let Some(o) = generator.take_outputs() {
             self.io_requests.send(&IoWriteV1 {
@@ -177,24 +182,20 @@ impl Task for Trajgen {
     }
 }
 
-/// The generator's reference is in its segment's space; servo follows joints. The gantry's
-/// Cartesian coordinates are its joints: both halves of the setpoint carry the same values.
-///
-/// # Real-time
-/// Copies only.
-fn to_joints(sp: &mut SetpointV2) {
-    sp.cartesian = sp.position;
-    sp.cartesian_velocity = sp.velocity;
-}
-
 /// The generator that goes on with `h`, a predecessor's paused motion, if `h` is valid,
 /// recent, and rests where servo holds (so its first setpoint is no jump).
-fn successor(h: &TrajgenHandoverV2, s: &ServoStateV3, now: u64, p: Params) -> Option<Generator> {
+fn successor(
+    h: &TrajgenHandoverV2,
+    s: &ServoStateV3,
+    now: u64,
+    p: Params,
+    kin: Option<Kin>,
+) -> Option<Generator> {
     const RECENT_NS: u64 = 30_000_000_000;
     if h.valid != 1 || now.saturating_sub(h.stamp_ns) > RECENT_NS {
         return None;
     }
-    let g = Generator::resume_from(p, h, now);
+    let g = Generator::resume_from(p, kin, h, now, &s.cmd_position);
     let rest = g.rest_position();
     (0..p.axes)
         .all(|i| (rest[i] - s.cmd_position[i]).abs() < 1e-3)

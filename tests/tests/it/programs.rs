@@ -49,12 +49,14 @@ fn predicted(cfg: &std::path::Path, prog: &std::path::Path) -> f64 {
         .unwrap_or_else(|| panic!("no prediction in {text}"))
 }
 
-#[test]
-fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
-    let test = "prog-pick";
+/// Runs `program` on the cell `cell` (with room for the host's stalls) with `run --json`,
+/// after `supervisor check` predicted it; the report, checked: done, its prediction check's
+/// own, and its motion time (waits excluded) the prediction within the last cycle's rounding
+/// (the trajectory runs on real time; each wait ends at the trajgen cycle that sees its input).
+fn run_as_predicted(test: &str, cell: &str, program: &str) -> serde_json::Value {
     let inst = instance(test);
-    let cfg = scratch(test, "cell.toml", &with_stall_room(&default_cell()));
-    let prog = scratch(test, "pick.prog", PICK_AND_PLACE);
+    let cfg = scratch(test, "cell.toml", &with_stall_room(cell));
+    let prog = scratch(test, "p.prog", program);
     let want = predicted(&cfg, &prog);
     let out = run_with_watchdog(
         supervisor()
@@ -66,23 +68,28 @@ fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
     let j = json_of(&out);
     assert_eq!(j["ok"], true, "{j}");
     let f = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} in {j}"));
-    // The run's prediction is check's (the same generator, from the same start).
     assert!(
         (f("predicted_s") - want).abs() < 1e-3,
         "{} vs {want}",
         f("predicted_s")
     );
-    // Measured less the waits: the prediction, within the last cycle's rounding (the
-    // trajectory runs on real time; each wait ends at the trajgen cycle that sees the input).
-    let period = f("trajgen_period_s");
-    let (measured, waited) = (f("measured_s"), f("waited_s"));
+    let (measured, period) = (f("measured_s"), f("trajgen_period_s"));
+    assert!(
+        measured >= want - 1e-6 && measured - want <= 2.0 * period,
+        "measured {measured} s (waits {} s excluded) vs predicted {want} s",
+        f("waited_s")
+    );
+    assert_clean(&inst);
+    j
+}
+
+#[test]
+fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
+    let j = run_as_predicted("prog-pick", &default_cell(), PICK_AND_PLACE);
+    let waited = j["waited_s"].as_f64().expect("waited_s");
     assert!(
         waited > 4.0 * 0.08,
         "four waits of at least the 80 ms switching time: {waited}"
-    );
-    assert!(
-        measured >= want - 1e-6 && measured - want <= 2.0 * period,
-        "measured {measured} s (waits {waited} s excluded) vs predicted {want} s"
     );
     // The IO timeline: each OUT, then the sensor following it, in order, twice.
     let changes: Vec<(f64, String)> = events_named(&j, "io-changed")
@@ -112,7 +119,6 @@ fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
     // Servo followed: its own latched figure, within the limit.
     let fe = j["max_following_error"]["x"].as_f64().expect("fe");
     assert!(fe > 0.0 && fe < 1.0, "{fe}");
-    assert_clean(&inst);
 }
 
 #[test]
@@ -153,4 +159,77 @@ fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
         err.contains("bin.prog:2:3: byte 0xFF is not UTF-8 text"),
         "{err}"
     );
+}
+
+/// The same pick-and-place on seed 004's five-bar (examples/five-bar.toml): Cartesian moves
+/// mapped to the two joints every cycle, a joint move, IO, waits and a loop.
+const FIVE_BAR_PICK: &str = "\
+P1 = (-170, -130)
+P2 = (-225, -160)
+REPEAT 2
+  MOVE(P1)
+  STOP
+  OUT(gripper, 1)
+  WAIT(gripper_closed, 1, 2)
+  MOVE(P2)
+  STOP
+  OUT(gripper, 0)
+  WAIT(gripper_closed, 0, 2)
+ENDREPEAT
+MOVEJ(0, 0)
+END
+";
+
+#[test]
+fn the_five_bar_runs_a_pick_and_place_through_its_kinematics_as_predicted() {
+    let five_bar = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
+        .expect("examples/five-bar.toml");
+    let j = run_as_predicted("prog-fivebar", &five_bar, FIVE_BAR_PICK);
+    let texts: Vec<String> = events_named(&j, "io-changed")
+        .iter()
+        .map(|e| e["text"].as_str().expect("text").to_string())
+        .collect();
+    assert_eq!(
+        texts.iter().filter(|t| *t == "gripper = 1").count(),
+        2,
+        "{texts:?}"
+    );
+    assert_eq!(
+        texts.iter().filter(|t| *t == "gripper_closed = 0").count(),
+        2,
+        "{texts:?}"
+    );
+    // Back at the null posture: both joints at 0.
+    for joint in ["a0", "a1"] {
+        let q = j["final_position"][joint].as_f64().expect("final");
+        assert!(q.abs() < 0.01, "{joint} = {q}");
+        let fe = j["max_following_error"][joint].as_f64().expect("fe");
+        assert!(fe > 0.0 && fe < 1.0, "{joint}: {fe}");
+    }
+}
+
+#[test]
+fn every_example_cell_and_its_program_pass_check() {
+    // The gantry's triangle on the embedded default, and each other cell's own program.
+    let examples = integration_tests::examples();
+    for (cell, prog) in [
+        ("gantry-uba.toml", "triangle.prog"),
+        ("five-bar.toml", "five-bar.prog"),
+        ("scara.toml", "scara.prog"),
+        ("polar.toml", "polar.prog"),
+    ] {
+        let out = run_with_watchdog(
+            supervisor()
+                .arg("check")
+                .arg(examples.join(prog))
+                .arg("--config")
+                .arg(examples.join(cell)),
+            WATCHDOG,
+        );
+        assert!(
+            out.status.success(),
+            "{cell} {prog}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
 }
