@@ -18,6 +18,9 @@ use std::sync::Arc;
 /// The longest a program without `REPEAT` for ever may run (s): 24 h.
 pub const MAX_PROGRAM_S: f64 = 86_400.0;
 
+/// The validation samples the path at least this often (s).
+pub const SAMPLE_S: f64 = 0.001;
+
 /// A parsed program that passed the checks that need no start position.
 #[derive(Clone, Debug)]
 pub struct Checked {
@@ -167,7 +170,9 @@ impl Checked {
         let p = params(cfg);
         let generator = Generator::with_kinematics(p, kin(cfg)?, start);
         let n = cfg.axis.len();
-        let dt = cfg.period_s("trajgen").min(p.t_acc / 20.0).max(1e-4);
+        // Every millisecond at most (between two samples a joint moves at most vmax × 1 ms),
+        // and at every transition the generator asks for.
+        let dt = cfg.period_s("trajgen").min(SAMPLE_S).max(1e-4);
         let mut violation: Option<String> = None;
         let mut check = |sp: &shm_schema::SetpointV2| {
             if violation.is_some() {

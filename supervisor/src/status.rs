@@ -315,6 +315,17 @@ fn program_json(snap: &Snapshot) -> Value {
         "program_id": sp.program_id,
         "line": sp.line,
         "motion_time_s": sp.motion_time_s,
+        "waited_s": sp.waited_s,
+        "holds": match sp.hold {
+            shm_schema::motion::hold::WAIT => json!({"for": "wait", "input": snap.cell.as_deref().and_then(|c| c.io().get(sp.hold_io as usize)).map(|e| str_of(&e.name))}),
+            shm_schema::motion::hold::DELAY => json!({"for": "delay"}),
+            _ => Value::Null,
+        },
+        "path_speed": sp.path_speed,
+        "speed_override": sp.speed_override,
+        "program_speed": sp.program_speed,
+        "space": if sp.space == 0 { "cartesian" } else { "joint" },
+        "cartesian": &sp.cartesian[..(sp.coords as usize).min(sp.cartesian.len())],
         "fault": (sp.fault != 0).then(|| shm_schema::motion::trajgen_fault::text(sp.fault)),
     })
 }

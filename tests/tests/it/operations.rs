@@ -233,6 +233,16 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
     up.until("moving again", |s| {
         s["supervisor"]["job"]["path_speed"].as_f64() == Some(1.0)
     });
+    // The live override: the path speed ramps to it and stays, along the same path.
+    let slow = up.ok(&["speed", "40"]);
+    assert!(slow.contains("speed override 40 %"), "{slow}");
+    let s = up.until("at 40 %", |s| {
+        s["supervisor"]["job"]["path_speed"].as_f64() == Some(0.4)
+    });
+    assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
+    assert!(up.refused(&["speed", "0"]).contains("1 to 100 %"));
+    assert!(up.refused(&["speed", "250"]).contains("1 to 100 %"));
+    up.ok(&["speed", "100"]);
     let aborted = up.ok(&["abort"]);
     assert!(aborted.contains("aborted"), "{aborted}");
     let s = up.status();

@@ -149,6 +149,31 @@ fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
         assert_eq!(out.status.code(), Some(2), "{src}: {err}");
         assert!(err.contains(want), "{src}: {err}");
     }
+    // A path whose joint speed exceeds an axis' vmax (the polar arm's radial axis, 16 mm/s,
+    // with the tool allowed 40 mm/s): found through the kinematics, before anything moves.
+    let polar = std::fs::read_to_string(integration_tests::examples().join("polar.toml"))
+        .expect("examples/polar.toml")
+        .replace("vmax = [10.0, 10.0]", "vmax = [40.0, 40.0]");
+    let cfg = scratch(test, "polar.toml", &polar);
+    let prog = scratch(
+        test,
+        "polar.prog",
+        "MOVE(120, 90)\nMOVE(60, 160)\nMOVE(150, 0)\nEND\n",
+    );
+    let out = run_with_watchdog(
+        supervisor()
+            .arg("check")
+            .arg(&prog)
+            .arg("--config")
+            .arg(&cfg),
+        WATCHDOG,
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("r reaches") && err.contains("above its vmax 16 mm/s"),
+        "{err}"
+    );
     // Not UTF-8: the place of the first bad byte.
     let prog = scratch(test, "bin.prog", "");
     std::fs::write(&prog, b"MOVE(40,40,0)\nMO\xffVE(1,2,3)\nEND\n").expect("write");
