@@ -172,7 +172,7 @@ impl Checked {
         let n = cfg.axis.len();
         // Every millisecond at most (between two samples a joint moves at most vmax × 1 ms),
         // and at every transition the generator asks for.
-        let dt = cfg.period_s("trajgen").min(SAMPLE_S).max(1e-4);
+        let dt = cfg.period_s("trajgen").clamp(1e-4, SAMPLE_S);
         let mut violation: Option<String> = None;
         let mut check = |sp: &shm_schema::SetpointV2| {
             if violation.is_some() {
