@@ -1,6 +1,7 @@
 //! `supervisor`: launches a cell and runs programs on it.
 
 use clap::{Parser, Subcommand};
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use supervisor::config::{Config, DEFAULT_TOML};
@@ -440,26 +441,32 @@ fn check(program: &std::path::Path, config: Option<&std::path::Path>) -> ExitCod
             return ExitCode::from(2);
         }
     };
+    // A closed stdout (`| head`) ends the listing, never in a panic.
+    let mut out = std::io::stdout().lock();
     match supervisor::run::check_program(&cfg, program) {
         Ok((_, p)) => {
             match p.iteration_s {
-                Some(i) => println!(
+                Some(i) => writeln!(
+                    out,
                     "ok: {}: {:.3} s to the end of its first iteration, then {i:.3} s per \
                      iteration, for ever (WAITs excluded)",
                     program.display(),
                     p.duration_s
                 ),
-                None => println!(
+                None => writeln!(
+                    out,
                     "ok: {}: predicted motion time {:.3} s (WAITs excluded)",
                     program.display(),
                     p.duration_s
                 ),
             }
+            .ok();
             for o in &p.outputs {
                 for k in 0..64 {
                     if o.mask & (1 << k) != 0 {
                         let name = cfg.io.get(k).map_or("?", |e| e.name.as_str());
-                        println!(
+                        let _ = writeln!(
+                            out,
                             "  {:9.3} s  line {:<4} {name} = {}",
                             o.t_s,
                             o.line,
