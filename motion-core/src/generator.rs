@@ -519,7 +519,14 @@ impl Generator {
     /// No allocation; arithmetic and a copy into the fixed queue.
     pub fn push_command(&mut self, c: &MotionCommandV2) {
         if c.seq == 1 && !matches!(self.phase, Phase::Moving(_)) {
-            // A new client session: the sequence restarts and a past fault is cleared.
+            // A new client session: the sequence restarts and a past fault is cleared. A
+            // program its client left (at rest, starved, waiting or delaying) ends here: the
+            // new one starts afresh.
+            if self.state == MotionState::Moving {
+                self.queue.clear();
+                self.phase = Phase::AtRest;
+                self.finish(self.path_ns, MotionState::Done);
+            }
             self.commands_taken = 0;
             self.fault = fault::NONE;
             self.fault_line = 0;
@@ -640,6 +647,7 @@ impl Generator {
             self.motion_start_ns = now_ns;
             self.motion_end_ns = 0;
             self.theoretical_s = 0.0;
+            self.starved = 0;
             self.program_id = cmd.program_id;
             self.state = MotionState::Moving;
             self.lost_s = 0.0;
@@ -890,7 +898,9 @@ impl Generator {
                     }
                 }
                 Phase::Delaying { until_s } if mt >= until_s - REACHED_S => {
+                    // What follows starts at the delay's exact end, however late this cycle.
                     self.phase = Phase::AtRest;
+                    self.take_at_rest(now_ns, Some(until_s));
                     continue;
                 }
                 _ => {}
@@ -1079,8 +1089,10 @@ impl Generator {
     }
 
     fn finish(&mut self, now_ns: u64, state: MotionState) {
-        // The next program starts at full programmed speed.
+        // The next program starts at full programmed speed, and no abort carries over to it
+        // (one that was ramping when the program reached its END, or a fault, is done).
         self.program_speed = 1.0;
+        self.aborting = false;
         self.speed = self.speed_override;
         self.target_speed = self.speed_override;
         self.state = state;

@@ -460,3 +460,91 @@ fn a_path_that_leaves_the_workspace_is_refused_by_the_prediction_with_its_reason
     );
     assert!(pr.kin_error.is_some());
 }
+
+fn control(seq: u64, kind: ControlKind) -> MotionControlV2 {
+    MotionControlV2 {
+        seq,
+        kind: kind as u32,
+        reserved: 0,
+        value: 0.0,
+    }
+}
+
+#[test]
+fn an_abort_that_ends_at_the_programs_end_does_not_carry_over_to_the_next_program() {
+    // Abort in the last moments before END (the move and its stop take 4 t_acc; the ramp to
+    // rest covers t_acc / 2 of path): the program reaches END while the speed ramps down.
+    let mut g = loaded("MOVE(41,40,0)\nEND");
+    let mut now = T0;
+    let mut sp = g.step(now, Some(0));
+    while sp.motion_time_s < 4.0 * T_ACC - 0.15 {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    g.control(&control(1, ControlKind::Abort), now);
+    while sp.state == MotionState::Moving as u32 {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    assert_eq!(
+        sp.state,
+        MotionState::Done as u32,
+        "END came before the abort's rest"
+    );
+    // The next program: a pause is a pause (not an abort), a resume goes on to its end.
+    let cmds = motion_program::parse(b"MOVE(60,40,0)\nEND", &cell())
+        .expect("parses")
+        .commands(4)
+        .collect::<Vec<_>>();
+    for c in &cmds {
+        g.push_command(c);
+    }
+    for _ in 0..500 {
+        now += MS;
+        g.step(now, Some(0));
+    }
+    g.control(&control(2, ControlKind::Pause), now);
+    for _ in 0..2000 {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    assert_eq!(sp.state, MotionState::Moving as u32, "paused, not dropped");
+    assert_eq!(sp.fault, trajgen_fault::NONE);
+    g.control(&control(3, ControlKind::Resume), now);
+    while sp.state == MotionState::Moving as u32 && now < T0 + 60_000 * MS {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    assert_eq!(sp.state, MotionState::Done as u32);
+    assert_eq!(&sp.position[..3], &[60.0, 40.0, 0.0]);
+}
+
+#[test]
+fn a_new_session_ends_a_program_its_client_left_and_starts_afresh() {
+    // A program without END is left by its client (starved at rest); a new one arrives.
+    let mut g = Generator::new(params(), &START);
+    for c in commands("MOVE(50,40,0)\nEND").iter().take(1) {
+        g.push_command(c);
+    }
+    let mut now = T0;
+    for _ in 0..3000 {
+        now += MS;
+        g.step(now, Some(0));
+    }
+    let cmds = motion_program::parse(b"MOVE(60,40,0)\nEND", &cell())
+        .expect("parses")
+        .commands(9)
+        .collect::<Vec<_>>();
+    for c in &cmds {
+        g.push_command(c);
+    }
+    let mut sp = g.step(now, Some(0));
+    assert_eq!(sp.program_id, 9, "the new program, from its own start");
+    while sp.state == MotionState::Moving as u32 && now < T0 + 60_000 * MS {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    assert_eq!(sp.state, MotionState::Done as u32);
+    assert_eq!(sp.starved, 0);
+    assert_eq!(&sp.position[..3], &[60.0, 40.0, 0.0]);
+}

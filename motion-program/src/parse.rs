@@ -22,6 +22,9 @@ const KEYWORDS: [&str; 11] = [
     "T",
 ];
 
+/// The shortest `WAIT` timeout (s).
+const MIN_TIMEOUT_S: f64 = 0.001;
+
 const EXPECTED: &str =
     "MOVE, MOVEJ, STOP, END, OUT, WAIT, DELAY, SPEED, REPEAT, ENDREPEAT or NAME = (…)";
 
@@ -214,7 +217,7 @@ impl Parser<'_> {
                 let timeout_s = if cur.peek() == Some(',') {
                     cur.pos += 1;
                     cur.skip_ws();
-                    Some(cur.bounded("the timeout (s)", f64::MIN_POSITIVE, MAX_WAIT_S)?)
+                    Some(cur.bounded("the timeout (s)", MIN_TIMEOUT_S, MAX_WAIT_S)?)
                 } else {
                     None
                 };
@@ -546,7 +549,8 @@ impl Parser<'_> {
 /// True for instructions that take time: a loop of nothing else would spin.
 fn moves_or_waits(op: &Op) -> bool {
     match op {
-        Op::Move { .. } | Op::Stop | Op::Wait { .. } => true,
+        // STOP at rest takes no time: a body of STOPs alone would spin.
+        Op::Move { .. } | Op::Wait { .. } => true,
         Op::Delay { seconds } => *seconds > 0.0,
         Op::Repeat { body, .. } => body.iter().any(|i| moves_or_waits(&i.op)),
         _ => false,

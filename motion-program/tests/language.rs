@@ -223,7 +223,7 @@ fn errors_name_line_and_column_and_what_was_expected() {
         ),
         (
             "WAIT(part_present, 1, 0)\nEND",
-            "1:23: the timeout (s) = 0 must be above 0",
+            "1:23: the timeout (s) = 0 must be at least 0.001",
         ),
         (
             "DELAY(-1)\nEND",
@@ -253,6 +253,10 @@ fn errors_name_line_and_column_and_what_was_expected() {
         ("ENDREPEAT\nEND", "1:1: ENDREPEAT without a REPEAT"),
         (
             "REPEAT\nOUT(gripper, 1)\nENDREPEAT\nEND",
+            "1:1: this REPEAT's body neither moves nor waits",
+        ),
+        (
+            "REPEAT\nSTOP\nENDREPEAT\nEND",
             "1:1: this REPEAT's body neither moves nor waits",
         ),
         (

@@ -21,6 +21,9 @@ pub const MAX_PROGRAM_S: f64 = 86_400.0;
 /// The validation samples the path at least this often (s).
 pub const SAMPLE_S: f64 = 0.001;
 
+/// Steps of the prediction between two calls of its keep-alive (a few milliseconds' work).
+const KEEPALIVE_STEPS: u64 = 2000;
+
 /// A parsed program that passed the checks that need no start position.
 #[derive(Clone, Debug)]
 pub struct Checked {
@@ -145,11 +148,18 @@ impl Checked {
 
     /// Runs the program through trajgen's generator from `start` (joint positions): its
     /// motion time, and every reference checked against the joint limits and velocities.
-    pub fn predict(&self, cfg: &Config, start: &[f64]) -> Result<Predicted, RunError> {
+    /// `keepalive` is called every few thousand steps: a supervisor that predicts a long
+    /// program meanwhile keeps beating (its processes would take its silence for its death).
+    pub fn predict(
+        &self,
+        cfg: &Config,
+        start: &[f64],
+        keepalive: &mut dyn FnMut(),
+    ) -> Result<Predicted, RunError> {
         let forever = self.program.forever();
-        let once = self.simulate(cfg, start, forever.then_some(1))?;
+        let once = self.simulate(cfg, start, forever.then_some(1), keepalive)?;
         let iteration_s = if forever {
-            let twice = self.simulate(cfg, start, Some(2))?;
+            let twice = self.simulate(cfg, start, Some(2), keepalive)?;
             Some(twice.duration_s - once.duration_s)
         } else {
             None
@@ -166,6 +176,7 @@ impl Checked {
         cfg: &Config,
         start: &[f64],
         forever_as: Option<u32>,
+        keepalive: &mut dyn FnMut(),
     ) -> Result<Prediction, RunError> {
         let p = params(cfg);
         let generator = Generator::with_kinematics(p, kin(cfg)?, start);
@@ -174,7 +185,12 @@ impl Checked {
         // and at every transition the generator asks for.
         let dt = cfg.period_s("trajgen").clamp(1e-4, SAMPLE_S);
         let mut violation: Option<String> = None;
+        let mut steps = 0u64;
         let mut check = |sp: &shm_schema::SetpointV2| {
+            steps += 1;
+            if steps.is_multiple_of(KEEPALIVE_STEPS) {
+                keepalive();
+            }
             if violation.is_some() {
                 return;
             }

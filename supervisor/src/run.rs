@@ -91,7 +91,7 @@ pub fn check_program(
         .map_err(|e| RunError::Input(format!("{}: cannot read: {e}", path.display())))?;
     let program = Checked::new(cfg, &path.display().to_string(), &bytes)?;
     let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
-    let predicted = program.predict(cfg, &start)?;
+    let predicted = program.predict(cfg, &start, &mut || {})?;
     Ok((program, predicted))
 }
 

@@ -177,7 +177,10 @@ impl Loop<'_> {
                 match (result, self.queued.take()) {
                     (Ok(sp), Some(p)) => {
                         let n = self.cfg.axis.len();
-                        match p.program.predict(self.cfg, &sp.position[..n]) {
+                        match p
+                            .program
+                            .predict(self.cfg, &sp.position[..n], &mut || self.cell.beat())
+                        {
                             Ok(predicted) => {
                                 let job =
                                     Job::new(self.cfg, &p.program, predicted, &sp, p.progress);
@@ -215,7 +218,18 @@ impl Loop<'_> {
                     }
                     Ok(report)
                 }
-                Err(e) => Err(self.with_events(e, r.events_from)),
+                Err(e) => {
+                    // trajgen must not go on with a program nobody follows any more (its
+                    // OUTs, its queue): it comes to rest along the path and drops it.
+                    if self
+                        .cell
+                        .last_sp
+                        .is_some_and(|sp| sp.state == shm_schema::MotionState::Moving as u32)
+                    {
+                        self.cell.motion_control(ControlKind::Abort);
+                    }
+                    Err(self.with_events(e, r.events_from))
+                }
             };
             self.finish(&r, &result);
             if run {
@@ -275,12 +289,14 @@ impl Loop<'_> {
 
     /// A program ended: its waiters get the report; `status` keeps a summary.
     fn finish(&mut self, r: &Running, result: &Result<Report, RunError>) {
+        // The CSV trace only for a waiter that asked for it (it may be long).
+        let wants_trace = r.waiters.iter().any(|(_, trace)| *trace);
         let (ok, json, text, csv) = match result {
             Ok(rep) => (
                 true,
                 rep.to_json(),
                 rep.human(),
-                Some(crate::run::trace_csv(rep)),
+                wants_trace.then(|| crate::run::trace_csv(rep)),
             ),
             Err(e) => (
                 false,
@@ -377,6 +393,16 @@ impl Loop<'_> {
                 r.job.name
             ));
         }
+        if let Some(sp) = self
+            .cell
+            .last_sp
+            .filter(|sp| sp.state == shm_schema::MotionState::Moving as u32)
+        {
+            return Some(format!(
+                "trajgen is still bringing the previous program to rest (line {}); try again in a moment",
+                sp.line
+            ));
+        }
         if self.enabling.is_some() {
             return Some("the drives are being enabled; try again in a moment".into());
         }
@@ -415,7 +441,8 @@ impl Loop<'_> {
         };
         // Validated from where the axes stand, with trajgen's own generator.
         let n = self.cfg.axis.len();
-        let predicted = match program.predict(self.cfg, &sp.position[..n]) {
+        let predicted = match program.predict(self.cfg, &sp.position[..n], &mut || self.cell.beat())
+        {
             Ok(p) => p,
             Err(e) => return Some(Reply::Refused(e.to_string())),
         };
