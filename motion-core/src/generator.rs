@@ -441,13 +441,28 @@ impl Generator {
             // The ramp starts now, not at the previous cycle.
             self.path_time(now_ns);
         }
-        let running = self.state == MotionState::Moving;
+        // A program whose commands are queued but not begun counts as running: a pause sent
+        // with its first commands starts it paused.
+        let begun = self.state == MotionState::Moving;
+        let running = begun || self.queue.len > 0;
         match ControlKind::from_u32(c.kind) {
             Some(ControlKind::Pause) if running => self.target_speed = 0.0,
             Some(ControlKind::Resume) if !self.aborting => self.target_speed = self.speed_override,
-            Some(ControlKind::Abort) if running => {
+            Some(ControlKind::Abort) if begun => {
                 self.target_speed = 0.0;
                 self.aborting = true;
+            }
+            Some(ControlKind::Abort) if running => {
+                // Not begun: nothing moves, the program is dropped at once.
+                if let Some(front) = self.queue.front() {
+                    self.program_id = front.program_id;
+                    self.line = front.line;
+                }
+                self.queue.clear();
+                self.fault = fault::ABORTED;
+                self.fault_line = self.line;
+                self.motion_start_ns = now_ns;
+                self.finish(now_ns, MotionState::Fault);
             }
             Some(ControlKind::Speed) if c.value.is_finite() => {
                 self.speed_override = bounded_speed(c.value);

@@ -548,3 +548,43 @@ fn a_new_session_ends_a_program_its_client_left_and_starts_afresh() {
     assert_eq!(sp.starved, 0);
     assert_eq!(&sp.position[..3], &[60.0, 40.0, 0.0]);
 }
+
+#[test]
+fn a_pause_or_an_abort_sent_with_the_first_commands_is_not_lost() {
+    // Paused before it began: it starts at rest, paused, and goes on when resumed.
+    let mut g = Generator::new(params(), &START);
+    for c in commands("MOVE(60,40,0)\nEND") {
+        g.push_command(&c);
+    }
+    g.control(&control(1, ControlKind::Pause), T0);
+    let mut now = T0;
+    let mut sp = g.step(now, Some(0));
+    for _ in 0..2000 {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    assert_eq!(sp.state, MotionState::Moving as u32);
+    assert!(
+        sp.path_speed == 0.0 && (sp.position[0] - 40.0).abs() < 0.1,
+        "{:?}",
+        &sp.position[..3]
+    );
+    g.control(&control(2, ControlKind::Resume), now);
+    while sp.state == MotionState::Moving as u32 && now < T0 + 60_000 * MS {
+        now += MS;
+        sp = g.step(now, Some(0));
+    }
+    assert_eq!(sp.state, MotionState::Done as u32);
+    // Aborted before it began: dropped at once under its own program id, nothing moved.
+    let mut g = Generator::new(params(), &START);
+    for c in commands("MOVE(60,40,0)\nEND") {
+        g.push_command(&c);
+    }
+    g.control(&control(1, ControlKind::Abort), T0);
+    let sp = g.step(T0, Some(0));
+    assert_eq!(
+        (sp.state, sp.fault, sp.program_id),
+        (MotionState::Fault as u32, trajgen_fault::ABORTED, 3)
+    );
+    assert_eq!(&sp.position[..3], &START);
+}

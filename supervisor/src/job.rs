@@ -358,7 +358,13 @@ impl Job {
         }
         // Flow control: never more in flight than trajgen has free places.
         if let Some(sp) = newest {
-            let in_flight = self.sent_seq - sp.commands_taken.min(self.sent_seq);
+            // Until trajgen runs this program, its count may be a previous session's: take
+            // everything sent as in flight (never more than the queue holds).
+            let in_flight = if self.last.is_some() {
+                self.sent_seq - sp.commands_taken.min(self.sent_seq)
+            } else {
+                self.sent_seq
+            };
             let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
             self.send(cell, credit)?;
             if sp.program_id == self.program_id {
