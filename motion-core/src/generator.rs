@@ -28,6 +28,7 @@
 
 use crate::blend::{Axes, Segment};
 use kinematics::{JointLimit, KinError, Kinematics, MAX_COORDS, cartesian_to_axes, joint_velocity};
+pub use motion_program::Space;
 use motion_program::segment_time;
 use shm_schema::motion::{hold, trajgen_fault as fault};
 use shm_schema::{
@@ -93,12 +94,6 @@ impl Params {
         }
         p
     }
-
-    /// True when the Cartesian coordinates are the joints (a move may change space at rest
-    /// without kinematics).
-    pub fn identity(&self) -> bool {
-        self.coords == self.axes
-    }
 }
 
 /// The cell's kinematics, shared by trajgen's generator and the supervisor's prediction.
@@ -133,15 +128,6 @@ impl Kin {
 
 /// The step of the jacobian's rate of change `J̇ q̇ ≈ (J(q + h q̇) − J(q − h q̇)) / 2h` (s).
 const JDOT_STEP_S: f64 = 1e-3;
-
-/// Where a `MOVE` or a `MOVEJ` is blended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Space {
-    /// `MOVE`: the tool's Cartesian coordinates.
-    Cartesian = 0,
-    /// `MOVEJ`: the joints.
-    Joint = 1,
-}
 
 /// What the generator is doing.
 #[derive(Clone, Copy, Debug, PartialEq)]

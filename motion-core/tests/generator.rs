@@ -1,30 +1,19 @@
 //! The generator against the formula, with regular, late and exact cycles.
 
+mod common;
+
 use motion_core::blend::{Axes, Segment};
 use motion_core::generator::{Generator, Params};
 use motion_program::{CellSpec, Op, Program, parse, segment_time};
 use shm_schema::motion::trajgen_fault;
-use shm_schema::{MAX_AXES, MotionCommandV2, MotionState, SetpointV2};
+use shm_schema::{MotionCommandV2, MotionState, SetpointV2};
 
 const TRIANGLE: &str = include_str!("../../examples/triangle.prog");
 const START: [f64; 3] = [40.0, 40.0, 0.0];
 const T0: u64 = 1_000_000_000_000; // an arbitrary CLOCK_MONOTONIC origin
 
 fn params() -> Params {
-    let mut p = Params {
-        axes: 3,
-        coords: 3,
-        vmax: [1.0; MAX_AXES],
-        coord_vmax: [1.0; MAX_AXES],
-        min: [0.0; MAX_AXES],
-        max: [0.0; MAX_AXES],
-        t_acc: 0.525,
-    };
-    p.vmax[..3].copy_from_slice(&[16.0, 16.0, 30.0]);
-    p.coord_vmax = p.vmax;
-    p.min[..3].copy_from_slice(&[0.0, 0.0, -180.0]);
-    p.max[..3].copy_from_slice(&[200.0, 150.0, 180.0]);
-    p
+    common::gantry_params()
 }
 
 fn commands(src: &str) -> Vec<MotionCommandV2> {

@@ -2,6 +2,8 @@
 //! to the blend, WAIT and DELAY at rest, a WAIT's timeout, SPEED, the live override, MOVEJ,
 //! and the prediction the supervisor makes with the same generator.
 
+mod common;
+
 use motion_core::generator::{Generator, Params};
 use motion_core::predict::{Outcome, simulate};
 use motion_program::CellSpec;
@@ -13,23 +15,10 @@ use shm_schema::{
 const START: [f64; 3] = [40.0, 40.0, 0.0];
 const T0: u64 = 1_000_000_000_000;
 const MS: u64 = 1_000_000;
-const T_ACC: f64 = 0.525;
+use common::T_ACC;
 
 fn params() -> Params {
-    let mut p = Params {
-        axes: 3,
-        coords: 3,
-        vmax: [1.0; MAX_AXES],
-        coord_vmax: [1.0; MAX_AXES],
-        min: [0.0; MAX_AXES],
-        max: [0.0; MAX_AXES],
-        t_acc: T_ACC,
-    };
-    p.vmax[..3].copy_from_slice(&[16.0, 16.0, 30.0]);
-    p.coord_vmax = p.vmax;
-    p.min[..3].copy_from_slice(&[0.0, 0.0, -180.0]);
-    p.max[..3].copy_from_slice(&[200.0, 150.0, 180.0]);
-    p
+    common::gantry_params()
 }
 
 fn cell() -> CellSpec {

@@ -43,13 +43,13 @@ pub const MAX_NESTING: usize = 8;
 /// Longest name (positions, IO).
 pub const MAX_NAME_LEN: usize = 31;
 
-/// The space a move is blended in.
+/// The space a move is blended in (its wire value is `SetpointV2::space`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Space {
     /// `MOVE`: linear in Cartesian space (the tool's coordinates).
-    Cartesian,
+    Cartesian = 0,
     /// `MOVEJ`: linear in joint space (the axes' positions).
-    Joint,
+    Joint = 1,
 }
 
 /// What an instruction does.
