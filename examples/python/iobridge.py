@@ -32,8 +32,8 @@ def payload(type_name, size, fields):
 
 ProcessConfigV2 = payload("rtc::ProcessConfigV2", 48, [
     ("name", C.c_char * 16), ("period_ns", u64), ("phase_ns", u64), ("priority", i32),
-    ("cpu", i32), ("network_estop_config", u32), ("reserved", u32)])
-CellConfigV5 = payload("rtc::CellConfigV5", 6824, [
+    ("cpu", i32), ("network_estop_config", u32), ("flags", u32)])
+CellConfigV6 = payload("rtc::CellConfigV6", 6904, [
     ("axes", u32), ("machine_substeps", u32), ("t_acc_s", f64),
     ("drive_command_timeout_ns", u64), ("setpoint_timeout_ns", u64),
     ("feedback_timeout_ns", u64), ("enable_timeout_ns", u64), ("settle_time_ns", u64),
@@ -42,7 +42,7 @@ CellConfigV5 = payload("rtc::CellConfigV5", 6824, [
     ("reserved", u32), ("health", f64 * 9), ("process", ProcessConfigV2 * 16),
     ("axis", u8 * (8 * 240)), ("inject", u8 * (4 * 24)),  # axes/faults unused here
     ("io_count", u32), ("reserved2", u32), ("io", u8 * (64 * 56)),  # IO unused here
-    ("kinematics", u8 * 288)])  # unused here
+    ("kinematics", u8 * 288), ("modbus", u8 * 80)])  # unused here
 ServoStateV3 = payload("rtc::ServoStateV3", 584, [
     ("seq", u64), ("stamp_ns", u64), ("measured_stamp_ns", u64), ("setpoint_seq", u64),
     ("request_seq", u64), ("status", u32), ("axes", u32), ("power", u8),
@@ -159,7 +159,7 @@ class Bridge:
 
     # --- setup -------------------------------------------------------------------------
     def setup(self):
-        config_sub = self.sub("cell/config", CellConfigV5)
+        config_sub = self.sub("cell/config", CellConfigV6)
         deadline = now_ns() + 10_000_000_000
         while not (got := self.take(config_sub)):
             if self.stop or now_ns() > deadline:

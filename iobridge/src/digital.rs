@@ -4,7 +4,7 @@
 
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV5, DigitalIoV1, EventQueue, EventV1, IoConfigV1, IoDirection, IoWriteV1, MAX_IO,
+    CellConfigV6, DigitalIoV1, EventQueue, EventV1, IoConfigV1, IoDirection, IoWriteV1, MAX_IO,
     SafeValue, str_of,
 };
 
@@ -30,7 +30,7 @@ fn bit(k: usize) -> u64 {
 impl DigitalIo {
     /// The IO of `cell`: inputs at their simulated field values until a field device reports
     /// them, outputs off.
-    pub fn new(cell: &CellConfigV5) -> Self {
+    pub fn new(cell: &CellConfigV6) -> Self {
         let mut io = Self {
             entries: cell.io,
             count: cell.io().len(),
@@ -208,8 +208,8 @@ mod tests {
     use super::*;
     use shm_schema::fixed_str;
 
-    fn cell() -> CellConfigV5 {
-        let mut c = CellConfigV5::default();
+    fn cell() -> CellConfigV6 {
+        let mut c = CellConfigV6::default();
         let entry =
             |name: &str, dir: IoDirection, safe: SafeValue, estop: u32, sim: u32| IoConfigV1 {
                 name: fixed_str(name),

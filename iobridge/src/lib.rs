@@ -12,28 +12,13 @@
 
 pub mod digital;
 
-use shm_schema::drive::{FIELDBUS_IMAGE_LEN, IMAGE_INVALID};
+use shm_schema::drive::{FIELDBUS_IMAGE_LEN, IMAGE_INVALID, milli_units};
 use shm_schema::{FieldbusImageV1, ServoStateV3};
 
 /// Bytes of the timestamp at the start of the image.
 pub const STAMP_BYTES: usize = 8;
 /// Axes that fit in the image.
 pub const IMAGE_AXES: usize = (FIELDBUS_IMAGE_LEN - STAMP_BYTES) / 4;
-
-/// Encodes a position in thousandths of the axis unit (saturating at the `i32` range just
-/// inside it); a value that is not finite (no valid measurement) is [`IMAGE_INVALID`], never
-/// a believable number.
-#[inline]
-pub fn milli_units(v: f64) -> i32 {
-    if !v.is_finite() {
-        return IMAGE_INVALID;
-    }
-    shm_schema::bound(
-        (v * 1000.0).round(),
-        IMAGE_INVALID as f64 + 1.0,
-        i32::MAX as f64,
-    ) as i32
-}
 
 /// Writes the output image for `state` at `now_ns`.
 ///

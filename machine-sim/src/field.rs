@@ -4,7 +4,7 @@
 //! position. The machine reads the outputs from iobridge's IO image and reports the sensors as
 //! a field device does, on `<i>/field/inputs`.
 
-use shm_schema::{CellConfigV5, IoDirection, IoWriteV1, MAX_IO};
+use shm_schema::{CellConfigV6, IoDirection, IoWriteV1, MAX_IO};
 
 /// Sensors report again at least this often (ns), so a restarted iobridge learns them.
 pub const REFRESH_NS: u64 = 100_000_000;
@@ -28,7 +28,7 @@ pub struct Field {
 impl Field {
     /// The devices of `cell`; every sensor starts at its input's `sim` value. `source` is the
     /// machine's index in the process table (who reports the sensors).
-    pub fn new(cell: &CellConfigV5, source: u32) -> Self {
+    pub fn new(cell: &CellConfigV6, source: u32) -> Self {
         let mut f = Self {
             devices: [(0, 0, 0); MAX_IO],
             count: 0,
@@ -113,7 +113,7 @@ mod tests {
 
     #[test]
     fn a_sensor_follows_its_output_after_the_switching_time() {
-        let mut c = CellConfigV5::default();
+        let mut c = CellConfigV6::default();
         c.io[0] = IoConfigV1 {
             name: fixed_str("gripper"),
             direction: IoDirection::Output as u32,

@@ -33,7 +33,7 @@ pub mod field;
 use cia402::{Conditions, Device, Mode, QuickStopOption, State, error_code};
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
-    AxisConfigV2, CellConfigV5, DriveCommandV2, DriveFeedbackV2, EventV1, FaultInjectionV1,
+    AxisConfigV2, CellConfigV6, DriveCommandV2, DriveFeedbackV2, EventV1, FaultInjectionV1,
     MAX_AXES, str_of,
 };
 
@@ -255,7 +255,7 @@ impl Machine {
     /// The machine of `cell`, at rest at the axes' start positions, every drive in Not ready
     /// to switch on.
     /// The machine of `cell`, cycling every `period_ns`.
-    pub fn new(cell: &CellConfigV5, period_ns: u64) -> Self {
+    pub fn new(cell: &CellConfigV6, period_ns: u64) -> Self {
         let idle = AxisConfigV2::default();
         let mut axis = [Axis::from_config(&idle); MAX_AXES];
         let mut drive = [Drive::new(&idle); MAX_AXES];
@@ -669,8 +669,8 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn cell(mode: Mode) -> CellConfigV5 {
-        let mut c = CellConfigV5 {
+    fn cell(mode: Mode) -> CellConfigV6 {
+        let mut c = CellConfigV6 {
             axes: 1,
             machine_substeps: 4,
             drive_command_timeout_ns: 20 * MS,

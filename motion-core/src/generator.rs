@@ -71,7 +71,7 @@ pub struct Params {
 impl Params {
     /// Parameters from the cell configuration: the joints' limits, and the Cartesian
     /// coordinates of its kinematics (the joints themselves for the gantry).
-    pub fn from_cell(cell: &shm_schema::CellConfigV5) -> Self {
+    pub fn from_cell(cell: &shm_schema::CellConfigV6) -> Self {
         let mut p = Params {
             axes: cell.axes as usize,
             coords: cell.axes as usize,
@@ -110,7 +110,7 @@ impl Kin {
     /// The kinematics the cell's configuration selects (`[kinematics]`); `None` for the
     /// gantry, whose Cartesian coordinates are its joints. Set-up only: it allocates.
     pub fn of_cell(
-        cell: &shm_schema::CellConfigV5,
+        cell: &shm_schema::CellConfigV6,
     ) -> Result<Option<Self>, kinematics::BuildError> {
         let k = &cell.kinematics;
         let name = shm_schema::str_of(&k.type_name);

@@ -13,7 +13,7 @@ use iceoryx2::prelude::Node;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV5, EstopOrigin, EstopReaction, EstopV1, EventQueue, EventV1, InstanceName,
+    CellConfigV6, EstopOrigin, EstopReaction, EstopV1, EventQueue, EventV1, InstanceName,
     ServiceId, str_of,
 };
 
@@ -56,7 +56,7 @@ impl EstopWatch {
     pub fn new(
         node: &Node<Ipc>,
         instance: &InstanceName,
-        cell: &CellConfigV5,
+        cell: &CellConfigV6,
         index: usize,
         now_ns: u64,
     ) -> Result<Self, IpcError> {

@@ -28,7 +28,7 @@ use crate::time::now_ns;
 use iceoryx2::prelude::Node;
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV5, EstopOrigin, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
+    CellConfigV6, EstopOrigin, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
     ProcessConfigV2, ProcessName, ProcessStatusV2, ServiceId, estop_seen,
 };
 use std::process::ExitCode;
@@ -64,7 +64,7 @@ pub struct Context {
     /// The process' iceoryx2 node; open ports with [`Pub::new`] and [`Sub::new`].
     pub node: Node<Ipc>,
     /// The validated cell configuration.
-    pub cell: CellConfigV5,
+    pub cell: CellConfigV6,
 }
 
 /// What one cycle gets from the runtime and gives back to it.
@@ -357,24 +357,35 @@ fn run_inner<T: Task>(
         let expired = health.cycle(now, wake.latency_ns(), pending, t - transport);
         transport = t;
         if let Some(d) = expired
-            && !estop.view().latched
+            && (!own.critical() || !estop.view().latched)
         {
             let r = health.bucket(d).report(now);
+            let what = if own.critical() {
+                code::HEALTH_EXPIRED
+            } else {
+                code::NOT_CRITICAL_FAILED
+            };
+            let (level, limit) = (f64::from(r.level), f64::from(r.limit));
             queue.push(EventV1::new(
                 now,
-                code::HEALTH_EXPIRED,
+                what,
                 -1,
-                f64::from(r.level),
-                f64::from(r.limit),
+                level,
+                limit,
                 &[d.name(), " expired"],
             ));
-            estop.raise(
-                now,
-                EstopOrigin::Host,
-                code::HEALTH_EXPIRED,
-                &[d.name(), " expired in ", name.as_str()],
-                &mut queue,
-            );
+            if own.critical() {
+                estop.raise(
+                    now,
+                    EstopOrigin::Host,
+                    code::HEALTH_EXPIRED,
+                    &[d.name(), " expired in ", name.as_str()],
+                    &mut queue,
+                );
+            } else {
+                // Not part of the cell's safety: a warning, and the detectors start afresh.
+                health.restart(now);
+            }
         }
         let view = *estop.view();
         if view.latched && view.react.is_some() && safe && !safe_reported && !estop.leaving() {
@@ -491,8 +502,8 @@ impl OverrunReporter {
 fn wait_for_cell_config(
     node: &Node<Ipc>,
     instance: &InstanceName,
-) -> Result<Option<CellConfigV5>, SetupError> {
-    let sub = Sub::<CellConfigV5>::new(node, instance, ServiceId::CellConfig, 1)?;
+) -> Result<Option<CellConfigV6>, SetupError> {
+    let sub = Sub::<CellConfigV6>::new(node, instance, ServiceId::CellConfig, 1)?;
     let start = Instant::now();
     loop {
         if let Some(cell) = sub.latest() {
@@ -515,7 +526,7 @@ fn wait_for_cell_config(
 }
 
 /// Checks what a process relies on; the supervisor validated everything else.
-pub fn validate_cell(cell: &CellConfigV5) -> Result<(), String> {
+pub fn validate_cell(cell: &CellConfigV6) -> Result<(), String> {
     if cell.axes == 0 || cell.axes as usize > shm_schema::MAX_AXES {
         return Err(format!(
             "cell configuration has {} axes, 1..={} allowed",

@@ -54,7 +54,7 @@ use cia402::{FaultReset, Mode, State, cw, disable_step, enable_step};
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::{EventQueue, code};
 use shm_schema::{
-    AxisConfigV2, CellConfigV5, DriveCommandV2, DriveFeedbackV2, EstopReaction, EventV1, MAX_AXES,
+    AxisConfigV2, CellConfigV6, DriveCommandV2, DriveFeedbackV2, EstopReaction, EventV1, MAX_AXES,
     Power, RequestKind, ServoRequestV1, ServoStateV3, SetpointV2, bound, str_of,
 };
 
@@ -84,7 +84,7 @@ pub struct Params {
 impl Params {
     /// From the cell configuration, for a servo of period `period_ns`. The setpoints' period
     /// is that of the process called `trajgen` (four servo periods without one).
-    pub fn from_cell(cell: &CellConfigV5, period_ns: u64) -> Self {
+    pub fn from_cell(cell: &CellConfigV6, period_ns: u64) -> Self {
         let trajgen_ns = cell.period_of("trajgen").unwrap_or(4 * period_ns);
         Self {
             axes: cell.axes as usize,

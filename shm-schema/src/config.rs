@@ -30,8 +30,57 @@ pub struct ProcessConfigV2 {
     /// Its reaction to a propagated e-stop (seed 002's `network_estop_config`):
     /// [`EstopReaction`] as `u32`.
     pub network_estop_config: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// [`process_flags`]: bits of the process' role in the cell (0: a critical process).
+    pub flags: u32,
+}
+
+/// Bits of [`ProcessConfigV2::flags`].
+pub mod process_flags {
+    /// `critical = false`: the process is not part of the cell's safety (a fieldbus server
+    /// for an HMI, a logger). Its loss, its stall or the expiry of one of its health
+    /// detectors is a warning and a restart (per its policy), never an e-stop, and never
+    /// ends a program.
+    pub const NOT_CRITICAL: u32 = 1;
+}
+
+impl ProcessConfigV2 {
+    /// Whether the cell's safety depends on it (the `critical` key; see
+    /// [`process_flags::NOT_CRITICAL`]).
+    pub fn critical(&self) -> bool {
+        self.flags & process_flags::NOT_CRITICAL == 0
+    }
+}
+
+/// Bytes of [`ModbusConfigV1::listen`].
+pub const LISTEN_LEN: usize = 64;
+
+/// The cell's Modbus TCP server (`[modbus]`), read by the process that serves it
+/// (`docs/fieldbus.md`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("rtc::ModbusConfigV1")]
+pub struct ModbusConfigV1 {
+    /// The address to listen on, NUL-padded text (`"127.0.0.1:1502"`; port 0: any free port,
+    /// announced in an event and in `supervisor status`).
+    pub listen: [u8; LISTEN_LEN],
+    /// Connections served at once; one more is closed as soon as it is accepted.
+    pub max_connections: u32,
+    /// 1: the writable coils and holding registers take writes; 0: every write gets an
+    /// exception (a read-only fieldbus).
+    pub writes: u32,
+    /// A connection that sends no request for this long is closed (ns).
+    pub idle_timeout_ns: u64,
+}
+
+impl Default for ModbusConfigV1 {
+    fn default() -> Self {
+        Self {
+            listen: [0; LISTEN_LEN],
+            max_connections: 0,
+            writes: 0,
+            idle_timeout_ns: 0,
+        }
+    }
 }
 
 /// A process' reaction to an e-stop it did not raise itself (`network_estop_config`).
@@ -215,14 +264,14 @@ pub struct ConfiguredFaultV1 {
     pub code: u32,
 }
 
-/// Capacity of [`CellConfigV5::inject`].
+/// Capacity of [`CellConfigV6::inject`].
 pub const MAX_CONFIGURED_FAULTS: usize = 4;
 
 /// The whole cell.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
-#[type_name("rtc::CellConfigV5")]
-pub struct CellConfigV5 {
+#[type_name("rtc::CellConfigV6")]
+pub struct CellConfigV6 {
     /// Number of axes in use, 1..=[`MAX_AXES`].
     pub axes: u32,
     /// Integration steps of the simulated machine per machine cycle.
@@ -272,9 +321,11 @@ pub struct CellConfigV5 {
     pub io: [IoConfigV1; MAX_IO],
     /// The kinematics.
     pub kinematics: KinematicsConfigV1,
+    /// The Modbus TCP server's settings (`[modbus]`).
+    pub modbus: ModbusConfigV1,
 }
 
-impl Default for CellConfigV5 {
+impl Default for CellConfigV6 {
     fn default() -> Self {
         Self {
             axes: 0,
@@ -299,11 +350,12 @@ impl Default for CellConfigV5 {
             reserved2: 0,
             io: [IoConfigV1::default(); MAX_IO],
             kinematics: KinematicsConfigV1::default(),
+            modbus: ModbusConfigV1::default(),
         }
     }
 }
 
-impl CellConfigV5 {
+impl CellConfigV6 {
     /// The axes in use.
     pub fn axes(&self) -> &[AxisConfigV2] {
         &self.axis[..(self.axes as usize).min(MAX_AXES)]

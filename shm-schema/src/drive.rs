@@ -287,6 +287,21 @@ pub const FIELDBUS_IMAGE_LEN: usize = 64;
 /// feedback was not a finite number).
 pub const IMAGE_INVALID: i32 = i32::MIN;
 
+/// Encodes a position in thousandths of the axis unit (saturating at the `i32` range just
+/// inside it); a value that is not finite (no valid measurement) is [`IMAGE_INVALID`], never
+/// a believable number.
+#[inline]
+pub fn milli_units(v: f64) -> i32 {
+    if !v.is_finite() {
+        return IMAGE_INVALID;
+    }
+    crate::bound(
+        libm::round(v * 1000.0),
+        IMAGE_INVALID as f64 + 1.0,
+        i32::MAX as f64,
+    ) as i32
+}
+
 /// The fieldbus output image iobridge writes every cycle, `<i>/iobridge/output`.
 ///
 /// `image` is what goes on the wire (little-endian), as the CS9 example of seed 000 §5 does:

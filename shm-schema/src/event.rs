@@ -244,6 +244,18 @@ pub mod code {
     pub const ESTOP_INPUT: u32 = 702;
     /// A write of the IO was refused (the text names the entry and why).
     pub const IO_REFUSED: u32 = 703;
+
+    /// A process serves on a network address (the text is the address: `127.0.0.1:1502`).
+    pub const LISTENING: u32 = 801;
+    /// A process cannot listen on its address (the text says why); it tries again every
+    /// second.
+    pub const LISTEN_FAILED: u32 = 802;
+    /// A fieldbus client wrote a setting (the text names the register and the client);
+    /// value: the value written.
+    pub const FIELDBUS_WRITE: u32 = 803;
+    /// A process that is not critical failed (lost, stalled, or a health detector expired;
+    /// the text says which): a warning, never an e-stop; it restarts per its policy.
+    pub const NOT_CRITICAL_FAILED: u32 = 804;
 }
 
 /// What a code means, for documents and reports.
@@ -549,6 +561,34 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Warning,
         unit: "",
         meaning: "iobridge refused (part of) a write of the IO: an output requested while its e-stop reaction holds the outputs at their safe values (nothing of that request is taken), an input written as an output or the reverse, or a bit beyond the IO table (those bits are ignored, the others taken); the text names the first refused entry and why.",
+    },
+    CodeInfo {
+        code: code::LISTENING,
+        name: "listening",
+        severity: Severity::Info,
+        unit: "",
+        meaning: "A process serves on a network address, which the text gives (the Modbus server: its `[modbus] listen`, with the port it got when that is 0). `supervisor status` shows it.",
+    },
+    CodeInfo {
+        code: code::LISTEN_FAILED,
+        name: "listen-failed",
+        severity: Severity::Warning,
+        unit: "",
+        meaning: "A process cannot listen on its address (in use by another instance or program, not an address of this machine); the text says why. It tries again every second; the cell runs on without it.",
+    },
+    CodeInfo {
+        code: code::FIELDBUS_WRITE,
+        name: "fieldbus-write",
+        severity: Severity::Info,
+        unit: "value written",
+        meaning: "A fieldbus client wrote a setting (the speed override register); the text names the register and the client.",
+    },
+    CodeInfo {
+        code: code::NOT_CRITICAL_FAILED,
+        name: "not-critical-failed",
+        severity: Severity::Warning,
+        unit: "",
+        meaning: "A process with `critical = false` failed: it was lost, it stalled, or one of its health detectors expired (the text says which; value and limit as in `process-lost` or `health-expired`). No e-stop follows and no program ends; the process restarts per its `restart` policy.",
     },
 ];
 

@@ -26,8 +26,8 @@ pub mod names;
 pub mod status;
 
 pub use config::{
-    AxisConfigV2, CellConfigV5, ConfiguredFaultV1, EstopReaction, HealthConfigV1, KinParamV1,
-    KinematicsConfigV1, ProcessConfigV2,
+    AxisConfigV2, CellConfigV6, ConfiguredFaultV1, EstopReaction, HealthConfigV1, KinParamV1,
+    KinematicsConfigV1, ModbusConfigV1, ProcessConfigV2, process_flags,
 };
 pub use drive::{
     DriveCommandV2, DriveFeedbackV2, FaultInjectionV1, FieldbusImageV1, Power, RequestKind,

@@ -110,8 +110,10 @@ impl ControlKind {
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::MotionControlV2")]
 pub struct MotionControlV2 {
-    /// Increasing per sender; trajgen echoes the last one it took in
-    /// [`SetpointV2::control_seq`].
+    /// Increasing across senders: the sender's `CLOCK_MONOTONIC` time (ns), or one more
+    /// than its previous number if that is larger; trajgen echoes the last one it took in
+    /// [`SetpointV2::control_seq`], so a sender knows its request was taken once the echo
+    /// reaches its number.
     pub seq: u64,
     /// [`ControlKind`] as `u32`.
     pub kind: u32,

@@ -174,7 +174,7 @@ impl fmt::Display for ServiceNameBuf {
 /// their payload layouts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ServiceId {
-    /// `<i>/cell/config`: [`crate::CellConfigV5`], published once by the supervisor with
+    /// `<i>/cell/config`: [`crate::CellConfigV6`], published once by the supervisor with
     /// history 1, so a process that starts later still receives it.
     CellConfig,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV2`], a client (the supervisor) to trajgen.

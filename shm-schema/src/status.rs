@@ -3,7 +3,7 @@
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
-/// Most processes a cell runs (entries of [`crate::CellConfigV5::process`]).
+/// Most processes a cell runs (entries of [`crate::CellConfigV6::process`]).
 pub const MAX_PROCESSES: usize = 16;
 
 /// Bytes of a process name.

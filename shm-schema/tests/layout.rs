@@ -31,7 +31,7 @@ const A: usize = MAX_AXES;
 
 fn layouts() -> Vec<Layout> {
     vec![
-        layout!(CellConfigV5 {
+        layout!(CellConfigV6 {
             axes: "uint32_t" = 4,
             machine_substeps: "uint32_t" = 4,
             t_acc_s: "double" = 8,
@@ -54,6 +54,13 @@ fn layouts() -> Vec<Layout> {
             reserved2: "uint32_t" = 4,
             io: "IoConfigV1[64]" = MAX_IO * size_of::<IoConfigV1>(),
             kinematics: "KinematicsConfigV1" = size_of::<KinematicsConfigV1>(),
+            modbus: "ModbusConfigV1" = size_of::<ModbusConfigV1>(),
+        }),
+        layout!(ModbusConfigV1 {
+            listen: "char[64]" = 64,
+            max_connections: "uint32_t" = 4,
+            writes: "uint32_t" = 4,
+            idle_timeout_ns: "uint64_t" = 8,
         }),
         layout!(KinematicsConfigV1 {
             type_name: "char[24]" = 24,
@@ -100,7 +107,7 @@ fn layouts() -> Vec<Layout> {
             priority: "int32_t" = 4,
             cpu: "int32_t" = 4,
             network_estop_config: "uint32_t" = 4,
-            reserved: "uint32_t" = 4,
+            flags: "uint32_t" = 4,
         }),
         layout!(HealthConfigV1 {
             pending_sequence_overrun_percent_limit: "double" = 8,

@@ -18,7 +18,7 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
-    CellConfigV5, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
+    CellConfigV6, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
     LatencyHistogramV1, MotionCommandV2, MotionControlV2, ProcState, ProcessName, ProcessStatusV2,
     RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV2, TrajgenHandoverV2,
     estop_seen, str_of,
@@ -216,6 +216,11 @@ pub(crate) struct Cell {
     commands: Vec<Option<Vec<String>>>,
     /// Per process: an incident (stall, fault) already reported for its current life.
     flagged: Vec<bool>,
+    /// Per process: whether the cell's safety depends on it (`critical`). A process that
+    /// is not critical is restarted on a loss without an e-stop and never ends a job.
+    critical: Vec<bool>,
+    /// Per process: the network address it announced it serves on (`listening` events).
+    pub(crate) listening: Vec<Option<String>>,
     /// The first e-stop trigger since the last reset, and when it was seen.
     pub(crate) estop: Option<(EstopV1, Instant)>,
     host: HostStateV1,
@@ -230,7 +235,7 @@ pub(crate) struct Cell {
     control_seq: u64,
     event_seq: u64,
     // Field order is drop order: ports before the node.
-    config_pub: Pub<CellConfigV5>,
+    config_pub: Pub<CellConfigV6>,
     pub(crate) command_pub: Pub<MotionCommandV2>,
     control_pub: Pub<MotionControlV2>,
     request_pub: Pub<ServoRequestV1>,
@@ -313,6 +318,8 @@ impl Cell {
             ignore_pid: vec![None; n],
             commands: vec![None; n],
             flagged: vec![false; n],
+            critical: cfg.process.iter().map(|p| p.critical).collect(),
+            listening: vec![None; n],
             estop: None,
             host,
             sense_to_command: None,
@@ -409,6 +416,13 @@ impl Cell {
                     _ => tracing::info!("{line}"),
                 },
             }
+            if let Some(k) = self.listening.get_mut(e.source as usize) {
+                match e.code {
+                    code::LISTENING => *k = Some(e.text().to_string()),
+                    code::LISTEN_FAILED => *k = None,
+                    _ => {}
+                }
+            }
             if self.events.len() < 1_000_000 {
                 self.events.push(e);
             }
@@ -460,7 +474,9 @@ impl Cell {
 
     /// Like [`Cell::motion_control`], with a value (the speed override).
     pub(crate) fn motion_control_with(&mut self, kind: ControlKind, value: f64) -> u64 {
-        self.control_seq += 1;
+        // The time (ns) makes the number increase across senders (the Modbus server sends
+        // the speed override too), so `control_seq >= seq` still means "taken".
+        self.control_seq = (self.control_seq + 1).max(runtime::time::now_ns());
         self.control_pub.send(&MotionControlV2 {
             seq: self.control_seq,
             kind: kind as u32,
@@ -510,11 +526,17 @@ impl Cell {
     /// A process was lost: the host e-stop, its resources, its restart.
     fn lost(&mut self, k: usize, cfg: &Config, why: &str, exit_code: f64) {
         let name = self.names[k].clone();
-        self.event(code::PROCESS_LOST, exit_code, &[&name, ": ", why]);
-        self.raise_host(code::PROCESS_LOST, &[&name, " lost"]);
+        self.listening[k] = None;
+        if self.critical[k] {
+            self.event(code::PROCESS_LOST, exit_code, &[&name, ": ", why]);
+            self.raise_host(code::PROCESS_LOST, &[&name, " lost"]);
+        } else {
+            self.event(code::NOT_CRITICAL_FAILED, exit_code, &[&name, ": ", why]);
+        }
         let _ = ipc::remove_dead_nodes(&self.instance);
         let p = &cfg.process[k];
-        self.life[k] = if self.mode == Mode::Run {
+        // A run ends with a lost critical process; one that is not critical restarts.
+        self.life[k] = if self.mode == Mode::Run && self.critical[k] {
             Life::Down(format!("lost: {why}"))
         } else if p.restart == RestartPolicy::Never {
             Life::Down(format!("lost: {why}; restart = \"never\""))
@@ -558,11 +580,13 @@ impl Cell {
         while let Some((p, status)) = self.children.exited() {
             let k = p.index;
             let text = status.to_string();
-            out.push(Incident::Exited {
-                name: p.name.clone(),
-                pid: p.pid(),
-                status: text.clone(),
-            });
+            if self.critical[k] {
+                out.push(Incident::Exited {
+                    name: p.name.clone(),
+                    pid: p.pid(),
+                    status: text.clone(),
+                });
+            }
             if self.host.handover & (1 << k) != 0 && self.children.get(k).is_some() {
                 // One of two during a swap (make before break): the other one still runs,
                 // nothing is lost; the swap reports it.
@@ -603,26 +627,31 @@ impl Cell {
                 && ProcState::from_u32(s.state) == Some(ProcState::Fault)
             {
                 self.flagged[k] = true;
-                out.push(Incident::Fault {
-                    name: self.names[k].clone(),
-                    fault: s.fault,
-                });
+                if self.critical[k] {
+                    out.push(Incident::Fault {
+                        name: self.names[k].clone(),
+                        fault: s.fault,
+                    });
+                }
             }
             let (cycles, at) = self.beats[k];
             if cycles > 0 && at.elapsed() > timeout && self.host.handover & (1 << k) == 0 {
                 self.flagged[k] = true;
                 let for_s = at.elapsed().as_secs_f64();
-                out.push(Incident::Stalled {
-                    name: self.names[k].clone(),
-                    for_s,
-                });
-                self.event(
-                    code::PROCESS_LOST,
-                    -1.0,
-                    &[&self.names[k].clone(), ": stalled"],
-                );
-                self.raise_host(code::PROCESS_LOST, &[&self.names[k].clone(), " stalled"]);
-                if self.mode == Mode::Up && cfg.process[k].restart == RestartPolicy::OnFailure {
+                let name = self.names[k].clone();
+                if self.critical[k] {
+                    out.push(Incident::Stalled {
+                        name: name.clone(),
+                        for_s,
+                    });
+                    self.event(code::PROCESS_LOST, -1.0, &[&name, ": stalled"]);
+                    self.raise_host(code::PROCESS_LOST, &[&name, " stalled"]);
+                } else {
+                    self.event(code::NOT_CRITICAL_FAILED, -1.0, &[&name, ": stalled"]);
+                }
+                if (self.mode == Mode::Up || !self.critical[k])
+                    && cfg.process[k].restart == RestartPolicy::OnFailure
+                {
                     // Alive but not cycling: end it; its exit restarts it.
                     self.children.kill(k);
                 }
@@ -741,6 +770,9 @@ impl Cell {
     pub(crate) fn reset_blockers(&self) -> Vec<String> {
         let mut out = Vec::new();
         for (k, name) in self.names.iter().enumerate() {
+            if !self.critical[k] {
+                continue; // the e-stop does not wait for it
+            }
             match &self.life[k] {
                 Life::Down(why) => out.push(format!(
                     "{name} is not running ({why}): `supervisor restart {name}` first"
@@ -865,6 +897,8 @@ impl Cell {
                     "why": why,
                     "restarts": self.restarts[k],
                     "command": self.commands[k],
+                    "critical": self.critical[k],
+                    "listening": self.listening[k],
                 })
             })
             .collect();

@@ -6,7 +6,7 @@ use serde::Deserialize;
 use shm_schema::config::MAX_CONFIGURED_FAULTS;
 use shm_schema::drive::injected;
 use shm_schema::{
-    AxisConfigV2, CellConfigV5, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
+    AxisConfigV2, CellConfigV6, ConfiguredFaultV1, EstopReaction, HealthConfigV1, MAX_AXES,
     MAX_PROCESSES, ProcessConfigV2, ProcessName, fixed_str,
 };
 use std::fmt;
@@ -14,6 +14,7 @@ use std::ops::Range;
 
 pub mod io;
 pub mod kinematics;
+pub mod modbus;
 mod stability;
 
 /// The embedded default cell (the Gantry UBA).
@@ -378,6 +379,15 @@ pub struct Process {
     /// `"ignore"`.
     #[serde(default = "default_reaction")]
     pub network_estop_config: String,
+    /// Whether the cell's safety depends on it (default true). `false`: its loss, stall or
+    /// health detectors are warnings and restarts, never an e-stop (a fieldbus server for an
+    /// HMI, a logger). machine, servo and trajgen are always critical.
+    #[serde(default = "default_critical")]
+    pub critical: bool,
+}
+
+fn default_critical() -> bool {
+    true
 }
 
 fn default_restart() -> RestartPolicy {
@@ -640,6 +650,9 @@ pub struct Config {
     /// `[kinematics]`: the gantry unless given.
     #[serde(default)]
     pub kinematics: kinematics::KinematicsSettings,
+    /// `[modbus]`: the Modbus TCP server's settings (served by the `modbus` process).
+    #[serde(default)]
+    pub modbus: modbus::ModbusSettings,
 }
 
 /// One step of a key path, to find where a value is written.
@@ -792,6 +805,9 @@ impl Config {
             return Err(e);
         }
         if let Some(e) = kinematics::validate(&self.kinematics, &self.axis) {
+            return Err(e);
+        }
+        if let Some(e) = modbus::validate(&self.modbus) {
             return Err(e);
         }
         if let Some(e) = self.validate_processes() {
@@ -1154,6 +1170,14 @@ impl Config {
             if self.process[..j].iter().any(|q| q.name == *name) {
                 return Some((at("name"), format!("process name {name:?} is used twice")));
             }
+            if !p.critical && REQUIRED_PROCESSES.contains(&name.as_str()) {
+                return Some((
+                    at("critical"),
+                    format!(
+                        "process {name}: critical = false is not allowed (the cell's motion depends on it)"
+                    ),
+                ));
+            }
             if p.command.is_empty() || p.command[0].is_empty() {
                 return Some((at("command"), format!("process {name}: command is empty")));
             }
@@ -1216,9 +1240,9 @@ impl Config {
     }
 
     /// The configuration as every process reads it from shared memory.
-    pub fn to_shm(&self) -> CellConfigV5 {
+    pub fn to_shm(&self) -> CellConfigV6 {
         let ns = |s: f64| (s * 1e9) as u64;
-        let mut c = CellConfigV5 {
+        let mut c = CellConfigV6 {
             axes: self.axis.len() as u32,
             machine_substeps: self.drives.substeps,
             t_acc_s: self.motion.t_acc,
@@ -1241,6 +1265,7 @@ impl Config {
             reserved2: 0,
             io: io::to_shm(&self.io),
             kinematics: self.kinematics.to_shm(&self.axis),
+            modbus: self.modbus.to_shm(),
         };
         for (j, f) in self.drives.inject.iter().enumerate() {
             c.inject[j] = ConfiguredFaultV1 {
@@ -1261,7 +1286,11 @@ impl Config {
                 cpu: p.cpu.unwrap_or(-1),
                 network_estop_config: reaction_of(&p.network_estop_config)
                     .unwrap_or(EstopReaction::Stop) as u32,
-                reserved: 0,
+                flags: if p.critical {
+                    0
+                } else {
+                    shm_schema::process_flags::NOT_CRITICAL
+                },
             };
         }
         for (i, a) in self.axis.iter().enumerate() {
@@ -1320,7 +1349,7 @@ mod tests {
         assert_eq!(shm.axes, 3);
         assert_eq!(shm_schema::str_of(&shm.axis[2].unit), "deg");
         assert_eq!(shm.period_of("servo"), Some(1_000_000));
-        assert_eq!(shm.processes().len(), 4);
+        assert_eq!(shm.processes().len(), 5);
     }
 
     /// Data-driven: replace `from` by `to` in the default file; the error must read `want`.
@@ -1341,6 +1370,39 @@ mod tests {
             .position(|l| l.contains(needle))
             .expect("present")
             + 1
+    }
+
+    #[test]
+    fn the_modbus_settings_and_critical_are_checked_where_they_are_written() {
+        let l = line_of("listen = \"127.0.0.1:1502\"");
+        check(
+            "listen = \"127.0.0.1:1502\"",
+            "listen = \"localhost:1502\"",
+            &format!(
+                "cell.toml:{l}:1: modbus listen = \"localhost:1502\" is not an IP:port address"
+            ),
+        );
+        let m = line_of("max_connections = 8");
+        check(
+            "max_connections = 8",
+            "max_connections = 0",
+            &format!("cell.toml:{m}:1: modbus max_connections = 0 must be 1..=64"),
+        );
+        check("idle_timeout = 60.0", "idle_timeout = 1e20", "cell.toml:");
+        let servo = line_of("command = [\"servo\"");
+        check(
+            "command = [\"servo\", \"--instance\", \"{instance}\"]",
+            "command = [\"servo\", \"--instance\", \"{instance}\"]\ncritical = false",
+            &format!(
+                "cell.toml:{}:1: process servo: critical = false is not allowed",
+                servo + 1
+            ),
+        );
+        let c = Config::default_cell();
+        let shm = c.to_shm();
+        let modbus = shm.process_named("modbus").expect("in the default cell").1;
+        assert!(!modbus.critical() && shm.process_named("servo").expect("servo").1.critical());
+        assert_eq!(shm_schema::str_of(&shm.modbus.listen), "127.0.0.1:1502");
     }
 
     #[test]

@@ -7,7 +7,7 @@ use runtime::events::EventSink;
 use runtime::ipc::{self, Ipc, Pub, Sub};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
-    CellConfigV5, DigitalIoV1, EstopOrigin, EstopV1, EventV1, FaultInjectionV1, InstanceName,
+    CellConfigV6, DigitalIoV1, EstopOrigin, EstopV1, EventV1, FaultInjectionV1, InstanceName,
     IoDirection, IoWriteV1, ProcessStatusV2, ServiceId, estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
@@ -64,9 +64,9 @@ fn failed(e: ipc::IpcError) -> ControlError {
 }
 
 /// The configuration the running cell published (its axes and processes, not a file's).
-fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV5, ControlError> {
+fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV6, ControlError> {
     let config =
-        Sub::<CellConfigV5>::new(node, instance, ServiceId::CellConfig, 1).map_err(failed)?;
+        Sub::<CellConfigV6>::new(node, instance, ServiceId::CellConfig, 1).map_err(failed)?;
     let start = Instant::now();
     loop {
         if let Some(c) = config.latest() {
@@ -337,7 +337,7 @@ pub fn io(instance: &str, name: Option<&str>, value: Option<&str>) -> Result<Str
 }
 
 /// The IO table as text: name, direction, value.
-fn io_table(cell: &CellConfigV5, image: Option<&DigitalIoV1>) -> String {
+fn io_table(cell: &CellConfigV6, image: Option<&DigitalIoV1>) -> String {
     if cell.io().is_empty() {
         return "the cell has no named IO (`[[io]]`)".into();
     }

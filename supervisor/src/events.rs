@@ -5,7 +5,7 @@ use runtime::ipc::{self, Sub};
 use runtime::signals;
 use serde_json::{Value, json};
 use shm_schema::event::{self, CodeInfo, SOURCE_SUPERVISOR};
-use shm_schema::{CellConfigV5, EventV1, InstanceName, ServiceId, Severity, str_of};
+use shm_schema::{CellConfigV6, EventV1, InstanceName, ServiceId, Severity, str_of};
 use std::time::Duration;
 
 /// Axis names and units, to name an event's axis and the unit of its value, and the process
@@ -20,7 +20,7 @@ pub struct Axes {
 
 impl Axes {
     /// From the configuration every process reads.
-    pub fn of_cell(cell: &CellConfigV5) -> Self {
+    pub fn of_cell(cell: &CellConfigV6) -> Self {
         Self {
             axes: cell
                 .axes()
@@ -125,7 +125,7 @@ pub fn follow(instance: &InstanceName, forever: bool, json: bool) -> Result<(), 
     signals::install().map_err(|e| format!("cannot install signal handlers: {e}"))?;
     let f = |e: ipc::IpcError| e.to_string();
     let node = ipc::node(instance, &format!("events-{}", std::process::id())).map_err(f)?;
-    let config = Sub::<CellConfigV5>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+    let config = Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
     let events = Sub::<EventV1>::new(&node, instance, ServiceId::Events, 1024).map_err(f)?;
     let mut axes = Axes::default();
     let t0 = runtime::time::now_ns();

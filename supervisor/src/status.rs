@@ -10,7 +10,7 @@ use serde_json::{Map, Value, json};
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopState, HostStateV1};
 use shm_schema::{
-    CellConfigV5, DetectorV1, DigitalIoV1, EstopOrigin, InstanceName, IoDirection,
+    CellConfigV6, DetectorV1, DigitalIoV1, EstopOrigin, InstanceName, IoDirection,
     LatencyHistogramV1, MotionState, Power, ProcState, ProcessName, ProcessStatusV2, SafeValue,
     ServiceId, ServoStateV3, SetpointV2, estop_seen, str_of,
 };
@@ -41,7 +41,7 @@ pub struct Snapshot {
     /// Servo's latest state.
     pub servo: Option<ServoStateV3>,
     /// The cell configuration (axis names and units).
-    pub cell: Option<Box<CellConfigV5>>,
+    pub cell: Option<Box<CellConfigV6>>,
     /// The drives' sense-to-command latency since they started.
     pub sense_to_command: Option<Box<LatencyHistogramV1>>,
     /// The supervisor's heartbeat and latched e-stop.
@@ -65,7 +65,7 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     let f = |e: ipc::IpcError| e.to_string();
     let node = ipc::node(instance, &format!("status-{}", std::process::id())).map_err(f)?;
     let cell_sub =
-        Sub::<CellConfigV5>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
+        Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
     let start = Instant::now();
     let cell = loop {
         if let Some(c) = cell_sub.latest() {
@@ -182,7 +182,7 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
 
 /// The named digital IO: per entry its name, direction, value (null before iobridge's first
 /// image), and for an output its safe value, for an input whether it is an e-stop circuit.
-pub fn io_json(cell: &CellConfigV5, io: Option<&DigitalIoV1>) -> Value {
+pub fn io_json(cell: &CellConfigV6, io: Option<&DigitalIoV1>) -> Value {
     let entries: Vec<Value> = cell
         .io()
         .iter()
@@ -236,7 +236,7 @@ fn drive_state(sw: u16) -> &'static str {
 }
 
 /// Servo's state as JSON: the arm and every axis.
-fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV5>) -> Value {
+fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV6>) -> Value {
     let n = (s.axes as usize).min(shm_schema::MAX_AXES);
     let names: Vec<String> = (0..n)
         .map(|i| match cell {
@@ -422,11 +422,19 @@ pub fn supervisor_lines(info: &Value) -> String {
     if let Some(procs) = info["processes"].as_array() {
         for p in procs {
             out += &format!(
-                "  {:<9} {:<10} pid {:<8} restarts {}{}\n",
+                "  {:<9} {:<10} pid {:<8} restarts {}{}{}{}\n",
                 p["name"].as_str().unwrap_or("?"),
                 p["life"].as_str().unwrap_or("?"),
                 p["pid"],
                 p["restarts"],
+                if p["critical"] == false {
+                    "  not critical"
+                } else {
+                    ""
+                },
+                p["listening"]
+                    .as_str()
+                    .map_or(String::new(), |a| format!("  listening on {a}")),
                 p["why"]
                     .as_str()
                     .map_or(String::new(), |w| format!("  ({w})"))

@@ -6,7 +6,7 @@ use machine_sim::Machine;
 use servo::{Controller, Params as ServoParams};
 use shm_schema::drive::servo_status as st;
 use shm_schema::{
-    CellConfigV5, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
+    CellConfigV6, DriveCommandV2, DriveFeedbackV2, EventQueue, EventV1, FaultInjectionV1,
     RequestKind, ServoRequestV1, ServoStateV3, SetpointV2,
 };
 
@@ -30,7 +30,7 @@ pub struct Loop {
 }
 
 impl Loop {
-    pub fn new(cell: &CellConfigV5) -> Self {
+    pub fn new(cell: &CellConfigV6) -> Self {
         let proc = |name: &str| *cell.process_named(name).expect("in the table").1;
         let (machine, servo) = (proc("machine"), proc("servo"));
         Self {

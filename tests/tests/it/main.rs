@@ -8,12 +8,14 @@ mod cell;
 mod closed_loop;
 mod drives;
 mod estop;
+mod fieldbus;
 mod latency;
 mod loop_sim;
 mod no_alloc;
 mod operations;
 mod programs;
 mod servo_layer;
+mod up;
 
 #[global_allocator]
 static ALLOC: runtime::alloc_count::CountingAllocator = runtime::alloc_count::CountingAllocator;

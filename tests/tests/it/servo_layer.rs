@@ -18,7 +18,7 @@ fn cfg_with(from: &str, to: &str) -> Config {
 }
 
 /// A trajectory generator at the default start with `program` queued.
-fn generator(cell: &shm_schema::CellConfigV5, program: &str) -> Generator {
+fn generator(cell: &shm_schema::CellConfigV6, program: &str) -> Generator {
     let mut g = Generator::new(Params::from_cell(cell), &[40.0, 40.0, 0.0]);
     for c in crate::gantry_commands(program, 1) {
         g.push_command(&c);

@@ -1,0 +1,145 @@
+//! `supervisor up` for the tests: a long-running cell in the background and the control CLI
+//! against it.
+
+use crate::drives::WATCHDOG;
+use integration_tests::{assert_clean, instance, run_with_watchdog, scratch, supervisor};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// `supervisor up` in the background, its log in a file; SIGTERM and wait on drop, so a
+/// failing test leaves no cell behind.
+pub(crate) struct Up {
+    pub(crate) inst: String,
+    pub(crate) child: Option<Child>,
+    log: PathBuf,
+}
+
+impl Up {
+    pub(crate) fn start(test: &str, cfg: &Path) -> Self {
+        let inst = instance(test);
+        let log = scratch(test, "up.log", "");
+        let child = supervisor()
+            .args(["up", "--instance", &inst, "--config"])
+            .arg(cfg)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).expect("log"))
+            .spawn()
+            .expect("supervisor up");
+        let up = Self {
+            inst,
+            child: Some(child),
+            log,
+        };
+        // Up once the drives are enabled and holding.
+        up.until("the drives enabled", |s| {
+            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+        });
+        up
+    }
+
+    pub(crate) fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// `supervisor <args> --instance <inst>`, under the watchdog.
+    pub(crate) fn ctl(&self, args: &[&str]) -> Output {
+        let mut cmd = supervisor();
+        cmd.args(args).args(["--instance", &self.inst]);
+        run_with_watchdog(&mut cmd, WATCHDOG)
+    }
+
+    /// Like [`Up::ctl`], and it must succeed; its stdout.
+    pub(crate) fn ok(&self, args: &[&str]) -> String {
+        let out = self.ctl(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}\n{}\nlog:\n{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+            self.log()
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    }
+
+    /// Like [`Up::ctl`], and it must be refused (exit 2); its stderr.
+    pub(crate) fn refused(&self, args: &[&str]) -> String {
+        let out = self.ctl(args);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        err
+    }
+
+    pub(crate) fn status(&self) -> Value {
+        let out = self.ok(&["status", "--json"]);
+        serde_json::from_str(out.trim()).expect("status JSON")
+    }
+
+    /// Polls `status --json` until `pred` holds, under the watchdog.
+    pub(crate) fn until(&self, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+        let start = Instant::now();
+        loop {
+            let mut cmd = supervisor();
+            cmd.args(["status", "--json", "--instance", &self.inst]);
+            let out = run_with_watchdog(&mut cmd, WATCHDOG);
+            if out.status.success()
+                && let Ok(v) =
+                    serde_json::from_str::<Value>(String::from_utf8_lossy(&out.stdout).trim())
+                && pred(&v)
+            {
+                return v;
+            }
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "{what}: never happened\n{}\nlog:\n{}",
+                String::from_utf8_lossy(&out.stdout),
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// `exec --wait --json PROGRAM` in the background, its output piped.
+    pub(crate) fn exec_in_background(&self, program: impl AsRef<std::ffi::OsStr>) -> Child {
+        supervisor()
+            .args(["exec", "--wait", "--json", "--instance", &self.inst])
+            .arg(program)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("exec")
+    }
+
+    /// `down`, then the supervisor exits 0 and nothing of the instance is left.
+    pub(crate) fn down(mut self) {
+        self.ok(&["down"]);
+        let child = self.child.take().expect("running");
+        let out = wait_child(child);
+        assert!(out.success(), "up exited with {out}\n{}", self.log());
+        assert_clean(&self.inst);
+    }
+}
+
+impl Drop for Up {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(c.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+            let _ = c.wait();
+        }
+    }
+}
+
+pub(crate) fn wait_child(mut c: Child) -> std::process::ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = c.try_wait().expect("wait") {
+            return s;
+        }
+        assert!(start.elapsed() < WATCHDOG, "the supervisor did not exit");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
