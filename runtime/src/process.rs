@@ -145,7 +145,8 @@ pub fn run<T: Task>(
     about: &str,
     build: impl FnOnce(&Context) -> Result<T, SetupError>,
 ) -> ExitCode {
-    init_logging();
+    // A blocked stderr (a full pipe, a paused terminal) must never stall a process.
+    let _log = init_logging_lossy();
     let (instance, name) = match parse_args(default_name, about) {
         Ok(Some(a)) => a,
         Ok(None) => return ExitCode::SUCCESS,
@@ -171,13 +172,33 @@ pub fn run<T: Task>(
     }
 }
 
-/// Logging to stderr, filtered by `RTC_LOG` (default `info`). Used by every binary.
+/// Logging to stderr, filtered by `RTC_LOG` (default `info`), blocking: for the commands of a
+/// terminal (`supervisor status`).
 pub fn init_logging() {
+    init_logging_to(std::io::stderr);
+}
+
+/// Logging to stderr as [`init_logging`], through a lossy non-blocking writer (a thread of its
+/// own writes the lines): a full pipe or a paused terminal loses lines and never stalls the
+/// process. Every process of a cell logs this way; keep the guard until exit (it flushes).
+pub fn init_logging_lossy() -> tracing_appender::non_blocking::WorkerGuard {
+    let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+        .lossy(true)
+        .buffered_lines_limit(4096)
+        .finish(std::io::stderr());
+    init_logging_to(writer);
+    guard
+}
+
+fn init_logging_to<W>(writer: W)
+where
+    W: for<'w> tracing_subscriber::fmt::MakeWriter<'w> + Send + Sync + 'static,
+{
     let filter = tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(writer)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .try_init();

@@ -759,6 +759,11 @@ impl Cell {
         self.commands[k] = command;
     }
 
+    /// Whether the cell's safety depends on process `k` (`critical`).
+    pub(crate) fn critical(&self, k: usize) -> bool {
+        self.critical[k]
+    }
+
     /// True when process `k` is cyclic and its cycles advance.
     pub(crate) fn cyclic(&self, k: usize) -> bool {
         self.life[k] == Life::Running

@@ -70,7 +70,8 @@ impl Enabling {
         let initialized = cell
             .last_servo
             .is_some_and(|s| s.status & st::INITIALIZED != 0);
-        let all_cyclic = (0..cell.names.len()).all(|k| cell.cyclic(k));
+        // A process that is not critical (the Modbus server) is not waited for.
+        let all_cyclic = (0..cell.names.len()).all(|k| cell.cyclic(k) || !cell.critical(k));
         if all_cyclic && initialized && cell.last_sp.is_some() && self.sent_ns.is_none() {
             self.sent_ns = Some(runtime::time::now_ns());
             if let Err(e) = cell.request(RequestKind::Enable) {
@@ -89,7 +90,7 @@ impl Enabling {
         }
         if self.start.elapsed() > self.timeout {
             let mut missing: Vec<String> = (0..cell.names.len())
-                .filter(|k| !cell.cyclic(*k))
+                .filter(|k| !cell.cyclic(*k) && cell.critical(*k))
                 .map(|k| format!("{} is not cyclic", cell.names[k]))
                 .collect();
             if cell.last_sp.is_none() {

@@ -344,19 +344,7 @@ fn init_logging(watching: bool) -> Vec<tracing_appender::non_blocking::WorkerGua
         .buffered_lines_limit(4096)
         .finish(std::io::stderr());
     supervisor::out::set(lines);
-    let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
-        .lossy(true)
-        .buffered_lines_limit(4096)
-        .finish(std::io::stderr());
-    let filter = tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(writer)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_target(false)
-        .try_init();
-    runtime::ipc::quiet_iceoryx2_log();
+    let guard = runtime::process::init_logging_lossy();
     vec![guard, lines_guard]
 }
 
