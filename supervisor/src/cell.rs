@@ -486,6 +486,14 @@ impl Cell {
         self.control_seq
     }
 
+    /// The heartbeat, and the publishers' connections (a new observer gets the configuration
+    /// and the host state's history), for a caller that waits outside the serve loop.
+    pub(crate) fn keep_alive(&mut self) {
+        self.beat();
+        self.config_pub.update_connections();
+        self.host_pub.update_connections();
+    }
+
     /// The heartbeat: the host state with the latched e-stop, every tick.
     pub(crate) fn beat(&mut self) {
         self.host.beat += 1;

@@ -11,6 +11,7 @@ pub mod latency_cmd;
 pub mod launch;
 pub mod out;
 pub mod program;
+pub mod record;
 pub mod report;
 pub mod run;
 pub mod serve;

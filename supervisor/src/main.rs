@@ -37,6 +37,28 @@ enum Cmd {
         /// Print one JSON object on stdout instead of the summary.
         #[arg(long)]
         json: bool,
+        /// Record every service of the cell into this MCAP file (docs/recording.md).
+        #[arg(long)]
+        record: Option<PathBuf>,
+    },
+    /// Record every service of a running cell into an MCAP file (for Foxglove, PlotJuggler):
+    /// until SIGINT/SIGTERM, `--duration`, or the cell going down (docs/recording.md).
+    Record {
+        /// The MCAP file to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Start a new file (OUT-000.mcap, OUT-001.mcap, …) once one reaches this many MB.
+        #[arg(long)]
+        rotate_size: Option<f64>,
+        /// Start a new file every this many seconds.
+        #[arg(long)]
+        rotate_time: Option<f64>,
     },
     /// Bring a cell up and keep it up, cyclic, drives enabled and holding, until `down`,
     /// SIGTERM or SIGINT. Logs on stderr. Control it from other shells (docs/operations.md).
@@ -47,6 +69,9 @@ enum Cmd {
         /// Instance name: prefixes every service and shared-memory file.
         #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
         instance: String,
+        /// Record every service of the cell into this MCAP file until it goes down.
+        #[arg(long)]
+        record: Option<PathBuf>,
     },
     /// Stop a cell that is up: every process leaves safely, nothing of the instance is left.
     Down {
@@ -70,6 +95,10 @@ enum Cmd {
         /// With --wait: write the CSV trace.
         #[arg(long, requires = "wait")]
         trace: Option<PathBuf>,
+        /// With --wait: record every service of the cell into this MCAP file while the
+        /// program runs.
+        #[arg(long, requires = "wait")]
+        record: Option<PathBuf>,
     },
     /// The live speed override: run the path at PERCENT (1..=100) of its programmed speed
     /// from now on, smoothly (within t_acc), without leaving it.
@@ -527,7 +556,18 @@ fn main() -> ExitCode {
             json,
             watch,
         } => status(&instance, json, watch),
-        Cmd::Up { config, instance } => match supervisor::up::up(config.as_deref(), &instance) {
+        Cmd::Record {
+            out,
+            instance,
+            duration,
+            rotate_size,
+            rotate_time,
+        } => record(&out, &instance, duration, rotate_size, rotate_time),
+        Cmd::Up {
+            config,
+            instance,
+            record,
+        } => match supervisor::up::up(config.as_deref(), &instance, record.as_deref()) {
             Ok(msg) => {
                 tracing::info!("{msg}");
                 ExitCode::SUCCESS
@@ -553,10 +593,19 @@ fn main() -> ExitCode {
             wait,
             json,
             trace,
+            record,
         } => {
             let i = match instance_of(&instance) {
                 Ok(i) => i,
                 Err(c) => return c,
+            };
+            let mut recorder = match record
+                .as_deref()
+                .map(|f| supervisor::record::Background::start(&i, f, &mut || {}))
+                .transpose()
+            {
+                Ok(r) => r,
+                Err(e) => return run_failed(&e, json),
             };
             let source = match std::fs::read(&program) {
                 Ok(s) => s,
@@ -571,13 +620,17 @@ fn main() -> ExitCode {
                 wait,
                 trace: trace.is_some(),
             };
-            match ctl::call(&i, &req) {
+            let code = match ctl::call(&i, &req) {
                 Ok(r) => ctl_reply(r, json, trace.as_deref()),
                 Err(e) => {
                     eprintln!("error: {e}");
                     ExitCode::from(2)
                 }
+            };
+            if let Some(r) = recorder.as_mut() {
+                eprint!("{}", r.stop());
             }
+            code
         }
         Cmd::Pause { instance } => ctl_call(&instance, Request::Pause),
         Cmd::Speed { percent, instance } => ctl_call(&instance, Request::Speed { percent }),
@@ -750,12 +803,14 @@ fn main() -> ExitCode {
             instance,
             trace,
             json,
+            record,
         } => {
             let opts = RunOptions {
                 program,
                 config,
                 instance,
                 trace,
+                record,
                 progress: true,
             };
             match run(&opts) {
@@ -770,5 +825,67 @@ fn main() -> ExitCode {
                 Err(e) => run_failed(&e, json),
             }
         }
+    }
+}
+
+/// `supervisor record`.
+fn record(
+    out: &std::path::Path,
+    instance: &str,
+    duration: Option<f64>,
+    rotate_size: Option<f64>,
+    rotate_time: Option<f64>,
+) -> ExitCode {
+    use supervisor::record::{RecordOptions, Rotate};
+    let i = match instance_of(instance) {
+        Ok(i) => i,
+        Err(c) => return c,
+    };
+    let secs = |name: &str, v: Option<f64>, lo: f64| -> Result<Option<f64>, String> {
+        match v {
+            Some(v) if !(v.is_finite() && v >= lo && v <= 1e9) => Err(format!(
+                "--{name} {v} must be at least {lo} (and at most 1e9)"
+            )),
+            v => Ok(v),
+        }
+    };
+    let checked = secs("duration", duration, 0.001).and_then(|d| {
+        Ok((
+            d,
+            secs("rotate-size", rotate_size, 0.001)?,
+            secs("rotate-time", rotate_time, 1.0)?,
+        ))
+    });
+    let (duration, size_mb, every) = match checked {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = runtime::signals::install() {
+        eprintln!("error: cannot install signal handlers: {e}");
+        return ExitCode::FAILURE;
+    }
+    let opts = RecordOptions {
+        out: out.to_path_buf(),
+        duration: duration.map(std::time::Duration::from_secs_f64),
+        rotate: Rotate {
+            bytes: size_mb.map(|mb| (mb * 1e6) as u64),
+            every: every.map(std::time::Duration::from_secs_f64),
+        },
+    };
+    let result =
+        supervisor::record::record(&i, &opts, &runtime::signals::stop_requested, &mut |path| {
+            use std::io::Write;
+            println!("recording instance {i} to {}", path.display());
+            let _ = std::io::stdout().flush();
+        });
+    match result {
+        Ok(r) => {
+            print!("{}", r.text());
+            ExitCode::SUCCESS
+        }
+        Err(e) => run_failed(&e, false),
     }
 }

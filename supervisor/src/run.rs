@@ -31,6 +31,8 @@ pub struct RunOptions {
     pub instance: String,
     /// Trace CSV to write.
     pub trace: Option<PathBuf>,
+    /// MCAP file to record the cell into (`--record`).
+    pub record: Option<PathBuf>,
     /// Show progress on stderr.
     pub progress: bool,
 }
@@ -102,6 +104,18 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
     let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
+    let mut recorder = match opts
+        .record
+        .as_deref()
+        .map(|f| crate::record::Background::start(&instance, f, &mut || cell.keep_alive()))
+        .transpose()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = cell.close(server);
+            return Err(e);
+        }
+    };
     let first = ProgramJob {
         program,
         progress: opts.progress,
@@ -110,6 +124,9 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     cell.refresh_latency();
     let processes = serve::process_reports(&cell);
     let sense_to_command = cell.sense_to_command.take();
+    if let Some(r) = recorder.as_mut() {
+        crate::out::line(r.stop().trim_end());
+    }
     let closed = cell.close(server);
     let mut report = match end {
         End::Program(r) => match *r {

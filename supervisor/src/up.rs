@@ -11,7 +11,11 @@ use std::path::Path;
 /// Brings the cell of `config` up on `instance` and serves it until it is told to go down;
 /// then stops every process and removes every resource of the instance. Returns how it
 /// ended.
-pub fn up(config: Option<&Path>, instance: &str) -> Result<String, RunError> {
+pub fn up(
+    config: Option<&Path>,
+    instance: &str,
+    record: Option<&Path>,
+) -> Result<String, RunError> {
     let cfg = Config::load(config).map_err(|e| RunError::Input(e.to_string()))?;
     let instance = InstanceName::new(instance)
         .map_err(|e| RunError::Input(format!("--instance {instance:?}: {e}")))?;
@@ -26,7 +30,20 @@ pub fn up(config: Option<&Path>, instance: &str) -> Result<String, RunError> {
             .collect::<Vec<_>>()
             .join(", ")
     );
+    let mut recorder = match record
+        .map(|f| crate::record::Background::start(&instance, f, &mut || cell.keep_alive()))
+        .transpose()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = cell.close(server);
+            return Err(e);
+        }
+    };
     let end = serve(&cfg, &mut cell, &mut server, None);
+    if let Some(r) = recorder.as_mut() {
+        tracing::info!("{}", r.stop().trim_end());
+    }
     let why = match end {
         End::Down => "supervisor down",
         End::Interrupted => "a signal",

@@ -14,6 +14,7 @@ mod loop_sim;
 mod no_alloc;
 mod operations;
 mod programs;
+mod recording;
 mod servo_layer;
 mod up;
 

@@ -1,0 +1,830 @@
+//! `supervisor record`: every service of a running cell into MCAP files, for Foxglove and
+//! PlotJuggler (docs/recording.md).
+//!
+//! An observer like any other: its own node, subscribers with the largest buffers the services
+//! allow, nothing the cell waits for. Each message is JSON with a JSON Schema (MCAP's
+//! `jsonschema` profile, which both viewers decode), timestamped with the time in the sample
+//! itself (`CLOCK_MONOTONIC`, mapped to the Unix epoch once at the start). Per-axis arrays are
+//! objects keyed by the axis' name (`/servo/state` → `act_position.x`), the latency histograms
+//! are summarised (count, percentiles, maximum). Memory stays bounded: messages go out in
+//! compressed chunks; files rotate by size or time. Samples the recorder did not read in time
+//! (a subscriber's buffer overflowed) are counted per topic from the gaps in their sequence
+//! numbers.
+
+use crate::events::Axes;
+use iceoryx2::prelude::ZeroCopySend;
+use mcap::records::MessageHeader;
+use runtime::ipc::{self, Sub};
+use serde::Serialize;
+use serde_json::{Map, Value, json};
+use shm_schema::estop::HostStateV1;
+use shm_schema::latency::LatencyHistogramV1;
+use shm_schema::{
+    CellConfigV6, CycleStatsV1, DetectorV1, DigitalIoV1, DriveCommandV2, DriveFeedbackV2, EstopV1,
+    EventV1, FieldbusImageV1, InstanceName, MAX_AXES, MotionCommandV2, MotionControlV2,
+    ProcessName, ProcessStatusV2, ServiceId, ServoStateV3, SetpointV2, str_of,
+};
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// How a field becomes JSON, and its JSON Schema.
+trait Enc<T> {
+    fn enc(v: &T, axes: &[String]) -> Value;
+    fn schema(v: &T, axes: &[String]) -> Value;
+}
+
+/// A number.
+struct Num;
+impl<T: Serialize> Enc<T> for Num {
+    fn enc(v: &T, _: &[String]) -> Value {
+        json!(v)
+    }
+    fn schema(_: &T, _: &[String]) -> Value {
+        json!({"type": "number"})
+    }
+}
+
+/// A per-axis array: an object keyed by the axes' names (the axes in use only).
+struct PerAxis;
+impl<T: Serialize> Enc<[T; MAX_AXES]> for PerAxis {
+    fn enc(v: &[T; MAX_AXES], axes: &[String]) -> Value {
+        Value::Object(
+            axes.iter()
+                .zip(v.iter())
+                .map(|(a, x)| (a.clone(), json!(x)))
+                .collect(),
+        )
+    }
+    fn schema(_: &[T; MAX_AXES], axes: &[String]) -> Value {
+        let props: Map<String, Value> = axes
+            .iter()
+            .map(|a| (a.clone(), json!({"type": "number"})))
+            .collect();
+        json!({"type": "object", "properties": props})
+    }
+}
+
+/// NUL-padded text.
+struct Text;
+impl<const N: usize> Enc<[u8; N]> for Text {
+    fn enc(v: &[u8; N], _: &[String]) -> Value {
+        json!(str_of(v))
+    }
+    fn schema(_: &[u8; N], _: &[String]) -> Value {
+        json!({"type": "string"})
+    }
+}
+
+/// A nested record.
+struct Nested;
+impl<T: Message> Enc<T> for Nested {
+    fn enc(v: &T, axes: &[String]) -> Value {
+        v.json(axes)
+    }
+    fn schema(_: &T, axes: &[String]) -> Value {
+        T::schema(axes)
+    }
+}
+
+/// A payload as a recorded message.
+trait Message: Copy + std::fmt::Debug + 'static {
+    /// The schema's name.
+    const NAME: &'static str;
+    fn json(&self, axes: &[String]) -> Value;
+    fn schema(axes: &[String]) -> Value;
+    /// The time in the sample (ns, `CLOCK_MONOTONIC`), if it has one.
+    fn stamp_ns(&self) -> Option<u64> {
+        None
+    }
+    /// (stream, sequence number): numbers that grow by one per sample of a stream.
+    fn seq(&self) -> Option<(u64, u64)> {
+        None
+    }
+}
+
+macro_rules! message {
+    ($t:ty, $name:literal, stamp: |$s:ident| $stamp:expr, seq: |$q:ident| $seq:expr,
+     { $($f:ident : $k:ident),* $(,)? }) => {
+        impl Message for $t {
+            const NAME: &'static str = $name;
+            fn json(&self, axes: &[String]) -> Value {
+                let mut m = Map::new();
+                $( m.insert(stringify!($f).into(), <$k as Enc<_>>::enc(&self.$f, axes)); )*
+                Value::Object(m)
+            }
+            fn schema(axes: &[String]) -> Value {
+                let d = <$t>::default();
+                let mut props = Map::new();
+                $( props.insert(stringify!($f).into(), <$k as Enc<_>>::schema(&d.$f, axes)); )*
+                json!({"title": $name, "type": "object", "properties": props})
+            }
+            fn stamp_ns(&self) -> Option<u64> {
+                let $s = self;
+                $stamp
+            }
+            fn seq(&self) -> Option<(u64, u64)> {
+                let $q = self;
+                $seq
+            }
+        }
+    };
+}
+
+message!(SetpointV2, "rtc.SetpointV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+    seq: Num, stamp_ns: Num, program_id: Num, line: Num, state: Num, fault: Num,
+    fault_line: Num, motion_time_s: Num, theoretical_s: Num, segment_time_s: Num,
+    path_speed: Num, speed_override: Num, program_speed: Num, hold: Num, space: Num,
+    waited_s: Num, commands_taken: Num, queue_free: Num, starved: Num, control_seq: Num,
+    position: PerAxis, velocity: PerAxis, acceleration: PerAxis,
+});
+message!(ServoStateV3, "rtc.ServoStateV3", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+    seq: Num, stamp_ns: Num, measured_stamp_ns: Num, setpoint_seq: Num, status: Num,
+    power: Num, settled_axes: Num, fault_code: Num, fault_axis: Num, fault_value: Num,
+    fault_limit: Num, controlword: PerAxis, statusword: PerAxis, cmd_position: PerAxis,
+    cmd_velocity: PerAxis, act_position: PerAxis, act_velocity: PerAxis,
+    following_error: PerAxis, effort: PerAxis, peak_program: Num,
+    peak_following_error: PerAxis,
+});
+message!(DriveFeedbackV2, "rtc.DriveFeedbackV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+    seq: Num, stamp_ns: Num, command_seq: Num, sense_to_command_ns: Num,
+    statusword: PerAxis, mode_display: PerAxis, error_code: PerAxis, position: PerAxis,
+    velocity: PerAxis, torque: PerAxis, following_error: PerAxis,
+});
+message!(DriveCommandV2, "rtc.DriveCommandV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+    seq: Num, stamp_ns: Num, feedback_seq: Num, feedback_stamp_ns: Num, controlword: PerAxis,
+    mode: PerAxis, target_position: PerAxis, target_velocity: PerAxis,
+    target_torque: PerAxis, velocity_offset: PerAxis, torque_offset: PerAxis,
+});
+message!(DigitalIoV1, "rtc.DigitalIoV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+    seq: Num, stamp_ns: Num, values: Num, changed: Num, taken: Num, refused: Num,
+    count: Num, outputs_safe: Num,
+});
+message!(EventV1, "rtc.EventV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((u64::from(s.source), s.seq)), {
+    seq: Num, stamp_ns: Num, source: Num, severity: Num, code: Num, axis: Num, value: Num,
+    limit: Num, text: Text,
+});
+message!(EstopV1, "rtc.EstopV1", stamp: |s| Some(s.stamp_ns), seq: |_s| None, {
+    stamp_ns: Num, kind: Num, origin: Num, source: Num, code: Num, reason: Text,
+});
+message!(HostStateV1, "rtc.HostStateV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.beat)), {
+    stamp_ns: Num, beat: Num, resets: Num, pid: Num, estop: Num, cause: Nested, handover: Num,
+});
+message!(CycleStatsV1, "rtc.CycleStatsV1", stamp: |_s| None, seq: |_s| None, {
+    period_ns: Num, cycles: Num, overruns: Num, skipped: Num, wakeup_latency_ns: Num,
+    max_wakeup_latency_ns: Num, exec_ns: Num, max_exec_ns: Num, overrun_flag: Num,
+});
+message!(DetectorV1, "rtc.DetectorV1", stamp: |_s| None, seq: |_s| None, {
+    level: Num, limit: Num, total: Num,
+});
+message!(ProcessStatusV2, "rtc.ProcessStatusV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((u64::from(s.pid), s.stats.cycles)), {
+    pid: Num, index: Num, state: Num, policy: Num, priority: Num, cpu: Num, fault: Num,
+    stamp_ns: Num, stats: Nested, pending_sequence: Nested, transport: Nested,
+    thread_offset: Nested, estop: Num,
+});
+message!(MotionCommandV2, "rtc.MotionCommandV2", stamp: |_s| None, seq: |_s| None, {
+    seq: Num, program_id: Num, line: Num, kind: Num, count: Num, io: Num, value: Num,
+    time_s: Num, speed: Num, target: PerAxis,
+});
+message!(MotionControlV2, "rtc.MotionControlV2", stamp: |_s| None, seq: |_s| None, {
+    seq: Num, kind: Num, value: Num,
+});
+
+/// iobridge's image, decoded: the positions in axis units.
+impl Message for FieldbusImageV1 {
+    const NAME: &'static str = "rtc.FieldbusImageV1";
+    fn json(&self, axes: &[String]) -> Value {
+        let img = self;
+        let mut pos = Map::new();
+        for (k, a) in axes.iter().enumerate().take(img.axes as usize) {
+            let at = 8 + 4 * k;
+            let raw = img
+                .image
+                .get(at..at + 4)
+                .and_then(|b| b.try_into().ok())
+                .map_or(shm_schema::drive::IMAGE_INVALID, i32::from_le_bytes);
+            let v = (raw != shm_schema::drive::IMAGE_INVALID).then(|| f64::from(raw) / 1000.0);
+            pos.insert(a.clone(), json!(v));
+        }
+        json!({
+            "seq": img.seq, "written_ns": img.written_ns, "measured_ns": img.measured_ns,
+            "source_seq": img.source_seq, "axes": img.axes, "position": pos,
+        })
+    }
+    fn schema(axes: &[String]) -> Value {
+        let props: Map<String, Value> = axes
+            .iter()
+            .map(|a| (a.clone(), json!({"type": ["number", "null"]})))
+            .collect();
+        let n = json!({"type": "number"});
+        json!({"title": Self::NAME, "type": "object", "properties": {
+            "seq": n, "written_ns": n, "measured_ns": n, "source_seq": n, "axes": n,
+            "position": {"type": "object", "properties": props},
+        }})
+    }
+    fn stamp_ns(&self) -> Option<u64> {
+        Some(self.written_ns)
+    }
+    fn seq(&self) -> Option<(u64, u64)> {
+        Some((0, self.seq))
+    }
+}
+
+/// A latency histogram, summarised (µs).
+impl Message for LatencyHistogramV1 {
+    const NAME: &'static str = "rtc.LatencySummary";
+    fn json(&self, _: &[String]) -> Value {
+        let h = self;
+        let us = |v: Option<u64>| v.map(|v| v as f64 / 1000.0);
+        json!({
+            "count": h.count,
+            "mean_us": h.mean_ns().map(|v| v / 1000.0),
+            "p50_us": us(h.percentile(1, 2)),
+            "p99_us": us(h.percentile(99, 100)),
+            "p999_us": us(h.percentile(999, 1000)),
+            "p9999_us": us(h.percentile(9999, 10000)),
+            "max_us": us((h.count > 0).then_some(h.max_ns)),
+        })
+    }
+    fn schema(_: &[String]) -> Value {
+        let n = json!({"type": ["number", "null"]});
+        json!({"title": Self::NAME, "type": "object", "properties": {
+            "count": n, "mean_us": n, "p50_us": n, "p99_us": n, "p999_us": n,
+            "p9999_us": n, "max_us": n,
+        }})
+    }
+    fn stamp_ns(&self) -> Option<u64> {
+        Some(self.stamp_ns)
+    }
+}
+
+/// When to start a new file.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Rotate {
+    /// Once the file reaches this many bytes.
+    pub bytes: Option<u64>,
+    /// Once the file is this old.
+    pub every: Option<Duration>,
+}
+
+/// What `supervisor record` is asked to do.
+#[derive(Clone, Debug)]
+pub struct RecordOptions {
+    /// The file (with rotation: `STEM-000.mcap`, `STEM-001.mcap`, … beside it).
+    pub out: PathBuf,
+    /// Stop after this long; `None`: until a signal or until the cell goes down.
+    pub duration: Option<Duration>,
+    /// Rotation.
+    pub rotate: Rotate,
+}
+
+/// What a recording wrote, per topic: messages written and samples lost.
+#[derive(Clone, Debug, Default)]
+pub struct Recorded {
+    /// The files, in order.
+    pub files: Vec<PathBuf>,
+    /// (topic, messages, lost).
+    pub topics: Vec<(String, u64, u64)>,
+    /// Why it ended.
+    pub ended: String,
+}
+
+impl Recorded {
+    /// Messages lost over every topic.
+    pub fn lost(&self) -> u64 {
+        self.topics.iter().map(|t| t.2).sum()
+    }
+
+    /// The summary printed at the end.
+    pub fn text(&self) -> String {
+        let mut out = format!(
+            "recorded {} ({}): {} messages, {} lost\n",
+            self.files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            self.ended,
+            self.topics.iter().map(|t| t.1).sum::<u64>(),
+            self.lost()
+        );
+        for (t, n, lost) in &self.topics {
+            out += &format!("  {t:<28} {n:>9} messages  {lost} lost\n");
+        }
+        out
+    }
+}
+
+/// `CLOCK_MONOTONIC` to the Unix epoch (ns), measured once.
+#[derive(Clone, Copy, Debug)]
+struct Clock {
+    offset_ns: i128,
+}
+
+impl Clock {
+    fn new() -> Self {
+        let real = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128);
+        Self {
+            offset_ns: real - runtime::time::now_ns() as i128,
+        }
+    }
+
+    fn epoch(&self, mono_ns: u64) -> u64 {
+        (mono_ns as i128 + self.offset_ns).max(0) as u64
+    }
+}
+
+/// One topic: a subscriber and its counts.
+trait Topic {
+    fn name(&self) -> &str;
+    fn schema_name(&self) -> &'static str;
+    fn schema(&self, axes: &[String]) -> Value;
+    /// Writes what arrived to `out`.
+    fn drain(
+        &mut self,
+        out: &mut Out,
+        k: usize,
+        axes: &[String],
+        clock: Clock,
+    ) -> Result<(), String>;
+    fn counts(&self) -> (u64, u64);
+}
+
+struct Chan<T: Message + ZeroCopySend> {
+    sub: Sub<T>,
+    topic: String,
+    last: HashMap<u64, u64>,
+    written: u64,
+    lost: u64,
+}
+
+impl<T: Message + ZeroCopySend> Topic for Chan<T> {
+    fn name(&self) -> &str {
+        &self.topic
+    }
+
+    fn schema_name(&self) -> &'static str {
+        T::NAME
+    }
+
+    fn schema(&self, axes: &[String]) -> Value {
+        T::schema(axes)
+    }
+
+    fn drain(
+        &mut self,
+        out: &mut Out,
+        k: usize,
+        axes: &[String],
+        clock: Clock,
+    ) -> Result<(), String> {
+        while let Some(m) = self.sub.next() {
+            // A number lower than the last (a restarted process) starts the count again.
+            if let Some((stream, seq)) = m.seq()
+                && let Some(prev) = self.last.insert(stream, seq)
+                && seq > prev + 1
+            {
+                self.lost += seq - prev - 1;
+            }
+            let stamp = m.stamp_ns().unwrap_or_else(runtime::time::now_ns);
+            let data = serde_json::to_vec(&m.json(axes)).map_err(|e| e.to_string())?;
+            out.write(k, clock.epoch(stamp), &data)?;
+            self.written += 1;
+        }
+        Ok(())
+    }
+
+    fn counts(&self) -> (u64, u64) {
+        (self.written, self.lost)
+    }
+}
+
+fn chan<T: Message + ZeroCopySend>(
+    node: &iceoryx2::prelude::Node<ipc::Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+    topic: String,
+    buffer: usize,
+) -> Result<Box<dyn Topic>, String> {
+    Ok(Box::new(Chan::<T> {
+        sub: Sub::new(node, instance, id, buffer).map_err(|e| format!("{topic}: {e}"))?,
+        topic,
+        last: HashMap::new(),
+        written: 0,
+        lost: 0,
+    }))
+}
+
+/// The MCAP file being written, and the next ones.
+struct Out {
+    base: PathBuf,
+    rotate: Rotate,
+    part: u32,
+    path: PathBuf,
+    writer: mcap::Writer<BufWriter<File>>,
+    /// Channel id per topic, in this file.
+    ids: Vec<u16>,
+    sequence: u32,
+    opened: Instant,
+    files: Vec<PathBuf>,
+}
+
+/// (topic, schema name, schema) of every topic.
+type Topics = Vec<(String, &'static str, Value)>;
+
+impl Out {
+    fn create(base: &Path, rotate: Rotate, part: u32, topics: &Topics) -> Result<Self, String> {
+        let path = if rotate.bytes.is_some() || rotate.every.is_some() {
+            let stem = base
+                .file_stem()
+                .map_or("record".into(), |s| s.to_string_lossy());
+            base.with_file_name(format!("{stem}-{part:03}.mcap"))
+        } else {
+            base.to_path_buf()
+        };
+        let file = File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut writer = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .profile("")
+            .create(BufWriter::new(file))
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut ids = Vec::new();
+        let mut schemas: HashMap<&'static str, u16> = HashMap::new();
+        for (topic, name, schema) in topics {
+            let schema_id = match schemas.get(name) {
+                Some(id) => *id,
+                None => {
+                    let text = serde_json::to_vec(schema).map_err(|e| e.to_string())?;
+                    let id = writer
+                        .add_schema(name, "jsonschema", &text)
+                        .map_err(|e| e.to_string())?;
+                    schemas.insert(name, id);
+                    id
+                }
+            };
+            ids.push(
+                writer
+                    .add_channel(schema_id, topic, "json", &BTreeMap::new())
+                    .map_err(|e| e.to_string())?,
+            );
+        }
+        Ok(Self {
+            base: base.to_path_buf(),
+            rotate,
+            part,
+            path: path.clone(),
+            writer,
+            ids,
+            sequence: 0,
+            opened: Instant::now(),
+            files: vec![path],
+        })
+    }
+
+    fn write(&mut self, k: usize, log_time: u64, data: &[u8]) -> Result<(), String> {
+        self.sequence = self.sequence.wrapping_add(1);
+        self.writer
+            .write_to_known_channel(
+                &MessageHeader {
+                    channel_id: self.ids[k],
+                    sequence: self.sequence,
+                    log_time,
+                    publish_time: log_time,
+                },
+                data,
+            )
+            .map_err(|e| format!("{}: {e}", self.path.display()))
+    }
+
+    /// Starts the next file when this one is full or old enough.
+    fn maybe_rotate(&mut self, topics: &Topics) -> Result<(), String> {
+        let full = self
+            .rotate
+            .bytes
+            .is_some_and(|b| std::fs::metadata(&self.path).is_ok_and(|m| m.len() >= b));
+        let old = self
+            .rotate
+            .every
+            .is_some_and(|t| self.opened.elapsed() >= t);
+        if !(full || old) {
+            return Ok(());
+        }
+        let mut next = Self::create(&self.base, self.rotate, self.part + 1, topics)?;
+        std::mem::swap(self, &mut next);
+        let mut files = std::mem::take(&mut next.files);
+        files.append(&mut self.files);
+        self.files = files;
+        next.finish()?;
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), String> {
+        self.writer
+            .finish()
+            .map(|_| ())
+            .map_err(|e| format!("{}: {e}", self.path.display()))
+    }
+}
+
+/// The topics of a cell: every service (per process: status and latency).
+fn topics(
+    node: &iceoryx2::prelude::Node<ipc::Ipc>,
+    instance: &InstanceName,
+    cell: &CellConfigV6,
+) -> Result<Vec<Box<dyn Topic>>, String> {
+    let big = 1024;
+    let mut t = vec![
+        chan::<SetpointV2>(
+            node,
+            instance,
+            ServiceId::Setpoint,
+            "/trajgen/setpoint".into(),
+            big,
+        )?,
+        chan::<ServoStateV3>(
+            node,
+            instance,
+            ServiceId::ServoState,
+            "/servo/state".into(),
+            big,
+        )?,
+        chan::<DriveCommandV2>(
+            node,
+            instance,
+            ServiceId::DriveCommand,
+            "/servo/drive_command".into(),
+            big,
+        )?,
+        chan::<DriveFeedbackV2>(
+            node,
+            instance,
+            ServiceId::DriveFeedback,
+            "/machine/feedback".into(),
+            big,
+        )?,
+        chan::<FieldbusImageV1>(
+            node,
+            instance,
+            ServiceId::FieldbusOutput,
+            "/iobridge/output".into(),
+            big,
+        )?,
+        chan::<DigitalIoV1>(node, instance, ServiceId::IoState, "/io/state".into(), big)?,
+        chan::<MotionCommandV2>(
+            node,
+            instance,
+            ServiceId::MotionCommand,
+            "/trajgen/command".into(),
+            big,
+        )?,
+        chan::<MotionControlV2>(
+            node,
+            instance,
+            ServiceId::MotionControl,
+            "/trajgen/control".into(),
+            big,
+        )?,
+        chan::<EventV1>(node, instance, ServiceId::Events, "/events".into(), big)?,
+        chan::<EstopV1>(node, instance, ServiceId::Estop, "/estop".into(), big)?,
+        chan::<HostStateV1>(
+            node,
+            instance,
+            ServiceId::HostState,
+            "/host/state".into(),
+            big,
+        )?,
+        chan::<LatencyHistogramV1>(
+            node,
+            instance,
+            ServiceId::SenseToCommand,
+            "/machine/sense_to_command".into(),
+            2,
+        )?,
+    ];
+    for p in cell.processes() {
+        let Some(name) = ProcessName::from_field(&p.name) else {
+            continue;
+        };
+        t.push(chan::<ProcessStatusV2>(
+            node,
+            instance,
+            ServiceId::Status(name),
+            format!("/{name}/status"),
+            big,
+        )?);
+        t.push(chan::<LatencyHistogramV1>(
+            node,
+            instance,
+            ServiceId::Latency(name),
+            format!("/{name}/latency"),
+            2,
+        )?);
+        t.push(chan::<LatencyHistogramV1>(
+            node,
+            instance,
+            ServiceId::ExecTime(name),
+            format!("/{name}/exec_time"),
+            2,
+        )?);
+    }
+    Ok(t)
+}
+
+/// How long without the supervisor's heartbeat before the recording takes the cell for gone.
+const GONE: Duration = Duration::from_secs(3);
+
+/// Records `instance` until `stop` says so, the duration is over or the cell goes down.
+/// `ready` is called once every subscriber is in place. Errors when the instance is not up
+/// (a [`crate::run::RunError::Input`]) or a file cannot be written.
+pub fn record(
+    instance: &InstanceName,
+    opts: &RecordOptions,
+    stop: &dyn Fn() -> bool,
+    ready: &mut dyn FnMut(&Path),
+) -> Result<Recorded, crate::run::RunError> {
+    use crate::run::RunError;
+    ipc::quiet_iceoryx2_log();
+    if ipc::live_node_pids(instance).unwrap_or_default().is_empty() {
+        return Err(RunError::Input(format!(
+            "instance {instance} is not up (`supervisor up --instance {instance}`)"
+        )));
+    }
+    let f = |e: String| RunError::failed(e);
+    let node = ipc::node(instance, &format!("recorder-{}", std::process::id()))
+        .map_err(|e| f(e.to_string()))?;
+    let cell_sub = Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1)
+        .map_err(|e| f(e.to_string()))?;
+    let start = Instant::now();
+    let cell = loop {
+        if let Some(c) = cell_sub.latest() {
+            break Box::new(c);
+        }
+        if start.elapsed() > Duration::from_secs(2) {
+            return Err(RunError::Input(format!(
+                "instance {instance} publishes no cell configuration: is it up?"
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    drop(cell_sub);
+    let axes: Vec<String> = Axes::of_cell(&cell).axes.into_iter().map(|a| a.0).collect();
+    let mut chans = topics(&node, instance, &cell).map_err(f)?;
+    let list: Topics = chans
+        .iter()
+        .map(|c| (c.name().to_string(), c.schema_name(), c.schema(&axes)))
+        .collect();
+    let mut out = Out::create(&opts.out, opts.rotate, 0, &list).map_err(f)?;
+    let host = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1)
+        .map_err(|e| f(e.to_string()))?;
+    let clock = Clock::new();
+    ready(&out.path);
+    let began = Instant::now();
+    let mut heard = Instant::now();
+    let mut last_check = Instant::now();
+    let ended = loop {
+        for (k, c) in chans.iter_mut().enumerate() {
+            c.drain(&mut out, k, &axes, clock).map_err(f)?;
+        }
+        if host.latest().is_some() {
+            heard = Instant::now();
+        }
+        if stop() {
+            break "stopped".to_string();
+        }
+        if opts.duration.is_some_and(|d| began.elapsed() >= d) {
+            break "its duration is over".to_string();
+        }
+        if heard.elapsed() > GONE {
+            break format!("instance {instance} went down");
+        }
+        if last_check.elapsed() >= Duration::from_secs(1) {
+            last_check = Instant::now();
+            out.maybe_rotate(&list).map_err(f)?;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    // What arrived meanwhile, then the index and the footer.
+    for (k, c) in chans.iter_mut().enumerate() {
+        c.drain(&mut out, k, &axes, clock).map_err(f)?;
+    }
+    out.finish().map_err(f)?;
+    let topics = chans
+        .iter()
+        .map(|c| {
+            let (n, lost) = c.counts();
+            (c.name().to_string(), n, lost)
+        })
+        .collect();
+    drop(chans);
+    drop(host);
+    drop(node);
+    ipc::cleanup_after_client(instance);
+    Ok(Recorded {
+        files: out.files.clone(),
+        topics,
+        ended,
+    })
+}
+
+/// `supervisor record` in a process of its own, for `run`, `up` and `exec --wait` with
+/// `--record FILE`: an observer, so nothing the cell does waits for it.
+#[derive(Debug)]
+pub struct Background {
+    child: Option<std::process::Child>,
+    out: Option<std::io::BufReader<std::process::ChildStdout>>,
+}
+
+impl Background {
+    /// Starts recording `instance` into `file`; returns once the recorder subscribes to
+    /// everything. `tick` runs every 10 ms meanwhile (the supervisor's heartbeat, and its
+    /// publishers' connections: the recorder needs the configuration's history).
+    pub fn start(
+        instance: &InstanceName,
+        file: &Path,
+        tick: &mut dyn FnMut(),
+    ) -> Result<Self, crate::run::RunError> {
+        use std::io::BufRead;
+        let exe = std::env::current_exe()
+            .map_err(|e| crate::run::RunError::failed(format!("record: {e}")))?;
+        let mut child = std::process::Command::new(exe)
+            .args(["record", "--instance", instance.as_str(), "--out"])
+            .arg(file)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .map_err(|e| crate::run::RunError::failed(format!("record: {e}")))?;
+        // Its first line says it is ready; read on a thread so that `tick` goes on.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let out = child.stdout.take().map(std::io::BufReader::new);
+        let reader = std::thread::spawn(move || {
+            let mut out = out;
+            let mut line = String::new();
+            if let Some(o) = out.as_mut() {
+                let _ = o.read_line(&mut line);
+            }
+            let _ = tx.send(line);
+            out
+        });
+        let started = Instant::now();
+        let line = loop {
+            match rx.recv_timeout(Duration::from_millis(10)) {
+                Ok(line) => break line,
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout)
+                    if started.elapsed() < Duration::from_secs(20) =>
+                {
+                    tick();
+                }
+                Err(_) => break String::new(),
+            }
+        };
+        let out = if line.is_empty() {
+            None
+        } else {
+            reader.join().ok().flatten()
+        };
+        let mut me = Self {
+            child: Some(child),
+            out,
+        };
+        if !line.starts_with("recording") {
+            let why = me.stop();
+            return Err(crate::run::RunError::failed(format!(
+                "the recorder did not start{}",
+                if why.trim().is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", why.trim())
+                }
+            )));
+        }
+        Ok(me)
+    }
+
+    /// Ends the recording (SIGTERM: the recorder finishes its file); its summary.
+    pub fn stop(&mut self) -> String {
+        use std::io::Read;
+        let Some(mut child) = self.child.take() else {
+            return String::new();
+        };
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(child.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+        let mut text = String::new();
+        if let Some(o) = self.out.as_mut() {
+            let _ = o.read_to_string(&mut text);
+        }
+        let _ = child.wait();
+        text
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        let _ = self.stop();
+    }
+}

@@ -1,0 +1,46 @@
+"""Reads an MCAP file with the `mcap` package from PyPI (an independent reader) for the tests.
+
+    python3 mcap_read.py FILE [FILE...]
+
+Prints one JSON object: per topic its message count, schema name and encoding and message
+encoding, whether every message's log time is in order, and every setpoint of
+`/trajgen/setpoint` as [program_id, motion_time_s, state, position by axis name...].
+"""
+
+import json
+import sys
+
+from mcap.reader import make_reader
+
+
+def main():
+    topics = {}
+    setpoints = []
+    for path in sys.argv[1:]:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            for ch in summary.channels.values():
+                sc = summary.schemas[ch.schema_id]
+                t = topics.setdefault(ch.topic, {"count": 0, "schema": sc.name,
+                                                  "schema_encoding": sc.encoding,
+                                                  "encoding": ch.message_encoding,
+                                                  "in_order": True, "last": 0})
+                json.loads(sc.data)  # the schema is JSON
+            for schema, channel, message in reader.iter_messages(log_time_order=False):
+                t = topics[channel.topic]
+                t["count"] += 1
+                if message.log_time < t["last"]:
+                    t["in_order"] = False
+                t["last"] = message.log_time
+                if channel.topic == "/trajgen/setpoint":
+                    m = json.loads(message.data)
+                    setpoints.append([m["program_id"], m["motion_time_s"], m["state"],
+                                      m["position"]])
+    for t in topics.values():
+        del t["last"]
+    print(json.dumps({"topics": topics, "setpoints": setpoints}))
+
+
+if __name__ == "__main__":
+    main()
