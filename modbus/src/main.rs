@@ -23,6 +23,9 @@ use std::sync::mpsc::Receiver;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+/// Write requests queued between two cycles at most.
+const WRITE_QUEUE: usize = 64;
+
 /// Servo states kept to find the one an image was taken from.
 const RECENT: usize = 16;
 
@@ -76,43 +79,69 @@ impl Gateway {
         fresh
     }
 
-    fn act(&mut self, cx: &mut Cycle<'_>, action: Action, peer: SocketAddr) {
+    /// Applies one cycle's writes, merged: the outputs in one request (the last write of each
+    /// bit wins), one e-stop, the last speed override, one event each.
+    fn apply(&mut self, cx: &mut Cycle<'_>, writes: &Writes) {
         let now = cx.now_ns();
-        let client = peer.to_string();
-        match action {
+        if writes.mask != 0 {
+            self.io_request.send(&IoWriteV1 {
+                stamp_ns: now,
+                mask: writes.mask,
+                values: writes.values,
+                source: self.index,
+                line: 0,
+            });
+        }
+        if let Some(peer) = &writes.estop {
+            let client = peer.to_string();
+            let why = ["e-stop asked over Modbus by ", &client];
+            cx.events
+                .push(EventV1::new(now, code::FIELDBUS_WRITE, -1, 1.0, 0.0, &why));
+            cx.raise_estop(EstopOrigin::External, code::FIELDBUS_WRITE, &why);
+        }
+        if let Some((percent, peer)) = &writes.speed {
+            // Numbers increase across senders: the time of the send (the supervisor's are
+            // times too).
+            self.control_seq = (self.control_seq + 1).max(runtime::time::now_ns());
+            self.control.send(&MotionControlV2 {
+                seq: self.control_seq,
+                kind: ControlKind::Speed as u32,
+                reserved: 0,
+                value: f64::from(*percent) / 100.0,
+            });
+            let client = peer.to_string();
+            cx.events.push(EventV1::new(
+                now,
+                code::FIELDBUS_WRITE,
+                -1,
+                f64::from(*percent),
+                0.0,
+                &["speed override % from ", &client],
+            ));
+        }
+    }
+}
+
+/// The writes of one cycle, merged.
+#[derive(Debug, Default)]
+struct Writes {
+    mask: u64,
+    values: u64,
+    estop: Option<SocketAddr>,
+    speed: Option<(u16, SocketAddr)>,
+}
+
+impl Writes {
+    fn add(&mut self, a: Action, peer: SocketAddr) {
+        match a {
             Action::Io { mask, values } => {
-                self.io_request.send(&IoWriteV1 {
-                    stamp_ns: now,
-                    mask,
-                    values,
-                    source: self.index,
-                    line: 0,
-                });
+                self.values = (self.values & !mask) | (values & mask);
+                self.mask |= mask;
             }
             Action::Estop => {
-                let why = ["e-stop asked over Modbus by ", &client];
-                cx.events
-                    .push(EventV1::new(now, code::FIELDBUS_WRITE, -1, 1.0, 0.0, &why));
-                cx.raise_estop(EstopOrigin::External, code::FIELDBUS_WRITE, &why);
+                self.estop.get_or_insert(peer);
             }
-            Action::Speed(percent) => {
-                // Numbers increase across senders (the supervisor's are times too).
-                self.control_seq = (self.control_seq + 1).max(now);
-                self.control.send(&MotionControlV2 {
-                    seq: self.control_seq,
-                    kind: ControlKind::Speed as u32,
-                    reserved: 0,
-                    value: f64::from(percent) / 100.0,
-                });
-                cx.events.push(EventV1::new(
-                    now,
-                    code::FIELDBUS_WRITE,
-                    -1,
-                    f64::from(percent),
-                    0.0,
-                    &["speed override % from ", &client],
-                ));
-            }
+            Action::Speed(p) => self.speed = Some((p, peer)),
         }
     }
 }
@@ -126,6 +155,7 @@ impl Task for Gateway {
                 Err(p) => *p.into_inner() = regs,
             }
         }
+        let mut writes = Writes::default();
         while let Ok(msg) = self.rx.try_recv() {
             let now = cx.now_ns();
             match msg {
@@ -151,9 +181,14 @@ impl Task for Gateway {
                         &[&why],
                     ));
                 }
-                Msg::Act(action, peer) => self.act(cx, action, peer),
+                Msg::Act(actions, peer) => {
+                    for a in actions {
+                        writes.add(a, peer);
+                    }
+                }
             }
         }
+        self.apply(cx, &writes);
     }
 }
 
@@ -177,7 +212,8 @@ fn main() -> ExitCode {
                 writes: m.writes != 0,
             };
             let regs: Shared = Arc::new(Mutex::new(Arc::new(Registers::default())));
-            let (tx, rx) = std::sync::mpsc::channel();
+            // Bounded: a client writing faster than the cycle takes writes gets exception 6.
+            let (tx, rx) = std::sync::mpsc::sync_channel(WRITE_QUEUE);
             server::spawn(settings, regs.clone(), tx)
                 .map_err(|e| SetupError::from(format!("cannot start the server: {e}")))?;
             Ok::<_, SetupError>(Gateway {

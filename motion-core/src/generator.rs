@@ -422,7 +422,8 @@ impl Generator {
     /// # Real-time
     /// Arithmetic only.
     pub fn control(&mut self, c: &MotionControlV2, now_ns: u64) {
-        self.control_seq = c.seq;
+        // The largest taken: numbers grow across senders, so `>=` tells a sender its own was.
+        self.control_seq = self.control_seq.max(c.seq);
         if self.state == MotionState::Moving {
             // The ramp starts now, not at the previous cycle.
             self.path_time(now_ns);

@@ -588,7 +588,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "not-critical-failed",
         severity: Severity::Warning,
         unit: "",
-        meaning: "A process with `critical = false` failed: it was lost, it stalled, or one of its health detectors expired (the text says which; value and limit as in `process-lost` or `health-expired`). No e-stop follows and no program ends; the process restarts per its `restart` policy.",
+        meaning: "A process with `critical = false` failed: it was lost or it stalled (the supervisor restarts it by its `restart` policy), or one of its health detectors expired (the process starts its detectors afresh); the text says which, value and limit as in `process-lost` or `health-expired`. No e-stop follows and no program ends.",
     },
 ];
 

@@ -312,10 +312,6 @@ impl ServiceId {
                 max_subscribers: 24,
                 ..base
             },
-            Self::MotionCommand => Qos {
-                max_subscribers: 2,
-                ..base
-            },
             // Every process writes events, and the supervisor; several tools may read them.
             Self::Events => Qos {
                 max_publishers: 32,
@@ -352,7 +348,7 @@ impl ServiceId {
             Self::Latency(_) | Self::ExecTime(_) | Self::SenseToCommand => Qos {
                 history: 1,
                 subscriber_max_buffer: 2,
-                max_subscribers: 4,
+                max_subscribers: 8,
                 ..base
             },
             _ => base,

@@ -194,6 +194,10 @@ fn await_orphans(cfg: &Config, instance: &InstanceName) -> Result<(), RunError> 
     }
 }
 
+/// How long a process that is not critical must run after a restart for its restart count
+/// to start again from 0.
+const STABLE: Duration = Duration::from_secs(60);
+
 /// The supervisor's ports and the processes of the cell.
 pub(crate) struct Cell {
     pub(crate) instance: InstanceName,
@@ -221,6 +225,8 @@ pub(crate) struct Cell {
     critical: Vec<bool>,
     /// Per process: the network address it announced it serves on (`listening` events).
     pub(crate) listening: Vec<Option<String>>,
+    /// Per process: when it was last started.
+    started: Vec<Instant>,
     /// The first e-stop trigger since the last reset, and when it was seen.
     pub(crate) estop: Option<(EstopV1, Instant)>,
     host: HostStateV1,
@@ -320,6 +326,7 @@ impl Cell {
             flagged: vec![false; n],
             critical: cfg.process.iter().map(|p| p.critical).collect(),
             listening: vec![None; n],
+            started: vec![Instant::now(); n],
             estop: None,
             host,
             sense_to_command: None,
@@ -535,6 +542,10 @@ impl Cell {
     fn lost(&mut self, k: usize, cfg: &Config, why: &str, exit_code: f64) {
         let name = self.names[k].clone();
         self.listening[k] = None;
+        if !self.critical[k] {
+            // Its last status must not hold a reset back while it restarts.
+            self.statuses[k] = None;
+        }
         if self.critical[k] {
             self.event(code::PROCESS_LOST, exit_code, &[&name, ": ", why]);
             self.raise_host(code::PROCESS_LOST, &[&name, " lost"]);
@@ -574,6 +585,7 @@ impl Cell {
             .children
             .spawn(&cfg.process[k], k, command.as_deref(), &self.instance)?;
         self.life[k] = Life::Running;
+        self.started[k] = Instant::now();
         self.beats[k] = (0, Instant::now());
         self.statuses[k] = None;
         self.flagged[k] = false;
@@ -663,6 +675,17 @@ impl Cell {
                     // Alive but not cycling: end it; its exit restarts it.
                     self.children.kill(k);
                 }
+            }
+        }
+        // A process that is not critical and has run a while since its last restart starts
+        // its restart count afresh (no e-stop reset does it for such a process).
+        for k in 0..self.names.len() {
+            if !self.critical[k]
+                && self.streak[k] > 0
+                && self.cyclic(k)
+                && self.started[k].elapsed() > STABLE
+            {
+                self.streak[k] = 0;
             }
         }
         // Restarts that are due.
@@ -819,20 +842,23 @@ impl Cell {
 
     /// The processes still showing the e-stop latched after a reset.
     pub(crate) fn still_latched(&self) -> Vec<String> {
-        self.names
-            .iter()
-            .zip(&self.statuses)
-            .filter(|(_, s)| s.is_some_and(|s| s.estop & estop_seen::LATCHED != 0))
-            .map(|(n, _)| n.clone())
+        // A process that is not critical is not waited for (its status may be a lost one's).
+        (0..self.names.len())
+            .filter(|&k| self.critical[k] && self.life[k] == Life::Running)
+            .filter(|&k| self.statuses[k].is_some_and(|s| s.estop & estop_seen::LATCHED != 0))
+            .map(|k| self.names[k].clone())
             .collect()
     }
 
     /// True while a process that reacts to the e-stop has not completed its reaction.
     pub(crate) fn reactions_pending(&self) -> bool {
-        self.statuses
-            .iter()
-            .flatten()
-            .any(|s| s.estop & estop_seen::REACTING != 0 && s.estop & estop_seen::SAFE == 0)
+        (0..self.names.len())
+            .filter(|&k| self.critical[k])
+            .any(|k| {
+                self.statuses[k].is_some_and(|s| {
+                    s.estop & estop_seen::REACTING != 0 && s.estop & estop_seen::SAFE == 0
+                })
+            })
     }
 
     /// True when process `name` reacts to the e-stop.

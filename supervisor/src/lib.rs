@@ -19,3 +19,4 @@ pub mod status;
 pub mod swap;
 pub mod tune;
 pub mod up;
+pub mod web;

@@ -41,6 +41,21 @@ enum Cmd {
         #[arg(long)]
         record: Option<PathBuf>,
     },
+    /// Serve the cell in a browser: a 3D view from its kinematics, live, the program line,
+    /// plots, the process table, e-stop / reset / start (docs/web.md). It attaches to the
+    /// instance whenever it is up, and waits for it when it is not; until SIGINT or SIGTERM.
+    Web {
+        /// Instance name.
+        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
+        instance: String,
+        /// Address to listen on (port 0: any free port, printed). Anything but a loopback
+        /// address needs --token.
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        listen: String,
+        /// A token every client must give (`?token=` in the page's address).
+        #[arg(long)]
+        token: Option<String>,
+    },
     /// Record every service of a running cell into an MCAP file (for Foxglove, PlotJuggler):
     /// until SIGINT/SIGTERM, `--duration`, or the cell going down (docs/recording.md).
     Record {
@@ -548,7 +563,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let _log = init_logging(matches!(
         cli.cmd,
-        Cmd::Up { .. } | Cmd::Run { .. } | Cmd::Tune { .. }
+        Cmd::Up { .. } | Cmd::Run { .. } | Cmd::Tune { .. } | Cmd::Web { .. } | Cmd::Record { .. }
     ));
     match cli.cmd {
         Cmd::Status {
@@ -556,6 +571,11 @@ fn main() -> ExitCode {
             json,
             watch,
         } => status(&instance, json, watch),
+        Cmd::Web {
+            instance,
+            listen,
+            token,
+        } => web(&instance, &listen, token),
         Cmd::Record {
             out,
             instance,
@@ -886,6 +906,40 @@ fn record(
             print!("{}", r.text());
             ExitCode::SUCCESS
         }
+        Err(e) => run_failed(&e, false),
+    }
+}
+
+/// `supervisor web`.
+fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
+    let i = match instance_of(instance) {
+        Ok(i) => i,
+        Err(c) => return c,
+    };
+    let Ok(listen) = listen.parse() else {
+        eprintln!("error: --listen {listen:?} is not an IP:port address (\"127.0.0.1:8080\")");
+        return ExitCode::from(2);
+    };
+    if token.as_deref().is_some_and(|t| t.len() < 8) {
+        eprintln!("error: --token must have at least 8 characters");
+        return ExitCode::from(2);
+    }
+    if let Err(e) = runtime::signals::install() {
+        eprintln!("error: cannot install signal handlers: {e}");
+        return ExitCode::FAILURE;
+    }
+    let opts = supervisor::web::WebOptions {
+        instance: i,
+        listen,
+        token,
+    };
+    let result = supervisor::web::web(&opts, &mut |addr| {
+        use std::io::Write;
+        println!("serving instance {i} on http://{addr}/");
+        let _ = std::io::stdout().flush();
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
         Err(e) => run_failed(&e, false),
     }
 }

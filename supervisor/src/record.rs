@@ -162,7 +162,9 @@ message!(DigitalIoV1, "rtc.DigitalIoV1", stamp: |s| Some(s.stamp_ns), seq: |s| S
     seq: Num, stamp_ns: Num, values: Num, changed: Num, taken: Num, refused: Num,
     count: Num, outputs_safe: Num,
 });
-message!(EventV1, "rtc.EventV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((u64::from(s.source), s.seq)), {
+// The supervisor's own events and its tools' (`supervisor inject`) share a source and number
+// separately: no loss is counted from theirs.
+message!(EventV1, "rtc.EventV1", stamp: |s| Some(s.stamp_ns), seq: |s| (s.source != shm_schema::event::SOURCE_SUPERVISOR).then_some((u64::from(s.source), s.seq)), {
     seq: Num, stamp_ns: Num, source: Num, severity: Num, code: Num, axis: Num, value: Num,
     limit: Num, text: Text,
 });
@@ -390,7 +392,12 @@ impl<T: Message + ZeroCopySend> Topic for Chan<T> {
             {
                 self.lost += seq - prev - 1;
             }
-            let stamp = m.stamp_ns().unwrap_or_else(runtime::time::now_ns);
+            // A sample without a time of its own (or a process' first status, stamped 0): the
+            // time it was read.
+            let stamp = m
+                .stamp_ns()
+                .filter(|&t| t > 0)
+                .unwrap_or_else(runtime::time::now_ns);
             let data = serde_json::to_vec(&m.json(axes)).map_err(|e| e.to_string())?;
             out.write(k, clock.epoch(stamp), &data)?;
             self.written += 1;
@@ -537,101 +544,120 @@ fn topics(
     cell: &CellConfigV6,
 ) -> Result<Vec<Box<dyn Topic>>, String> {
     let big = 1024;
-    let mut t = vec![
+    let mut t: Vec<Box<dyn Topic>> = Vec::new();
+    // A service whose subscriber slots are all taken is not recorded: the recorder never
+    // takes a place the cell needs, and says which topic it left out.
+    let mut add = |c: Result<Box<dyn Topic>, String>| match c {
+        Ok(c) => t.push(c),
+        Err(e) => tracing::warn!("record: {e}; that topic is not recorded"),
+    };
+    for c in [
         chan::<SetpointV2>(
             node,
             instance,
             ServiceId::Setpoint,
             "/trajgen/setpoint".into(),
             big,
-        )?,
+        ),
         chan::<ServoStateV3>(
             node,
             instance,
             ServiceId::ServoState,
             "/servo/state".into(),
             big,
-        )?,
+        ),
         chan::<DriveCommandV2>(
             node,
             instance,
             ServiceId::DriveCommand,
             "/servo/drive_command".into(),
             big,
-        )?,
+        ),
         chan::<DriveFeedbackV2>(
             node,
             instance,
             ServiceId::DriveFeedback,
             "/machine/feedback".into(),
             big,
-        )?,
+        ),
         chan::<FieldbusImageV1>(
             node,
             instance,
             ServiceId::FieldbusOutput,
             "/iobridge/output".into(),
             big,
-        )?,
-        chan::<DigitalIoV1>(node, instance, ServiceId::IoState, "/io/state".into(), big)?,
+        ),
+        chan::<DigitalIoV1>(node, instance, ServiceId::IoState, "/io/state".into(), big),
         chan::<MotionCommandV2>(
             node,
             instance,
             ServiceId::MotionCommand,
             "/trajgen/command".into(),
             big,
-        )?,
+        ),
         chan::<MotionControlV2>(
             node,
             instance,
             ServiceId::MotionControl,
             "/trajgen/control".into(),
             big,
-        )?,
-        chan::<EventV1>(node, instance, ServiceId::Events, "/events".into(), big)?,
-        chan::<EstopV1>(node, instance, ServiceId::Estop, "/estop".into(), big)?,
+        ),
+        chan::<EventV1>(node, instance, ServiceId::Events, "/events".into(), big),
+        chan::<EstopV1>(node, instance, ServiceId::Estop, "/estop".into(), big),
         chan::<HostStateV1>(
             node,
             instance,
             ServiceId::HostState,
             "/host/state".into(),
             big,
-        )?,
+        ),
         chan::<LatencyHistogramV1>(
             node,
             instance,
             ServiceId::SenseToCommand,
             "/machine/sense_to_command".into(),
             2,
-        )?,
-    ];
+        ),
+    ] {
+        add(c);
+    }
     for p in cell.processes() {
         let Some(name) = ProcessName::from_field(&p.name) else {
             continue;
         };
-        t.push(chan::<ProcessStatusV2>(
+        add(chan::<ProcessStatusV2>(
             node,
             instance,
             ServiceId::Status(name),
             format!("/{name}/status"),
             big,
-        )?);
-        t.push(chan::<LatencyHistogramV1>(
+        ));
+        add(chan::<LatencyHistogramV1>(
             node,
             instance,
             ServiceId::Latency(name),
             format!("/{name}/latency"),
             2,
-        )?);
-        t.push(chan::<LatencyHistogramV1>(
+        ));
+        add(chan::<LatencyHistogramV1>(
             node,
             instance,
             ServiceId::ExecTime(name),
             format!("/{name}/exec_time"),
             2,
-        )?);
+        ));
     }
     Ok(t)
+}
+
+/// Removes what is left of the instance once this observer's node is gone, if the cell is gone
+/// too.
+struct Leave(InstanceName);
+
+impl Drop for Leave {
+    fn drop(&mut self) {
+        ipc::cleanup_after_client(&self.0);
+    }
 }
 
 /// How long without the supervisor's heartbeat before the recording takes the cell for gone.
@@ -654,6 +680,9 @@ pub fn record(
         )));
     }
     let f = |e: String| RunError::failed(e);
+    // Whatever happens from here, the recorder leaves nothing of the instance behind it once
+    // the cell is gone (declared before the node: dropped after it).
+    let _leave = Leave(*instance);
     let node = ipc::node(instance, &format!("recorder-{}", std::process::id()))
         .map_err(|e| f(e.to_string()))?;
     let cell_sub = Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1)
@@ -719,10 +748,6 @@ pub fn record(
             (c.name().to_string(), n, lost)
         })
         .collect();
-    drop(chans);
-    drop(host);
-    drop(node);
-    ipc::cleanup_after_client(instance);
     Ok(Recorded {
         files: out.files.clone(),
         topics,
@@ -814,11 +839,20 @@ impl Background {
             nix::unistd::Pid::from_raw(child.id() as i32),
             nix::sys::signal::Signal::SIGTERM,
         );
+        // It finishes its file and prints its summary; one that does not within this long is
+        // killed (its file then lacks its index: readers that stream still read it).
+        let until = Instant::now() + Duration::from_secs(10);
+        while child.try_wait().ok().flatten().is_none() && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        if child.try_wait().ok().flatten().is_none() {
+            let _ = child.kill();
+        }
+        let _ = child.wait();
         let mut text = String::new();
         if let Some(o) = self.out.as_mut() {
             let _ = o.read_to_string(&mut text);
         }
-        let _ = child.wait();
         text
     }
 }

@@ -420,9 +420,11 @@ pub(crate) fn pid_of(role: &str, inst: &str) -> i32 {
 }
 
 /// Waits until servo of `inst` follows a motion (x faster than 1 mm/s); returns the port.
+/// A run that ends first fails the test with its output.
 pub(crate) fn until_moving(
     node: &iceoryx2::prelude::Node<runtime::ipc::Ipc>,
     name: &shm_schema::InstanceName,
+    run: &mut std::process::Child,
 ) -> runtime::ipc::Sub<shm_schema::ServoStateV3> {
     let state = runtime::ipc::Sub::<shm_schema::ServoStateV3>::new(
         node,
@@ -437,12 +439,20 @@ pub(crate) fn until_moving(
         .is_some_and(|s| s.cmd_velocity[0].abs() > 1.0)
     {
         assert!(start.elapsed() < WATCHDOG, "the arm never moved");
+        if let Some(status) = run.try_wait().expect("wait") {
+            let mut err = String::new();
+            if let Some(e) = run.stderr.as_mut() {
+                let _ = std::io::Read::read_to_string(e, &mut err);
+            }
+            panic!("the run ended ({status}) before the arm moved:\n{err}");
+        }
         std::thread::sleep(Duration::from_millis(10));
     }
     state
 }
 
-/// Connects a node to `inst` once its cell is up (a run refuses an instance in use).
+/// Connects a node to `inst` once its cell is up (the supervisor and the five processes of
+/// the default cell).
 pub(crate) fn client_of(
     inst: &str,
 ) -> (
@@ -454,7 +464,7 @@ pub(crate) fn client_of(
     while runtime::ipc::live_node_pids(&name)
         .unwrap_or_default()
         .len()
-        < 5
+        < 6
     {
         assert!(start.elapsed() < WATCHDOG, "the cell never came up");
         std::thread::sleep(Duration::from_millis(20));
@@ -466,9 +476,9 @@ pub(crate) fn client_of(
 #[test]
 fn servo_cuts_power_when_the_drives_process_stalls() {
     let inst = instance("stall-machine");
-    let run = triangle_in_background_with(&inst, Some(&patient_config("stall-machine")));
+    let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-machine")));
     let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name);
+    let state = until_moving(&node, &name, &mut run);
     // The drives' process stops (as a hung fieldbus would): its feedback stops coming.
     let machine = pid_of("machine-sim", &inst);
     // SAFETY: kill(2) on a process this test's supervisor started.
@@ -498,9 +508,9 @@ fn servo_cuts_power_when_the_drives_process_stalls() {
 #[test]
 fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
     let inst = instance("stall-trajgen");
-    let run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
+    let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
     let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name);
+    let state = until_moving(&node, &name, &mut run);
     // trajgen stops publishing in the middle of a move; servo must bring the axes to rest
     // along their path and hold, enabled, with nothing latched. (The supervisor ends the run
     // after its heartbeat timeout, here 5 s.)

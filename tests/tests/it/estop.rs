@@ -38,9 +38,9 @@ fn estop(inst: &str, reason: &str) {
 /// Runs the triangle on `inst` with `cfg`, raises the user's e-stop mid-motion; returns the
 /// run's stderr and JSON report.
 fn user_estop_mid_motion(inst: &str, cfg: Option<&std::path::Path>) -> (String, serde_json::Value) {
-    let run = triangle_in_background_as(inst, cfg, true);
+    let mut run = triangle_in_background_as(inst, cfg, true);
     let (name, node) = client_of(inst);
-    let state = until_moving(&node, &name);
+    let state = until_moving(&node, &name, &mut run);
     estop(inst, "test e-stop");
     let out = wait_for(run);
     drop(state);
@@ -131,9 +131,9 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
         "cell.toml",
         &default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1),
     );
-    let run = triangle_in_background_as(&inst, Some(&cfg), false);
+    let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
     let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name);
+    let state = until_moving(&node, &name, &mut run);
     let trajgen = pid_of("trajgen", &inst);
     // SAFETY: kill(2) on a process this test's supervisor started.
     unsafe { libc::kill(trajgen, libc::SIGSTOP) };
@@ -160,11 +160,10 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
         "cell.toml",
         &with_stall_room(&default_cell()),
     );
-    let run = triangle_in_background_as(&inst, Some(&cfg), false);
+    let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
     let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name);
+    let state = until_moving(&node, &name, &mut run);
     let cell = pids_with(&["--instance", &inst]);
-    let mut run = run;
     run.kill().expect("SIGKILL the supervisor");
     let _ = run.wait();
     // Servo brings the axes to rest and disables the drives before it leaves.

@@ -17,6 +17,7 @@ mod programs;
 mod recording;
 mod servo_layer;
 mod up;
+mod web;
 
 #[global_allocator]
 static ALLOC: runtime::alloc_count::CountingAllocator = runtime::alloc_count::CountingAllocator;

@@ -1,0 +1,215 @@
+//! `supervisor web` in a real headless Chromium (Debian's `chromium`, driven by
+//! `playwright-core` from npm: tests/web/drive.mjs): the page loads with no network but the
+//! supervisor's, draws the robot where the cell says it is and follows a running program,
+//! its e-stop button stops the cell, reset and start bring it back, and the page goes on
+//! across the cell going down and coming up again. A screenshot is saved.
+
+use crate::drives::WATCHDOG;
+use crate::up::Up;
+use integration_tests::{default_cell, leftovers, scratch, supervisor, with_stall_room};
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn cell(test: &str) -> PathBuf {
+    let src = with_stall_room(&default_cell()).replacen(
+        "listen = \"127.0.0.1:1502\"",
+        "listen = \"127.0.0.1:0\"",
+        1,
+    );
+    scratch(test, "cell.toml", &src)
+}
+
+/// The page in Chromium, one command and one JSON answer at a time.
+struct Browser {
+    child: Child,
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+}
+
+impl Browser {
+    fn open(url: &str) -> (Self, Value) {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("web");
+        assert!(
+            dir.join("node_modules/playwright-core").exists(),
+            "playwright-core is not installed: `npm ci --prefix tests/web` (.ci/run does it)"
+        );
+        let mut child = Command::new("node")
+            .arg(dir.join("drive.mjs"))
+            .arg(url)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("node");
+        let stdin = child.stdin.take().expect("stdin");
+        let stdout = BufReader::new(child.stdout.take().expect("stdout"));
+        let mut b = Self {
+            child,
+            stdin,
+            stdout,
+        };
+        let ready = b.answer();
+        (b, ready)
+    }
+
+    fn answer(&mut self) -> Value {
+        let mut line = String::new();
+        self.stdout.read_line(&mut line).expect("read");
+        assert!(!line.is_empty(), "the browser driver ended");
+        serde_json::from_str(&line).expect("JSON from the driver")
+    }
+
+    fn ask(&mut self, cmd: &str) -> Value {
+        writeln!(self.stdin, "{cmd}").expect("write");
+        let a = self.answer();
+        assert!(a["error"].is_null(), "{cmd}: {a}");
+        a
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `supervisor web`, stopped (SIGTERM) when the test ends, whatever happens.
+struct Web(Child);
+
+impl Drop for Web {
+    fn drop(&mut self) {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(self.0.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+        let _ = self.0.wait();
+    }
+}
+
+/// `supervisor web` on a free port: the process and the page's address.
+fn serve(inst: &str) -> (Web, String) {
+    let mut web = supervisor()
+        .args(["web", "--instance", inst, "--listen", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("supervisor web");
+    let mut line = String::new();
+    BufReader::new(web.stdout.as_mut().expect("stdout"))
+        .read_line(&mut line)
+        .expect("read");
+    let url = line
+        .split_whitespace()
+        .find(|w| w.starts_with("http://"))
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_string();
+    (Web(web), url)
+}
+
+#[test]
+fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the_cell() {
+    let test = "web";
+    let cfg = cell(test);
+    let up = Up::start(test, &cfg);
+    let inst = up.inst.clone();
+    let (mut web, url) = serve(&inst);
+    let (mut page, ready) = Browser::open(&url);
+    assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+    // A program: x from 40 to 140 mm and back; the drawn tool follows the measured position.
+    let short = scratch(
+        test,
+        "short.prog",
+        "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
+    );
+    up.ok(&["exec", short.to_str().expect("utf-8")]);
+    up.until("moving", |s| {
+        s["supervisor"]["job"]["motion_time_s"]
+            .as_f64()
+            .is_some_and(|t| t > 1.0)
+    });
+    let a = page.ask("sample 3");
+    let samples: Vec<&Value> = a["samples"]
+        .as_array()
+        .expect("samples")
+        .iter()
+        .filter(|s| s["state"] == 1)
+        .collect();
+    assert!(samples.len() >= 5, "too few samples while moving: {a}");
+    let xs: Vec<f64> = samples
+        .iter()
+        .map(|s| s["drawn"][0].as_f64().expect("drawn x"))
+        .collect();
+    for s in &samples {
+        // Gantry: the tool is drawn at the measured joints (x, y).
+        let (d, j) = (&s["drawn"], &s["joints"]);
+        assert_eq!(d[0], j[0], "{s}");
+        assert_eq!(d[1], j[1], "{s}");
+    }
+    for w in xs.windows(2) {
+        assert!(w[1] >= w[0] - 1e-9, "x goes out to 140 mm: {xs:?}");
+    }
+    let moved = xs[xs.len() - 1] - xs[0];
+    println!("drawn x moved {moved:.2} mm in {} samples", xs.len());
+    assert!(
+        moved > 1.0,
+        "the drawn tool did not follow the program: {xs:?}"
+    );
+    let shot = scratch(test, "web.png", "");
+    page.ask(&format!("shot {}", shot.display()));
+    assert!(
+        std::fs::metadata(&shot).is_ok_and(|m| m.len() > 10_000),
+        "screenshot"
+    );
+    println!("screenshot: {}", shot.display());
+    // The e-stop button stops the cell, through the CLI's path.
+    page.ask("click estop");
+    let a = page.ask("until rtc.estop");
+    assert!(a["banner"].as_str().unwrap_or("").contains("E-STOP"), "{a}");
+    let s = up.until("e-stop latched", |s| !s["supervisor"]["estop"].is_null());
+    let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+    assert!(reason.contains("web view"), "{s}");
+    up.until("the job ended", |s| s["supervisor"]["job"].is_null());
+    // Reset and start from the page.
+    page.ask("click reset");
+    page.ask("until !rtc.estop");
+    page.ask("click start");
+    page.ask("until rtc.last && rtc.last.enabled === true");
+    // The cell goes down: the page says so; the web server lets go of the instance.
+    up.ok(&["down"]);
+    drop(up);
+    page.ask("until !rtc.up");
+    let start = Instant::now();
+    while !leftovers(&inst).is_empty() {
+        assert!(start.elapsed() < WATCHDOG, "left: {:?}", leftovers(&inst));
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // It comes up again: the same page draws it again.
+    let up = Up::start(test, &cfg);
+    let frames = page.ask("until rtc.up && rtc.last && rtc.last.joints")["held"].clone();
+    assert!(frames.is_string());
+    let bye = page.ask("quit");
+    assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
+    drop(page);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(web.0.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .expect("kill");
+    let status = web.0.wait().expect("web");
+    assert!(status.success(), "web exited with {status}");
+    up.down();
+}
+
+#[test]
+fn web_refuses_a_network_address_without_a_token() {
+    let out = supervisor()
+        .args(["web", "--instance", "nobody", "--listen", "0.0.0.0:0"])
+        .output()
+        .expect("web");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
+}
