@@ -360,6 +360,8 @@ struct Chan<T: Message + ZeroCopySend> {
     sub: Sub<T>,
     topic: String,
     last: HashMap<u64, u64>,
+    /// The time of the topic's last message (ns, `CLOCK_MONOTONIC`).
+    stamp: Option<u64>,
     written: u64,
     lost: u64,
 }
@@ -392,12 +394,15 @@ impl<T: Message + ZeroCopySend> Topic for Chan<T> {
             {
                 self.lost += seq - prev - 1;
             }
-            // A sample without a time of its own (or a process' first status, stamped 0): the
-            // time it was read.
-            let stamp = m
-                .stamp_ns()
-                .filter(|&t| t > 0)
-                .unwrap_or_else(runtime::time::now_ns);
+            // A sample without a time of its own: the time it was read; a process' first
+            // status (stamped 0, before its first cycle): the topic's previous time, so that
+            // the topic stays in time order.
+            let stamp = match m.stamp_ns() {
+                None => runtime::time::now_ns(),
+                Some(0) => self.stamp.unwrap_or_else(runtime::time::now_ns),
+                Some(t) => t,
+            };
+            self.stamp = Some(stamp);
             let data = serde_json::to_vec(&m.json(axes)).map_err(|e| e.to_string())?;
             out.write(k, clock.epoch(stamp), &data)?;
             self.written += 1;
@@ -421,6 +426,7 @@ fn chan<T: Message + ZeroCopySend>(
         sub: Sub::new(node, instance, id, buffer).map_err(|e| format!("{topic}: {e}"))?,
         topic,
         last: HashMap::new(),
+        stamp: None,
         written: 0,
         lost: 0,
     }))
