@@ -362,6 +362,8 @@ struct Chan<T: Message + ZeroCopySend> {
     last: HashMap<u64, u64>,
     /// The time of the topic's last message (ns, `CLOCK_MONOTONIC`).
     stamp: Option<u64>,
+    /// When the recorder subscribed: no sample it reads was published before.
+    since: u64,
     written: u64,
     lost: u64,
 }
@@ -399,7 +401,7 @@ impl<T: Message + ZeroCopySend> Topic for Chan<T> {
             // the topic stays in time order.
             let stamp = match m.stamp_ns() {
                 None => runtime::time::now_ns(),
-                Some(0) => self.stamp.unwrap_or_else(runtime::time::now_ns),
+                Some(0) => self.stamp.unwrap_or(self.since),
                 Some(t) => t,
             };
             self.stamp = Some(stamp);
@@ -427,6 +429,7 @@ fn chan<T: Message + ZeroCopySend>(
         topic,
         last: HashMap::new(),
         stamp: None,
+        since: runtime::time::now_ns(),
         written: 0,
         lost: 0,
     }))

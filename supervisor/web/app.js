@@ -210,8 +210,14 @@ function panel(f) {
       `<td>${p.wakeup_us?.toFixed(1) ?? '–'}</td><td>${p.max_wakeup_us?.toFixed(0) ?? '–'}</td><td>${p.overruns ?? '–'}</td></tr>`).join('');
 }
 
+// Drawn when something changes (a frame, the camera), not at the display's rate: a
+// software-rendered page must not take a CPU from the controller it shows.
+let dirty = true;
+controls.addEventListener('change', () => { dirty = true; });
+
 function onFrame(f) {
   rtc.frames++; rtc.last = f; rtc.up = f.up; rtc.estop = f.up ? f.estop : null;
+  dirty = true;
   panel(f);
   if (!f.up || !machine || !f.joints) return;
   const [x, y] = machine(f);
@@ -246,9 +252,12 @@ $('start').onclick = () => act('start');
 
 resize();
 connect();
+window.addEventListener('resize', () => { dirty = true; });
 (function loop() {
   requestAnimationFrame(loop);
   controls.update();
+  if (!dirty) return;
+  dirty = false;
   renderer.render(scene, camera);
   plot($('fe'), feHist, 'following error (largest per frame)', 'unit');
   plot($('lat'), latHist, 'wake-up latency', 'µs');

@@ -43,9 +43,11 @@ pub fn default_cell() -> String {
 
 /// `src` (a cell configuration) with room for the host's stalls where a test checks something
 /// else than the cell's tolerance of them: a following-error limit of 5 units, a drive
-/// watchdog and a feedback timeout of 0.5 s, a setpoint timeout of 0.2 s, and a
+/// watchdog and a feedback timeout of 0.5 s, a setpoint timeout of 0.2 s, a
 /// pending-sequence detector that expires only when a process misses every sample for a
-/// second. On this VM a loaded host stalls a process for 100 ms now and then
+/// second, a thread-offset detector that expires only when every wake-up is late for a
+/// second, and a supervisor timeout of 2 s (the tests run side by side on 2 CPUs, a
+/// browser and a recorder among them). On this VM a loaded host stalls a process for 100 ms now and then
 /// (`../shared/notes/machine.md`), which the default cell rightly treats as a fault.
 pub fn with_stall_room(src: &str) -> String {
     let out = src
@@ -58,9 +60,17 @@ pub fn with_stall_room(src: &str) -> String {
         .replace(
             "pending_sequence_overrun_percent_limit = 30.0",
             "pending_sequence_overrun_percent_limit = 100.0",
-        );
+        )
+        .replace(
+            "thread_offset_variance_overrun_percent_limit = 5.0",
+            "thread_offset_variance_overrun_percent_limit = 100.0",
+        )
+        .replace("supervisor_timeout = 0.5 ", "supervisor_timeout = 2.0 ");
     assert!(
-        out.contains("feedback_timeout = 0.5") && !out.contains("following_error_limit = 1.0"),
+        out.contains("feedback_timeout = 0.5")
+            && !out.contains("following_error_limit = 1.0")
+            && out.contains("thread_offset_variance_overrun_percent_limit = 100.0")
+            && out.contains("supervisor_timeout = 2.0"),
         "the cell's keys moved: update with_stall_room"
     );
     out
