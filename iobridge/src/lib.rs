@@ -12,7 +12,7 @@
 
 pub mod digital;
 
-use shm_schema::drive::{FIELDBUS_IMAGE_LEN, IMAGE_INVALID, milli_units};
+use shm_schema::drive::{FIELDBUS_IMAGE_LEN, milli_units};
 use shm_schema::{FieldbusImageV1, ServoStateV3};
 
 /// Bytes of the timestamp at the start of the image.
@@ -44,7 +44,7 @@ pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV3) -> FieldbusImage
 }
 
 /// Decodes an image: (measurement time µs, positions in axis units; NaN for
-/// [`IMAGE_INVALID`]).
+/// [`shm_schema::drive::IMAGE_INVALID`]).
 pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
     let mut stamp = [0u8; 8];
     stamp.copy_from_slice(&img.image[..STAMP_BYTES]);
@@ -54,15 +54,7 @@ pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
         .enumerate()
         .take((img.axes as usize).min(IMAGE_AXES))
     {
-        let at = STAMP_BYTES + 4 * i;
-        let mut b = [0u8; 4];
-        b.copy_from_slice(&img.image[at..at + 4]);
-        let raw = i32::from_le_bytes(b);
-        *p = if raw == IMAGE_INVALID {
-            f64::NAN
-        } else {
-            raw as f64 / 1000.0
-        };
+        *p = img.position(i).unwrap_or(f64::NAN);
     }
     (u64::from_le_bytes(stamp), pos)
 }
@@ -70,6 +62,7 @@ pub fn read_image(img: &FieldbusImageV1) -> (u64, [f64; IMAGE_AXES]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shm_schema::drive::IMAGE_INVALID;
 
     #[test]
     fn the_image_carries_the_measurement_time_and_positions() {

@@ -337,7 +337,7 @@ impl Registers {
                 let fl = field(AXIS, name);
                 put(&mut input, base + fl.addr, fl.kind, u64::from(v as u32));
             };
-            let measured = s.image.and_then(|img| image_position(&img, k));
+            let measured = s.image.and_then(|img| img.milli_position(k));
             axis("position", measured.unwrap_or(IMAGE_INVALID));
             if let Some(sv) = &s.servo {
                 axis("command", milli_units(sv.cmd_position[k]));
@@ -362,16 +362,6 @@ impl Registers {
             valid: s.image.is_some(),
         }
     }
-}
-
-/// Axis `k`'s measured position as iobridge wrote it (thousandths), if the image has it.
-fn image_position(img: &FieldbusImageV1, k: usize) -> Option<i32> {
-    if k >= img.axes as usize {
-        return None;
-    }
-    let at = 8 + 4 * k;
-    let bytes: [u8; 4] = img.image.get(at..at + 4)?.try_into().ok()?;
-    Some(i32::from_le_bytes(bytes))
 }
 
 /// `docs/fieldbus.md`'s register tables for `cell` (generated; a test compares).

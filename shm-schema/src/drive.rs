@@ -327,3 +327,24 @@ pub struct FieldbusImageV1 {
     /// The output image, see the type's documentation.
     pub image: [u8; FIELDBUS_IMAGE_LEN],
 }
+
+impl FieldbusImageV1 {
+    /// Axis `k`'s position as written (thousandths of the axis unit, [`IMAGE_INVALID`] for
+    /// no valid measurement); `None` for an axis the image does not have.
+    pub fn milli_position(&self, k: usize) -> Option<i32> {
+        if k >= self.axes as usize {
+            return None;
+        }
+        let at = 8 + 4 * k;
+        let bytes: [u8; 4] = self.image.get(at..at + 4)?.try_into().ok()?;
+        Some(i32::from_le_bytes(bytes))
+    }
+
+    /// Axis `k`'s position in axis units; `None` for an axis the image does not have or
+    /// no valid measurement.
+    pub fn position(&self, k: usize) -> Option<f64> {
+        self.milli_position(k)
+            .filter(|&raw| raw != IMAGE_INVALID)
+            .map(|raw| f64::from(raw) / 1000.0)
+    }
+}

@@ -199,17 +199,12 @@ impl Message for FieldbusImageV1 {
     const NAME: &'static str = "rtc.FieldbusImageV1";
     fn json(&self, axes: &[String]) -> Value {
         let img = self;
-        let mut pos = Map::new();
-        for (k, a) in axes.iter().enumerate().take(img.axes as usize) {
-            let at = 8 + 4 * k;
-            let raw = img
-                .image
-                .get(at..at + 4)
-                .and_then(|b| b.try_into().ok())
-                .map_or(shm_schema::drive::IMAGE_INVALID, i32::from_le_bytes);
-            let v = (raw != shm_schema::drive::IMAGE_INVALID).then(|| f64::from(raw) / 1000.0);
-            pos.insert(a.clone(), json!(v));
-        }
+        let pos: Map<String, Value> = axes
+            .iter()
+            .enumerate()
+            .take(img.axes as usize)
+            .map(|(k, a)| (a.clone(), json!(img.position(k))))
+            .collect();
         json!({
             "seq": img.seq, "written_ns": img.written_ns, "measured_ns": img.measured_ns,
             "source_seq": img.source_seq, "axes": img.axes, "position": pos,

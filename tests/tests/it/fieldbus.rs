@@ -5,28 +5,14 @@
 //! no e-stop; the register map's document is the code's.
 
 use crate::drives::{WATCHDOG, pid_of};
-use crate::up::Up;
-use integration_tests::{default_cell, examples, run_with_watchdog, scratch, with_stall_room};
+use crate::up::{Up, cell};
+use integration_tests::{examples, run_with_watchdog, scratch};
 use serde_json::Value;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// The default cell with room for the host's stalls, its Modbus server on any free port, and
-/// `[modbus]` keys replaced as `set` says (`("max_connections = 8", "max_connections = 2")`).
-fn cell(test: &str, set: &[(&str, &str)]) -> PathBuf {
-    let mut src = with_stall_room(&default_cell());
-    for (from, to) in [("listen = \"127.0.0.1:1502\"", "listen = \"127.0.0.1:0\"")]
-        .iter()
-        .chain(set)
-    {
-        assert!(src.contains(from), "{from:?} not in the default cell");
-        src = src.replacen(from, to, 1);
-    }
-    scratch(test, "cell.toml", &src)
-}
 
 fn process_in<'a>(s: &'a Value, name: &str) -> &'a Value {
     s["supervisor"]["processes"]

@@ -4,26 +4,14 @@
 //! observer that stays to the end of a run neither fails it nor is left behind.
 
 use crate::drives::WATCHDOG;
-use crate::up::Up;
+use crate::up::{Up, cell};
 use integration_tests::{
-    assert_clean, default_cell, examples, instance, json_of, run_with_watchdog, scratch,
-    supervisor, with_stall_room,
+    assert_clean, examples, instance, json_of, run_with_watchdog, scratch, supervisor,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// The default cell with room for the host's stalls and its Modbus server on any free port
-/// (tests run side by side).
-fn cell(test: &str) -> PathBuf {
-    let src = with_stall_room(&default_cell()).replacen(
-        "listen = \"127.0.0.1:1502\"",
-        "listen = \"127.0.0.1:0\"",
-        1,
-    );
-    scratch(test, "cell.toml", &src)
-}
 
 /// `tests/python/mcap_read.py` over `files`: topics and setpoints.
 fn read_back(files: &[PathBuf]) -> Value {
@@ -50,7 +38,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(cell(test))
+            .arg(cell(test, &[]))
             .arg("--record")
             .arg(&mcap)
             .arg("--trace")
@@ -138,7 +126,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
 #[test]
 fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
     let test = "rec-up";
-    let up = Up::start(test, &cell(test));
+    let up = Up::start(test, &cell(test, &[]));
     let base = scratch(test, "cell.mcap", "");
     let out = run_with_watchdog(
         supervisor()
@@ -185,7 +173,7 @@ fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behin
     let inst = instance(test);
     let run = supervisor()
         .args(["run", "--json", "--instance", &inst, "--config"])
-        .arg(cell(test))
+        .arg(cell(test, &[]))
         .arg(scratch(
             test,
             "p.prog",

@@ -2,7 +2,9 @@
 //! against it.
 
 use crate::drives::WATCHDOG;
-use integration_tests::{assert_clean, instance, run_with_watchdog, scratch, supervisor};
+use integration_tests::{
+    assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, with_stall_room,
+};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Output, Stdio};
@@ -142,4 +144,18 @@ pub(crate) fn wait_child(mut c: Child) -> std::process::ExitStatus {
         assert!(start.elapsed() < WATCHDOG, "the supervisor did not exit");
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// The default cell with room for the host's stalls, its Modbus server on any free port (the
+/// tests run side by side), and keys replaced as `set` says (`("max_connections = 8", "max_connections = 2")`).
+pub(crate) fn cell(test: &str, set: &[(&str, &str)]) -> PathBuf {
+    let mut src = with_stall_room(&default_cell());
+    for (from, to) in [("listen = \"127.0.0.1:1502\"", "listen = \"127.0.0.1:0\"")]
+        .iter()
+        .chain(set)
+    {
+        assert!(src.contains(from), "{from:?} not in the default cell");
+        src = src.replacen(from, to, 1);
+    }
+    scratch(test, "cell.toml", &src)
 }

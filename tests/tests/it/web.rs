@@ -5,22 +5,13 @@
 //! across the cell going down and coming up again. A screenshot is saved.
 
 use crate::drives::WATCHDOG;
-use crate::up::Up;
-use integration_tests::{default_cell, leftovers, scratch, supervisor, with_stall_room};
+use crate::up::{Up, cell};
+use integration_tests::{leftovers, scratch, supervisor};
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn cell(test: &str) -> PathBuf {
-    let src = with_stall_room(&default_cell()).replacen(
-        "listen = \"127.0.0.1:1502\"",
-        "listen = \"127.0.0.1:0\"",
-        1,
-    );
-    scratch(test, "cell.toml", &src)
-}
 
 /// The page in Chromium, one command and one JSON answer at a time.
 struct Browser {
@@ -113,7 +104,7 @@ fn serve(inst: &str) -> (Web, String) {
 #[test]
 fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the_cell() {
     let test = "web";
-    let cfg = cell(test);
+    let cfg = cell(test, &[]);
     let up = Up::start(test, &cfg);
     let inst = up.inst.clone();
     let (mut web, url) = serve(&inst);
