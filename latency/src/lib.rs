@@ -15,12 +15,11 @@
 //!
 //! Figures per series: samples, min, avg, max, p50/p99/p99.9/p99.99 (from the fixed-size
 //! [`shm_schema::LatencyHistogramV1`]), and cyclictest's 1-µs histogram with its overflows
-//! ([`histfile`]); as text like cyclictest's, as JSON ([`report`]) or as a PNG ([`plot`]).
+//! ([`histfile`]); as text like cyclictest's, as JSON ([`report`]) or as a PNG (the `plot` crate draws it).
 
 pub mod histfile;
 pub mod measure;
 pub mod peer;
-pub mod plot;
 pub mod report;
 
 pub use measure::{Options, Results, Series, Test, Threads, run};

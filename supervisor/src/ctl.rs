@@ -43,6 +43,8 @@ pub enum Request {
         wait: bool,
         /// With `wait`: include the trace (CSV) in the report.
         trace: bool,
+        /// With `wait`: include the figures (`--plot`) in the report.
+        figures: bool,
     },
     /// Decelerate along the path to rest and hold.
     Pause,
@@ -97,6 +99,8 @@ pub enum Reply {
         text: String,
         /// The trace as CSV (`run --trace`), when asked for and the program completed.
         trace_csv: Option<String>,
+        /// What `--plot` draws, when asked for and the program completed.
+        figures: Option<Box<crate::figures::Figures>>,
     },
 }
 

@@ -4,6 +4,7 @@
 
 use crate::cell::{Cell, Incident};
 use crate::config::Config;
+use crate::figures::{AxisEnvelope, Envelope, Figures};
 use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
 use crate::run::{RunError, TICK};
@@ -128,6 +129,9 @@ pub(crate) struct Job {
     predicted: Predicted,
     rows: Vec<SetpointV2>,
     servo_log: Vec<ServoSample>,
+    /// Servo's following error in every state from the program's first setpoint on, for the
+    /// figures: bounded however long the program runs, every peak kept.
+    fe: Envelope,
     /// Most rows and servo samples recorded ([`MAX_RECORD_S`]); beyond, the trace is cut.
     record_cap: (usize, usize),
     truncated: bool,
@@ -169,6 +173,7 @@ impl Job {
             predicted,
             rows: Vec::new(),
             servo_log: Vec::new(),
+            fe: Envelope::new(n, (cfg.period_s("servo") * 1e9) as u64),
             // Setpoints come at trajgen's period and at its transitions.
             record_cap: (2 * per_s("trajgen"), per_s("servo")),
             truncated: false,
@@ -197,8 +202,13 @@ impl Job {
         }
     }
 
-    /// Keeps a servo state for the trace (up to the record's cap).
+    /// Keeps a servo state for the trace (up to the record's cap) and its following error
+    /// for the figures (all of them).
     fn keep_servo(&mut self, s: &ServoStateV3) {
+        if let Some(first) = self.rows.first() {
+            self.fe.start_at(first.stamp_ns);
+            self.fe.add(s.stamp_ns, &s.following_error);
+        }
         if self.servo_log.len() < self.record_cap.1 {
             self.servo_log.push(ServoSample {
                 stamp_ns: s.stamp_ns,
@@ -472,6 +482,9 @@ impl Job {
             [f64::NAN; MAX_AXES]
         };
         let images = self.images;
+        let trace = trace_rows(&self.rows, &self.servo_log);
+        let measured_s = (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9 - done.waited_s;
+        let figures = self.figures(cfg, &trace, &max_fe, measured_s, done.theoretical_s);
         Report {
             ok: true,
             program: self.name.clone(),
@@ -489,7 +502,7 @@ impl Job {
                 .collect(),
             theoretical_s: done.theoretical_s,
             predicted_s: self.predicted.duration_s,
-            measured_s: (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9 - done.waited_s,
+            measured_s,
             waited_s: done.waited_s,
             trajgen_period_s: cfg.period_s("trajgen"),
             settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
@@ -515,9 +528,57 @@ impl Job {
                 )
             }),
             processes: Vec::new(),
-            trace: trace_rows(&self.rows, &self.servo_log),
+            trace,
             events: Vec::new(),
             sense_to_command: None,
+            figures,
+        }
+    }
+
+    /// The path and the following error of the figures (the latency histograms are the
+    /// processes', added with their reports).
+    fn figures(
+        &self,
+        cfg: &Config,
+        trace: &[TraceRow],
+        peak: &[f64; MAX_AXES],
+        measured_s: f64,
+        theoretical_s: f64,
+    ) -> Figures {
+        let n = cfg.axis.len();
+        let kin = crate::program::kin(cfg).ok().flatten();
+        let coords: Vec<(String, String)> = match &kin {
+            Some(k) => {
+                k.0.coords()
+                    .iter()
+                    .map(|c| (c.name.to_string(), c.unit.symbol().to_string()))
+                    .collect()
+            }
+            None => cfg
+                .axis
+                .iter()
+                .map(|a| (a.name.clone(), a.unit.clone()))
+                .collect(),
+        };
+        let rows = trace.iter().map(|r| (r.t_s, r.cmd, r.act));
+        Figures {
+            title: format!(
+                "{} on {}: {measured_s:.3} s measured, {theoretical_s:.3} s theoretical",
+                self.name, cfg.cell.name
+            ),
+            path: crate::figures::path_of(rows, kin.as_ref(), n, &coords),
+            following_error: cfg
+                .axis
+                .iter()
+                .enumerate()
+                .map(|(k, a)| AxisEnvelope {
+                    axis: a.name.clone(),
+                    unit: a.unit.clone(),
+                    peak: peak[k],
+                    buckets: self.fe.axis(k),
+                })
+                .collect(),
+            latency: Vec::new(),
         }
     }
 }

@@ -1,6 +1,6 @@
 //! `supervisor latency`: the options, their checks, progress and the output files.
 
-use latency::{Options, Results, Test, Threads, histfile, plot, report};
+use latency::{Options, Results, Test, Threads, histfile, report};
 use runtime::signals;
 use shm_schema::InstanceName;
 use std::io::{IsTerminal, Write};

@@ -6,6 +6,7 @@ pub mod config;
 pub mod control;
 pub mod ctl;
 pub mod events;
+pub mod figures;
 pub mod job;
 pub mod latency_cmd;
 pub mod launch;

@@ -40,6 +40,10 @@ enum Cmd {
         /// Record every service of the cell into this MCAP file (docs/recording.md).
         #[arg(long)]
         record: Option<PathBuf>,
+        /// Write a PNG: the commanded and measured path, the following error of every axis
+        /// over the run, each process' wake-up latency histogram.
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
     /// Serve the cell in a browser: a 3D view from its kinematics, live, the program line,
     /// plots, the process table, e-stop / reset / start (docs/web.md). It attaches to the
@@ -114,6 +118,9 @@ enum Cmd {
         /// program runs.
         #[arg(long, requires = "wait")]
         record: Option<PathBuf>,
+        /// With --wait: write the PNG `run --plot` writes.
+        #[arg(long, requires = "wait")]
+        plot: Option<PathBuf>,
     },
     /// The live speed override: run the path at PERCENT (1..=100) of its programmed speed
     /// from now on, smoothly (within t_acc), without leaving it.
@@ -408,7 +415,7 @@ fn ctl_call(instance: &str, req: Request) -> ExitCode {
         Err(c) => return c,
     };
     match ctl::call(&instance, &req) {
-        Ok(reply) => ctl_reply(reply, false, None),
+        Ok(reply) => ctl_reply(reply, false, None, None),
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(2)
@@ -416,7 +423,12 @@ fn ctl_call(instance: &str, req: Request) -> ExitCode {
     }
 }
 
-fn ctl_reply(reply: Reply, json: bool, trace: Option<&std::path::Path>) -> ExitCode {
+fn ctl_reply(
+    reply: Reply,
+    json: bool,
+    trace: Option<&std::path::Path>,
+    plot: Option<&std::path::Path>,
+) -> ExitCode {
     match reply {
         Reply::Done(m) => {
             println!("{m}");
@@ -439,11 +451,18 @@ fn ctl_reply(reply: Reply, json: bool, trace: Option<&std::path::Path>) -> ExitC
             json: body,
             text,
             trace_csv,
+            figures,
         } => {
             if let (Some(path), Some(csv)) = (trace, trace_csv)
                 && let Err(e) = std::fs::write(path, csv)
             {
                 eprintln!("error: {}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+            if let (Some(path), Some(f)) = (plot, figures)
+                && let Err(e) = supervisor::figures::write_png(&f, path)
+            {
+                eprintln!("error: {e}");
                 return ExitCode::FAILURE;
             }
             if json {
@@ -614,11 +633,18 @@ fn main() -> ExitCode {
             json,
             trace,
             record,
+            plot,
         } => {
             let i = match instance_of(&instance) {
                 Ok(i) => i,
                 Err(c) => return c,
             };
+            for (path, flag) in [(&trace, "--trace"), (&plot, "--plot")] {
+                if let Some(Err(e)) = path.as_deref().map(|p| supervisor::run::writable(p, flag)) {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(2);
+                }
+            }
             let mut recorder = match record
                 .as_deref()
                 .map(|f| supervisor::record::Background::start(&i, f, &mut || {}))
@@ -639,9 +665,10 @@ fn main() -> ExitCode {
                 source,
                 wait,
                 trace: trace.is_some(),
+                figures: plot.is_some(),
             };
             let code = match ctl::call(&i, &req) {
-                Ok(r) => ctl_reply(r, json, trace.as_deref()),
+                Ok(r) => ctl_reply(r, json, trace.as_deref(), plot.as_deref()),
                 Err(e) => {
                     eprintln!("error: {e}");
                     ExitCode::from(2)
@@ -824,6 +851,7 @@ fn main() -> ExitCode {
             trace,
             json,
             record,
+            plot,
         } => {
             let opts = RunOptions {
                 program,
@@ -831,6 +859,7 @@ fn main() -> ExitCode {
                 instance,
                 trace,
                 record,
+                plot,
                 progress: true,
             };
             match run(&opts) {

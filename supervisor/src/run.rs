@@ -33,6 +33,8 @@ pub struct RunOptions {
     pub trace: Option<PathBuf>,
     /// MCAP file to record the cell into (`--record`).
     pub record: Option<PathBuf>,
+    /// PNG of the run's figures to write (`--plot`).
+    pub plot: Option<PathBuf>,
     /// Show progress on stderr.
     pub progress: bool,
 }
@@ -103,6 +105,11 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let (program, _) = check_program(&cfg, &opts.program)?;
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
+    for (path, flag) in [(&opts.trace, "--trace"), (&opts.plot, "--plot")] {
+        if let Some(p) = path {
+            writable(p, flag).map_err(RunError::Input)?;
+        }
+    }
     let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
     let mut recorder = match opts
         .record
@@ -123,6 +130,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let end = serve::serve(&cfg, &mut cell, &mut server, Some(first));
     cell.refresh_latency();
     let processes = serve::process_reports(&cell);
+    let latency_figures = serve::latency_figures(&cell);
     let sense_to_command = cell.sense_to_command.take();
     if let Some(r) = recorder.as_mut() {
         crate::out::line(r.stop().trim_end());
@@ -151,6 +159,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .filter(|h| h.count > 0)
         .map(latency::report::Summary::of);
     report.processes = processes;
+    report.figures.latency = latency_figures;
     report.events = closed.events;
     if let Some(e) = closed.problem {
         return Err(e);
@@ -159,7 +168,31 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         std::fs::write(path, trace_csv(&report))
             .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
     }
+    if let Some(path) = &opts.plot {
+        crate::figures::write_png(&report.figures, path).map_err(RunError::failed)?;
+    }
     Ok(report)
+}
+
+/// Whether a file can be written at `path` (`flag` names it in the error): its directory
+/// exists and it is not a directory itself. Checked before anything starts, so a run is never
+/// lost to a typo in an output's name.
+pub fn writable(path: &std::path::Path, flag: &str) -> Result<(), String> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => std::path::Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(format!(
+            "{flag} {}: the directory {} does not exist",
+            path.display(),
+            dir.display()
+        ));
+    }
+    if path.is_dir() {
+        return Err(format!("{flag} {}: is a directory", path.display()));
+    }
+    Ok(())
 }
 
 /// The trace as CSV: `t_s, cmd_<axis>..., act_<axis>...`, one row per setpoint.

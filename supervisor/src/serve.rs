@@ -58,10 +58,18 @@ enum Pending {
     },
 }
 
+/// A client waiting for a program's end (`exec --wait`), and what its report must carry.
+#[derive(Clone, Copy, Debug)]
+struct Waiter {
+    conn: ConnId,
+    trace: bool,
+    figures: bool,
+}
+
 /// The program running now, who waits for it, and where its events start.
 struct Running {
     job: Job,
-    waiters: Vec<(ConnId, bool)>,
+    waiters: Vec<Waiter>,
     events_from: usize,
     started: Instant,
 }
@@ -209,6 +217,7 @@ impl Loop<'_> {
                     if !run {
                         self.cell.refresh_latency();
                         report.processes = process_reports(self.cell);
+                        report.figures.latency = latency_figures(self.cell);
                         report.sense_to_command = self
                             .cell
                             .sense_to_command
@@ -277,7 +286,7 @@ impl Loop<'_> {
         }
     }
 
-    fn begin(&mut self, job: Job, waiters: Vec<(ConnId, bool)>) {
+    fn begin(&mut self, job: Job, waiters: Vec<Waiter>) {
         tracing::info!("running {} (predicted {:.2} s)", job.name, job.predicted());
         self.running = Some(Running {
             job,
@@ -290,7 +299,7 @@ impl Loop<'_> {
     /// A program ended: its waiters get the report; `status` keeps a summary.
     fn finish(&mut self, r: &Running, result: &Result<Report, RunError>) {
         // The CSV trace only for a waiter that asked for it (it may be long).
-        let wants_trace = r.waiters.iter().any(|(_, trace)| *trace);
+        let wants_trace = r.waiters.iter().any(|w| w.trace);
         let (ok, json, text, csv) = match result {
             Ok(rep) => (
                 true,
@@ -323,14 +332,19 @@ impl Loop<'_> {
             "ran_s": r.started.elapsed().as_secs_f64(),
         }));
         let body = json.to_string();
-        for (conn, trace) in &r.waiters {
+        for w in &r.waiters {
+            let figures = match result {
+                Ok(rep) if w.figures => Some(Box::new(rep.figures.clone())),
+                _ => None,
+            };
             self.server.reply(
-                *conn,
+                w.conn,
                 &Reply::Report {
                     ok,
                     json: body.clone(),
                     text: text.clone(),
-                    trace_csv: if *trace { csv.clone() } else { None },
+                    trace_csv: if w.trace { csv.clone() } else { None },
+                    figures,
                 },
             );
         }
@@ -344,7 +358,15 @@ impl Loop<'_> {
                 source,
                 wait,
                 trace,
-            } => self.exec(conn, name, &source, wait, trace),
+                figures,
+            } => {
+                let waiter = wait.then_some(Waiter {
+                    conn,
+                    trace,
+                    figures,
+                });
+                self.exec(name, &source, waiter)
+            }
             Request::Pause => self.control(conn, ControlKind::Pause),
             Request::Resume => self.control(conn, ControlKind::Resume),
             Request::Abort => self.control(conn, ControlKind::Abort),
@@ -421,14 +443,7 @@ impl Loop<'_> {
         None
     }
 
-    fn exec(
-        &mut self,
-        conn: ConnId,
-        name: String,
-        src: &[u8],
-        wait: bool,
-        trace: bool,
-    ) -> Option<Reply> {
+    fn exec(&mut self, name: String, src: &[u8], waiter: Option<Waiter>) -> Option<Reply> {
         let program = match Checked::new(self.cfg, &name, src) {
             Ok(p) => p,
             Err(e) => return Some(Reply::Refused(e.to_string())),
@@ -455,14 +470,8 @@ impl Loop<'_> {
         };
         let job = Job::new(self.cfg, &program, predicted, &sp, false);
         self.cell.events.clear();
-        self.begin(
-            job,
-            if wait {
-                vec![(conn, trace)]
-            } else {
-                Vec::new()
-            },
-        );
+        let wait = waiter.is_some();
+        self.begin(job, waiter.into_iter().collect());
         (!wait).then_some(Reply::Done(text))
     }
 
@@ -735,6 +744,26 @@ impl Loop<'_> {
             Err(e) => Reply::Failed(e),
         }
     }
+}
+
+/// Per process, its wake-up latency histogram over its life, for the run's figures.
+pub(crate) fn latency_figures(cell: &Cell) -> Vec<crate::figures::ProcessLatency> {
+    cell.names
+        .iter()
+        .zip(&cell.latencies)
+        .enumerate()
+        .filter(|(k, _)| cell.children.get(*k).is_some())
+        .filter_map(|(_, (name, h))| {
+            let h = h.as_deref().filter(|h| h.count > 0)?;
+            let m = latency::report::Summary::of(h);
+            Some(crate::figures::ProcessLatency {
+                process: name.clone(),
+                bins: crate::figures::latency_bins(h),
+                p99_us: m.p99_us,
+                max_us: m.max_us,
+            })
+        })
+        .collect()
 }
 
 /// Per process, its figures from the cell's view (for the report).

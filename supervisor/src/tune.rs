@@ -15,7 +15,7 @@
 use crate::cell::{Cell, Mode, open_cell};
 use crate::config::Config;
 use crate::run::{RunError, TICK};
-use latency::plot::{Panel, series_png};
+use plot::{Panel, series_png};
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;
 use shm_schema::{

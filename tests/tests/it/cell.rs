@@ -78,14 +78,55 @@ fn check_run(j: &serde_json::Value, target: [f64; 3]) {
     assert_eq!(j["lost_setpoints"].as_u64(), Some(0), "{j}");
 }
 
+/// `--plot`'s PNG: its size, and in each of its three plots the lines of the run's data (not
+/// only their legend's swatches, a few dozen pixels): the commanded and measured path, one
+/// histogram per process, the following error of x and y.
+pub(crate) fn check_figures(path: &Path, processes: usize) {
+    use supervisor::figures::{HEIGHT, WIDTH, areas};
+    let file = std::fs::File::open(path).expect("the PNG was written");
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .expect("a PNG");
+    let mut rgb = vec![0; reader.output_buffer_size().expect("fits")];
+    let info = reader.next_frame(&mut rgb).expect("a frame");
+    assert_eq!((info.width, info.height), (WIDTH, HEIGHT));
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    let count = |a: plot::Area, color: [u8; 3]| {
+        let mut n = 0;
+        for y in a.top.max(0)..a.bottom.min(HEIGHT as i32) {
+            for x in a.left.max(0)..a.right.min(WIDTH as i32) {
+                let i = (y as usize * WIDTH as usize + x as usize) * 3;
+                n += usize::from(rgb[i..i + 3] == color);
+            }
+        }
+        n
+    };
+    let (path_area, latency_area, fe_area) = areas();
+    let drawn = |what: &str, a: plot::Area, k: usize| {
+        let n = count(a, plot::color(k));
+        println!("{}: {what}: {n} pixels of colour {k}", path.display());
+        assert!(n > 250, "{}: {what}: {n} pixels", path.display());
+    };
+    drawn("commanded path", path_area, 0);
+    drawn("measured path", path_area, 1);
+    for k in 0..processes {
+        drawn("latency histogram", latency_area, k);
+    }
+    drawn("following error of x", fe_area, 0);
+    drawn("following error of y", fe_area, 1);
+}
+
 #[test]
 fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
     let inst = instance("triangle");
     let trace = std::env::temp_dir().join(format!("{inst}.csv"));
+    let plot = std::env::temp_dir().join(format!("{inst}.png"));
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--json", "--instance", &inst, "--trace"])
             .arg(&trace)
+            .arg("--plot")
+            .arg(&plot)
             .arg(examples().join("triangle.prog")),
         WATCHDOG,
     );
@@ -133,6 +174,9 @@ fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
             .all(|r| (r[1] - r[4]).abs() < 1.0 && (r[2] - r[5]).abs() < 1.0)
     );
     let _ = std::fs::remove_file(&trace);
+    // The figures: every process of the default cell has its histogram.
+    check_figures(&plot, j["processes"].as_object().expect("processes").len());
+    let _ = std::fs::remove_file(&plot);
     assert_clean(&inst);
 }
 
@@ -212,6 +256,36 @@ fn a_target_outside_the_limits_is_refused_before_anything_moves() {
         "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
         "2:9: y = 400 mm is outside the axis limits 0 .. 150 mm",
     );
+}
+
+#[test]
+fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
+    let inst = instance("badout");
+    let tri = examples().join("triangle.prog");
+    let dir = std::env::temp_dir();
+    for (flag, path, why) in [
+        (
+            "--plot",
+            "/nonexistent/dir/p.png",
+            "the directory /nonexistent/dir does not exist",
+        ),
+        ("--trace", dir.to_str().expect("utf-8"), "is a directory"),
+    ] {
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["run", "--instance", &inst, flag, path])
+                .arg(&tri),
+            WATCHDOG,
+        );
+        assert_eq!(out.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(&format!("{flag} {path}: {why}")), "{err}");
+        assert!(
+            pids_with(&["--instance", &inst]).is_empty(),
+            "a process was started"
+        );
+    }
+    assert_clean(&inst);
 }
 
 #[test]

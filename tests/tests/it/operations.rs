@@ -67,10 +67,16 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
     let bad = program(test, "MOVE(140, 40)\nEND\n");
     let err = up.refused(&["exec", &bad]);
     assert!(err.contains("p.prog:1:"), "{err}");
-    // exec --wait prints run's report.
-    let out = up.ok(&["exec", tri, "--wait", "--json"]);
+    // exec --wait prints run's report and draws its figures; an output where none can be
+    // written is refused before anything moves.
+    let err = up.refused(&["exec", tri, "--wait", "--plot", "/nonexistent/dir/p.png"]);
+    assert!(err.contains("--plot /nonexistent/dir/p.png"), "{err}");
+    let plot = integration_tests::scratch(test, "exec.png", "");
+    let plot_arg = plot.to_str().expect("utf-8");
+    let out = up.ok(&["exec", tri, "--wait", "--json", "--plot", plot_arg]);
     let r: Value = serde_json::from_str(out.trim()).expect("report");
     assert_eq!(r["ok"], true);
+    crate::cell::check_figures(&plot, r["processes"].as_object().expect("processes").len());
     let diff = r["difference_s"].as_f64().expect("difference");
     println!("exec --wait: measured - theoretical = {:.3} ms", diff * 1e3);
     assert!(diff >= 0.0, "{r}");

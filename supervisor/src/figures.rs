@@ -1,0 +1,550 @@
+//! The figures of a program's run (`supervisor run --plot`, `exec --wait --plot`): the
+//! commanded and measured path of the tool, the following error of every axis over the whole
+//! run, and each process' wake-up latency histogram, drawn into one PNG by the `plot` crate.
+//!
+//! The supervisor gathers them as the program runs, in bounded memory whatever its length:
+//! the path from the trace (thinned to what a figure can show), the following error as an
+//! [`Envelope`] of servo's every state (the smallest and largest value per time bucket, so no
+//! peak is lost however long the run), the histograms from the processes' own. [`Figures`]
+//! travels to an `exec` client over the control channel; the client draws it.
+
+use motion_core::generator::Kin;
+use plot::{Area, Bin, Figure, Histogram, Panel, PathLine};
+use serde::{Deserialize, Serialize};
+use shm_schema::{LatencyHistogramV1, MAX_AXES};
+
+/// Buckets an [`Envelope`] keeps at most; past it, their width doubles.
+pub const ENVELOPE_BUCKETS: usize = 1024;
+
+/// The smallest and largest value of each axis per time bucket, over a run of any length: the
+/// first bucket starts at the first sample, buckets are `width_ns` wide, and when a sample
+/// falls past the last of [`ENVELOPE_BUCKETS`], neighbours merge in pairs and the width
+/// doubles. Peaks are exact; only where in its bucket one happened is lost. Non-finite values
+/// are skipped. Fixed memory once full; no allocation after the buckets reach their count.
+#[derive(Clone, Debug)]
+pub struct Envelope {
+    axes: usize,
+    t0_ns: Option<u64>,
+    width_ns: u64,
+    /// Per bucket, per axis: (min, max); (inf, -inf) while empty.
+    buckets: Vec<[(f64, f64); MAX_AXES]>,
+}
+
+const EMPTY: [(f64, f64); MAX_AXES] = [(f64::INFINITY, f64::NEG_INFINITY); MAX_AXES];
+
+impl Envelope {
+    /// An empty envelope of `axes` axes whose buckets start `width_ns` wide.
+    pub fn new(axes: usize, width_ns: u64) -> Self {
+        Self {
+            axes: axes.min(MAX_AXES),
+            t0_ns: None,
+            width_ns: width_ns.max(1),
+            buckets: Vec::new(),
+        }
+    }
+
+    /// Makes the first bucket start at `t0_ns`, unless a sample or an earlier call already
+    /// placed it.
+    pub fn start_at(&mut self, t0_ns: u64) {
+        self.t0_ns.get_or_insert(t0_ns);
+    }
+
+    /// Adds the values at time `stamp_ns`; a sample from before the first bucket is dropped.
+    pub fn add(&mut self, stamp_ns: u64, values: &[f64; MAX_AXES]) {
+        let t0 = *self.t0_ns.get_or_insert(stamp_ns);
+        let Some(dt) = stamp_ns.checked_sub(t0) else {
+            return;
+        };
+        let mut i = dt / self.width_ns;
+        while i >= ENVELOPE_BUCKETS as u64 {
+            self.merge_pairs();
+            i = dt / self.width_ns;
+        }
+        let i = i as usize;
+        if self.buckets.len() <= i {
+            self.buckets.resize(i + 1, EMPTY);
+        }
+        for (b, &v) in self.buckets[i].iter_mut().zip(values).take(self.axes) {
+            if v.is_finite() {
+                *b = (b.0.min(v), b.1.max(v));
+            }
+        }
+    }
+
+    fn merge_pairs(&mut self) {
+        let merged = self
+            .buckets
+            .chunks(2)
+            .map(|pair| {
+                let mut m = pair[0];
+                if let Some(b) = pair.get(1) {
+                    for (m, b) in m.iter_mut().zip(b) {
+                        *m = (m.0.min(b.0), m.1.max(b.1));
+                    }
+                }
+                m
+            })
+            .collect();
+        self.buckets = merged;
+        self.width_ns *= 2;
+    }
+
+    /// The width of a bucket now (ns).
+    pub fn width_ns(&self) -> u64 {
+        self.width_ns
+    }
+
+    /// Axis `k`'s buckets: (start, seconds from the first sample; min; max), empty ones left out.
+    pub fn axis(&self, k: usize) -> Vec<(f64, f64, f64)> {
+        let w = self.width_ns as f64 * 1e-9;
+        self.buckets
+            .iter()
+            .enumerate()
+            .filter_map(|(i, b)| {
+                let (lo, hi) = *b.get(k)?;
+                (lo <= hi).then_some((i as f64 * w, lo, hi))
+            })
+            .collect()
+    }
+}
+
+/// The following error of one axis over the run, as an [`Envelope`] gives it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct AxisEnvelope {
+    pub axis: String,
+    pub unit: String,
+    /// Servo's own latch over the run (`ServoStateV3.peak_following_error`).
+    pub peak: f64,
+    /// Per bucket: its start (s from the program's first setpoint), min, max.
+    pub buckets: Vec<(f64, f64, f64)>,
+}
+
+/// The tool's path in the plane of the cell's first two Cartesian coordinates (or, for a
+/// cell with one, that coordinate over time).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PathFigure {
+    /// Horizontal and vertical axis labels (`x (mm)`, `y (mm)`, or `time (s)`).
+    pub labels: (String, String),
+    pub commanded: Vec<(f64, f64)>,
+    pub measured: Vec<(f64, f64)>,
+}
+
+/// One process' wake-up latency over the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ProcessLatency {
+    pub process: String,
+    /// (lowest µs, highest µs, samples), ascending, empty bins left out.
+    pub bins: Vec<(f64, f64, u64)>,
+    pub p99_us: f64,
+    pub max_us: f64,
+}
+
+/// Everything `--plot` draws.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Figures {
+    pub title: String,
+    pub path: PathFigure,
+    pub following_error: Vec<AxisEnvelope>,
+    pub latency: Vec<ProcessLatency>,
+}
+
+/// The figure's size (pixels).
+pub const WIDTH: u32 = 1280;
+pub const HEIGHT: u32 = 960;
+
+/// Where each plot goes: the path top left, the histograms top right, the following error
+/// across the bottom.
+pub fn areas() -> (Area, Area, Area) {
+    let (w, h) = (WIDTH as i32, HEIGHT as i32);
+    let top = plot::TITLE_H;
+    let split = top + (h - top) * 11 / 20;
+    (
+        Area {
+            left: 0,
+            top,
+            right: w / 2,
+            bottom: split,
+        },
+        Area {
+            left: w / 2,
+            top,
+            right: w,
+            bottom: split,
+        },
+        Area {
+            left: 0,
+            top: split,
+            right: w,
+            bottom: h,
+        },
+    )
+}
+
+/// Line widths: the commanded path wide under the measured one, so both show where they agree.
+const COMMANDED_WIDTH: u32 = 5;
+const MEASURED_WIDTH: u32 = 1;
+
+impl Figures {
+    /// The figure drawn (not yet encoded); the path's scale for whoever checks it.
+    pub fn draw(&self) -> (Figure, plot::PathScale) {
+        let mut f = Figure::new(WIDTH, HEIGHT);
+        f.title(&self.title);
+        let (path_area, lat_area, fe_area) = areas();
+        let p = &self.path;
+        let scale = f.path(
+            path_area,
+            "tool path, o at the start",
+            (&p.labels.0, &p.labels.1),
+            &[
+                PathLine {
+                    label: "commanded".into(),
+                    points: p.commanded.clone(),
+                    width: COMMANDED_WIDTH,
+                },
+                PathLine {
+                    label: "measured".into(),
+                    points: p.measured.clone(),
+                    width: MEASURED_WIDTH,
+                },
+            ],
+        );
+        let hist: Vec<Histogram> = self
+            .latency
+            .iter()
+            .map(|l| Histogram {
+                label: format!(
+                    "{} p99 {:.0} \u{b5}s, max {:.0} \u{b5}s",
+                    l.process, l.p99_us, l.max_us
+                ),
+                bins: l
+                    .bins
+                    .iter()
+                    .map(|&(lo, hi, count)| Bin { lo, hi, count })
+                    .collect(),
+            })
+            .collect();
+        f.log_histogram(
+            lat_area,
+            "wake-up latency per process, whole run",
+            "wake-up latency (\u{b5}s, log)",
+            &hist,
+        );
+        // One panel per unit (mm and deg do not share a scale); each axis' envelope drawn as
+        // a band: its min and max alternate along the line.
+        let mut panels: Vec<Panel> = Vec::new();
+        for a in &self.following_error {
+            let label = format!("{} (peak {:.4} {})", a.axis, a.peak, a.unit);
+            let band: Vec<(f64, f64)> = a
+                .buckets
+                .iter()
+                .flat_map(|&(t, lo, hi)| [(t, lo), (t, hi)])
+                .collect();
+            let y_label = format!("following error ({})", a.unit);
+            match panels.iter_mut().find(|p| p.y_label == y_label) {
+                Some(p) => p.lines.push((label, band)),
+                None => panels.push(Panel {
+                    y_label,
+                    lines: vec![(label, band)],
+                }),
+            }
+        }
+        f.series(
+            fe_area,
+            "time from the program's first setpoint (s); every servo cycle, min and max per bucket",
+            &panels,
+        );
+        (f, scale)
+    }
+
+    /// The PNG.
+    pub fn png(&self) -> Result<Vec<u8>, String> {
+        self.draw().0.png()
+    }
+}
+
+/// Draws `figures` and writes the PNG to `path`.
+pub fn write_png(figures: &Figures, path: &std::path::Path) -> Result<(), String> {
+    let png = figures
+        .png()
+        .map_err(|e| format!("--plot {}: {e}", path.display()))?;
+    std::fs::write(path, png).map_err(|e| format!("--plot {}: {e}", path.display()))
+}
+
+/// The wake-up latency histogram `h` in bins of 1/8 octave (16 of its buckets each, all its
+/// 1-ns buckets below 256 ns in one), µs, ascending, empty bins left out.
+pub fn latency_bins(h: &LatencyHistogramV1) -> Vec<(f64, f64, u64)> {
+    use shm_schema::latency::{BUCKETS, bucket_bounds};
+    const FIRST: usize = 256;
+    const GROUP: usize = 16;
+    let groups = 1 + (BUCKETS - FIRST).div_ceil(GROUP);
+    (0..groups)
+        .filter_map(|g| {
+            let (first, last) = if g == 0 {
+                (0, FIRST - 1)
+            } else {
+                let first = FIRST + (g - 1) * GROUP;
+                (first, (first + GROUP - 1).min(BUCKETS - 1))
+            };
+            let count: u64 = h.buckets[first..=last].iter().sum();
+            (count > 0).then(|| {
+                let (lo, hi) = (bucket_bounds(first).0, bucket_bounds(last).1 + 1);
+                (lo as f64 * 1e-3, hi as f64 * 1e-3, count)
+            })
+        })
+        .collect()
+}
+
+/// Thins a path to what a figure shows: a point is kept when it lies more than `tol` from the
+/// last kept one (the first and the last always). Corners survive; a path that stands still
+/// becomes one point.
+pub fn thin(points: impl IntoIterator<Item = (f64, f64)>, tol: f64) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut last_seen = None;
+    for p in points {
+        if !(p.0.is_finite() && p.1.is_finite()) {
+            continue;
+        }
+        last_seen = Some(p);
+        match out.last() {
+            Some(&q) if (p.0 - q.0).hypot(p.1 - q.1) <= tol => {}
+            _ => out.push(p),
+        }
+    }
+    if let Some(p) = last_seen
+        && out.last() != Some(&p)
+    {
+        out.push(p);
+    }
+    out
+}
+
+/// The tool's pose for joints `q` (the first `n`): through the cell's kinematics, or the
+/// joints themselves for the gantry.
+pub fn tool_of(kin: Option<&Kin>, q: &[f64; MAX_AXES], n: usize) -> Option<Vec<f64>> {
+    match kin {
+        None => Some(q[..n].to_vec()),
+        Some(k) => {
+            let mut j = [0.0; kinematics::MAX_JOINTS];
+            for (d, v) in j.iter_mut().zip(&q[..n]) {
+                *d = *v;
+            }
+            let p = k.0.axes_to_cartesian(&j).ok()?;
+            Some(p[..k.0.coords().len()].to_vec())
+        }
+    }
+}
+
+/// The path figure of a trace: rows of (time s, commanded joints, measured joints), each
+/// mapped to the tool, in the plane of the first two coordinates `coords` (name, unit).
+pub fn path_of(
+    rows: impl Iterator<Item = (f64, [f64; MAX_AXES], [f64; MAX_AXES])> + Clone,
+    kin: Option<&Kin>,
+    n: usize,
+    coords: &[(String, String)],
+) -> PathFigure {
+    let plane = coords.len() >= 2;
+    let pick = |t: f64, p: Option<Vec<f64>>| -> (f64, f64) {
+        match p {
+            Some(p) if plane => (p[0], p[1]),
+            Some(p) => (t, p.first().copied().unwrap_or(f64::NAN)),
+            None => (f64::NAN, f64::NAN),
+        }
+    };
+    let cmd: Vec<(f64, f64)> = rows
+        .clone()
+        .map(|(t, c, _)| pick(t, tool_of(kin, &c, n)))
+        .collect();
+    let act: Vec<(f64, f64)> = rows.map(|(t, _, a)| pick(t, tool_of(kin, &a, n))).collect();
+    // A tolerance of 1/4000 of the path's extent: well under a pixel of the figure.
+    let extent = |pts: &[(f64, f64)]| {
+        let f = pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite());
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for p in f {
+            (x0, x1, y0, y1) = (x0.min(p.0), x1.max(p.0), y0.min(p.1), y1.max(p.1));
+        }
+        ((x1 - x0).max(y1 - y0)).max(0.0)
+    };
+    let tol = extent(&cmd) / 4000.0;
+    let label = |(name, unit): &(String, String)| format!("{name} ({unit})");
+    let labels = if plane {
+        (label(&coords[0]), label(&coords[1]))
+    } else {
+        (
+            "time (s)".into(),
+            coords.first().map(label).unwrap_or_default(),
+        )
+    };
+    PathFigure {
+        labels,
+        commanded: thin(cmd, tol),
+        measured: thin(act, tol),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one(v: f64) -> [f64; MAX_AXES] {
+        let mut a = [0.0; MAX_AXES];
+        a[0] = v;
+        a[1] = -v;
+        a
+    }
+
+    #[test]
+    fn an_envelope_keeps_every_peak_however_long_the_run() {
+        // 20 000 samples at 1 ms into 1024 buckets: the widths double five times.
+        let mut e = Envelope::new(2, 1_000_000);
+        let mut peak = (0.0f64, 0.0f64);
+        for i in 0..20_000u64 {
+            let v = ((i as f64) * 0.37).sin() * (1.0 + (i % 997) as f64 * 1e-3);
+            let v = if i == 12_345 { 7.5 } else { v };
+            peak = (peak.0.min(v), peak.1.max(v));
+            e.add(1_000 + i * 1_000_000, &one(v));
+        }
+        assert_eq!(e.width_ns(), 32_000_000);
+        let a = e.axis(0);
+        assert!(a.len() <= ENVELOPE_BUCKETS);
+        let lo = a.iter().map(|b| b.1).fold(f64::INFINITY, f64::min);
+        let hi = a.iter().map(|b| b.2).fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!((lo, hi), peak);
+        // The spike is in the bucket of its time.
+        let spike = a.iter().find(|b| b.2 == 7.5).expect("the spike");
+        assert!(spike.0 <= 12.345 && 12.345 < spike.0 + 0.032, "{spike:?}");
+        // The second axis (the negated values) too.
+        let b = e.axis(1);
+        let hi = b.iter().map(|b| b.2).fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!(hi, -peak.0);
+    }
+
+    #[test]
+    fn an_envelope_skips_what_is_not_a_number_and_leaves_gaps_empty() {
+        let mut e = Envelope::new(1, 10);
+        e.add(100, &one(1.0));
+        e.add(105, &one(f64::NAN));
+        e.add(150, &one(-2.0));
+        e.add(50, &one(99.0)); // before the first: dropped
+        let a = e.axis(0);
+        assert_eq!(a.len(), 2);
+        assert_eq!((a[0].1, a[0].2), (1.0, 1.0));
+        assert_eq!((a[1].1, a[1].2), (-2.0, -2.0));
+        assert!((a[1].0 - 50e-9).abs() < 1e-15);
+    }
+
+    #[test]
+    fn latency_bins_keep_every_sample_and_join_up() {
+        let mut h = LatencyHistogramV1::new();
+        let samples: Vec<u64> = (0..5000u64)
+            .map(|i| 12_000 + (i * 7919) % 40_000)
+            .chain([150, 2_500_000, 9_000_000])
+            .collect();
+        for &s in &samples {
+            h.record(s);
+        }
+        let bins = latency_bins(&h);
+        let total: u64 = bins.iter().map(|b| b.2).sum();
+        assert_eq!(total, samples.len() as u64);
+        for s in &samples {
+            let us = *s as f64 * 1e-3;
+            let n = bins.iter().filter(|b| b.0 <= us && us < b.1).count();
+            assert_eq!(n, 1, "sample {us} µs in {n} bins");
+        }
+        // Ascending, never overlapping; neighbours with samples share their bound.
+        for w in bins.windows(2) {
+            assert!(w[0].1 <= w[1].0, "{w:?}");
+        }
+        assert!(bins.windows(2).any(|w| w[0].1 == w[1].0));
+        // 1/8 of an octave: 1/8 of the octave's start wide.
+        let b = bins.iter().find(|b| b.0 > 16.0).expect("a body bin");
+        let octave_us = 2f64.powf((b.0 * 1e3).log2().floor()) * 1e-3;
+        assert!((b.1 - b.0 - octave_us / 8.0).abs() < 1e-9, "{b:?}");
+    }
+
+    #[test]
+    fn thinning_keeps_the_corners_and_the_ends() {
+        let mut pts = Vec::new();
+        for i in 0..=1000 {
+            pts.push((f64::from(i) * 0.1, 0.0));
+        }
+        for i in 1..=1000 {
+            pts.push((100.0, f64::from(i) * 0.1));
+        }
+        pts.push((100.0, 100.0)); // standing still at the end
+        let t = thin(pts.clone(), 1.0);
+        assert!(t.len() < 250, "{}", t.len());
+        assert_eq!(t.first(), Some(&(0.0, 0.0)));
+        assert_eq!(t.last(), Some(&(100.0, 100.0)));
+        // Every original point within 1 of a kept one along the way.
+        assert!(
+            t.iter()
+                .any(|p| (p.0 - 100.0).abs() <= 1.0 && p.1.abs() <= 1.0)
+        );
+        assert_eq!(thin([(1.0, 1.0); 10], 0.5), vec![(1.0, 1.0)]);
+    }
+
+    #[test]
+    fn a_figure_draws_the_path_where_the_trace_went() {
+        let mut rows = Vec::new();
+        // A square, the measured path 0.05 off to the side.
+        for i in 0..400 {
+            let s = f64::from(i) / 100.0;
+            let (x, y) = match i / 100 {
+                0 => (40.0 + 100.0 * s, 40.0),
+                1 => (140.0, 40.0 + 100.0 * (s - 1.0)),
+                2 => (140.0 - 100.0 * (s - 2.0), 140.0),
+                _ => (40.0, 140.0 - 100.0 * (s - 3.0)),
+            };
+            let mut c = [0.0; MAX_AXES];
+            c[0] = x;
+            c[1] = y;
+            let mut a = c;
+            a[0] += 0.05;
+            rows.push((s, c, a));
+        }
+        let coords = vec![
+            ("x".to_string(), "mm".to_string()),
+            ("y".into(), "mm".into()),
+        ];
+        let path = path_of(rows.iter().copied(), None, 3, &coords);
+        assert_eq!(path.labels, ("x (mm)".into(), "y (mm)".into()));
+        let mut e = Envelope::new(2, 1_000_000);
+        for i in 0..4000u64 {
+            e.add(i * 1_000_000, &one(0.04 * ((i as f64) * 0.01).sin()));
+        }
+        let figures = Figures {
+            title: "square".into(),
+            path,
+            following_error: vec![AxisEnvelope {
+                axis: "x".into(),
+                unit: "mm".into(),
+                peak: 0.04,
+                buckets: e.axis(0),
+            }],
+            latency: vec![ProcessLatency {
+                process: "servo".into(),
+                bins: vec![(10.0, 11.0, 100), (11.0, 12.0, 5)],
+                p99_us: 11.0,
+                max_us: 12.0,
+            }],
+        };
+        let (f, scale) = figures.draw();
+        // The commanded path, 5 pixels wide under the measured one, at each corner.
+        let near = |(px, py): (i32, i32), c: [u8; 3]| {
+            (-2..=2).any(|dx| (-2..=2).any(|dy| f.pixel(px + dx, py + dy) == c))
+        };
+        for (x, y) in [(40.0, 40.0), (140.0, 40.0), (140.0, 140.0), (40.0, 140.0)] {
+            assert!(near(scale.pixel(x, y), plot::color(0)), "corner ({x}, {y})");
+        }
+        // The middle of the square is not on the path (a grid line may cross it).
+        let (px, py) = scale.pixel(90.0, 90.0);
+        assert_ne!(f.pixel(px, py), plot::color(0));
+        // The measured path (second colour) is drawn along the commanded one.
+        assert!(near(scale.pixel(90.0, 40.0), plot::color(1)));
+        // Round trip through the control channel's encoding.
+        let bytes = postcard::to_allocvec(&figures).expect("encodes");
+        let back: Figures = postcard::from_bytes(&bytes).expect("decodes");
+        assert_eq!(back, figures);
+        assert_eq!(&figures.png().expect("png")[1..4], b"PNG");
+    }
+}
