@@ -21,8 +21,8 @@ use runtime::ipc::{self, Sub};
 use serde_json::{Value, json};
 use shm_schema::estop::HostStateV1;
 use shm_schema::{
-    CellConfigV6, InstanceName, MAX_AXES, ProcessName, ProcessStatusV2, ServiceId, ServoStateV3,
-    SetpointV2, str_of,
+    CellConfigV6, InstanceName, LatencyHistogramV1, MAX_AXES, ProcessName, ProcessStatusV2,
+    ServiceId, ServoStateV3, SetpointV2, str_of,
 };
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -278,6 +278,7 @@ fn attached(
         let kin = motion_core::generator::Kin::of_cell(&cell).map_err(|e| e.to_string())?;
         let axes = Axes::of_cell(&cell);
         let mut statuses = Vec::new();
+        let mut latencies = Vec::new();
         for p in cell.processes() {
             if let Some(name) = ProcessName::from_field(&p.name) {
                 statuses.push((
@@ -286,6 +287,14 @@ fn attached(
                         .map_err(f)?,
                     None::<ProcessStatusV2>,
                 ));
+                // A process without a histogram service (one of another language) is left out.
+                if let Ok(sub) = Sub::new(&node, &instance, ServiceId::Latency(name), 1) {
+                    latencies.push(LatencyWatch {
+                        name: name.to_string(),
+                        sub,
+                        last: None,
+                    });
+                }
             }
         }
         let servo =
@@ -300,7 +309,9 @@ fn attached(
         let (mut last_servo, mut last_sp, mut heard) = (None, None, Instant::now());
         let mut peak_fe = [0.0f64; MAX_AXES];
         let n = axes.axes.len();
+        let mut count = 0u64;
         while !STOP.load(std::sync::atomic::Ordering::Relaxed) {
+            count += 1;
             // Every servo state since the last frame: the largest following error among them.
             while let Some(s) = servo.next() {
                 for (k, p) in peak_fe.iter_mut().enumerate().take(n) {
@@ -335,6 +346,17 @@ fn attached(
                 &statuses,
                 &peak_fe,
             );
+            let mut frame = frame;
+            // The latency histograms about once a second (the processes publish them every
+            // 100 ms; they change slowly).
+            if count % RATE_HZ == 1 {
+                for l in &mut latencies {
+                    if let Some(h) = l.sub.latest() {
+                        l.last = Some(Box::new(h));
+                    }
+                }
+                frame["latency"] = latency_json(&latencies);
+            }
             peak_fe = [0.0; MAX_AXES];
             let _ = frames.send(Arc::from(frame.to_string()));
             std::thread::sleep(Duration::from_millis(1000 / RATE_HZ));
@@ -344,6 +366,32 @@ fn attached(
     drop(node);
     ipc::cleanup_after_client(&instance);
     result
+}
+
+/// One process' latency histogram service and the newest histogram it published.
+struct LatencyWatch {
+    name: String,
+    sub: Sub<LatencyHistogramV1>,
+    last: Option<Box<LatencyHistogramV1>>,
+}
+
+/// Each process' wake-up latency histogram since it started, as `--plot` draws it: bins of
+/// 1/8 octave (µs), its p99 and its largest.
+fn latency_json(latencies: &[LatencyWatch]) -> Value {
+    latencies
+        .iter()
+        .filter_map(|l| {
+            let h = l.last.as_deref().filter(|h| h.count > 0)?;
+            let m = latency::report::Summary::of(h);
+            Some(json!({
+                "name": l.name,
+                "samples": h.count,
+                "p99_us": m.p99_us,
+                "max_us": m.max_us,
+                "bins": crate::figures::latency_bins(h),
+            }))
+        })
+        .collect()
 }
 
 /// The cell as the page draws it: axes, kinematics and its parameters, processes.
@@ -366,8 +414,8 @@ fn describe(cell: &CellConfigV6, axes: &Axes) -> Value {
     })
 }
 
-/// One frame: where the machine is (measured, and the tool through the kinematics), the
-/// program, the e-stop, each process' newest wake-up latency.
+/// One frame: where the machine is (measured, and the tool through the kinematics; the
+/// commanded tool likewise), the program, the e-stop, each process' newest wake-up latency.
 #[allow(clippy::too_many_arguments)]
 fn frame(
     t: f64,
@@ -380,19 +428,8 @@ fn frame(
     peak_fe: &[f64; MAX_AXES],
 ) -> Value {
     let joints: Option<Vec<f64>> = servo.map(|s| s.act_position[..n].to_vec());
-    let tool: Option<Vec<f64>> = match (kin, servo) {
-        (Some(k), Some(s)) => {
-            let mut q = [0.0; kinematics::MAX_JOINTS];
-            for (d, v) in q.iter_mut().zip(&s.act_position[..n]) {
-                *d = *v;
-            }
-            k.0.axes_to_cartesian(&q)
-                .ok()
-                .map(|p| p[..k.0.coords().len()].to_vec())
-        }
-        (None, _) => joints.clone(),
-        _ => None,
-    };
+    let tool = servo.and_then(|s| crate::figures::tool_of(kin, &s.act_position, n));
+    let command_tool = servo.and_then(|s| crate::figures::tool_of(kin, &s.cmd_position, n));
     let estop = host
         .filter(|h| h.estop != 0)
         .map(|h| json!({"origin": h.cause.origin, "reason": str_of(&h.cause.reason)}));
@@ -403,6 +440,7 @@ fn frame(
         "joints": joints,
         "command": servo.map(|s| s.cmd_position[..n].to_vec()),
         "tool": tool,
+        "command_tool": command_tool,
         "following_error": peak_fe[..n].to_vec(),
         "enabled": servo.map(|s| s.status & shm_schema::drive::servo_status::ENABLED != 0),
         "estop": estop,

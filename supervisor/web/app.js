@@ -5,7 +5,12 @@ import { OrbitControls } from '/vendor/OrbitControls.js';
 
 const token = new URLSearchParams(location.search).get('token');
 const withToken = (path) => token ? `${path}?token=${encodeURIComponent(token)}` : path;
-const rtc = window.rtc = { frames: 0, hello: null, last: null, drawn: null, estop: null, up: false };
+const rtc = window.rtc = {
+  frames: 0, hello: null, last: null, drawn: null, estop: null, up: false,
+  // The plots' data: the current program's commanded and measured tool path, each process'
+  // latency histogram; and what the plots last drew.
+  path: { program: null, commanded: [], measured: [] }, latency: [], plotted: {},
+};
 
 // ---- the 3D view (mm, z up) ----
 const view = document.getElementById('view');
@@ -157,14 +162,23 @@ function build(h) {
 // ---- the side panel and the plots ----
 const $ = (id) => document.getElementById(id);
 const PLOT_S = 10;
-const feHist = [], latHist = [];
-const colors = ['#ef5350', '#66bb6a', '#42a5f5', '#ffca28', '#ab47bc', '#26c6da', '#ff7043', '#8d6e63'];
-function plot(canvas, hist, title, unit) {
+const feHist = [];
+const colors = ['#42a5f5', '#ffa726', '#66bb6a', '#ef5350', '#ab47bc', '#8d6e63', '#ec407a', '#bdbdbd'];
+// A canvas at its displayed size, cleared, its title written; null when it has no room.
+function surface(canvas, title) {
   const w = canvas.width = canvas.clientWidth, h = canvas.height = canvas.clientHeight;
+  if (w < 20 || h < 20) return null;
   const g = canvas.getContext('2d');
   g.fillStyle = '#15181c'; g.fillRect(0, 0, w, h);
+  g.font = '11px system-ui, sans-serif';
   g.fillStyle = '#9ab'; g.fillText(title, 8, 14);
-  if (hist.length < 2) return;
+  return { g, w, h };
+}
+// Following error per axis, the last PLOT_S seconds (the largest in each frame).
+function plotSeries(canvas, hist, title, unit) {
+  const s = surface(canvas, title);
+  if (!s || hist.length < 2) return;
+  const { g, w, h } = s;
   const t1 = hist[hist.length - 1].t, t0 = t1 - PLOT_S;
   const n = hist[hist.length - 1].v.length;
   let lo = 0, hi = 0;
@@ -172,17 +186,98 @@ function plot(canvas, hist, title, unit) {
   if (hi - lo < 1e-9) hi = lo + 1;
   const X = (t) => 40 + (t - t0) / PLOT_S * (w - 50), Y = (v) => h - 16 - (v - lo) / (hi - lo) * (h - 36);
   g.strokeStyle = '#333'; g.beginPath(); g.moveTo(40, Y(0)); g.lineTo(w - 10, Y(0)); g.stroke();
-  g.fillStyle = '#9ab'; g.fillText(`${hi.toPrecision(3)} ${unit}`, 2, 26); g.fillText(`${lo.toPrecision(3)}`, 2, h - 16);
+  g.fillStyle = '#9ab'; g.fillText(`${hi.toPrecision(3)} ${unit}`, 2, 30); g.fillText(`${lo.toPrecision(3)}`, 2, h - 16);
   for (let k = 0; k < n; k++) {
     g.strokeStyle = colors[k % colors.length]; g.beginPath();
     hist.forEach((p, i) => { const x = X(p.t), y = Y(p.v[k] ?? 0); i ? g.lineTo(x, y) : g.moveTo(x, y); });
     g.stroke();
-    g.fillStyle = colors[k % colors.length]; g.fillText(hist.names[k] || '', 160 + 70 * k, 14);
+    g.fillStyle = colors[k % colors.length]; g.fillText(hist.names[k] || '', w - 40 * (n - k), 14);
   }
 }
 function keep(hist, t, v, names) {
   hist.push({ t, v }); hist.names = names;
   while (hist.length && hist[0].t < t - PLOT_S) hist.shift();
+}
+// The program's tool path, commanded (wide) and measured (thin), at the same scale on both
+// axes, as `supervisor run --plot` draws it.
+function plotPath(canvas) {
+  const s = surface(canvas, 'path');
+  rtc.plotted.path = 0;
+  const { commanded: c, measured: m } = rtc.path;
+  if (!s || c.length < 2) return;
+  const { g, w, h } = s;
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (const [x, y] of c.concat(m)) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+  const span = Math.max(x1 - x0, y1 - y0, 1e-3);
+  const k = Math.min((w - 60) / Math.max(x1 - x0, span * 0.05), (h - 40) / Math.max(y1 - y0, span * 0.05));
+  const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+  const X = (x) => w / 2 + 10 + (x - cx) * k, Y = (y) => h / 2 + 8 - (y - cy) * k;
+  const line = (pts, color, width) => {
+    g.strokeStyle = color; g.lineWidth = width; g.beginPath();
+    pts.forEach(([x, y], i) => (i ? g.lineTo(X(x), Y(y)) : g.moveTo(X(x), Y(y))));
+    g.stroke();
+  };
+  line(c, colors[0], 5);
+  line(m, colors[1], 1.5);
+  g.lineWidth = 1;
+  g.fillStyle = colors[0]; g.fillText('commanded', w - 130, 14);
+  g.fillStyle = colors[1]; g.fillText('measured', w - 60, 14);
+  const u = rtc.hello ? rtc.hello.axes[0].unit : '';
+  g.fillStyle = '#9ab';
+  g.fillText(`x ${x0.toFixed(1)} .. ${x1.toFixed(1)}, y ${y0.toFixed(1)} .. ${y1.toFixed(1)} ${u}`, 8, h - 4);
+  rtc.plotted.path = c.length + m.length;
+}
+// Each process' wake-up latency since it started: log µs across, log samples up.
+function plotHist(canvas) {
+  const s = surface(canvas, 'wake-up latency, µs');
+  rtc.plotted.hist = 0;
+  const series = rtc.latency || [];
+  const bins = series.flatMap((p) => p.bins);
+  if (!s || !bins.length) return;
+  const { g, w, h } = s;
+  const d0 = Math.floor(Math.log10(Math.max(Math.min(...bins.map((b) => b[0])), 1e-3)));
+  const d1 = Math.max(Math.ceil(Math.log10(Math.max(...bins.map((b) => b[1])))), d0 + 1);
+  const c1 = Math.max(1, Math.ceil(Math.log10(Math.max(...bins.map((b) => b[2])))));
+  const X = (v) => 30 + (Math.log10(Math.max(v, 10 ** d0)) - d0) / (d1 - d0) * (w - 40);
+  const Y = (c) => h - 16 - (c > 0 ? (Math.log10(c) + 0.3) / (c1 + 0.3) : 0) * (h - 36);
+  g.strokeStyle = '#333';
+  g.fillStyle = '#9ab';
+  // A label every decade, or every other one where they would touch.
+  const every = (w - 40) / (d1 - d0) < 45 ? 2 : 1;
+  for (let d = d0; d <= d1; d++) {
+    g.beginPath(); g.moveTo(X(10 ** d), 20); g.lineTo(X(10 ** d), h - 16); g.stroke();
+    if ((d - d0) % every === 0) g.fillText(d >= 0 ? String(10 ** d) : (10 ** d).toFixed(-d), X(10 ** d) - 6, h - 4);
+  }
+  series.forEach((p, k) => {
+    g.strokeStyle = colors[k % colors.length]; g.lineWidth = 1.5; g.beginPath();
+    let end = null;
+    for (const [lo, hi, n] of p.bins) {
+      if (end === null || Math.abs(lo - end) > 1e-9 * Math.max(lo, 1)) {
+        if (end !== null) g.lineTo(X(end), Y(0));
+        g.moveTo(X(lo), Y(0));
+      }
+      g.lineTo(X(lo), Y(n)); g.lineTo(X(hi), Y(n));
+      end = hi;
+    }
+    if (end !== null) g.lineTo(X(end), Y(0));
+    g.stroke();
+    g.fillStyle = colors[k % colors.length];
+    g.fillText(`${p.name} p99 ${p.p99_us.toFixed(0)}`, w - 105, 14 + 13 * k);
+  });
+  g.lineWidth = 1;
+  rtc.plotted.hist = series.length;
+}
+// The commanded and measured tool of a moving program, for the path plot (a new program
+// starts a new path; at most 20 000 points each, the oldest dropped).
+const PATH_MAX = 20000;
+function keepPath(f) {
+  const p = f.program;
+  if (!p || p.state !== 1 || !f.tool || !f.command_tool) return;
+  if (rtc.path.program !== p.id) rtc.path = { program: p.id, commanded: [], measured: [] };
+  const two = (v) => [v[0], v.length > 1 ? v[1] : 0];
+  rtc.path.commanded.push(two(f.command_tool));
+  rtc.path.measured.push(two(f.tool));
+  for (const k of ['commanded', 'measured']) if (rtc.path[k].length > PATH_MAX) rtc.path[k].splice(0, PATH_MAX / 2);
 }
 
 const STATES = ['idle', 'moving', 'done', 'fault'];
@@ -223,10 +318,9 @@ function onFrame(f) {
   const [x, y] = machine(f);
   rtc.drawn = [x, y];
   if (f.program && f.program.state === 1) addTrail(x, y, 1);
-  if (rtc.hello) {
-    keep(feHist, f.t, f.following_error, rtc.hello.axes.map(a => a.name));
-    keep(latHist, f.t, f.processes.map(p => p.wakeup_us ?? 0), f.processes.map(p => p.name));
-  }
+  keepPath(f);
+  if (f.latency) rtc.latency = f.latency;
+  if (rtc.hello) keep(feHist, f.t, f.following_error, rtc.hello.axes.map(a => a.name));
 }
 
 // ---- the connection: again and again, whatever the cell does ----
@@ -259,6 +353,8 @@ window.addEventListener('resize', () => { dirty = true; });
   if (!dirty) return;
   dirty = false;
   renderer.render(scene, camera);
-  plot($('fe'), feHist, 'following error (largest per frame)', 'unit');
-  plot($('lat'), latHist, 'wake-up latency', 'µs');
+  const units = [...new Set((rtc.hello?.axes ?? []).map((a) => a.unit))];
+  plotSeries($('fe'), feHist, 'following error', units.length === 1 ? units[0] : '(axis units)');
+  plotPath($('path'));
+  plotHist($('hist'));
 })();

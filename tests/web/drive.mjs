@@ -5,6 +5,7 @@
 //   shot FILE        a screenshot
 //   click ID         clicks a button (estop, reset, start)
 //   until EXPR       waits (up to 60 s) until the expression holds in the page, e.g. rtc.estop
+//   eval EXPR        the expression's value in the page, e.g. rtc.path
 //   quit
 import { chromium } from 'playwright-core';
 import readline from 'node:readline';
@@ -47,6 +48,8 @@ for await (const line of readline.createInterface({ input: process.stdin })) {
     } else if (cmd === 'until') {
       await page.waitForFunction(arg, null, { timeout: 60000, polling: 100 });
       say({ held: arg, banner: await page.textContent('#banner'), answer: await page.textContent('#answer') });
+    } else if (cmd === 'eval') {
+      say({ value: await page.evaluate(arg) });
     } else if (cmd === 'quit') {
       say({ bye: true, errors });
       break;

@@ -149,6 +149,67 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
         moved > 1.0,
         "the drawn tool did not follow the program: {xs:?}"
     );
+    // The path plot: the commanded tool along y = 40 mm (the program moves x only), the
+    // measured one within the following-error limit (1 mm) of it; both drawn.
+    let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
+    assert!(a["held"].is_string(), "{a}");
+    let v =
+        page.ask("eval ({path: rtc.path, latency: rtc.latency, plotted: rtc.plotted})")["value"]
+            .clone();
+    let points = |k: &str| -> Vec<(f64, f64)> {
+        v["path"][k]
+            .as_array()
+            .expect("points")
+            .iter()
+            .map(|p| (p[0].as_f64().expect("x"), p[1].as_f64().expect("y")))
+            .collect()
+    };
+    let (commanded, measured) = (points("commanded"), points("measured"));
+    assert_eq!(commanded.len(), measured.len());
+    for (c, m) in commanded.iter().zip(&measured) {
+        assert!(
+            (c.1 - 40.0).abs() < 1e-9 && (40.0..=140.0).contains(&c.0),
+            "{c:?}"
+        );
+        assert!(
+            (m.1 - c.1).abs() < 1.0 && (m.0 - c.0).abs() < 1.0,
+            "{m:?} {c:?}"
+        );
+    }
+    println!(
+        "path plot: {} points, x {:.1} .. {:.1} mm",
+        commanded.len(),
+        commanded.first().expect("a point").0,
+        commanded.last().expect("a point").0
+    );
+    // The latency histograms: one per process of the cell, each with its samples.
+    let status = up.status();
+    let names: Vec<&String> = status["processes"]
+        .as_object()
+        .expect("processes")
+        .keys()
+        .collect();
+    assert!(names.len() >= 4, "{status}");
+    let hists = v["latency"].as_array().expect("latency histograms");
+    for name in &names {
+        let h = hists
+            .iter()
+            .find(|h| h["name"].as_str() == Some(name.as_str()))
+            .unwrap_or_else(|| panic!("no histogram of {name}: {v}"));
+        let in_bins: u64 = h["bins"]
+            .as_array()
+            .expect("bins")
+            .iter()
+            .map(|b| b[2].as_u64().expect("count"))
+            .sum();
+        let samples = h["samples"].as_u64().expect("samples");
+        assert!(in_bins > 0 && in_bins <= samples, "{name}: {h}");
+    }
+    assert_eq!(
+        v["plotted"]["hist"].as_u64(),
+        Some(hists.len() as u64),
+        "{v}"
+    );
     let shot = scratch(test, "web.png", "");
     page.ask(&format!("shot {}", shot.display()));
     assert!(
