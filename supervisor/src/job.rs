@@ -484,7 +484,11 @@ impl Job {
         let images = self.images;
         let trace = trace_rows(&self.rows, &self.servo_log);
         let measured_s = (done.motion_end_ns - done.motion_start_ns) as f64 * 1e-9 - done.waited_s;
-        let figures = self.figures(cfg, &trace, &max_fe, measured_s, done.theoretical_s);
+        let title = format!(
+            "{} on {}: {measured_s:.3} s measured, {:.3} s theoretical",
+            self.name, cfg.cell.name, done.theoretical_s
+        );
+        let figures = self.figures(cfg, title, &trace, &max_fe);
         Report {
             ok: true,
             program: self.name.clone(),
@@ -535,15 +539,31 @@ impl Job {
         }
     }
 
+    /// The figures of a program that failed, up to the failure: its path and following
+    /// error so far (the peak is servo's latch in its newest state).
+    pub(crate) fn figures_so_far(&self, cfg: &Config, cell: &Cell) -> Figures {
+        let trace = trace_rows(&self.rows, &self.servo_log);
+        let peak = match cell.last_servo {
+            Some(s) if s.peak_program == self.program_id => s.peak_following_error,
+            _ => [f64::NAN; MAX_AXES],
+        };
+        let title = format!(
+            "{} on {}: FAILED after {:.3} s of motion",
+            self.name,
+            cfg.cell.name,
+            self.last.map_or(0.0, |sp| sp.motion_time_s)
+        );
+        self.figures(cfg, title, &trace, &peak)
+    }
+
     /// The path and the following error of the figures (the latency histograms are the
     /// processes', added with their reports).
     fn figures(
         &self,
         cfg: &Config,
+        title: String,
         trace: &[TraceRow],
         peak: &[f64; MAX_AXES],
-        measured_s: f64,
-        theoretical_s: f64,
     ) -> Figures {
         let n = cfg.axis.len();
         let kin = crate::program::kin(cfg).ok().flatten();
@@ -562,10 +582,7 @@ impl Job {
         };
         let rows = trace.iter().map(|r| (r.t_s, r.cmd, r.act));
         Figures {
-            title: format!(
-                "{} on {}: {measured_s:.3} s measured, {theoretical_s:.3} s theoretical",
-                self.name, cfg.cell.name
-            ),
+            title,
             path: crate::figures::path_of(rows, kin.as_ref(), n, &coords),
             following_error: cfg
                 .axis

@@ -459,11 +459,18 @@ fn ctl_reply(
                 eprintln!("error: {}: {e}", path.display());
                 return ExitCode::FAILURE;
             }
-            if let (Some(path), Some(f)) = (plot, figures)
-                && let Err(e) = supervisor::figures::write_png(&f, path)
-            {
-                eprintln!("error: {e}");
-                return ExitCode::FAILURE;
+            // A failed program's figures show it up to the failure.
+            if let (Some(path), Some(f)) = (plot, figures) {
+                match supervisor::figures::write_png(&f, path) {
+                    Ok(()) if !ok => {
+                        eprintln!("figures up to the failure: {}", path.display())
+                    }
+                    Ok(()) => {}
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                }
             }
             if json {
                 println!("{body}");

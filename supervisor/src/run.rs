@@ -50,6 +50,8 @@ pub enum RunError {
         message: String,
         /// The events of the run up to the failure (`docs/events.md`).
         events: Vec<serde_json::Value>,
+        /// A program's figures up to the failure (`--plot`), when it had started.
+        figures: Option<Box<crate::figures::Figures>>,
     },
     /// Ctrl-C / SIGTERM. Exit code 130.
     Interrupted,
@@ -61,6 +63,7 @@ impl RunError {
         Self::Failed {
             message: message.into(),
             events: Vec::new(),
+            figures: None,
         }
     }
 
@@ -139,10 +142,25 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let mut report = match end {
         End::Program(r) => match *r {
             Ok(r) => r,
-            Err(RunError::Failed { message, .. }) => {
+            Err(RunError::Failed {
+                mut message,
+                figures,
+                ..
+            }) => {
+                // The figures up to the failure: what a user looks at to see why.
+                if let (Some(path), Some(mut f)) = (&opts.plot, figures) {
+                    f.latency = latency_figures;
+                    match crate::figures::write_png(&f, path) {
+                        Ok(()) => {
+                            message += &format!("\n  figures up to the failure: {}", path.display())
+                        }
+                        Err(e) => message += &format!("\n  {e}"),
+                    }
+                }
                 return Err(RunError::Failed {
                     message,
                     events: closed.events,
+                    figures: None,
                 });
             }
             Err(e) => return Err(e),

@@ -237,7 +237,8 @@ impl Loop<'_> {
                     {
                         self.cell.motion_control(ControlKind::Abort);
                     }
-                    Err(self.with_events(e, r.events_from))
+                    let e = self.with_events(e, r.events_from);
+                    Err(self.with_figures(e, &r.job))
                 }
             };
             self.finish(&r, &result);
@@ -255,6 +256,7 @@ impl Loop<'_> {
                 RunError::failed(format!("{why} before {} ended", r.job.name)),
                 r.events_from,
             );
+            let e = self.with_figures(e, &r.job);
             self.finish(&r, &Err(e));
         }
         if let Some((_, waiters)) = self.enabling.take() {
@@ -278,12 +280,25 @@ impl Loop<'_> {
     fn with_events(&mut self, e: RunError, from: usize) -> RunError {
         self.cell.take_events();
         match e {
-            RunError::Failed { message, .. } => RunError::Failed {
+            RunError::Failed {
+                message, figures, ..
+            } => RunError::Failed {
                 message,
                 events: self.events_json(from),
+                figures,
             },
             e => e,
         }
+    }
+
+    /// A failed program's figures up to the failure, for `--plot`.
+    fn with_figures(&self, mut e: RunError, job: &Job) -> RunError {
+        if let RunError::Failed { figures, .. } = &mut e {
+            let mut f = job.figures_so_far(self.cfg, self.cell);
+            f.latency = latency_figures(self.cell);
+            *figures = Some(Box::new(f));
+        }
+        e
     }
 
     fn begin(&mut self, job: Job, waiters: Vec<Waiter>) {
@@ -335,6 +350,9 @@ impl Loop<'_> {
         for w in &r.waiters {
             let figures = match result {
                 Ok(rep) if w.figures => Some(Box::new(rep.figures.clone())),
+                Err(RunError::Failed {
+                    figures: Some(f), ..
+                }) if w.figures => Some(f.clone()),
                 _ => None,
             };
             self.server.reply(

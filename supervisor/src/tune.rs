@@ -197,6 +197,7 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
             return Err(RunError::Failed {
                 message,
                 events: closed.events,
+                figures: None,
             });
         }
         Err(e) => return Err(e),

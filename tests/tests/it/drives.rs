@@ -97,10 +97,13 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         "substeps = 4\n\n[[drives.inject]]\naxis = \"y\"\nfault = \"over-current\"\nat = 2.0\n\n#",
     );
     let cfg = scratch("inject-cfg", "cell.toml", &cfg);
+    let plot = scratch("inject-cfg", "failed.png", "");
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--json", "--instance", &inst, "--config"])
             .arg(&cfg)
+            .arg("--plot")
+            .arg(&plot)
             .arg(examples().join("triangle.prog")),
         WATCHDOG,
     );
@@ -110,6 +113,12 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         err.contains("servo cut power: drive-reports-fault on axis y"),
         "{err}"
     );
+    // The figures up to the failure: x's first 2 s of motion, the processes' latency.
+    assert!(
+        err.contains(&format!("figures up to the failure: {}", plot.display())),
+        "{err}"
+    );
+    crate::cell::check_figures(&plot, 4);
     // Printed as they happened, and in the report.
     assert!(err.contains("fault-injected axis y"), "{err}");
     let j = json_of(&out);
