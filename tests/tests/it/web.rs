@@ -256,6 +256,89 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
     up.down();
 }
 
+/// Seed 004's five-bar (examples/five-bar.toml) in the page: its builder draws it without an
+/// error, the tool it draws is the forward kinematics of the measured joints (computed here
+/// with the `kinematics` crate, not the page's), and the commanded path stays in the
+/// program's triangle.
+#[test]
+fn the_page_draws_the_five_bar_through_its_kinematics() {
+    let test = "web-fivebar";
+    let src = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
+        .expect("examples/five-bar.toml");
+    let cfg = scratch(test, "cell.toml", &integration_tests::with_stall_room(&src));
+    // The five-bar's parameters as the file gives them (`[kinematics]`: key = number).
+    let params: Vec<(String, f64)> = src
+        .lines()
+        .skip_while(|l| l.trim() != "[kinematics]")
+        .skip(1)
+        .take_while(|l| !l.starts_with('['))
+        .filter_map(|l| {
+            let (k, v) = l.split_once('=')?;
+            let v = v.split('#').next()?.trim().parse::<f64>().ok()?;
+            Some((k.trim().to_string(), v))
+        })
+        .collect();
+    let params: Vec<(&str, f64)> = params.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    assert_eq!(params.len(), 6, "{params:?}");
+    let kin = kinematics::build("five-bar", &kinematics::Params(&params)).expect("the five-bar");
+    let up = Up::start(test, &cfg);
+    let (web, url) = serve(&up.inst);
+    let (mut page, ready) = Browser::open(&url);
+    assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+    let hello = page.ask("eval rtc.hello.kinematics")["value"].clone();
+    assert_eq!(hello, "five-bar");
+    let prog = integration_tests::examples().join("five-bar.prog");
+    up.ok(&["exec", prog.to_str().expect("utf-8")]);
+    up.until("moving", |s| {
+        s["supervisor"]["job"]["motion_time_s"]
+            .as_f64()
+            .is_some_and(|t| t > 1.0)
+    });
+    let a = page.ask("sample 2");
+    let samples: Vec<&Value> = a["samples"]
+        .as_array()
+        .expect("samples")
+        .iter()
+        .filter(|s| s["state"] == 1)
+        .collect();
+    assert!(samples.len() >= 5, "too few samples while moving: {a}");
+    for s in &samples {
+        let q: Vec<f64> = s["joints"]
+            .as_array()
+            .expect("joints")
+            .iter()
+            .map(|v| v.as_f64().expect("joint"))
+            .collect();
+        let mut joints = [0.0; kinematics::MAX_JOINTS];
+        joints[..q.len()].copy_from_slice(&q);
+        let p = kin.axes_to_cartesian(&joints).expect("forward");
+        for k in 0..2 {
+            let drawn = s["drawn"][k].as_f64().expect("drawn");
+            assert!((drawn - p[k]).abs() < 1e-6, "{s}: forward {p:?}");
+        }
+    }
+    let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
+    assert!(a["held"].is_string(), "{a}");
+    let path = page.ask("eval rtc.path.commanded")["value"].clone();
+    for p in path.as_array().expect("points") {
+        let (x, y) = (p[0].as_f64().expect("x"), p[1].as_f64().expect("y"));
+        // Start (-200, -150) and the corners P1..P3: the blend stays within their hull's box.
+        assert!(
+            (-236.0..=-159.0).contains(&x) && (-191.0..=-109.0).contains(&y),
+            "({x}, {y})"
+        );
+    }
+    let shot = scratch(test, "five-bar.png", "");
+    page.ask(&format!("shot {}", shot.display()));
+    println!("screenshot: {}", shot.display());
+    let bye = page.ask("quit");
+    assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
+    drop(page);
+    // The observer leaves first: `down` checks that nothing of the instance is left.
+    drop(web);
+    up.down();
+}
+
 #[test]
 fn web_refuses_a_network_address_without_a_token() {
     let out = supervisor()
