@@ -122,9 +122,14 @@ pub struct PathScale {
 impl PathScale {
     /// The pixel of data point `(x, y)`.
     pub fn pixel(&self, x: f64, y: f64) -> (i32, i32) {
+        // A point far outside (a wild measured value) lands far off the figure, never wraps.
         (
-            self.origin_px.0 + ((x - self.origin.0) * self.px_per_unit).round() as i32,
-            self.origin_px.1 - ((y - self.origin.1) * self.px_per_unit).round() as i32,
+            self.origin_px
+                .0
+                .saturating_add(((x - self.origin.0) * self.px_per_unit).round() as i32),
+            self.origin_px
+                .1
+                .saturating_sub(((y - self.origin.1) * self.px_per_unit).round() as i32),
         )
     }
 }
@@ -1063,7 +1068,7 @@ mod tests {
         assert_eq!(tick_label(2.5e9, 5e8), "2.5e9");
     }
 
-    /// Writes a demo plot to look at: `cargo test -p latency --lib plot -- --ignored`.
+    /// Writes a demo plot to look at: `cargo test -p plot -- --ignored`.
     #[test]
     #[ignore]
     fn write_series_demo() {

@@ -328,7 +328,26 @@ impl Server {
 
 impl Conn {
     fn set_reply(&mut self, r: &Reply) {
-        let bytes = postcard::to_allocvec(r).unwrap_or_default();
+        let mut bytes = postcard::to_allocvec(r).unwrap_or_default();
+        // A report too long for a frame (a very long trace) goes without its trace and
+        // figures, saying so, rather than as an answer the client must refuse.
+        if bytes.len() > MAX_FRAME
+            && let Reply::Report { ok, json, text, .. } = r
+        {
+            let text = format!(
+                "{text}\n  the trace and figures asked for were left out: {} bytes, more than \
+                 an answer may hold ({MAX_FRAME})",
+                bytes.len()
+            );
+            let short = Reply::Report {
+                ok: *ok,
+                json: json.clone(),
+                text,
+                trace_csv: None,
+                figures: None,
+            };
+            bytes = postcard::to_allocvec(&short).unwrap_or_default();
+        }
         self.output = frame(&bytes);
         self.written = 0;
     }

@@ -129,7 +129,8 @@ pub struct PathFigure {
     pub measured: Vec<(f64, f64)>,
 }
 
-/// One process' wake-up latency over the run.
+/// One process' wake-up latency since it started (for `run`, the processes it launched: the
+/// run; for `exec` on a long-running cell, the processes' whole life so far).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ProcessLatency {
     pub process: String,
@@ -137,6 +138,19 @@ pub struct ProcessLatency {
     pub bins: Vec<(f64, f64, u64)>,
     pub p99_us: f64,
     pub max_us: f64,
+}
+
+impl ProcessLatency {
+    /// The figure of `process`' histogram `h`.
+    pub fn of(process: &str, h: &LatencyHistogramV1) -> Self {
+        let m = latency::report::Summary::of(h);
+        Self {
+            process: process.to_string(),
+            bins: latency_bins(h),
+            p99_us: m.p99_us,
+            max_us: m.max_us,
+        }
+    }
 }
 
 /// Everything `--plot` draws.
@@ -225,7 +239,7 @@ impl Figures {
             .collect();
         f.log_histogram(
             lat_area,
-            "wake-up latency per process, whole run",
+            "wake-up latency per process, since it started",
             "wake-up latency (\u{b5}s, log)",
             &hist,
         );
@@ -233,7 +247,17 @@ impl Figures {
         // a band: its min and max alternate along the line.
         let mut panels: Vec<Panel> = Vec::new();
         for a in &self.following_error {
-            let label = format!("{} (peak {:.4} {})", a.axis, a.peak, a.unit);
+            // Servo's own latch (every cycle); the envelope's when servo latched another
+            // program (a failure before this one's first state).
+            let peak = if a.peak.is_finite() {
+                a.peak
+            } else {
+                a.buckets
+                    .iter()
+                    .flat_map(|&(_, lo, hi)| [lo, hi])
+                    .fold(0.0, |p: f64, v| if v.abs() > p.abs() { v } else { p })
+            };
+            let label = format!("{} (peak {peak:.4} {})", a.axis, a.unit);
             let band: Vec<(f64, f64)> = a
                 .buckets
                 .iter()
@@ -287,33 +311,83 @@ pub fn latency_bins(h: &LatencyHistogramV1) -> Vec<(f64, f64, u64)> {
             };
             let count: u64 = h.buckets[first..=last].iter().sum();
             (count > 0).then(|| {
-                let (lo, hi) = (bucket_bounds(first).0, bucket_bounds(last).1 + 1);
+                let (mut lo, hi) = (bucket_bounds(first).0, bucket_bounds(last).1 + 1);
+                if g == 0 {
+                    // Not from 0 ns: on a log axis that would stretch it decades to the left.
+                    lo = h.min_ns.clamp(1, hi - 1);
+                }
                 (lo as f64 * 1e-3, hi as f64 * 1e-3, count)
             })
         })
         .collect()
 }
 
-/// Thins a path to what a figure shows: a point is kept when it lies more than `tol` from the
-/// last kept one (the first and the last always). Corners survive; a path that stands still
-/// becomes one point.
+/// Thins a path to what a figure shows, in one pass (Reumann-Witkam): a run of points that
+/// stays within `tol` of the line through its first two becomes its ends, so a straight
+/// stretch of any length is two points and an arc keeps a point every few `tol`s. A point
+/// that turns back along the line (a reversal) ends the run too. Corners and the ends
+/// survive; a path that stands still becomes one point. A point that is not finite (a pose
+/// the kinematics could not give) breaks the line: one `(NaN, NaN)` in its place.
 pub fn thin(points: impl IntoIterator<Item = (f64, f64)>, tol: f64) -> Vec<(f64, f64)> {
+    let gap = (f64::NAN, f64::NAN);
     let mut out: Vec<(f64, f64)> = Vec::new();
-    let mut last_seen = None;
+    // The run: its first point, its direction (unit) once a point left the tolerance, the
+    // farthest it went along it, and its newest point.
+    let mut anchor: Option<(f64, f64)> = None;
+    let mut dir: Option<(f64, f64)> = None;
+    let mut far = 0.0f64;
+    let mut prev = (0.0, 0.0);
     for p in points {
         if !(p.0.is_finite() && p.1.is_finite()) {
+            if let Some(a) = anchor.take() {
+                if prev != a {
+                    out.push(prev);
+                }
+                out.push(gap);
+            }
             continue;
         }
-        last_seen = Some(p);
-        match out.last() {
-            Some(&q) if (p.0 - q.0).hypot(p.1 - q.1) <= tol => {}
-            _ => out.push(p),
+        let Some(mut a) = anchor else {
+            out.push(p);
+            (anchor, dir, far, prev) = (Some(p), None, 0.0, p);
+            continue;
+        };
+        let inside = |a: (f64, f64), d: (f64, f64), far: f64| {
+            let v = (p.0 - a.0, p.1 - a.1);
+            let along = v.0 * d.0 + v.1 * d.1;
+            let across = (v.0 * d.1 - v.1 * d.0).abs();
+            (across <= tol && along >= far - tol).then_some(along)
+        };
+        if let Some(d) = dir {
+            match inside(a, d, far) {
+                Some(along) => far = far.max(along),
+                None => {
+                    // The run ends at the point before: a new run from there.
+                    out.push(prev);
+                    a = prev;
+                    anchor = Some(a);
+                    dir = None;
+                    far = 0.0;
+                }
+            }
         }
+        if dir.is_none() {
+            let v = (p.0 - a.0, p.1 - a.1);
+            let len = v.0.hypot(v.1);
+            if len > tol {
+                dir = Some((v.0 / len, v.1 / len));
+                far = len;
+            }
+        }
+        prev = p;
     }
-    if let Some(p) = last_seen
-        && out.last() != Some(&p)
+    if let Some(a) = anchor
+        && prev != a
     {
-        out.push(p);
+        out.push(prev);
+    }
+    if out.last().is_some_and(|p| p.0.is_nan()) {
+        out.pop();
     }
     out
 }
@@ -334,16 +408,26 @@ pub fn tool_of(kin: Option<&Kin>, q: &[f64; MAX_AXES], n: usize) -> Option<Vec<f
     }
 }
 
-/// The path figure of a trace: rows of (time s, commanded joints, measured joints), each
-/// mapped to the tool, in the plane of the first two coordinates `coords` (name, unit).
+/// One row of a path: its time (s), the commanded and the measured joints, and the
+/// commanded tool when the setpoint carries it (trajgen's own; a foreign trajgen may leave it
+/// out, and then it comes through the kinematics like the measured tool).
+pub type PathRow = (
+    f64,
+    [f64; MAX_AXES],
+    [f64; MAX_AXES],
+    Option<[f64; MAX_AXES]>,
+);
+
+/// The path figure of a trace: each row mapped to the tool, in the plane of the first two
+/// coordinates `coords` (name, unit).
 pub fn path_of(
-    rows: impl Iterator<Item = (f64, [f64; MAX_AXES], [f64; MAX_AXES])> + Clone,
+    rows: impl Iterator<Item = PathRow> + Clone,
     kin: Option<&Kin>,
     n: usize,
     coords: &[(String, String)],
 ) -> PathFigure {
     let plane = coords.len() >= 2;
-    let pick = |t: f64, p: Option<Vec<f64>>| -> (f64, f64) {
+    let pick = |t: f64, p: Option<&[f64]>| -> (f64, f64) {
         match p {
             Some(p) if plane => (p[0], p[1]),
             Some(p) => (t, p.first().copied().unwrap_or(f64::NAN)),
@@ -352,10 +436,15 @@ pub fn path_of(
     };
     let cmd: Vec<(f64, f64)> = rows
         .clone()
-        .map(|(t, c, _)| pick(t, tool_of(kin, &c, n)))
+        .map(|(t, c, _, tool)| match tool {
+            Some(tool) => pick(t, Some(&tool[..])),
+            None => pick(t, tool_of(kin, &c, n).as_deref()),
+        })
         .collect();
-    let act: Vec<(f64, f64)> = rows.map(|(t, _, a)| pick(t, tool_of(kin, &a, n))).collect();
-    // A tolerance of 1/4000 of the path's extent: well under a pixel of the figure.
+    let act: Vec<(f64, f64)> = rows
+        .map(|(t, _, a, _)| pick(t, tool_of(kin, &a, n).as_deref()))
+        .collect();
+    // A tolerance of 1/1200 of the path's extent: under a pixel of the figure.
     let extent = |pts: &[(f64, f64)]| {
         let f = pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite());
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
@@ -364,7 +453,7 @@ pub fn path_of(
         }
         ((x1 - x0).max(y1 - y0)).max(0.0)
     };
-    let tol = extent(&cmd) / 4000.0;
+    let tol = extent(&cmd) / 1200.0;
     let label = |(name, unit): &(String, String)| format!("{name} ({unit})");
     let labels = if plane {
         (label(&coords[0]), label(&coords[1]))
@@ -461,8 +550,27 @@ mod tests {
         assert!((b.1 - b.0 - octave_us / 8.0).abs() < 1e-9, "{b:?}");
     }
 
+    /// The distance from `p` to the nearest segment of `line` (its breaks skipped).
+    fn off_line(p: (f64, f64), line: &[(f64, f64)]) -> f64 {
+        line.windows(2)
+            .filter(|w| w[0].0.is_finite() && w[1].0.is_finite())
+            .map(|w| {
+                let (a, b) = (w[0], w[1]);
+                let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+                let l2 = dx * dx + dy * dy;
+                let t = if l2 > 0.0 {
+                    (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / l2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
     #[test]
-    fn thinning_keeps_the_corners_and_the_ends() {
+    fn thinning_keeps_the_corners_the_ends_and_the_reversals() {
+        // Along x, up, and back down the same line: 3001 points.
         let mut pts = Vec::new();
         for i in 0..=1000 {
             pts.push((f64::from(i) * 0.1, 0.0));
@@ -470,17 +578,45 @@ mod tests {
         for i in 1..=1000 {
             pts.push((100.0, f64::from(i) * 0.1));
         }
-        pts.push((100.0, 100.0)); // standing still at the end
-        let t = thin(pts.clone(), 1.0);
-        assert!(t.len() < 250, "{}", t.len());
-        assert_eq!(t.first(), Some(&(0.0, 0.0)));
-        assert_eq!(t.last(), Some(&(100.0, 100.0)));
-        // Every original point within 1 of a kept one along the way.
-        assert!(
-            t.iter()
-                .any(|p| (p.0 - 100.0).abs() <= 1.0 && p.1.abs() <= 1.0)
+        for i in 1..=1000 {
+            pts.push((100.0, 100.0 - f64::from(i) * 0.05));
+        }
+        pts.push((100.0, 50.0)); // standing still at the end
+        let t = thin(pts.clone(), 0.01);
+        assert_eq!(
+            t,
+            vec![(0.0, 0.0), (100.0, 0.0), (100.0, 100.0), (100.0, 50.0)]
         );
         assert_eq!(thin([(1.0, 1.0); 10], 0.5), vec![(1.0, 1.0)]);
+    }
+
+    #[test]
+    fn a_thinned_arc_stays_within_the_tolerance_and_a_gap_breaks_it() {
+        // A circle of radius 100 in 10 000 points, a gap (no pose) in the middle.
+        let tol = 0.05;
+        let pts: Vec<(f64, f64)> = (0..=10_000)
+            .map(|i| {
+                if (5000..5010).contains(&i) {
+                    return (f64::NAN, f64::NAN);
+                }
+                let a = f64::from(i) * std::f64::consts::TAU / 10_000.0;
+                (100.0 * a.cos(), 100.0 * a.sin())
+            })
+            .collect();
+        let t = thin(pts.clone(), tol);
+        assert!(t.len() < 400, "{}", t.len());
+        assert_eq!(t.iter().filter(|p| p.0.is_nan()).count(), 1, "one break");
+        let worst = pts
+            .iter()
+            .filter(|p| p.0.is_finite())
+            .map(|&p| off_line(p, &t))
+            .fold(0.0, f64::max);
+        assert!(worst <= 2.0 * tol, "{worst}");
+        // Nothing drawn across the gap: the points on either side are not joined.
+        let k = t.iter().position(|p| p.0.is_nan()).expect("a break");
+        assert!(t[k - 1].1 > 0.0 && t[k + 1].1 < 0.0 && k > 0);
+        assert_eq!(t.first(), Some(&pts[0]));
+        assert_eq!(t.last(), pts.last());
     }
 
     #[test]
@@ -500,7 +636,7 @@ mod tests {
             c[1] = y;
             let mut a = c;
             a[0] += 0.05;
-            rows.push((s, c, a));
+            rows.push((s, c, a, None));
         }
         let coords = vec![
             ("x".to_string(), "mm".to_string()),

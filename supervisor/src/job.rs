@@ -146,6 +146,8 @@ pub(crate) struct Job {
     ending: Option<Instant>,
     /// The newest setpoint of this program.
     pub(crate) last: Option<SetpointV2>,
+    /// Build the figures at the end (someone asked for them: `--plot`).
+    pub(crate) plot: bool,
 }
 
 impl Job {
@@ -184,6 +186,7 @@ impl Job {
             in_pos_since: None,
             ending: None,
             last: None,
+            plot: false,
         }
     }
 
@@ -306,6 +309,8 @@ impl Job {
             // completed its reaction (servo: axes at rest, drives disabled), at most the
             // e-stop stop time and a second: the job ends on a cell at rest.
             let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 1.0);
+            // The stop itself belongs on the figures: the axes braking to rest.
+            self.record(cell);
             if cell.reactions_pending() && since.elapsed() < limit {
                 return Ok(None);
             }
@@ -389,6 +394,8 @@ impl Job {
             if self.last.is_none() {
                 continue;
             }
+            // Before the checks: the state that ends the run is on its figures too.
+            self.keep_servo(&s);
             if s.status & st::FAULT_LATCHED != 0 {
                 cell.take_events();
                 return Err(RunError::failed(cell.fault_text(&s)));
@@ -407,7 +414,6 @@ impl Job {
                     "servo refused a setpoint as a jump (see the setpoint-jump event)",
                 ));
             }
-            self.keep_servo(&s);
             if let Some(d) = &self.done {
                 let inside = (0..n).all(|i| {
                     s.following_error[i].abs() <= cfg.axis[i].in_position
@@ -488,7 +494,9 @@ impl Job {
             "{} on {}: {measured_s:.3} s measured, {:.3} s theoretical",
             self.name, cfg.cell.name, done.theoretical_s
         );
-        let figures = self.figures(cfg, title, &trace, &max_fe);
+        let figures = self
+            .plot
+            .then(|| Box::new(self.figures(cfg, title, &trace, &max_fe)));
         Report {
             ok: true,
             program: self.name.clone(),
@@ -566,6 +574,12 @@ impl Job {
         peak: &[f64; MAX_AXES],
     ) -> Figures {
         let n = cfg.axis.len();
+        // The trace and so the path stop at the record's cap; the following error does not.
+        let title = if self.truncated {
+            format!("{title}  (path: the first {MAX_RECORD_S:.0} s)")
+        } else {
+            title
+        };
         let kin = crate::program::kin(cfg).ok().flatten();
         let coords: Vec<(String, String)> = match &kin {
             Some(k) => {
@@ -580,7 +594,12 @@ impl Job {
                 .map(|a| (a.name.clone(), a.unit.clone()))
                 .collect(),
         };
-        let rows = trace.iter().map(|r| (r.t_s, r.cmd, r.act));
+        // The commanded tool is trajgen's own (no kinematics to run again), when it gave it.
+        let rows = trace.iter().zip(&self.rows).map(|(r, sp)| {
+            let tool = (sp.coords as usize >= coords.len().min(2) && sp.coords > 0)
+                .then_some(sp.cartesian);
+            (r.t_s, r.cmd, r.act, tool)
+        });
         Figures {
             title,
             path: crate::figures::path_of(rows, kin.as_ref(), n, &coords),

@@ -453,11 +453,14 @@ fn ctl_reply(
             trace_csv,
             figures,
         } => {
+            // An output that cannot be written fails the command, after the report: the
+            // program ran, and what it did is not lost with the file.
+            let mut unwritten = false;
             if let (Some(path), Some(csv)) = (trace, trace_csv)
                 && let Err(e) = std::fs::write(path, csv)
             {
                 eprintln!("error: {}: {e}", path.display());
-                return ExitCode::FAILURE;
+                unwritten = true;
             }
             // A failed program's figures show it up to the failure.
             if let (Some(path), Some(f)) = (plot, figures) {
@@ -468,7 +471,7 @@ fn ctl_reply(
                     Ok(()) => {}
                     Err(e) => {
                         eprintln!("error: {e}");
-                        return ExitCode::FAILURE;
+                        unwritten = true;
                     }
                 }
             }
@@ -479,7 +482,11 @@ fn ctl_reply(
                 if !json {
                     print!("{text}");
                 }
-                ExitCode::SUCCESS
+                if unwritten {
+                    ExitCode::FAILURE
+                } else {
+                    ExitCode::SUCCESS
+                }
             } else {
                 eprintln!("error: {text}");
                 ExitCode::FAILURE
@@ -646,7 +653,11 @@ fn main() -> ExitCode {
                 Ok(i) => i,
                 Err(c) => return c,
             };
-            for (path, flag) in [(&trace, "--trace"), (&plot, "--plot")] {
+            for (path, flag) in [
+                (&trace, "--trace"),
+                (&plot, "--plot"),
+                (&record, "--record"),
+            ] {
                 if let Some(Err(e)) = path.as_deref().map(|p| supervisor::run::writable(p, flag)) {
                     eprintln!("error: {e}");
                     return ExitCode::from(2);

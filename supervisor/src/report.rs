@@ -160,9 +160,9 @@ pub struct Report {
     /// Sense-to-command latency the drives measured over the run: sampling the encoders to
     /// applying the command computed from that sample.
     pub sense_to_command: Option<Summary>,
-    /// What `--plot` draws: the path, the following error over the run, the latency
-    /// histograms.
-    pub figures: crate::figures::Figures,
+    /// What `--plot` draws (the path, the following error over the run, the latency
+    /// histograms), when it was asked for: built at the program's end only then.
+    pub figures: Option<Box<crate::figures::Figures>>,
 }
 
 fn per_axis<T: Serialize>(names: &[String], values: &[T]) -> Value {

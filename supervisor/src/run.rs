@@ -108,7 +108,11 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let (program, _) = check_program(&cfg, &opts.program)?;
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    for (path, flag) in [(&opts.trace, "--trace"), (&opts.plot, "--plot")] {
+    for (path, flag) in [
+        (&opts.trace, "--trace"),
+        (&opts.plot, "--plot"),
+        (&opts.record, "--record"),
+    ] {
         if let Some(p) = path {
             writable(p, flag).map_err(RunError::Input)?;
         }
@@ -129,6 +133,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let first = ProgramJob {
         program,
         progress: opts.progress,
+        plot: opts.plot.is_some(),
     };
     let end = serve::serve(&cfg, &mut cell, &mut server, Some(first));
     cell.refresh_latency();
@@ -177,7 +182,9 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         .filter(|h| h.count > 0)
         .map(latency::report::Summary::of);
     report.processes = processes;
-    report.figures.latency = latency_figures;
+    if let Some(f) = &mut report.figures {
+        f.latency = latency_figures;
+    }
     report.events = closed.events;
     if let Some(e) = closed.problem {
         return Err(e);
@@ -186,15 +193,16 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         std::fs::write(path, trace_csv(&report))
             .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
     }
-    if let Some(path) = &opts.plot {
-        crate::figures::write_png(&report.figures, path).map_err(RunError::failed)?;
+    if let (Some(path), Some(f)) = (&opts.plot, &report.figures) {
+        crate::figures::write_png(f, path).map_err(RunError::failed)?;
     }
     Ok(report)
 }
 
 /// Whether a file can be written at `path` (`flag` names it in the error): its directory
-/// exists and it is not a directory itself. Checked before anything starts, so a run is never
-/// lost to a typo in an output's name.
+/// exists and this user may write there, and it is not a directory or a file this user may
+/// not write. Checked before anything starts, so a run is never lost to a typo in an
+/// output's name.
 pub fn writable(path: &std::path::Path, flag: &str) -> Result<(), String> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
@@ -210,7 +218,20 @@ pub fn writable(path: &std::path::Path, flag: &str) -> Result<(), String> {
     if path.is_dir() {
         return Err(format!("{flag} {}: is a directory", path.display()));
     }
-    Ok(())
+    use nix::unistd::{AccessFlags, access};
+    let (what, check) = if path.exists() {
+        ("the file", path)
+    } else {
+        ("the directory", dir)
+    };
+    access(check, AccessFlags::W_OK).map_err(|e| {
+        format!(
+            "{flag} {}: {what} {} cannot be written ({})",
+            path.display(),
+            check.display(),
+            e.desc()
+        )
+    })
 }
 
 /// The trace as CSV: `t_s, cmd_<axis>..., act_<axis>...`, one row per setpoint.

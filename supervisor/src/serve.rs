@@ -32,6 +32,8 @@ pub(crate) struct ProgramJob {
     pub program: Checked,
     /// Print progress on stderr.
     pub progress: bool,
+    /// Build the figures at its end (`run --plot`).
+    pub plot: bool,
 }
 
 /// Why the loop ended.
@@ -190,8 +192,9 @@ impl Loop<'_> {
                             .predict(self.cfg, &sp.position[..n], &mut || self.cell.beat())
                         {
                             Ok(predicted) => {
-                                let job =
+                                let mut job =
                                     Job::new(self.cfg, &p.program, predicted, &sp, p.progress);
+                                job.plot = p.plot;
                                 self.begin(job, Vec::new());
                             }
                             Err(e) => {
@@ -217,7 +220,9 @@ impl Loop<'_> {
                     if !run {
                         self.cell.refresh_latency();
                         report.processes = process_reports(self.cell);
-                        report.figures.latency = latency_figures(self.cell);
+                        if let Some(f) = &mut report.figures {
+                            f.latency = latency_figures(self.cell);
+                        }
                         report.sense_to_command = self
                             .cell
                             .sense_to_command
@@ -291,9 +296,12 @@ impl Loop<'_> {
         }
     }
 
-    /// A failed program's figures up to the failure, for `--plot`.
-    fn with_figures(&self, mut e: RunError, job: &Job) -> RunError {
-        if let RunError::Failed { figures, .. } = &mut e {
+    /// A failed program's figures up to the failure, for `--plot` (when it was asked for).
+    fn with_figures(&mut self, mut e: RunError, job: &Job) -> RunError {
+        if let RunError::Failed { figures, .. } = &mut e
+            && job.plot
+        {
+            self.cell.refresh_latency();
             let mut f = job.figures_so_far(self.cfg, self.cell);
             f.latency = latency_figures(self.cell);
             *figures = Some(Box::new(f));
@@ -349,7 +357,7 @@ impl Loop<'_> {
         let body = json.to_string();
         for w in &r.waiters {
             let figures = match result {
-                Ok(rep) if w.figures => Some(Box::new(rep.figures.clone())),
+                Ok(rep) if w.figures => rep.figures.clone(),
                 Err(RunError::Failed {
                     figures: Some(f), ..
                 }) if w.figures => Some(f.clone()),
@@ -486,7 +494,8 @@ impl Loop<'_> {
             ),
             None => format!("started {name}: predicted {:.2} s", predicted.duration_s),
         };
-        let job = Job::new(self.cfg, &program, predicted, &sp, false);
+        let mut job = Job::new(self.cfg, &program, predicted, &sp, false);
+        job.plot = waiter.is_some_and(|w| w.figures);
         self.cell.events.clear();
         let wait = waiter.is_some();
         self.begin(job, waiter.into_iter().collect());
@@ -773,13 +782,7 @@ pub(crate) fn latency_figures(cell: &Cell) -> Vec<crate::figures::ProcessLatency
         .filter(|(k, _)| cell.children.get(*k).is_some())
         .filter_map(|(_, (name, h))| {
             let h = h.as_deref().filter(|h| h.count > 0)?;
-            let m = latency::report::Summary::of(h);
-            Some(crate::figures::ProcessLatency {
-                process: name.clone(),
-                bins: crate::figures::latency_bins(h),
-                p99_us: m.p99_us,
-                max_us: m.max_us,
-            })
+            Some(crate::figures::ProcessLatency::of(name, h))
         })
         .collect()
 }

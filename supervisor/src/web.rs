@@ -302,7 +302,7 @@ fn attached(
         let setpoint =
             Sub::<SetpointV2>::new(&node, &instance, ServiceId::Setpoint, 16).map_err(f)?;
         let host = Sub::<HostStateV1>::new(&node, &instance, ServiceId::HostState, 1).map_err(f)?;
-        let description = describe(&cell, &axes);
+        let description = describe(&cell, &axes, kin.as_ref());
         if let Ok(mut h) = hello.lock() {
             *h = Some(Arc::from(description.to_string()));
         }
@@ -382,20 +382,22 @@ fn latency_json(latencies: &[LatencyWatch]) -> Value {
         .iter()
         .filter_map(|l| {
             let h = l.last.as_deref().filter(|h| h.count > 0)?;
-            let m = latency::report::Summary::of(h);
+            let f = crate::figures::ProcessLatency::of(&l.name, h);
             Some(json!({
-                "name": l.name,
+                "name": f.process,
                 "samples": h.count,
-                "p99_us": m.p99_us,
-                "max_us": m.max_us,
-                "bins": crate::figures::latency_bins(h),
+                "overflows": h.overflows,
+                "p99_us": f.p99_us,
+                "max_us": f.max_us,
+                "bins": f.bins,
             }))
         })
         .collect()
 }
 
-/// The cell as the page draws it: axes, kinematics and its parameters, processes.
-fn describe(cell: &CellConfigV6, axes: &Axes) -> Value {
+/// The cell as the page draws it: axes, kinematics and its parameters, the tool's
+/// coordinates (the axes themselves for a gantry), processes.
+fn describe(cell: &CellConfigV6, axes: &Axes, kin: Option<&motion_core::generator::Kin>) -> Value {
     let k = &cell.kinematics;
     let kind = str_of(&k.type_name);
     let params: serde_json::Map<String, Value> = k.params
@@ -410,6 +412,14 @@ fn describe(cell: &CellConfigV6, axes: &Axes) -> Value {
         "axes": cell.axes().iter().map(|a| json!({
             "name": str_of(&a.name), "unit": str_of(&a.unit), "min": a.min, "max": a.max,
         })).collect::<Vec<_>>(),
+        "coords": match kin {
+            Some(k) => k.0.coords().iter()
+                .map(|c| json!({"name": c.name, "unit": c.unit.symbol()}))
+                .collect::<Vec<_>>(),
+            None => cell.axes().iter()
+                .map(|a| json!({"name": str_of(&a.name), "unit": str_of(&a.unit)}))
+                .collect(),
+        },
         "processes": axes.processes,
     })
 }
@@ -429,7 +439,13 @@ fn frame(
 ) -> Value {
     let joints: Option<Vec<f64>> = servo.map(|s| s.act_position[..n].to_vec());
     let tool = servo.and_then(|s| crate::figures::tool_of(kin, &s.act_position, n));
-    let command_tool = servo.and_then(|s| crate::figures::tool_of(kin, &s.cmd_position, n));
+    // The commanded tool is trajgen's own, on the program's path whatever the host's
+    // stalls did to servo's extrapolation; through the kinematics from servo's command when
+    // the setpoint does not carry it (a trajgen of another language may not).
+    let command_tool = match sp.filter(|sp| sp.coords > 0) {
+        Some(sp) => Some(sp.cartesian[..(sp.coords as usize).min(MAX_AXES)].to_vec()),
+        None => servo.and_then(|s| crate::figures::tool_of(kin, &s.cmd_position, n)),
+    };
     let estop = host
         .filter(|h| h.estop != 0)
         .map(|h| json!({"origin": h.cause.origin, "reason": str_of(&h.cause.reason)}));

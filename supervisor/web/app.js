@@ -222,9 +222,12 @@ function plotPath(canvas) {
   g.lineWidth = 1;
   g.fillStyle = colors[0]; g.fillText('commanded', w - 130, 14);
   g.fillStyle = colors[1]; g.fillText('measured', w - 60, 14);
-  const u = rtc.hello ? rtc.hello.axes[0].unit : '';
+  // The tool's coordinates, as the kinematics names them (a joint's unit is not the tool's).
+  const [cx0, cy0] = rtc.hello?.coords ?? [];
+  const name = (c, d) => (c ? `${c.name}` : d), unit = (c) => (c ? ` ${c.unit}` : '');
   g.fillStyle = '#9ab';
-  g.fillText(`x ${x0.toFixed(1)} .. ${x1.toFixed(1)}, y ${y0.toFixed(1)} .. ${y1.toFixed(1)} ${u}`, 8, h - 4);
+  g.fillText(`${name(cx0, 'x')} ${x0.toFixed(1)} .. ${x1.toFixed(1)}${unit(cx0)}, ` +
+    `${name(cy0, 'y')} ${y0.toFixed(1)} .. ${y1.toFixed(1)}${unit(cy0)}`, 8, h - 4);
   rtc.plotted.path = c.length + m.length;
 }
 // Each process' wake-up latency since it started: log µs across, log samples up.
@@ -275,8 +278,13 @@ function keepPath(f) {
   if (!p || p.state !== 1 || !f.tool || !f.command_tool) return;
   if (rtc.path.program !== p.id) rtc.path = { program: p.id, commanded: [], measured: [] };
   const two = (v) => [v[0], v.length > 1 ? v[1] : 0];
-  rtc.path.commanded.push(two(f.command_tool));
-  rtc.path.measured.push(two(f.tool));
+  // A point where the last one is (a WAIT, a dwell) adds nothing to draw.
+  const add = (pts, v) => {
+    const q = pts[pts.length - 1];
+    if (!q || q[0] !== v[0] || q[1] !== v[1]) pts.push(v);
+  };
+  add(rtc.path.commanded, two(f.command_tool));
+  add(rtc.path.measured, two(f.tool));
   for (const k of ['commanded', 'measured']) if (rtc.path[k].length > PATH_MAX) rtc.path[k].splice(0, PATH_MAX / 2);
 }
 

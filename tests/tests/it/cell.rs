@@ -112,8 +112,14 @@ pub(crate) fn check_figures(path: &Path, processes: usize) {
     for k in 0..processes {
         drawn("latency histogram", latency_area, k);
     }
-    drawn("following error of x", fe_area, 0);
-    drawn("following error of y", fe_area, 1);
+    // The following error's first panel (mm: x and y; theta has a panel of its own below,
+    // in the same colours), the upper half of its area.
+    let mm_panel = plot::Area {
+        bottom: (fe_area.top + fe_area.bottom) / 2,
+        ..fe_area
+    };
+    drawn("following error of x", mm_panel, 0);
+    drawn("following error of y", mm_panel, 1);
 }
 
 #[test]
@@ -270,6 +276,11 @@ fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
             "the directory /nonexistent/dir does not exist",
         ),
         ("--trace", dir.to_str().expect("utf-8"), "is a directory"),
+        (
+            "--record",
+            "/nonexistent/r.mcap",
+            "the directory /nonexistent does not exist",
+        ),
     ] {
         let out = run_with_watchdog(
             supervisor()

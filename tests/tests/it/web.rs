@@ -149,8 +149,10 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
         moved > 1.0,
         "the drawn tool did not follow the program: {xs:?}"
     );
-    // The path plot: the commanded tool along y = 40 mm (the program moves x only), the
-    // measured one within the following-error limit (1 mm) of it; both drawn.
+    // The path plot: the commanded tool (trajgen's own) along y = 40 mm from x = 40 to 140
+    // (the program moves x only), the measured one within the following-error limit of
+    // this cell (5 mm, room for the host's stalls: beyond it the cell faults) of that
+    // segment; both drawn.
     let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
     assert!(a["held"].is_string(), "{a}");
     let v =
@@ -165,17 +167,27 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
             .collect()
     };
     let (commanded, measured) = (points("commanded"), points("measured"));
-    assert_eq!(commanded.len(), measured.len());
-    for (c, m) in commanded.iter().zip(&measured) {
+    assert!(commanded.len() > 10 && measured.len() > 10, "{v}");
+    for c in &commanded {
         assert!(
             (c.1 - 40.0).abs() < 1e-9 && (40.0..=140.0).contains(&c.0),
-            "{c:?}"
-        );
-        assert!(
-            (m.1 - c.1).abs() < 1.0 && (m.0 - c.0).abs() < 1.0,
-            "{m:?} {c:?}"
+            "commanded {c:?}"
         );
     }
+    for m in &measured {
+        assert!(
+            (m.1 - 40.0).abs() < 5.0 && (35.0..=145.0).contains(&m.0),
+            "measured {m:?}"
+        );
+    }
+    // Measured and commanded are the same motion, not two drawings: they go as far.
+    let reach = |p: &[(f64, f64)]| p.iter().map(|p| p.0).fold(f64::MIN, f64::max);
+    assert!(
+        (reach(&measured) - reach(&commanded)).abs() < 5.0,
+        "measured to x {}, commanded to x {}",
+        reach(&measured),
+        reach(&commanded)
+    );
     println!(
         "path plot: {} points, x {:.1} .. {:.1} mm",
         commanded.len(),
@@ -202,8 +214,10 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
             .iter()
             .map(|b| b[2].as_u64().expect("count"))
             .sum();
+        // Every sample in a bin, or beyond the histogram's range (counted apart).
         let samples = h["samples"].as_u64().expect("samples");
-        assert!(in_bins > 0 && in_bins <= samples, "{name}: {h}");
+        let beyond = h["overflows"].as_u64().expect("overflows");
+        assert!(in_bins > 0 && in_bins + beyond == samples, "{name}: {h}");
     }
     assert_eq!(
         v["plotted"]["hist"].as_u64(),
