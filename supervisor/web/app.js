@@ -265,7 +265,9 @@ function plotHist(canvas) {
     if (end !== null) g.lineTo(X(end), Y(0));
     g.stroke();
     g.fillStyle = colors[k % colors.length];
-    g.fillText(`${p.name} p99 ${p.p99_us.toFixed(0)}`, w - 105, 14 + 13 * k);
+    g.textAlign = 'right';
+    g.fillText(`${p.name} p99 ${p.p99_us.toFixed(0)}`, w - 4, 14 + 13 * k);
+    g.textAlign = 'left';
   });
   g.lineWidth = 1;
   rtc.plotted.hist = series.length;
@@ -276,14 +278,20 @@ const PATH_MAX = 20000;
 function keepPath(f) {
   const p = f.program;
   if (!p || p.state !== 1 || !f.tool || !f.command_tool) return;
-  if (rtc.path.program !== p.id) rtc.path = { program: p.id, commanded: [], measured: [] };
+  if (rtc.path.program !== p.id) {
+    rtc.path = { program: p.id, commanded: [], measured: [], box: [Infinity, -Infinity, Infinity, -Infinity] };
+  }
   const two = (v) => [v[0], v.length > 1 ? v[1] : 0];
-  // A point where the last one is (a WAIT, a dwell) adds nothing to draw.
+  // A point within 1/1000 of the path's extent of the last one kept (a WAIT, a dwell, a
+  // slow stretch) adds nothing the plot can show: the page redraws every point each frame.
+  const b = rtc.path.box, c = two(f.command_tool);
+  rtc.path.box = [Math.min(b[0], c[0]), Math.max(b[1], c[0]), Math.min(b[2], c[1]), Math.max(b[3], c[1])];
+  const tol = Math.max(rtc.path.box[1] - rtc.path.box[0], rtc.path.box[3] - rtc.path.box[2]) / 1000;
   const add = (pts, v) => {
     const q = pts[pts.length - 1];
-    if (!q || q[0] !== v[0] || q[1] !== v[1]) pts.push(v);
+    if (!q || Math.abs(q[0] - v[0]) > tol || Math.abs(q[1] - v[1]) > tol) pts.push(v);
   };
-  add(rtc.path.commanded, two(f.command_tool));
+  add(rtc.path.commanded, c);
   add(rtc.path.measured, two(f.tool));
   for (const k of ['commanded', 'measured']) if (rtc.path[k].length > PATH_MAX) rtc.path[k].splice(0, PATH_MAX / 2);
 }
