@@ -401,6 +401,12 @@ impl Job {
                 return Err(RunError::failed(cell.fault_text(&s)));
             }
             if s.power != Power::Enabled as u8 {
+                if cell.estop.is_some() {
+                    // The e-stop's reaction (servo's state can come before its status says it
+                    // reacts): the job ends as the e-stop's, once the reactions complete.
+                    self.ending = Some(Instant::now());
+                    return Ok(None);
+                }
                 cell.take_events();
                 return Err(RunError::failed(format!(
                     "the arm is no longer enabled (servo power {}): a disable request from \
