@@ -508,6 +508,17 @@ impl Cell {
         self.host_pub.send(&self.host);
     }
 
+    /// Reads `<i>/estop` and latches the first trigger in it (every tick, and again where a
+    /// verdict depends on whether one arrived since: servo reacts to an e-stop in the cycle
+    /// it sees it, maybe before this tick read it).
+    pub(crate) fn poll_estop(&mut self) {
+        while let Some(e) = self.estop_sub.next() {
+            if e.kind == EstopKind::Trigger as u32 {
+                self.latch(e);
+            }
+        }
+    }
+
     /// Latches `e` (the first trigger since the last reset wins).
     fn latch(&mut self, e: EstopV1) {
         if self.estop.is_none() {
@@ -623,11 +634,7 @@ impl Cell {
         self.host_pub.update_connections();
         self.handover_pub.update_connections();
         self.take_events();
-        while let Some(e) = self.estop_sub.next() {
-            if e.kind == EstopKind::Trigger as u32 {
-                self.latch(e);
-            }
-        }
+        self.poll_estop();
         let timeout = Duration::from_secs_f64(cfg.supervisor.heartbeat_timeout);
         for k in 0..self.names.len() {
             while let Some(s) = self.status_subs[k].next() {

@@ -444,7 +444,8 @@ pub fn path_of(
     let act: Vec<(f64, f64)> = rows
         .map(|(t, _, a, _)| pick(t, tool_of(kin, &a, n).as_deref()))
         .collect();
-    // A tolerance of 1/1200 of the path's extent: under a pixel of the figure.
+    // A tolerance of 1/1200 of the path's extent: a point stays within about twice that of
+    // the line drawn, about a pixel of the figure.
     let extent = |pts: &[(f64, f64)]| {
         let f = pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite());
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
@@ -614,7 +615,7 @@ mod tests {
         assert!(worst <= 2.0 * tol, "{worst}");
         // Nothing drawn across the gap: the points on either side are not joined.
         let k = t.iter().position(|p| p.0.is_nan()).expect("a break");
-        assert!(t[k - 1].1 > 0.0 && t[k + 1].1 < 0.0 && k > 0);
+        assert!(k > 0 && t[k - 1].1 > 0.0 && t[k + 1].1 < 0.0);
         assert_eq!(t.first(), Some(&pts[0]));
         assert_eq!(t.last(), pts.last());
     }

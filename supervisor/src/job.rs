@@ -198,6 +198,10 @@ impl Job {
 
     /// Keeps a setpoint of this program for the trace (up to the record's cap).
     fn keep(&mut self, sp: SetpointV2) {
+        // Once either log is full both stop: no row is paired with a stale measurement.
+        if self.truncated {
+            return;
+        }
         if self.rows.len() < self.record_cap.0 {
             self.rows.push(sp);
         } else {
@@ -211,6 +215,9 @@ impl Job {
         if let Some(first) = self.rows.first() {
             self.fe.start_at(first.stamp_ns);
             self.fe.add(s.stamp_ns, &s.following_error);
+        }
+        if self.truncated {
+            return;
         }
         if self.servo_log.len() < self.record_cap.1 {
             self.servo_log.push(ServoSample {
@@ -401,9 +408,11 @@ impl Job {
                 return Err(RunError::failed(cell.fault_text(&s)));
             }
             if s.power != Power::Enabled as u8 {
+                // The e-stop's reaction: servo's state can come before its status says it
+                // reacts, and before this tick read the e-stop (published after the tick
+                // polled it): the job ends as the e-stop's, once the reactions complete.
+                cell.poll_estop();
                 if cell.estop.is_some() {
-                    // The e-stop's reaction (servo's state can come before its status says it
-                    // reacts): the job ends as the e-stop's, once the reactions complete.
                     self.ending = Some(Instant::now());
                     return Ok(None);
                 }

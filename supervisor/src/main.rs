@@ -456,6 +456,22 @@ fn ctl_reply(
             // An output that cannot be written fails the command, after the report: the
             // program ran, and what it did is not lost with the file.
             let mut unwritten = false;
+            // Asked for but not sent (a report too long for an answer says why in its text):
+            // not written, and said so even with --json.
+            for (flag, path, sent) in [
+                ("--trace", trace, trace_csv.is_some()),
+                ("--plot", plot, figures.is_some()),
+            ] {
+                if let Some(path) = path
+                    && !sent
+                {
+                    eprintln!(
+                        "error: {flag} {}: not written: the cell sent no data for it",
+                        path.display()
+                    );
+                    unwritten = true;
+                }
+            }
             if let (Some(path), Some(csv)) = (trace, trace_csv)
                 && let Err(e) = std::fs::write(path, csv)
             {

@@ -19,6 +19,10 @@ pub fn up(
     let cfg = Config::load(config).map_err(|e| RunError::Input(e.to_string()))?;
     let instance = InstanceName::new(instance)
         .map_err(|e| RunError::Input(format!("--instance {instance:?}: {e}")))?;
+    // An output that cannot be written is refused before anything starts.
+    if let Some(f) = record {
+        crate::run::writable(f, "--record").map_err(RunError::Input)?;
+    }
     let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Up)?;
     tracing::info!(
         "instance {instance} up: {} ({} processes: {}); control it with `supervisor <command> --instance {instance}`",

@@ -164,7 +164,27 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
     );
     assert_eq!(gone.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&gone.stderr).contains("is not up"));
+    let inst = up.inst.clone();
     up.down();
+    // `up --record` where no file can be written: refused before anything starts (exit 2,
+    // the flag named), nothing of the instance left.
+    let refused = run_with_watchdog(
+        supervisor()
+            .args([
+                "up",
+                "--instance",
+                &inst,
+                "--record",
+                "/nonexistent/dir/c.mcap",
+            ])
+            .arg("--config")
+            .arg(cell(test, &[])),
+        WATCHDOG,
+    );
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{err}");
+    assert!(err.contains("--record /nonexistent/dir/c.mcap"), "{err}");
+    integration_tests::assert_clean(&inst);
 }
 
 #[test]

@@ -155,6 +155,14 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
     // segment; both drawn.
     let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
     assert!(a["held"].is_string(), "{a}");
+    // Measured and commanded are the same motion, not two drawings: they go as far, once
+    // the measured tool had time to get where the command was (a host stall can hold servo
+    // back while trajgen runs on the other CPU: waited for, up to the driver's 60 s).
+    let a = page.ask(
+        "until (() => { const r = (p) => Math.max(...p.map(q => q[0])); \
+         return Math.abs(r(rtc.path.measured) - r(rtc.path.commanded)) < 5; })()",
+    );
+    assert!(a["held"].is_string(), "{a}");
     let v =
         page.ask("eval ({path: rtc.path, latency: rtc.latency, plotted: rtc.plotted})")["value"]
             .clone();
@@ -180,19 +188,14 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
             "measured {m:?}"
         );
     }
-    // Measured and commanded are the same motion, not two drawings: they go as far.
     let reach = |p: &[(f64, f64)]| p.iter().map(|p| p.0).fold(f64::MIN, f64::max);
-    assert!(
-        (reach(&measured) - reach(&commanded)).abs() < 5.0,
-        "measured to x {}, commanded to x {}",
-        reach(&measured),
-        reach(&commanded)
-    );
     println!(
-        "path plot: {} points, x {:.1} .. {:.1} mm",
+        "path plot: {} points, x {:.1} .. {:.1} mm; reach: measured {:.2}, commanded {:.2} mm",
         commanded.len(),
         commanded.first().expect("a point").0,
-        commanded.last().expect("a point").0
+        commanded.last().expect("a point").0,
+        reach(&measured),
+        reach(&commanded)
     );
     // The latency histograms: one per process of the cell, each with its samples.
     let status = up.status();
@@ -332,6 +335,14 @@ fn the_page_draws_the_five_bar_through_its_kinematics() {
         }
     }
     let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
+    assert!(a["held"].is_string(), "{a}");
+    // Measured and commanded are the same motion, not two drawings: they go as far, once
+    // the measured tool had time to get where the command was (a host stall can hold servo
+    // back while trajgen runs on the other CPU: waited for, up to the driver's 60 s).
+    let a = page.ask(
+        "until (() => { const r = (p) => Math.max(...p.map(q => q[0])); \
+         return Math.abs(r(rtc.path.measured) - r(rtc.path.commanded)) < 5; })()",
+    );
     assert!(a["held"].is_string(), "{a}");
     let path = page.ask("eval rtc.path.commanded")["value"].clone();
     for p in path.as_array().expect("points") {
