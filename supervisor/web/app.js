@@ -247,9 +247,16 @@ function plotHist(canvas) {
   g.fillStyle = '#9ab';
   // A label every decade, or every other one where they would touch.
   const every = (w - 40) / (d1 - d0) < 45 ? 2 : 1;
+  let right = -Infinity; // where the last label drawn ends: labels never overlap
   for (let d = d0; d <= d1; d++) {
     g.beginPath(); g.moveTo(X(10 ** d), 20); g.lineTo(X(10 ** d), h - 16); g.stroke();
-    if ((d - d0) % every === 0) g.fillText(d >= 0 ? String(10 ** d) : (10 ** d).toFixed(-d), X(10 ** d) - 6, h - 4);
+    if ((d - d0) % every === 0) {
+      const label = d >= 4 ? `1e${d}` : d >= 0 ? String(10 ** d) : (10 ** d).toFixed(-d);
+      const width = g.measureText(label).width;
+      // Inside the plot: the last one right-aligned to its edge where it would not fit.
+      const x = Math.min(X(10 ** d) - 6, w - 2 - width);
+      if (x > right + 4) { g.fillText(label, x, h - 4); right = x + width; }
+    }
   }
   series.forEach((p, k) => {
     g.strokeStyle = colors[k % colors.length]; g.lineWidth = 1.5; g.beginPath();
