@@ -1124,7 +1124,11 @@ impl Config {
         }
         for (k, v) in self.health_config.entries() {
             let hi = match k {
-                "thread_offset_variance_percent" => 1000.0,
+                // A stall's skipped periods count at once when it ends: above 100 % the
+                // detector forgives a stall longer than a second.
+                "thread_offset_variance_percent" | "pending_sequence_overrun_percent_limit" => {
+                    1000.0
+                }
                 _ if k.ends_with("_s") => 3600.0,
                 _ => 100.0,
             };
