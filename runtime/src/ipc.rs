@@ -487,6 +487,58 @@ pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
     left
 }
 
+/// Removes every file of `instance`: its root folder and its shared memory. For a supervisor
+/// that holds the instance's lock and found no node of it alive: whatever is there was left by
+/// processes killed part-way (a service created but not finalized, a node half created or half
+/// removed), which iceoryx2 cannot clean up (it refuses to open such a service:
+/// `HangsInCreation`, and lists such a node as neither alive nor dead). Returns the files it
+/// removed.
+pub fn purge_instance(instance: &InstanceName) -> Vec<String> {
+    let mut files = Vec::new();
+    let prefix = instance.shm_prefix();
+    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
+        for e in dir.flatten() {
+            if e.file_name().to_string_lossy().starts_with(prefix.as_str()) {
+                files.push(e.path().display().to_string());
+            }
+        }
+    }
+    let root = std::path::PathBuf::from(instance.root_dir().as_str());
+    collect_files(&root, &mut files);
+    files.retain(|f| std::fs::remove_file(f).is_ok());
+    remove_empty_dirs(&root);
+    files
+}
+
+/// Removes the services of `instance` whose creation never finished (their creator died
+/// before it made the static file read-only: iceoryx2 then refuses them for ever with
+/// `HangsInCreation`) and that are older than `age` (not one being created right now). For a
+/// supervisor that holds the instance's lock while observers of the instance are alive (so it
+/// cannot [`purge_instance`]). Returns the files it removed.
+pub fn remove_unfinished_services(
+    instance: &InstanceName,
+    age: std::time::Duration,
+) -> Vec<String> {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::path::PathBuf::from(instance.root_dir().as_str()).join("services");
+    let mut removed = Vec::new();
+    for e in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+        let Ok(meta) = e.metadata() else { continue };
+        // iceoryx2 creates a static file owner read-write and finalizes it owner read-only
+        // (iceoryx2-cal's `static_storage::file`: INIT_PERMISSIONS, FINAL_PERMISSIONS).
+        let unfinished = meta.is_file() && meta.permissions().mode() & 0o777 == 0o600;
+        let old = meta
+            .modified()
+            .ok()
+            .and_then(|m| m.elapsed().ok())
+            .is_some_and(|a| a >= age);
+        if unfinished && old && std::fs::remove_file(e.path()).is_ok() {
+            removed.push(e.path().display().to_string());
+        }
+    }
+    removed
+}
+
 /// [`remove_instance`], after waiting up to `patience` for the live nodes of the instance to
 /// go (clients such as `supervisor status` or `inject` that are just finishing).
 pub fn remove_instance_waiting(

@@ -120,13 +120,23 @@ pub(crate) fn open_cell(
     // We hold the instance now: no other supervisor creates or removes anything of it.
     await_orphans(cfg, &instance)?;
     let _ = ipc::remove_dead_nodes(&instance);
-    if ipc::live_node_pids(&instance)
+    let removed = if ipc::live_node_pids(&instance)
         .unwrap_or_default()
         .is_empty()
     {
         // Nothing of the instance is alive: whatever is left (a half-created service, a
-        // half-removed node of a supervisor killed while starting) goes.
-        let _ = ipc::remove_instance(&instance);
+        // half-created or half-removed node of a supervisor killed while starting) goes.
+        ipc::purge_instance(&instance)
+    } else {
+        // Observers are attached: only what can belong to no one goes.
+        ipc::remove_unfinished_services(&instance, Duration::from_secs(1))
+    };
+    if !removed.is_empty() {
+        tracing::warn!(
+            "instance {instance}: removed {} iceoryx2 file(s) that processes killed part-way left",
+            removed.len()
+        );
+        tracing::debug!("removed: {}", removed.join(", "));
     }
     let cell = Cell::open(cfg, instance, mode).inspect_err(|_| {
         ipc::remove_instance(&instance);

@@ -8,10 +8,17 @@
 //!   So a second `up` of a running instance is refused at once (two starts within a
 //!   millisecond included), and a supervisor killed with SIGKILL leaves no stale lock.
 //! - **Who may talk**: the supervisor reads the peer's credentials (`SO_PEERCRED`) of every
-//!   connection and answers only its own user and root; anyone else gets [`Reply::Refused`].
-//! - **Framing**: one request per connection: the client sends a frame, the server answers
-//!   with one frame and closes. A frame is a little-endian `u32` length followed by that
-//!   many bytes of a postcard-encoded [`Request`] or [`Reply`] (at most [`MAX_FRAME`]).
+//!   connection as it accepts it and serves only its own user and root; anyone else gets
+//!   [`Reply::Refused`] written at once and the connection closed: nothing of theirs is kept,
+//!   read or buffered.
+//! - **Framing**: one request per connection: the client sends a frame (and may then shut its
+//!   writing side), the server answers with one frame and closes. A frame is a little-endian
+//!   `u32` length followed by that many bytes of a postcard-encoded [`Request`] (at most
+//!   [`MAX_REQUEST`]) or [`Reply`] (at most [`MAX_FRAME`]). A request with anything after it,
+//!   inside its frame or after it, is refused and nothing is done.
+//! - **Bounds**: at most [`MAX_CONNECTIONS`] connections at once (more are refused "busy"), a
+//!   request complete within [`REQUEST_TIMEOUT`] of connecting, at most [`MAX_BUFFERED`] bytes of
+//!   requests held for all connections together (the rest waits in the kernel).
 //!
 //! The server never blocks: connections are non-blocking, read and written a piece per
 //! supervisor tick; a client that does not read its answer only keeps its own connection open
@@ -23,9 +30,27 @@ use std::io::{ErrorKind, Read, Write};
 use std::os::fd::{AsFd, BorrowedFd};
 use std::os::linux::net::SocketAddrExt;
 use std::os::unix::net::{SocketAddr, UnixListener, UnixStream};
+use std::time::{Duration, Instant};
 
-/// Largest frame either side accepts (a program's source, a report with its trace).
+/// Largest answer a client accepts (a report with its trace and figures).
 pub const MAX_FRAME: usize = 64 << 20;
+
+/// Largest request the server accepts: a program's source
+/// ([`motion_program::MAX_SOURCE_BYTES`]) with its name and room to spare.
+pub const MAX_REQUEST: usize = motion_program::MAX_SOURCE_BYTES + (64 << 10);
+
+/// Most connections served at once (a client's `exec --wait` holds one for the program's
+/// length; observers hold none).
+pub const MAX_CONNECTIONS: usize = 32;
+
+/// Most bytes of incomplete requests held for all connections together.
+pub const MAX_BUFFERED: usize = 2 * MAX_REQUEST;
+
+/// A connection's request must be complete this long after it connected.
+pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// After accepting failed (no descriptor left), how long the listener rests.
+const ACCEPT_PAUSE: Duration = Duration::from_millis(100);
 
 /// What a client asks a running cell.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -148,6 +173,14 @@ pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CtlError> {
         Err(e) => return Err(CtlError::Io(format!("instance {instance}: {e}"))),
     };
     let bytes = postcard::to_allocvec(req).map_err(|e| CtlError::Io(e.to_string()))?;
+    if bytes.len() > MAX_REQUEST {
+        return Ok(Reply::Refused(format!(
+            "the request is {} bytes: at most {MAX_REQUEST} are accepted (a program's source \
+             is at most {} bytes)",
+            bytes.len(),
+            motion_program::MAX_SOURCE_BYTES
+        )));
+    }
     let broke = |e: std::io::Error| {
         CtlError::Io(format!(
             "instance {instance}: the supervisor's control channel broke: {e}"
@@ -155,7 +188,9 @@ pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CtlError> {
     };
     // A refusal (another user) may be written and the connection closed before the request
     // is even read: read the answer whatever the write did.
-    let wrote = s.write_all(&frame(&bytes));
+    let wrote = s
+        .write_all(&frame(&bytes))
+        .and_then(|()| s.shutdown(std::net::Shutdown::Write));
     match read_frame(&mut s) {
         Ok(body) => {
             postcard::from_bytes(&body).map_err(|e| CtlError::Io(format!("a garbled answer: {e}")))
@@ -188,14 +223,17 @@ pub fn is_up(instance: &InstanceName) -> bool {
 struct Conn {
     id: u64,
     stream: UnixStream,
+    /// When it was accepted: a request must be complete within [`REQUEST_TIMEOUT`].
+    opened: Instant,
     input: Vec<u8>,
+    /// The client half-closed (or closed) its side: nothing more will arrive.
+    eof: bool,
     output: Vec<u8>,
     written: usize,
     /// A request was taken from it (so no second one is read).
     asked: bool,
-    /// The answer to whatever it asks (another user: refused). Given once its request is
-    /// read, so the connection closes with nothing unread and the client reads the answer.
-    refusal: Option<Reply>,
+    /// Nothing to answer (it left without a word): closed at the next flush.
+    silent: bool,
 }
 
 /// The serving side: the instance's lock and its connections.
@@ -205,10 +243,30 @@ pub struct Server {
     conns: Vec<Conn>,
     next_id: u64,
     uid: u32,
+    /// Accepting failed for want of descriptors: the listener is left out of the wait until
+    /// then (else a pending connection would wake the loop at once, again and again).
+    accept_paused_until: Option<Instant>,
+    /// Connections refused since the last log line about them, and when that was.
+    refused: (u64, Option<Instant>),
 }
 
 /// A connection's handle, to answer it later.
 pub type ConnId = u64;
+
+/// Why the server closes a connection without taking a request from it.
+fn refuse_now(stream: &UnixStream, reply: &Reply) {
+    // One non-blocking write of a small frame: the client reads it (it stays in the client's
+    // queue after the close), or it went away; either way nothing is kept here.
+    if let Ok(bytes) = postcard::to_allocvec(reply) {
+        use nix::sys::socket::{MsgFlags, send};
+        use std::os::fd::AsRawFd;
+        let _ = send(
+            stream.as_raw_fd(),
+            &frame(&bytes),
+            MsgFlags::MSG_DONTWAIT | MsgFlags::MSG_NOSIGNAL,
+        );
+    }
+}
 
 impl Server {
     /// Takes the instance's name: fails with `AddrInUse` when another supervisor serves it.
@@ -220,87 +278,167 @@ impl Server {
             conns: Vec::new(),
             next_id: 1,
             uid: nix::unistd::geteuid().as_raw(),
+            accept_paused_until: None,
+            refused: (0, None),
         })
     }
 
-    /// The descriptors to wait on (the listener and every connection with work pending).
+    /// The descriptors to wait on: the listener (unless accepting is paused) and every
+    /// connection whose request is still arriving.
     pub fn fds(&self) -> Vec<BorrowedFd<'_>> {
-        let mut v = vec![self.listener.as_fd()];
-        v.extend(
-            self.conns
-                .iter()
-                .filter(|c| !c.asked)
-                .map(|c| c.stream.as_fd()),
-        );
+        let paused = self.accept_paused_until.is_some_and(|t| Instant::now() < t);
+        let mut v = Vec::new();
+        if !paused {
+            v.push(self.listener.as_fd());
+        }
+        // Requests wait in the kernel while the budget is spent: not woken for them.
+        if self.buffered() < MAX_BUFFERED {
+            v.extend(
+                self.conns
+                    .iter()
+                    .filter(|c| !c.asked && !c.eof)
+                    .map(|c| c.stream.as_fd()),
+            );
+        }
         v
     }
 
     /// Accepts new connections, reads what arrived, writes what is pending; returns the
     /// requests that are complete. A connection from another user is answered
-    /// [`Reply::Refused`] here and never reaches the caller; a garbled request likewise.
+    /// [`Reply::Refused`] and closed as it is accepted (nothing of it is kept or read); a
+    /// connection beyond [`MAX_CONNECTIONS`], a garbled, oversized or late request likewise.
     pub fn poll(&mut self) -> Vec<(ConnId, Request)> {
-        while let Ok((stream, _)) = self.listener.accept() {
-            let _ = stream.set_nonblocking(true);
-            let id = self.next_id;
-            self.next_id += 1;
-            let mut conn = Conn {
-                id,
-                stream,
-                input: Vec::new(),
-                output: Vec::new(),
-                written: 0,
-                asked: false,
-                refusal: None,
-            };
-            let peer = nix::sys::socket::getsockopt(
-                &conn.stream,
-                nix::sys::socket::sockopt::PeerCredentials,
-            );
-            match peer {
-                Ok(c) if c.uid() == self.uid || c.uid() == 0 => {}
-                Ok(c) => {
-                    tracing::warn!(
-                        "control: refused a connection from uid {} (pid {})",
-                        c.uid(),
-                        c.pid()
-                    );
-                    conn.refusal = Some(Reply::Refused(format!(
-                        "refused: this cell belongs to uid {}; uid {} may not control it",
-                        self.uid,
-                        c.uid()
+        self.accept();
+        let mut out = Vec::new();
+        let mut budget = MAX_BUFFERED.saturating_sub(self.buffered());
+        for c in &mut self.conns {
+            if c.asked {
+                continue;
+            }
+            match c.read_request(&mut budget) {
+                Ok(Some(r)) => {
+                    c.asked = true;
+                    out.push((c.id, r));
+                }
+                Ok(None) if c.eof && c.input.is_empty() => {
+                    // Connected and left without a word (`is_up`): nothing to answer.
+                    c.asked = true;
+                    c.silent = true;
+                }
+                Ok(None) if c.eof => {
+                    c.asked = true;
+                    c.set_reply(&Reply::Refused(format!(
+                        "the request ended after {} bytes, before its frame was complete",
+                        c.input.len()
                     )));
                 }
-                Err(e) => {
-                    conn.refusal = Some(Reply::Refused(format!(
-                        "refused: cannot read the peer's credentials: {e}"
+                Ok(None) if c.opened.elapsed() > REQUEST_TIMEOUT => {
+                    c.asked = true;
+                    c.set_reply(&Reply::Refused(format!(
+                        "no complete request within {} s of connecting",
+                        REQUEST_TIMEOUT.as_secs()
                     )));
+                }
+                Ok(None) => {}
+                Err(why) => {
+                    c.asked = true;
+                    c.set_reply(&Reply::Refused(why));
                 }
             }
-            self.conns.push(conn);
-        }
-        let mut out = Vec::new();
-        for c in &mut self.conns {
-            if !c.asked {
-                match c.read_request() {
-                    Ok(Some(_)) if c.refusal.is_some() => {
-                        c.asked = true;
-                        let r = c.refusal.take().expect("checked");
-                        c.set_reply(&r);
-                    }
-                    Ok(Some(r)) => {
-                        c.asked = true;
-                        out.push((c.id, r));
-                    }
-                    Ok(None) => {}
-                    Err(why) => {
-                        c.asked = true;
-                        c.set_reply(&Reply::Refused(why));
-                    }
-                }
+            if c.asked {
+                c.input = Vec::new();
             }
         }
         self.flush();
         out
+    }
+
+    /// Bytes of requests held, all connections together.
+    fn buffered(&self) -> usize {
+        self.conns.iter().map(|c| c.input.len()).sum()
+    }
+
+    fn accept(&mut self) {
+        if self.accept_paused_until.is_some_and(|t| Instant::now() < t) {
+            return;
+        }
+        self.accept_paused_until = None;
+        loop {
+            let stream = match self.listener.accept() {
+                Ok((stream, _)) => stream,
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return,
+                Err(e) => {
+                    // EMFILE, ENFILE, ENOBUFS: the connection waits in the backlog; try
+                    // again after a while instead of spinning on a readable listener.
+                    tracing::warn!("control: cannot accept a connection: {e}");
+                    self.accept_paused_until = Some(Instant::now() + ACCEPT_PAUSE);
+                    return;
+                }
+            };
+            let peer =
+                nix::sys::socket::getsockopt(&stream, nix::sys::socket::sockopt::PeerCredentials);
+            let refusal = match peer {
+                Ok(c) if c.uid() == self.uid || c.uid() == 0 => None,
+                Ok(c) => Some((
+                    format!("uid {} (pid {})", c.uid(), c.pid()),
+                    format!(
+                        "refused: this cell belongs to uid {}; uid {} may not control it",
+                        self.uid,
+                        c.uid()
+                    ),
+                )),
+                Err(e) => Some((
+                    "an unknown peer".into(),
+                    format!("refused: cannot read the peer's credentials: {e}"),
+                )),
+            };
+            let refusal = refusal.or_else(|| {
+                (self.conns.len() >= MAX_CONNECTIONS).then(|| {
+                    (
+                        "a client over the limit".into(),
+                        format!("refused: busy, {MAX_CONNECTIONS} connections are open; try again"),
+                    )
+                })
+            });
+            if let Some((who, why)) = refusal {
+                refuse_now(&stream, &Reply::Refused(why));
+                self.note_refusal(&who);
+                continue;
+            }
+            if stream.set_nonblocking(true).is_err() {
+                continue;
+            }
+            let id = self.next_id;
+            self.next_id += 1;
+            self.conns.push(Conn {
+                id,
+                stream,
+                opened: Instant::now(),
+                input: Vec::new(),
+                eof: false,
+                output: Vec::new(),
+                written: 0,
+                asked: false,
+                silent: false,
+            });
+        }
+    }
+
+    /// Logs refused connections: the first at once, then a count at most once a second (a
+    /// flood of them must not flood the log).
+    fn note_refusal(&mut self, who: &str) {
+        self.refused.0 += 1;
+        let due = self
+            .refused
+            .1
+            .is_none_or(|t| t.elapsed() >= Duration::from_secs(1));
+        if due {
+            tracing::warn!(
+                "control: refused {} connection(s), the last from {who}",
+                self.refused.0
+            );
+            self.refused = (0, Some(Instant::now()));
+        }
     }
 
     /// Answers connection `id` (dropped silently if the client went away).
@@ -317,11 +455,11 @@ impl Server {
     }
 
     /// Writes the pending answers for up to `patience` (on the way down).
-    pub fn drain(&mut self, patience: std::time::Duration) {
-        let start = std::time::Instant::now();
+    pub fn drain(&mut self, patience: Duration) {
+        let start = Instant::now();
         while self.conns.iter().any(|c| !c.output.is_empty()) && start.elapsed() < patience {
             self.flush();
-            std::thread::sleep(std::time::Duration::from_millis(2));
+            std::thread::sleep(Duration::from_millis(2));
         }
     }
 }
@@ -352,36 +490,53 @@ impl Conn {
         self.written = 0;
     }
 
-    /// Reads what is there; a complete request once it has all arrived.
-    fn read_request(&mut self) -> Result<Option<Request>, String> {
+    /// Reads what is there (at most `budget` bytes, taken from it); a complete request once
+    /// it has all arrived. Whatever follows the frame, inside it or after it, refuses it.
+    fn read_request(&mut self, budget: &mut usize) -> Result<Option<Request>, String> {
         let mut buf = [0u8; 16 * 1024];
-        loop {
-            match self.stream.read(&mut buf) {
-                Ok(0) => break,
-                Ok(n) => self.input.extend_from_slice(&buf[..n]),
+        while !self.eof && *budget > 0 {
+            let want = buf.len().min(*budget);
+            match self.stream.read(&mut buf[..want]) {
+                Ok(0) => self.eof = true,
+                Ok(n) => {
+                    self.input.extend_from_slice(&buf[..n]);
+                    *budget -= n;
+                }
                 Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(e) => return Err(format!("read: {e}")),
             }
-            if self.input.len() > MAX_FRAME + 4 {
-                return Err(format!("a request longer than {MAX_FRAME} bytes"));
+            if self.input.len() >= 4 {
+                let len = frame_len(&self.input);
+                if len > MAX_REQUEST {
+                    return Err(format!(
+                        "a request of {len} bytes: at most {MAX_REQUEST} are accepted \
+                         (a program's source is at most {} bytes)",
+                        motion_program::MAX_SOURCE_BYTES
+                    ));
+                }
+                if self.input.len() > 4 + len {
+                    return Err(format!(
+                        "{} bytes follow the request's frame: one request per connection, \
+                         nothing after it",
+                        self.input.len() - 4 - len
+                    ));
+                }
             }
         }
-        if self.input.len() < 4 {
+        if self.input.len() < 4 || self.input.len() < 4 + frame_len(&self.input) {
             return Ok(None);
         }
-        let len = u32::from_le_bytes([self.input[0], self.input[1], self.input[2], self.input[3]])
-            as usize;
-        if len > MAX_FRAME {
-            return Err(format!(
-                "a request of {len} bytes is longer than {MAX_FRAME}"
-            ));
+        match postcard::take_from_bytes::<Request>(&self.input[4..]) {
+            Ok((r, [])) => Ok(Some(r)),
+            Ok((_, rest)) => Err(format!(
+                "{} bytes of junk after the request inside its frame: refused, nothing done",
+                rest.len()
+            )),
+            Err(e) => Err(format!(
+                "a garbled request ({e}): not a supervisor of this version?"
+            )),
         }
-        if self.input.len() < 4 + len {
-            return Ok(None);
-        }
-        postcard::from_bytes(&self.input[4..4 + len])
-            .map(Some)
-            .map_err(|e| format!("a garbled request ({e}): not a supervisor of this version?"))
     }
 
     /// Writes what it can; false once the connection is finished or broken.
@@ -391,23 +546,33 @@ impl Conn {
                 Ok(0) => return false,
                 Ok(n) => self.written += n,
                 Err(e) if e.kind() == ErrorKind::WouldBlock => return true,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(_) => return false,
             }
         }
         if !self.output.is_empty() {
             return false; // answered: close
         }
-        // Waiting for a request or for its answer: a client that hung up is gone.
-        let mut probe = [0u8; 1];
-        use nix::sys::socket::{MsgFlags, recv};
-        use std::os::fd::AsRawFd;
-        !matches!(
-            recv(
-                self.stream.as_raw_fd(),
-                &mut probe,
-                MsgFlags::MSG_PEEK | MsgFlags::MSG_DONTWAIT
-            ),
-            Ok(0)
-        )
+        if self.silent {
+            return false;
+        }
+        // Waiting for its request or its answer: a client that closed its socket is gone.
+        // One that only half-closed it (it sent its request and shut its writing side)
+        // still reads its answer.
+        !self.peer_closed()
     }
+
+    /// The peer closed its socket entirely (`POLLHUP`; a half-close only raises `POLLRDHUP`).
+    fn peer_closed(&self) -> bool {
+        use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+        let mut fds = [PollFd::new(self.stream.as_fd(), PollFlags::empty())];
+        matches!(poll(&mut fds, PollTimeout::ZERO), Ok(n) if n > 0)
+            && fds[0]
+                .revents()
+                .is_some_and(|r| r.intersects(PollFlags::POLLHUP | PollFlags::POLLERR))
+    }
+}
+
+fn frame_len(input: &[u8]) -> usize {
+    u32::from_le_bytes([input[0], input[1], input[2], input[3]]) as usize
 }

@@ -171,7 +171,7 @@ impl Children {
         }
     }
 
-    /// The running processes, in start order.
+    /// The running processes, in the order they were started.
     pub fn iter(&self) -> impl Iterator<Item = &Running> {
         self.procs.iter()
     }
@@ -189,12 +189,15 @@ impl Children {
         Some((p, status))
     }
 
-    /// Stops every process in reverse start order: SIGTERM to its group, then SIGKILL after
-    /// the stop timeout; `tick` runs every few milliseconds meanwhile (the supervisor's
-    /// heartbeat). Returns the processes that did not exit cleanly (status 0) with a
-    /// description.
+    /// Stops every process in reverse table order (the process graph's: the table is its
+    /// start order), whatever order restarts and swaps left them in: SIGTERM to its group,
+    /// then SIGKILL after the stop timeout; `tick` runs every few milliseconds meanwhile (the
+    /// supervisor's heartbeat). Returns the processes that did not exit cleanly (status 0)
+    /// with a description.
     pub fn stop_all(&mut self, tick: &mut dyn FnMut()) -> Vec<(String, String)> {
         let mut problems = Vec::new();
+        // Stable: of two with one index (a swap under way), the newer stops first.
+        self.procs.sort_by_key(|p| p.index);
         while let Some(mut p) = self.procs.pop() {
             if let Some(problem) = stop_one(&mut p, self.stop_timeout, tick) {
                 problems.push((p.name.clone(), problem));

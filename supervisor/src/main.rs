@@ -983,8 +983,8 @@ fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
         eprintln!("error: --listen {listen:?} is not an IP:port address (\"127.0.0.1:8080\")");
         return ExitCode::from(2);
     };
-    if token.as_deref().is_some_and(|t| t.len() < 8) {
-        eprintln!("error: --token must have at least 8 characters");
+    if let Some(Err(e)) = token.as_deref().map(supervisor::web::check_token) {
+        eprintln!("error: {e}");
         return ExitCode::from(2);
     }
     if let Err(e) = runtime::signals::install() {

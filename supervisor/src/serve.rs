@@ -8,6 +8,10 @@
 //!
 //! `run` is this loop with one program queued at the start, ending with it; `up` is this loop
 //! until `down` or a signal.
+//!
+//! Going down (`down`, SIGTERM, SIGINT) is a controlled stop, never a stop through a fault: a
+//! program that moves comes to rest along its path first (as `abort` does), then servo disables
+//! the drives at rest, and only then does the loop end and the processes stop ([`Stopping`]).
 
 use crate::cell::{Cell, Incident, Mode};
 use crate::config::Config;
@@ -60,6 +64,21 @@ enum Pending {
     },
 }
 
+/// The cell going down: where it stands on the way (see the module documentation).
+struct Stopping {
+    end: End,
+    stage: StopStage,
+    since: Instant,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum StopStage {
+    /// trajgen was asked to abort: the path speed ramps to 0 within `t_acc`.
+    Resting,
+    /// servo was asked to disable: the drives power down at rest.
+    Disabling,
+}
+
 /// A client waiting for a program's end (`exec --wait`), and what its report must carry.
 #[derive(Clone, Copy, Debug)]
 struct Waiter {
@@ -87,6 +106,7 @@ struct Loop<'a> {
     /// The last program's end, for `status`.
     last_job: Option<Value>,
     down: bool,
+    stopping: Option<Stopping>,
 }
 
 /// Runs the loop; see the module documentation. `first` is `run`'s program.
@@ -106,17 +126,18 @@ pub(crate) fn serve(
         pending: Vec::new(),
         last_job: None,
         down: false,
+        stopping: None,
     };
     loop {
         l.wait();
-        if signals::stop_requested() {
-            l.abandon("the supervisor was stopped by a signal");
-            l.server.drain(Duration::from_millis(200));
-            return End::Interrupted;
+        if signals::stop_requested() && l.stopping.is_none() {
+            l.go_down(End::Interrupted, "the supervisor was stopped by a signal");
         }
         let cfg = l.cfg;
         let incidents = l.cell.tick(cfg);
-        if let Some(end) = l.advance(&incidents) {
+        if l.stopping.is_some() {
+            l.cell.drain_motion();
+        } else if let Some(end) = l.advance(&incidents) {
             l.server.drain(Duration::from_millis(200));
             return end;
         }
@@ -125,10 +146,12 @@ pub(crate) fn serve(
             l.handle(conn, req);
         }
         l.pending_step();
-        if l.down {
-            l.abandon("`supervisor down` stopped the cell");
+        if l.down && l.stopping.is_none() {
+            l.go_down(End::Down, "`supervisor down` stopped the cell");
+        }
+        if let Some(end) = l.stop_step() {
             l.server.drain(Duration::from_millis(200));
-            return End::Down;
+            return end;
         }
     }
 }
@@ -254,6 +277,91 @@ impl Loop<'_> {
         None
     }
 
+    /// Starts going down: whoever waits is told; a moving program comes to rest along its
+    /// path (trajgen aborts it), or, at rest, the drives are disabled.
+    fn go_down(&mut self, end: End, why: &str) {
+        self.abandon(why);
+        let moving = self
+            .cell
+            .last_sp
+            .is_some_and(|sp| sp.state == shm_schema::MotionState::Moving as u32);
+        let stage = if moving && self.cell.estop.is_none() {
+            tracing::info!("going down: the program comes to rest along its path");
+            self.cell.motion_control(ControlKind::Abort);
+            StopStage::Resting
+        } else {
+            self.disable();
+            StopStage::Disabling
+        };
+        self.stopping = Some(Stopping {
+            end,
+            stage,
+            since: Instant::now(),
+        });
+    }
+
+    /// Asks servo to disable the drives if they are powered (it brings its reference to rest
+    /// along its path, then powers down).
+    fn disable(&mut self) {
+        let powered = self.cell.last_servo.is_some_and(|s| {
+            s.status & st::ENABLED != 0 || s.power != shm_schema::Power::Disabled as u8
+        });
+        if powered {
+            tracing::info!("going down: disabling the drives");
+            if let Err(e) = self.cell.request(shm_schema::RequestKind::Disable) {
+                tracing::warn!("going down: {e}");
+            }
+        }
+    }
+
+    /// The next step of going down; `Some` once the processes may be stopped.
+    fn stop_step(&mut self) -> Option<End> {
+        let stage = self.stopping.as_ref()?.stage;
+        let since = self.stopping.as_ref()?.since;
+        let m = &self.cfg.motion;
+        match stage {
+            StopStage::Resting => {
+                let at_rest = self
+                    .cell
+                    .last_sp
+                    .is_none_or(|sp| sp.state != shm_schema::MotionState::Moving as u32);
+                let limit = Duration::from_secs_f64(m.t_acc + 2.0);
+                // An e-stop on the way: the cell's own reactions bring it to rest.
+                if at_rest || self.cell.estop.is_some() || since.elapsed() > limit {
+                    if !at_rest && self.cell.estop.is_none() {
+                        tracing::warn!(
+                            "going down: trajgen did not bring the program to rest within {:.1} s; \
+                             servo brings its reference to rest",
+                            limit.as_secs_f64()
+                        );
+                    }
+                    self.disable();
+                    let s = self.stopping.as_mut()?;
+                    s.stage = StopStage::Disabling;
+                    s.since = Instant::now();
+                }
+                None
+            }
+            StopStage::Disabling => {
+                let off = self.cell.last_servo.is_none_or(|s| {
+                    s.status & st::ENABLED == 0 && s.power == shm_schema::Power::Disabled as u8
+                });
+                let limit = Duration::from_secs_f64(m.estop_stop_time + 1.0);
+                if !off && since.elapsed() <= limit {
+                    return None;
+                }
+                if !off {
+                    tracing::warn!(
+                        "going down: the drives were not disabled within {:.1} s; the processes \
+                         stop (each brings its part to rest as it leaves)",
+                        limit.as_secs_f64()
+                    );
+                }
+                self.stopping.take().map(|s| s.end)
+            }
+        }
+    }
+
     /// The cell goes down: whoever waits gets told, not dropped.
     fn abandon(&mut self, why: &str) {
         if let Some(r) = self.running.take() {
@@ -377,6 +485,20 @@ impl Loop<'_> {
     }
 
     fn handle(&mut self, conn: ConnId, req: Request) {
+        if self.stopping.is_some() && !matches!(req, Request::Info) {
+            let reply = match req {
+                Request::Down => Reply::Done(format!(
+                    "instance {}: already going down",
+                    self.cell.instance
+                )),
+                _ => Reply::Refused(format!(
+                    "instance {} is going down: the axes come to rest, then the processes stop",
+                    self.cell.instance
+                )),
+            };
+            self.server.reply(conn, &reply);
+            return;
+        }
         let reply = match req {
             Request::Info => Some(Reply::Json(self.info().to_string())),
             Request::Exec {
@@ -430,6 +552,7 @@ impl Loop<'_> {
         v["job"] = job.unwrap_or(Value::Null);
         v["last_job"] = self.last_job.clone().unwrap_or(Value::Null);
         v["enabling"] = json!(self.enabling.is_some());
+        v["going_down"] = json!(self.stopping.is_some());
         v
     }
 

@@ -7,14 +7,28 @@
 //! JSON frame, broadcast to every WebSocket client. The page, its script and three.js are
 //! compiled into the binary: nothing is fetched from the network. The buttons go through the
 //! same paths as the CLI (`supervisor estop` straight on `<i>/estop`; `reset` and `start`
-//! through the control channel). Local only by default; any other address needs a token.
+//! through the control channel).
+//!
+//! # Who may use it
+//! Every request passes [`guard`] before anything is kept or done:
+//! - **Local only by default** (`127.0.0.1:8080`): the `Host` header must name this machine's
+//!   loopback (a DNS-rebinding page names its own host), and the connecting process must be
+//!   the user who runs the view or root (read from the kernel's socket table, as the control
+//!   channel reads `SO_PEERCRED`): another local user cannot use it to reach the cell.
+//! - **Any other address needs `--token`**: every request carries it (`Authorization:
+//!   Bearer`, `?token=`, or the `SameSite=Strict` cookie the page gets with it), the page and
+//!   its scripts included.
+//! - **Nothing changes the cell cross-site**: a `POST` needs the header `X-Rtc-Request: 1` (a
+//!   page of another origin cannot send it without a CORS preflight, which is never granted),
+//!   and a `POST` or a WebSocket upgrade whose `Origin` is not this server's is refused.
 
 use crate::events::Axes;
 use crate::run::RunError;
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{Query, State};
-use axum::http::{HeaderMap, StatusCode, header};
+use axum::extract::{ConnectInfo, Query, State};
+use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
+use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use runtime::ipc::{self, Sub};
@@ -24,7 +38,6 @@ use shm_schema::{
     CellConfigV6, InstanceName, LatencyHistogramV1, MAX_AXES, ProcessName, ProcessStatusV2,
     ServiceId, ServoStateV3, SetpointV2, str_of,
 };
-use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -57,6 +70,10 @@ pub struct WebOptions {
 struct Shared {
     instance: InstanceName,
     token: Option<String>,
+    /// Where it listens (the connections' local end).
+    addr: SocketAddr,
+    /// The user it runs as.
+    uid: u32,
     frames: broadcast::Sender<Arc<str>>,
     /// The cell's description (axes, kinematics, processes), for a client that connects.
     hello: Arc<Mutex<Option<Arc<str>>>>,
@@ -70,13 +87,10 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), R
             opts.listen
         )));
     }
+    if let Some(t) = &opts.token {
+        check_token(t).map_err(RunError::Input)?;
+    }
     let (frames, _) = broadcast::channel(64);
-    let shared = Shared {
-        instance: opts.instance,
-        token: opts.token.clone(),
-        frames: frames.clone(),
-        hello: Arc::new(Mutex::new(None)),
-    };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -87,6 +101,14 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), R
     let addr = listener
         .local_addr()
         .map_err(|e| RunError::failed(format!("web: {e}")))?;
+    let shared = Shared {
+        instance: opts.instance,
+        token: opts.token.clone(),
+        addr,
+        uid: nix::unistd::geteuid().as_raw(),
+        frames: frames.clone(),
+        hello: Arc::new(Mutex::new(None)),
+    };
     let sampler = {
         let (hello, instance) = (shared.hello.clone(), opts.instance);
         std::thread::Builder::new()
@@ -112,9 +134,14 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), R
         .route("/favicon.ico", get(|| async { StatusCode::NO_CONTENT }))
         .route("/ws", get(ws))
         .route("/api/{action}", post(action))
+        .layer(axum::middleware::from_fn_with_state(shared.clone(), guard))
         .with_state(shared);
     ready(addr);
-    let serve = axum::serve(listener, app).with_graceful_shutdown(async {
+    let serve = axum::serve(
+        listener,
+        app.into_make_service_with_connect_info::<SocketAddr>(),
+    )
+    .with_graceful_shutdown(async {
         while !runtime::signals::stop_requested() {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
@@ -135,27 +162,233 @@ fn page(kind: &'static str, body: &'static str) -> Response {
     ([(header::CONTENT_TYPE, kind)], body).into_response()
 }
 
-/// Whether a request carries the token (or none is needed).
-fn allowed(s: &Shared, headers: &HeaderMap, query: &HashMap<String, String>) -> bool {
-    let Some(token) = &s.token else {
-        return true;
-    };
-    let bearer = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    bearer == Some(token.as_str()) || query.get("token") == Some(token)
+/// A token the view accepts: at least 8 characters, none of them blank or a control
+/// character.
+pub fn check_token(token: &str) -> Result<(), String> {
+    if token.chars().count() < 8 {
+        return Err("--token must have at least 8 characters".into());
+    }
+    if token.chars().any(|c| c.is_whitespace() || c.is_control()) {
+        return Err("--token must not contain blanks or control characters".into());
+    }
+    Ok(())
 }
 
-async fn ws(
-    State(s): State<Shared>,
-    headers: HeaderMap,
-    Query(q): Query<HashMap<String, String>>,
-    upgrade: WebSocketUpgrade,
-) -> Response {
-    if !allowed(&s, &headers, &q) {
-        return (StatusCode::UNAUTHORIZED, "a token is needed").into_response();
+/// The cookie that carries the token for the page's own requests (its scripts, its
+/// WebSocket), one per port.
+fn cookie_name(s: &Shared) -> String {
+    format!("rtc_token_{}", s.addr.port())
+}
+
+/// `a` equals `b`, compared in a time that does not depend on where they differ.
+fn same_secret(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = a.len() ^ b.len();
+    for (i, x) in a.iter().enumerate() {
+        diff |= usize::from(x ^ b.get(i).copied().unwrap_or(!x));
     }
+    diff == 0
+}
+
+/// The token the request carries, if any: `Authorization: Bearer`, `?token=`, the cookie.
+fn token_of(s: &Shared, headers: &HeaderMap, query: Option<&str>) -> Vec<String> {
+    let mut found = Vec::new();
+    if let Some(b) = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+    {
+        found.push(b.to_string());
+    }
+    if let Some(q) = query
+        && let Ok(q) = query_pairs(q)
+    {
+        found.extend(q.into_iter().filter(|(k, _)| k == "token").map(|(_, v)| v));
+    }
+    let name = cookie_name(s);
+    for v in headers.get_all(header::COOKIE) {
+        for pair in v.to_str().unwrap_or("").split(';') {
+            if let Some((k, v)) = pair.trim().split_once('=')
+                && k == name
+            {
+                found.push(v.to_string());
+            }
+        }
+    }
+    found
+}
+
+/// `k=v&k=v` of a query string, percent-decoded.
+fn query_pairs(q: &str) -> Result<Vec<(String, String)>, ()> {
+    let query: Query<Vec<(String, String)>> =
+        Query::try_from_uri(&format!("/?{q}").parse().map_err(|_| ())?).map_err(|_| ())?;
+    Ok(query.0)
+}
+
+/// Whether `host` (a `Host` header) names this machine's loopback at `port`.
+fn loopback_host(host: &str, port: u16) -> bool {
+    let (name, p) = match host.rsplit_once(':') {
+        Some((n, p)) if !n.ends_with(']') || n.starts_with('[') => (n, p.parse::<u16>().ok()),
+        _ => (host, Some(80)),
+    };
+    if p != Some(port) {
+        return false;
+    }
+    let name = name.trim_start_matches('[').trim_end_matches(']');
+    name.eq_ignore_ascii_case("localhost")
+        || name
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+/// The uid of the process at the other end of a loopback TCP connection: the kernel's socket
+/// table (`/proc/net/tcp`, `/proc/net/tcp6`) lists the client's socket, local address =
+/// `peer`, remote = `server`, with its owner's uid.
+pub fn loopback_peer_uid(server: SocketAddr, peer: SocketAddr) -> Option<u32> {
+    fn hex(a: SocketAddr) -> String {
+        let ip = match a.ip() {
+            std::net::IpAddr::V4(v4) => format!("{:08X}", u32::from_ne_bytes(v4.octets())),
+            std::net::IpAddr::V6(v6) => v6
+                .octets()
+                .chunks(4)
+                .map(|c| format!("{:08X}", u32::from_ne_bytes([c[0], c[1], c[2], c[3]])))
+                .collect(),
+        };
+        format!("{ip}:{:04X}", a.port())
+    }
+    let (want_local, want_remote) = (hex(peer), hex(server));
+    for table in ["/proc/net/tcp", "/proc/net/tcp6"] {
+        let Ok(text) = std::fs::read_to_string(table) else {
+            continue;
+        };
+        for line in text.lines().skip(1) {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            if f.len() > 7 && f[1] == want_local && f[2] == want_remote {
+                return f[7].parse().ok();
+            }
+        }
+    }
+    None
+}
+
+/// Who may ask what (see the module documentation); a refusal names why. Runs before any
+/// handler: nothing of a refused request is kept or done.
+fn check(
+    s: &Shared,
+    peer: SocketAddr,
+    method: &Method,
+    path: &str,
+    query: Option<&str>,
+    headers: &HeaderMap,
+) -> Result<Option<HeaderValue>, (StatusCode, String)> {
+    let refuse = |code, why: String| Err((code, why));
+    let Some(host) = headers.get(header::HOST).and_then(|h| h.to_str().ok()) else {
+        return refuse(StatusCode::BAD_REQUEST, "no Host header".into());
+    };
+    let mut set_cookie = None;
+    match &s.token {
+        None => {
+            if !loopback_host(host, s.addr.port()) {
+                return refuse(
+                    StatusCode::FORBIDDEN,
+                    format!(
+                        "Host {host:?} is not this machine's loopback: the view serves \
+                         http://127.0.0.1:{}/ (or localhost) only",
+                        s.addr.port()
+                    ),
+                );
+            }
+            match loopback_peer_uid(s.addr, peer) {
+                Some(uid) if uid == s.uid || uid == 0 => {}
+                Some(uid) => {
+                    return refuse(
+                        StatusCode::FORBIDDEN,
+                        format!(
+                            "refused: this view belongs to uid {}; uid {uid} may not use it",
+                            s.uid
+                        ),
+                    );
+                }
+                None => {
+                    return refuse(
+                        StatusCode::FORBIDDEN,
+                        format!("refused: cannot tell which user connects from {peer}"),
+                    );
+                }
+            }
+        }
+        Some(token) => {
+            let given = token_of(s, headers, query);
+            if !given
+                .iter()
+                .any(|g| same_secret(g.as_bytes(), token.as_bytes()))
+            {
+                return refuse(StatusCode::UNAUTHORIZED, "a token is needed".into());
+            }
+            // The page's own requests (its scripts) carry it from now on.
+            set_cookie = HeaderValue::from_str(&format!(
+                "{}={token}; HttpOnly; SameSite=Strict; Path=/",
+                cookie_name(s)
+            ))
+            .ok();
+        }
+    }
+    let upgrade = path == "/ws";
+    if *method != Method::GET && *method != Method::HEAD || upgrade {
+        if let Some(origin) = headers.get(header::ORIGIN) {
+            let own = format!("http://{host}");
+            if origin.to_str().ok() != Some(own.as_str()) {
+                return refuse(
+                    StatusCode::FORBIDDEN,
+                    format!(
+                        "refused: a request from {origin:?}, another origin than {own} \
+                         (a cross-site request)"
+                    ),
+                );
+            }
+        }
+        if !upgrade && headers.get("x-rtc-request").and_then(|v| v.to_str().ok()) != Some("1") {
+            return refuse(
+                StatusCode::FORBIDDEN,
+                "refused: a request that changes the cell needs the header X-Rtc-Request: 1 \
+                 (the page sends it; a page of another site cannot)"
+                    .into(),
+            );
+        }
+    }
+    Ok(set_cookie)
+}
+
+/// Every request passes here first: [`check`].
+async fn guard(
+    State(s): State<Shared>,
+    ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    req: axum::extract::Request,
+    next: Next,
+) -> Response {
+    let checked = check(
+        &s,
+        peer,
+        req.method(),
+        req.uri().path(),
+        req.uri().query(),
+        req.headers(),
+    );
+    match checked {
+        Ok(cookie) => {
+            let mut r = next.run(req).await;
+            if let Some(c) = cookie {
+                r.headers_mut().append(header::SET_COOKIE, c);
+            }
+            r
+        }
+        Err((code, why)) => {
+            tracing::warn!("web: {code} for {peer}: {why}");
+            (code, why).into_response()
+        }
+    }
+}
+
+async fn ws(State(s): State<Shared>, upgrade: WebSocketUpgrade) -> Response {
     upgrade.on_upgrade(move |socket| client(socket, s))
 }
 
@@ -198,12 +431,7 @@ async fn client(mut socket: WebSocket, s: Shared) {
 async fn action(
     State(s): State<Shared>,
     axum::extract::Path(what): axum::extract::Path<String>,
-    headers: HeaderMap,
-    Query(q): Query<HashMap<String, String>>,
 ) -> Response {
-    if !allowed(&s, &headers, &q) {
-        return (StatusCode::UNAUTHORIZED, "a token is needed").into_response();
-    }
     let instance = s.instance;
     let result = tokio::task::spawn_blocking(move || -> Result<String, (StatusCode, String)> {
         use crate::ctl::{Reply, Request};

@@ -359,7 +359,7 @@ function connect() {
 async function act(what) {
   $('answer').textContent = `${what}…`;
   try {
-    const r = await fetch(withToken(`/api/${what}`), { method: 'POST' });
+    const r = await fetch(withToken(`/api/${what}`), { method: 'POST', headers: { 'X-Rtc-Request': '1' } });
     $('answer').textContent = await r.text();
   } catch (e) { $('answer').textContent = `${what}: ${e}`; }
 }

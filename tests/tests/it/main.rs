@@ -8,6 +8,7 @@ mod cell;
 mod closed_loop;
 mod drives;
 mod estop;
+mod faults;
 mod fieldbus;
 mod latency;
 mod loop_sim;

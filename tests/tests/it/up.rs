@@ -29,6 +29,12 @@ impl Up {
             .stderr(std::fs::File::create(&log).expect("log"))
             .spawn()
             .expect("supervisor up");
+        Self::adopt(inst, child, log)
+    }
+
+    /// A `supervisor up` of `inst` started by the caller (its stderr into `log`), once the
+    /// drives are enabled.
+    pub(crate) fn adopt(inst: String, child: Child, log: PathBuf) -> Self {
         let up = Self {
             inst,
             child: Some(child),
@@ -113,13 +119,31 @@ impl Up {
             .expect("exec")
     }
 
-    /// `down`, then the supervisor exits 0 and nothing of the instance is left.
-    pub(crate) fn down(mut self) {
+    /// `down`, then the supervisor exits 0 and nothing of the instance is left; its log.
+    pub(crate) fn down(mut self) -> String {
         self.ok(&["down"]);
+        self.ended("down")
+    }
+
+    /// SIGTERM to the supervisor, then it exits 0 and nothing of the instance is left; its
+    /// log.
+    pub(crate) fn terminate(mut self) -> String {
+        let child = self.child.as_ref().expect("running");
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(child.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        )
+        .expect("SIGTERM");
+        self.ended("SIGTERM")
+    }
+
+    fn ended(&mut self, how: &str) -> String {
         let child = self.child.take().expect("running");
         let out = wait_child(child);
-        assert!(out.success(), "up exited with {out}\n{}", self.log());
+        let log = self.log();
+        assert!(out.success(), "{how}: up exited with {out}\n{log}");
         assert_clean(&self.inst);
+        log
     }
 }
 

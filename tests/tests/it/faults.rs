@@ -1,0 +1,597 @@
+//! What the hostile fault campaign of issue 21 found, kept fixed on the real binaries: a
+//! supervisor killed while it starts, `down` of a moving cell, the stopping order after a
+//! restart, the control channel under other users' and malformed connections, the web view
+//! under cross-site and foreign requests.
+
+use crate::drives::WATCHDOG;
+use crate::up::{Up, cell};
+use integration_tests::{examples, instance, pids_with, run_with_watchdog, supervisor};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::process::CommandExt;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// When a starting supervisor is killed.
+#[derive(Clone, Copy, Debug)]
+enum Kill {
+    /// This long after it was started.
+    After(Duration),
+    /// As soon as the instance's folder `dir` (`services`, `nodes`) holds `n` entries.
+    WhenCreated(&'static str, usize),
+}
+
+/// Starts `up` of `inst` and SIGKILLs it as `when` says; then waits until every process of
+/// the instance has left (they lose their parent: SIGTERM, or its heartbeat stops).
+fn kill_while_starting(inst: &str, cfg: &Path, when: Kill) {
+    let mut child = supervisor()
+        .args(["up", "--instance", inst, "--config"])
+        .arg(cfg)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("up");
+    match when {
+        Kill::After(d) => std::thread::sleep(d),
+        Kill::WhenCreated(dir, n) => {
+            let dir = Path::new("/tmp/iceoryx2").join(inst).join(dir);
+            let start = Instant::now();
+            while std::fs::read_dir(&dir).map_or(0, |d| d.count()) < n
+                && start.elapsed() < Duration::from_secs(5)
+            {
+                std::thread::sleep(Duration::from_micros(50));
+            }
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    let start = Instant::now();
+    while !pids_with(&["--instance", inst]).is_empty() {
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "the processes of a killed supervisor did not leave"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Item 1: a supervisor killed at any moment of `up` (before, during and after it creates its
+/// services and nodes) never breaks the instance: the next `up` comes up, and its `down`
+/// leaves nothing. Before the fix, 6 of 10 delays between 5 and 30 ms left the instance
+/// unusable (`HangsInCreation`: a service file never finalized) or dirty (a half-created node
+/// that every later `down` reported as left behind).
+#[test]
+fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
+    let test = "killed-up";
+    let inst = instance(test);
+    let cfg = cell(test, &[]);
+    let mut kills: Vec<Kill> = (0..=100)
+        .step_by(5)
+        .map(|ms| Kill::After(Duration::from_millis(ms)))
+        .collect();
+    // The windows themselves, whatever the host's speed: while the first services and the
+    // supervisor's node are being created.
+    for n in 1..=4 {
+        kills.push(Kill::WhenCreated("services", n));
+    }
+    for n in 1..=3 {
+        kills.push(Kill::WhenCreated("nodes", n));
+    }
+    for k in kills {
+        kill_while_starting(&inst, &cfg, k);
+        // Every kill is followed by one more: each `up` also cleans what the previous left.
+    }
+    // Now the next `up` must come up and go down clean (Up::start waits for the drives).
+    let up = Up::start(test, &cfg);
+    assert!(
+        !up.log().contains("left behind"),
+        "the new up found files it could not remove:\n{}",
+        up.log()
+    );
+    up.down();
+}
+
+/// Event lines of a severity `error` in a supervisor's log (faults, cuts).
+fn error_events(log: &str) -> Vec<&str> {
+    log.lines().filter(|l| l.contains("] error ")).collect()
+}
+
+/// Starts the triangle on `up` and waits until it moves along its second segment.
+fn moving(up: &Up) {
+    up.ok(&[
+        "exec",
+        examples().join("triangle.prog").to_str().expect("path"),
+    ]);
+    up.until("the triangle moving", |s| {
+        s["supervisor"]["job"]["motion_time_s"]
+            .as_f64()
+            .is_some_and(|t| t > 2.0)
+            && s["supervisor"]["job"]["path_speed"]
+                .as_f64()
+                .is_some_and(|v| v > 0.5)
+    });
+}
+
+/// Item 2: `down` and SIGTERM of a cell whose program moves bring the axes to rest along the
+/// path (trajgen aborts the program), then disable the drives at rest, then stop the
+/// processes: no fault on the way. Before the fix, servo latched `velocity-step-over-limit`
+/// and quick-stopped the axes in 4 of 4 runs.
+#[test]
+fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() {
+    for how in ["down", "sigterm"] {
+        let test = &format!("down-moving-{how}");
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        moving(&up);
+        let log = if how == "down" {
+            up.down()
+        } else {
+            up.terminate()
+        };
+        let rest = log
+            .find("going down: the program comes to rest along its path")
+            .unwrap_or_else(|| panic!("{how}: the program was not brought to rest:\n{log}"));
+        let disabled = log[rest..]
+            .find("servo     disabled")
+            .unwrap_or_else(|| panic!("{how}: servo did not disable the drives:\n{log}"));
+        assert!(
+            log[rest + disabled..].contains("going down ("),
+            "{how}: the processes stopped before the drives were disabled:\n{log}"
+        );
+        let errors = error_events(&log);
+        assert!(
+            errors.is_empty(),
+            "{how}: a fault on the way down: {errors:#?}\n{log}"
+        );
+    }
+}
+
+/// Item 5: after the drives' process was restarted or swapped (its pid is then the newest),
+/// `down` still stops the processes in reverse table order, the drives last. Before the fix
+/// the new machine was stopped first: servo latched `feedback-stale` and cut power.
+#[test]
+fn down_after_the_drives_process_restarted_stops_in_the_graph_order() {
+    let test = "down-after-restart";
+    let cfg = cell(test, &[]);
+    let up = Up::start(test, &cfg);
+    for how in ["restart", "swap"] {
+        let out = up.ok(&[how, "machine"]);
+        assert!(out.contains("re-enabling"), "{how}: {out}");
+        up.until("re-enabled", |s| {
+            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+        });
+    }
+    let log = up.down();
+    let errors = error_events(&log);
+    assert!(
+        errors.is_empty() && !log.contains("feedback-stale"),
+        "a fault on the way down: {errors:#?}\n{log}"
+    );
+}
+
+/// A control-channel frame: the length, then the bytes.
+fn frame(body: &[u8]) -> Vec<u8> {
+    let mut v = (body.len() as u32).to_le_bytes().to_vec();
+    v.extend_from_slice(body);
+    v
+}
+
+/// A connection to the control channel of `inst`.
+fn connect(inst: &str) -> std::os::unix::net::UnixStream {
+    use std::os::linux::net::SocketAddrExt;
+    let addr = std::os::unix::net::SocketAddr::from_abstract_name(format!("rtcell/{inst}"))
+        .expect("address");
+    let s = std::os::unix::net::UnixStream::connect_addr(&addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("timeout");
+    s
+}
+
+/// The answer on `s`, decoded (`None` if the connection closed without one).
+fn answer(s: &mut std::os::unix::net::UnixStream) -> Option<supervisor::ctl::Reply> {
+    let mut len = [0u8; 4];
+    s.read_exact(&mut len).ok()?;
+    let mut body = vec![0u8; u32::from_le_bytes(len) as usize];
+    s.read_exact(&mut body).ok()?;
+    postcard::from_bytes(&body).ok()
+}
+
+fn refused_with(r: Option<supervisor::ctl::Reply>, what: &str, words: &str) {
+    match r {
+        Some(supervisor::ctl::Reply::Refused(m)) => {
+            assert!(m.contains(words), "{what}: refused, but {m:?}")
+        }
+        other => panic!("{what}: not refused: {other:?}"),
+    }
+}
+
+/// Item 6: a frame with anything after its request (inside the frame or after it) is refused
+/// and nothing is done (a `Down` followed by junk used to take the cell down); a client that
+/// half-closes its socket after its request gets its answer; an incomplete frame and an
+/// oversized one are refused at once.
+#[test]
+fn control_frames_are_taken_whole_or_not_at_all() {
+    let test = "ctl-frames";
+    let cfg = cell(test, &[]);
+    let up = Up::start(test, &cfg);
+    let down = postcard::to_allocvec(&supervisor::ctl::Request::Down).expect("encode");
+
+    let mut inside = down.clone();
+    inside.extend_from_slice(b"junk");
+    let mut s = connect(&up.inst);
+    s.write_all(&frame(&inside)).expect("write");
+    refused_with(
+        answer(&mut s),
+        "junk inside the frame",
+        "junk after the request",
+    );
+
+    let mut after = frame(&down);
+    after.extend_from_slice(b"junk");
+    let mut s = connect(&up.inst);
+    s.write_all(&after).expect("write");
+    refused_with(answer(&mut s), "junk after the frame", "follow the request");
+
+    let mut s = connect(&up.inst);
+    s.write_all(&frame(&down)[..3]).expect("write");
+    s.shutdown(std::net::Shutdown::Write).expect("half-close");
+    refused_with(
+        answer(&mut s),
+        "an incomplete frame",
+        "before its frame was complete",
+    );
+
+    let mut s = connect(&up.inst);
+    s.write_all(&(60u32 << 20).to_le_bytes()).expect("write");
+    refused_with(answer(&mut s), "a 60 MB request", "at most");
+
+    // The cell is still up and enabled: none of them was executed.
+    let st = up.status();
+    assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
+
+    // A client that half-closes after its request gets the answer.
+    let info = postcard::to_allocvec(&supervisor::ctl::Request::Info).expect("encode");
+    let mut s = connect(&up.inst);
+    s.write_all(&frame(&info)).expect("write");
+    s.shutdown(std::net::Shutdown::Write).expect("half-close");
+    match answer(&mut s) {
+        Some(supervisor::ctl::Reply::Json(j)) => assert!(j.contains("\"arm\""), "{j}"),
+        other => panic!("a half-closed client got {other:?}"),
+    }
+
+    // Connections beyond the limit are refused "busy" at once; the held ones go when their
+    // request does not come; then the channel serves again.
+    let held: Vec<_> = (0..supervisor::ctl::MAX_CONNECTIONS)
+        .map(|_| connect(&up.inst))
+        .collect();
+    std::thread::sleep(Duration::from_millis(200));
+    let mut s = connect(&up.inst);
+    s.write_all(&frame(&info)).expect("write");
+    refused_with(answer(&mut s), "a connection over the limit", "busy");
+    drop(held);
+    up.status();
+    up.down();
+}
+
+/// Sets the soft and hard limit of open files of the process being started.
+fn with_nofile(cmd: &mut Command, n: u64) {
+    // SAFETY: between fork and exec only setrlimit, which is async-signal-safe.
+    unsafe {
+        cmd.pre_exec(move || {
+            let l = libc::rlimit {
+                rlim_cur: n,
+                rlim_max: n,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &l) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+}
+
+/// Open descriptors of process `pid`.
+fn open_fds(pid: u32) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count())
+}
+
+/// Item 4: another local user's connections are refused as they are accepted, never kept: a
+/// thousand of them held open by uid 65534 cost the supervisor (under `ulimit -n 1024`) no
+/// descriptor, and meanwhile `status` answers and a lost process restarts. Before the fix
+/// each was kept until its request came: the supervisor ran out of descriptors, `status` hung
+/// and a crashed iobridge stayed down ("Too many open files").
+#[test]
+fn other_users_connections_cost_the_supervisor_nothing() {
+    let test = "ctl-other-user";
+    let inst = instance(test);
+    let cfg = cell(test, &[]);
+    let log = integration_tests::scratch(test, "up.log", "");
+    let mut cmd = supervisor();
+    cmd.args(["up", "--instance", &inst, "--config"])
+        .arg(&cfg)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).expect("log"));
+    with_nofile(&mut cmd, 1024);
+    let child = cmd.spawn().expect("up");
+    let up = Up::adopt(inst.clone(), child, log);
+    let sup = up.child.as_ref().expect("running").id();
+    let before = open_fds(sup);
+
+    // uid 65534 opens 1000 connections and holds them, each with the start of a 60 MB frame.
+    let script = format!(
+        r#"
+import resource, socket, sys, time
+soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
+held = []
+for i in range(1000):
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.connect("\0rtcell/{inst}")
+    try:
+        s.setblocking(False)
+        s.send((60 << 20).to_bytes(4, "little") + b"x" * 4096)
+    except OSError:
+        pass
+    held.append(s)
+print("held", len(held), flush=True)
+sys.stdin.read()
+"#
+    );
+    let mut attacker = Command::new("python3")
+        .args(["-c", &script])
+        .uid(65534)
+        .gid(65534)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("python3 as uid 65534");
+    let mut line = String::new();
+    BufReader::new(attacker.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("attacker's report");
+    assert_eq!(line.trim(), "held 1000", "the attacker could not connect");
+
+    // While they are held: the supervisor holds no more descriptors than before (a few for
+    // the clients below), answers, and restarts a lost process.
+    let during = open_fds(sup);
+    assert!(
+        during < before + 20,
+        "the supervisor went from {before} to {during} open descriptors"
+    );
+    let st = up.status();
+    assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
+    let iobridge = st["supervisor"]["processes"]
+        .as_array()
+        .expect("processes")
+        .iter()
+        .find(|p| p["name"] == "iobridge")
+        .and_then(|p| p["pid"].as_i64())
+        .expect("iobridge's pid");
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(iobridge as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .expect("kill iobridge");
+    up.until("iobridge restarted", |s| {
+        s["supervisor"]["processes"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .any(|p| {
+                p["name"] == "iobridge"
+                    && p["pid"].as_i64().is_some_and(|pid| pid != iobridge)
+                    && p["life"] == "running"
+                    && p["restarts"] == 1
+            })
+    });
+    assert!(
+        up.log()
+            .contains("refused 1 connection(s), the last from uid 65534"),
+        "the refusal is not in the log:\n{}",
+        up.log()
+    );
+    drop(attacker.stdin.take());
+    let _ = attacker.wait();
+    up.ok(&["reset"]);
+    up.down();
+}
+
+/// An HTTP/1.1 request to `addr` with `headers` (`Host` among them or not); the status code
+/// and the whole answer.
+fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)]) -> (u16, String) {
+    let mut s = std::net::TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("timeout");
+    let mut req = format!("{method} {path} HTTP/1.1\r\nConnection: close\r\nContent-Length: 0\r\n");
+    for (k, v) in headers {
+        req.push_str(&format!("{k}: {v}\r\n"));
+    }
+    req.push_str("\r\n");
+    s.write_all(req.as_bytes()).expect("write");
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    let code = out
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    (code, out)
+}
+
+/// `supervisor web` of `inst` on a free loopback port, with `extra` arguments; its address.
+fn web(inst: &str, extra: &[&str]) -> (std::process::Child, String) {
+    let mut child = supervisor()
+        .args(["web", "--instance", inst, "--listen", "127.0.0.1:0"])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("web");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("its address");
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .and_then(|a| a.strip_suffix("/\n"))
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_string();
+    (child, addr)
+}
+
+/// Item 3: the web view without a token serves its own machine's loopback and its own user
+/// only, and nothing changes the cell cross-site: a reset from another origin, without the
+/// page's header, under a foreign `Host` (DNS rebinding), or from another user is refused and
+/// the e-stop stays latched; a cross-origin WebSocket upgrade is refused. With `--token`,
+/// every request needs it, the page and its script included, and a blank token is refused.
+#[test]
+fn the_web_view_takes_commands_from_its_own_page_only() {
+    let test = "web-guard";
+    let cfg = cell(test, &[]);
+    let up = Up::start(test, &cfg);
+    let (mut view, addr) = web(&up.inst, &[]);
+    let host = addr.as_str();
+    let own = format!("http://{addr}");
+    up.ok(&["estop"]);
+    up.until("the e-stop latched", |s| {
+        !s["supervisor"]["estop"].is_null()
+    });
+    let latched = |why: &str| {
+        let st = up.status();
+        assert!(
+            !st["supervisor"]["estop"].is_null(),
+            "{why} cleared the e-stop"
+        );
+    };
+
+    for (why, headers) in [
+        (
+            "another origin",
+            vec![
+                ("Host", host),
+                ("Origin", "http://evil.example"),
+                ("X-Rtc-Request", "1"),
+            ],
+        ),
+        (
+            "no X-Rtc-Request header",
+            vec![("Host", host), ("Origin", own.as_str())],
+        ),
+        (
+            "a foreign Host (DNS rebinding)",
+            vec![("Host", "evil.example:80"), ("X-Rtc-Request", "1")],
+        ),
+    ] {
+        let (code, body) = http(&addr, "POST", "/api/reset", &headers);
+        assert_eq!(code, 403, "{why}: {body}");
+        latched(why);
+    }
+    let (code, body) = http(&addr, "GET", "/", &[("Host", "evil.example")]);
+    assert_eq!(code, 403, "a page under a foreign Host: {body}");
+    let (code, body) = http(
+        &addr,
+        "GET",
+        "/ws",
+        &[
+            ("Host", host),
+            ("Origin", "http://evil.example"),
+            ("Connection", "Upgrade"),
+            ("Upgrade", "websocket"),
+            ("Sec-WebSocket-Version", "13"),
+            ("Sec-WebSocket-Key", "dGhlIHNhbXBsZSBub25jZQ=="),
+        ],
+    );
+    assert_eq!(code, 403, "a cross-origin WebSocket: {body}");
+
+    // Another local user, with every header right.
+    let script = format!(
+        r#"
+import urllib.request, urllib.error
+r = urllib.request.Request("http://{addr}/api/reset", method="POST",
+    headers={{"X-Rtc-Request": "1", "Origin": "http://{addr}"}})
+try:
+    print(urllib.request.urlopen(r).status)
+except urllib.error.HTTPError as e:
+    print(e.code, e.read().decode())
+"#
+    );
+    let out = run_with_watchdog(
+        Command::new("python3")
+            .args(["-c", &script])
+            .uid(65534)
+            .gid(65534),
+        WATCHDOG,
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.starts_with("403") && said.contains("uid 65534 may not"),
+        "another user: {said}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    latched("another user");
+
+    // The page's own request clears it.
+    let (code, body) = http(
+        &addr,
+        "POST",
+        "/api/reset",
+        &[("Host", host), ("Origin", &own), ("X-Rtc-Request", "1")],
+    );
+    assert_eq!(code, 200, "the page's own reset: {body}");
+    up.until("the e-stop cleared", |s| s["supervisor"]["estop"].is_null());
+    let _ = view.kill();
+    let _ = view.wait();
+
+    // With a token: nothing without it, the page included; the page with it sets a cookie
+    // that carries it for its script.
+    let token = "s3cret-token-42";
+    let (mut view, addr) = web(&up.inst, &["--token", token]);
+    let host = addr.as_str();
+    for path in ["/", "/app.js", "/vendor/three.module.js"] {
+        let (code, body) = http(&addr, "GET", path, &[("Host", host)]);
+        assert_eq!(code, 401, "{path} without the token: {body}");
+    }
+    let (code, page) = http(&addr, "GET", &format!("/?token={token}"), &[("Host", host)]);
+    assert_eq!(code, 200, "the page with its token: {page}");
+    let cookie = page
+        .lines()
+        .find_map(|l| l.strip_prefix("set-cookie: "))
+        .and_then(|c| c.split(';').next())
+        .unwrap_or_else(|| panic!("no cookie:\n{page}"))
+        .to_string();
+    assert!(page.contains("SameSite=Strict"), "{page}");
+    let (code, body) = http(
+        &addr,
+        "GET",
+        "/app.js",
+        &[("Host", host), ("Cookie", &cookie)],
+    );
+    assert_eq!(code, 200, "the script with the cookie: {body}");
+    let (code, body) = http(
+        &addr,
+        "GET",
+        "/app.js",
+        &[("Host", host), ("Authorization", "Bearer wrong-token-42")],
+    );
+    assert_eq!(code, 401, "a wrong token: {body}");
+    let _ = view.kill();
+    let _ = view.wait();
+    for bad in ["        ", "spaces in token", "short"] {
+        let out = run_with_watchdog(
+            supervisor().args([
+                "web",
+                "--instance",
+                &up.inst,
+                "--listen",
+                "127.0.0.1:0",
+                "--token",
+                bad,
+            ]),
+            WATCHDOG,
+        );
+        assert_eq!(out.status.code(), Some(2), "--token {bad:?} accepted");
+    }
+    up.down();
+}
