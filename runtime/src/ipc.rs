@@ -393,14 +393,21 @@ impl Debug for Listener {
     }
 }
 
-/// Removes the resources of every dead node of `instance` (a process that was killed).
-/// Returns how many dead nodes were cleaned.
+/// Removes the resources of every dead node of `instance` (a process that was killed), then
+/// the files of nodes that are not alive and that iceoryx2 cannot clean (see
+/// [`remove_orphan_node_files`]). Returns how many nodes were cleaned.
 pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
     let cfg = config_for(instance)?;
     let mut dead = Vec::new();
+    let mut alive = Vec::new();
     Node::<Ipc>::list(&cfg, |state| {
-        if let NodeState::Dead(view) = state {
-            dead.push(view);
+        match state {
+            NodeState::Dead(view) => dead.push(view),
+            NodeState::Alive(view) => alive.push(view.id().value()),
+            // Only a live node's files are kept below; one that cannot be told (another
+            // user's) is kept too.
+            NodeState::Inaccessible(id) => alive.push(id.value()),
+            NodeState::Undefined(_) => {}
         }
         CallbackProgression::Continue
     })
@@ -411,7 +418,61 @@ pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
             cleaned += 1;
         }
     }
-    Ok(cleaned)
+    Ok(cleaned + remove_orphan_node_files(instance, &alive, std::time::Duration::from_secs(1)))
+}
+
+/// Removes the files under the instance's `nodes/` folder of every node that is not in `alive`
+/// and whose newest file is `age` old (not a node being created right now): what a process
+/// killed while it created or removed its node leaves, which iceoryx2 lists as undefined, as
+/// dead without details, or not at all. Returns how many nodes' files it removed.
+fn remove_orphan_node_files(
+    instance: &InstanceName,
+    alive: &[u128],
+    age: std::time::Duration,
+) -> usize {
+    use std::collections::BTreeMap;
+    let nodes = std::path::PathBuf::from(instance.root_dir().as_str()).join("nodes");
+    let prefix = instance.shm_prefix();
+    // Per node id: its files. A node is `<prefix><id>.node_monitor…` and a folder `<id>/`.
+    let mut by_id: BTreeMap<u128, Vec<std::path::PathBuf>> = BTreeMap::new();
+    for e in std::fs::read_dir(&nodes).into_iter().flatten().flatten() {
+        let name = e.file_name().to_string_lossy().to_string();
+        let id = name
+            .strip_prefix(prefix.as_str())
+            .and_then(|rest| rest.split('.').next())
+            .unwrap_or(&name)
+            .parse::<u128>();
+        let Ok(id) = id else { continue };
+        let mut files = Vec::new();
+        if e.path().is_dir() {
+            collect_files(&e.path(), &mut files);
+        } else {
+            files.push(e.path().display().to_string());
+        }
+        by_id
+            .entry(id)
+            .or_default()
+            .extend(files.into_iter().map(std::path::PathBuf::from));
+    }
+    let mut removed = 0;
+    for (id, files) in by_id {
+        let young = files.iter().any(|f| {
+            std::fs::metadata(f)
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|m| m.elapsed().ok())
+                .is_none_or(|a| a < age)
+        });
+        if alive.contains(&id) || young {
+            continue;
+        }
+        for f in &files {
+            let _ = std::fs::remove_file(f);
+        }
+        let _ = std::fs::remove_dir(nodes.join(id.to_string()));
+        removed += 1;
+    }
+    removed
 }
 
 /// Process ids of the live nodes of `instance`.

@@ -91,6 +91,32 @@ fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
     up.down();
 }
 
+/// An observer (`supervisor status` here) SIGKILLed at any moment of attaching to a running
+/// cell is never blamed on the cell: `down` exits 0 and nothing is left. Before the fix, a node
+/// killed half-created (iceoryx2 cannot clean it: no details) made `down` exit 1, "iceoryx2
+/// resources left behind".
+#[test]
+fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
+    let test = "killed-observer";
+    let cfg = cell(test, &[]);
+    let up = Up::start(test, &cfg);
+    for ms in (0..=40).step_by(2) {
+        let mut status = supervisor()
+            .args(["status", "--instance", &up.inst])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("status");
+        std::thread::sleep(Duration::from_millis(ms));
+        let _ = status.kill();
+        let _ = status.wait();
+    }
+    // Half-created nodes are cleaned once a second old (not one being created right now).
+    std::thread::sleep(Duration::from_millis(1500));
+    let log = up.down();
+    assert!(!log.contains("left behind"), "{log}");
+}
+
 /// Event lines of a severity `error` in a supervisor's log (faults, cuts).
 fn error_events(log: &str) -> Vec<&str> {
     log.lines().filter(|l| l.contains("] error ")).collect()
@@ -419,8 +445,27 @@ fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)]) -> (u16,
     (code, out)
 }
 
+/// A `supervisor web`, stopped as a user stops it (SIGTERM: it lets go of the instance)
+/// when dropped, so a failing test leaves no server behind either.
+struct View(std::process::Child);
+
+impl Drop for View {
+    fn drop(&mut self) {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(self.0.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+        let start = Instant::now();
+        while matches!(self.0.try_wait(), Ok(None)) && start.elapsed() < WATCHDOG {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// `supervisor web` of `inst` on a free loopback port, with `extra` arguments; its address.
-fn web(inst: &str, extra: &[&str]) -> (std::process::Child, String) {
+fn web(inst: &str, extra: &[&str]) -> (View, String) {
     let mut child = supervisor()
         .args(["web", "--instance", inst, "--listen", "127.0.0.1:0"])
         .args(extra)
@@ -438,7 +483,7 @@ fn web(inst: &str, extra: &[&str]) -> (std::process::Child, String) {
         .and_then(|a| a.strip_suffix("/\n"))
         .unwrap_or_else(|| panic!("no address in {line:?}"))
         .to_string();
-    (child, addr)
+    (View(child), addr)
 }
 
 /// Item 3: the web view without a token serves its own machine's loopback and its own user
@@ -451,7 +496,7 @@ fn the_web_view_takes_commands_from_its_own_page_only() {
     let test = "web-guard";
     let cfg = cell(test, &[]);
     let up = Up::start(test, &cfg);
-    let (mut view, addr) = web(&up.inst, &[]);
+    let (view, addr) = web(&up.inst, &[]);
     let host = addr.as_str();
     let own = format!("http://{addr}");
     up.ok(&["estop"]);
@@ -541,13 +586,12 @@ except urllib.error.HTTPError as e:
     );
     assert_eq!(code, 200, "the page's own reset: {body}");
     up.until("the e-stop cleared", |s| s["supervisor"]["estop"].is_null());
-    let _ = view.kill();
-    let _ = view.wait();
+    drop(view);
 
     // With a token: nothing without it, the page included; the page with it sets a cookie
     // that carries it for its script.
     let token = "s3cret-token-42";
-    let (mut view, addr) = web(&up.inst, &["--token", token]);
+    let (view, addr) = web(&up.inst, &["--token", token]);
     let host = addr.as_str();
     for path in ["/", "/app.js", "/vendor/three.module.js"] {
         let (code, body) = http(&addr, "GET", path, &[("Host", host)]);
@@ -576,8 +620,7 @@ except urllib.error.HTTPError as e:
         &[("Host", host), ("Authorization", "Bearer wrong-token-42")],
     );
     assert_eq!(code, 401, "a wrong token: {body}");
-    let _ = view.kill();
-    let _ = view.wait();
+    drop(view);
     for bad in ["        ", "spaces in token", "short"] {
         let out = run_with_watchdog(
             supervisor().args([
