@@ -1,0 +1,504 @@
+//! One EtherCAT SubDevice Controller (ESC): its 64 KiB address space (registers below
+//! 0x1000, process RAM above), as the ET1100 datasheet describes the registers a MainDevice
+//! uses: identity and features, station address and alias, DL status, AL control and status
+//! with the status code, the SII EEPROM interface, FMMUs, SyncManagers, DC.
+//!
+//! Reads and writes come from the frame's datagrams (`Esc::read`, `Esc::write`,
+//! `Esc::logical`); each says whether it was addressed to something the ESC has, which
+//! is what the working counter counts. A write reaches only the bytes the MainDevice may
+//! write; AL control and SII control act at once (an ESC's AL state machine for devices without
+//! a microcontroller, the EEPROM read at its speed, here instantly).
+
+use crate::sii::{Sii, SmKind};
+
+/// Size of the ESC's address space.
+pub const MEMORY: usize = 0x1_0000;
+/// Start of the process RAM.
+pub const RAM: u16 = 0x1000;
+
+/// Register addresses (ET1100 datasheet, section II).
+pub mod reg {
+    /// ESC type.
+    pub const TYPE: u16 = 0x0000;
+    /// FMMUs supported.
+    pub const FMMU_COUNT: u16 = 0x0004;
+    /// SyncManagers supported.
+    pub const SM_COUNT: u16 = 0x0005;
+    /// Process RAM in KiB.
+    pub const RAM_SIZE: u16 = 0x0006;
+    /// Port descriptor.
+    pub const PORTS: u16 = 0x0007;
+    /// ESC features supported (bit 2: DC, bit 3: DC 64 bit).
+    pub const FEATURES: u16 = 0x0008;
+    /// Configured station address.
+    pub const STATION_ADDRESS: u16 = 0x0010;
+    /// Configured station alias.
+    pub const STATION_ALIAS: u16 = 0x0012;
+    /// DL status.
+    pub const DL_STATUS: u16 = 0x0110;
+    /// AL control.
+    pub const AL_CONTROL: u16 = 0x0120;
+    /// AL status.
+    pub const AL_STATUS: u16 = 0x0130;
+    /// AL status code.
+    pub const AL_STATUS_CODE: u16 = 0x0134;
+    /// SII EEPROM configuration (owner).
+    pub const SII_CONFIG: u16 = 0x0500;
+    /// SII EEPROM control and status.
+    pub const SII_CONTROL: u16 = 0x0502;
+    /// SII EEPROM word address.
+    pub const SII_ADDRESS: u16 = 0x0504;
+    /// SII EEPROM data (8 bytes read).
+    pub const SII_DATA: u16 = 0x0508;
+    /// FMMU 0; 16 bytes each.
+    pub const FMMU: u16 = 0x0600;
+    /// SyncManager 0; 8 bytes each.
+    pub const SM: u16 = 0x0800;
+    /// DC receive time of port 0 (a write latches every port's).
+    pub const DC_RECEIVE_TIME_PORT0: u16 = 0x0900;
+    /// DC system time.
+    pub const DC_SYSTEM_TIME: u16 = 0x0910;
+    /// DC registers end (exclusive).
+    pub const DC_END: u16 = 0x0A00;
+}
+
+/// AL states (AL control and AL status, low 4 bits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum AlState {
+    /// Init.
+    Init = 1,
+    /// Pre-operational: mailbox.
+    PreOp = 2,
+    /// Bootstrap (not supported here).
+    Bootstrap = 3,
+    /// Safe-operational: inputs.
+    SafeOp = 4,
+    /// Operational: inputs and outputs.
+    Op = 8,
+}
+
+impl AlState {
+    /// The state of a code.
+    pub fn from_code(c: u8) -> Option<Self> {
+        Some(match c {
+            1 => Self::Init,
+            2 => Self::PreOp,
+            3 => Self::Bootstrap,
+            4 => Self::SafeOp,
+            8 => Self::Op,
+            _ => return None,
+        })
+    }
+}
+
+/// AL status codes (ETG.1000.6, table "AL status codes") the emulator sets.
+pub mod al_code {
+    /// No error.
+    pub const NONE: u16 = 0x0000;
+    /// Invalid requested state change.
+    pub const INVALID_STATE_CHANGE: u16 = 0x0011;
+    /// Unknown requested state.
+    pub const UNKNOWN_STATE: u16 = 0x0012;
+    /// Bootstrap not supported.
+    pub const NO_BOOTSTRAP: u16 = 0x0013;
+    /// Invalid mailbox configuration (PRE-OP).
+    pub const INVALID_MAILBOX: u16 = 0x0016;
+    /// SyncManager watchdog.
+    pub const SM_WATCHDOG: u16 = 0x001B;
+    /// Invalid output configuration.
+    pub const INVALID_OUTPUTS: u16 = 0x001D;
+    /// Invalid input configuration.
+    pub const INVALID_INPUTS: u16 = 0x001E;
+}
+
+/// SII control bits (register 0x0502, as ethercrab's and SOEM's `SiiControl` read them).
+mod sii_bit {
+    pub const READ_SIZE_8: u16 = 1 << 6;
+    pub const READ: u16 = 1 << 8;
+    pub const WRITE: u16 = 1 << 9;
+    pub const RELOAD: u16 = 1 << 10;
+    pub const COMMAND_ERROR: u16 = 1 << 13;
+    pub const WRITE_ERROR: u16 = 1 << 14;
+    pub const BUSY: u16 = 1 << 15;
+    pub const WRITE_ENABLE: u16 = 1;
+}
+
+/// One ESC: its memory, its EEPROM and what it has.
+#[derive(Clone)]
+pub struct Esc {
+    mem: Box<[u8]>,
+    eeprom: Vec<u16>,
+    sii: Sii,
+    fmmus: u8,
+    sms: u8,
+    dc: bool,
+}
+
+impl std::fmt::Debug for Esc {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Esc")
+            .field("device", &self.sii.order)
+            .field("station_address", &self.station_address())
+            .field("al_status", &self.al_status())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Esc {
+    /// An ESC with `fmmus` FMMUs, `sms` SyncManagers, DC or not, and the EEPROM `sii`, in
+    /// INIT as after power-on.
+    pub fn new(sii: Sii, fmmus: u8, sms: u8, dc: bool) -> Self {
+        let mut esc = Self {
+            mem: vec![0u8; MEMORY].into_boxed_slice(),
+            eeprom: sii.words(),
+            sii,
+            fmmus: fmmus.min(16),
+            sms: sms.min(16),
+            dc,
+        };
+        esc.power_on();
+        esc
+    }
+
+    /// Every register to its power-on value: INIT, no address, FMMUs and SyncManagers off.
+    pub fn power_on(&mut self) {
+        self.mem.fill(0);
+        self.mem[usize::from(reg::TYPE)] = 0x11; // ET1100
+        self.mem[usize::from(reg::FMMU_COUNT)] = self.fmmus;
+        self.mem[usize::from(reg::SM_COUNT)] = self.sms;
+        self.mem[usize::from(reg::RAM_SIZE)] = 8;
+        self.mem[usize::from(reg::PORTS)] = 0x0F; // ports 0 and 1: MII
+        let features: u16 = if self.dc { 0b1100 } else { 0 };
+        self.put16(reg::FEATURES, features);
+        self.put16(reg::STATION_ALIAS, self.sii.alias);
+        self.put16(reg::AL_STATUS, AlState::Init as u16);
+        self.put16(reg::SII_CONTROL, sii_bit::READ_SIZE_8);
+    }
+
+    /// The EEPROM's content.
+    pub fn sii(&self) -> &Sii {
+        &self.sii
+    }
+
+    /// Register 0x0010.
+    pub fn station_address(&self) -> u16 {
+        self.get16(reg::STATION_ADDRESS)
+    }
+
+    /// AL status (state and error bit).
+    pub fn al_status(&self) -> u16 {
+        self.get16(reg::AL_STATUS)
+    }
+
+    /// The AL state (without the error bit).
+    pub fn al_state(&self) -> Option<AlState> {
+        AlState::from_code((self.al_status() & 0x0F) as u8)
+    }
+
+    /// AL status code.
+    pub fn al_status_code(&self) -> u16 {
+        self.get16(reg::AL_STATUS_CODE)
+    }
+
+    /// The ESC leaves its state for `state` with the error bit and `code` (a device-side
+    /// error: a watchdog, a fault the device reports).
+    pub fn fall_to(&mut self, state: AlState, code: u16) {
+        self.put16(reg::AL_STATUS, state as u16 | 0x10);
+        self.put16(reg::AL_STATUS_CODE, code);
+    }
+
+    /// Sets the DL status (links and loops of ports 0 and 1: the bus knows its position).
+    pub fn set_links(&mut self, upstream: bool, downstream: bool) {
+        let mut s: u16 = 1 | 2; // PDI operational, watchdog not expired
+        if upstream {
+            s |= 1 << 4 | 1 << 9; // link port 0, communication on port 0
+        } else {
+            s |= 1 << 8; // loop closed
+        }
+        if downstream {
+            s |= 1 << 5 | 1 << 11;
+        } else {
+            s |= 1 << 10;
+        }
+        s |= 1 << 12 | 1 << 14; // ports 2 and 3: loop closed
+        self.put16(reg::DL_STATUS, s);
+    }
+
+    /// Whether the ESC has memory at `addr` (an unimplemented area is not counted).
+    fn implemented(&self, addr: u16) -> bool {
+        let dc = (reg::DC_RECEIVE_TIME_PORT0..reg::DC_END).contains(&addr);
+        !dc || self.dc
+    }
+
+    /// Whether the MainDevice may write the byte at `addr`.
+    fn writable(&self, addr: u16) -> bool {
+        match addr {
+            0x0010..=0x0011 => true, // station address
+            0x0100..=0x0103 => true, // DL control
+            0x0120..=0x0121 => true, // AL control
+            0x0200..=0x0205 => true, // event masks
+            0x0300..=0x0313 => true, // error counters (cleared)
+            0x0400..=0x0401 | 0x0410..=0x0411 | 0x0420..=0x0421 => true, // watchdogs
+            0x0442..=0x0443 => true, // watchdog counters
+            0x0500..=0x050F => true, // SII interface
+            0x0600..=0x06FF => true, // FMMUs
+            0x0800..=0x087F => !matches!(addr % 8, 5 | 7), // SMs but status, PDI ctrl
+            0x0900..=0x09FF => self.dc, // DC
+            a if a >= RAM => true,
+            _ => false,
+        }
+    }
+
+    /// A read of `buf.len()` bytes at `addr` into `buf` (ORed in for a broadcast). False if
+    /// nothing there is implemented (not counted).
+    pub fn read(&mut self, addr: u16, buf: &mut [u8], or: bool) -> bool {
+        if !self.implemented(addr) {
+            return false;
+        }
+        let start = usize::from(addr);
+        for (k, b) in buf.iter_mut().enumerate() {
+            let v = self.mem.get(start + k).copied().unwrap_or(0);
+            *b = if or { *b | v } else { v };
+        }
+        true
+    }
+
+    /// A write of `data` at `addr` (the bytes the MainDevice may write), then what it sets
+    /// off. False if nothing there is implemented (not counted).
+    pub fn write(&mut self, addr: u16, data: &[u8]) -> bool {
+        if !self.implemented(addr) {
+            return false;
+        }
+        let start = usize::from(addr);
+        let end = start + data.len();
+        for (k, v) in data.iter().enumerate() {
+            let a = start + k;
+            if a < MEMORY && self.writable(a as u16) {
+                self.mem[a] = *v;
+            }
+        }
+        let touches = |r: u16, len: usize| start < usize::from(r) + len && usize::from(r) < end;
+        if touches(reg::AL_CONTROL, 2) {
+            self.al_control();
+        }
+        if touches(reg::SII_CONTROL, 2) {
+            self.sii_command();
+        }
+        if touches(0x0300, 0x14) {
+            self.mem[0x0300..0x0314].fill(0);
+        }
+        if self.dc && touches(reg::DC_RECEIVE_TIME_PORT0, 1) {
+            self.latch_receive_times();
+        }
+        true
+    }
+
+    /// A logical access (LRD, LWR, LRW) of the datagram at logical address `logical`
+    /// through this ESC's active FMMUs; returns the working counter's increment (+1 for a read
+    /// served, +2 for a write taken).
+    pub fn logical(&mut self, logical: u32, data: &mut [u8], read: bool, write: bool) -> u16 {
+        let frame_in = data.to_vec();
+        let (d0, d1) = (
+            u64::from(logical) * 8,
+            (u64::from(logical) + data.len() as u64) * 8,
+        );
+        let (mut read_hit, mut write_hit) = (false, false);
+        for n in 0..usize::from(self.fmmus) {
+            let b = usize::from(reg::FMMU) + 16 * n;
+            let f = &self.mem[b..b + 16];
+            if f[12] & 1 == 0 {
+                continue;
+            }
+            let log = u64::from(u32::from_le_bytes([f[0], f[1], f[2], f[3]]));
+            let len = u64::from(u16::from_le_bytes([f[4], f[5]]));
+            if len == 0 {
+                continue;
+            }
+            let (start_bit, end_bit) = (u64::from(f[6] & 7), u64::from(f[7] & 7));
+            let phys = u64::from(u16::from_le_bytes([f[8], f[9]])) * 8 + u64::from(f[10] & 7);
+            let kind = f[11];
+            let l0 = log * 8 + start_bit;
+            let l1 = (log + len - 1) * 8 + end_bit + 1;
+            let (o0, o1) = (l0.max(d0), l1.min(d1));
+            if o0 >= o1 {
+                continue;
+            }
+            let reads = read && kind & 1 != 0;
+            let writes = write && kind & 2 != 0;
+            for bit in o0..o1 {
+                let p = phys + (bit - l0);
+                let (pb, pi) = ((p / 8) as usize, (p % 8) as u8);
+                let (db, di) = (((bit - d0) / 8) as usize, ((bit - d0) % 8) as u8);
+                // Process data lives in the process RAM and the digital output register
+                // (0x0F00, which simple output terminals use).
+                if !(0x0F00..MEMORY).contains(&pb) {
+                    continue;
+                }
+                if writes {
+                    let v = (frame_in[db] >> di) & 1;
+                    self.mem[pb] = (self.mem[pb] & !(1 << pi)) | (v << pi);
+                }
+                if reads {
+                    let v = (self.mem[pb] >> pi) & 1;
+                    data[db] = (data[db] & !(1 << di)) | (v << di);
+                }
+            }
+            read_hit |= reads;
+            write_hit |= writes;
+        }
+        u16::from(read_hit) + 2 * u16::from(write_hit)
+    }
+
+    /// The process RAM at `addr`, `len` bytes (what a SyncManager's buffer holds).
+    pub fn memory(&self, addr: u16, len: usize) -> &[u8] {
+        let s = usize::from(addr);
+        &self.mem[s.min(MEMORY)..(s + len).min(MEMORY)]
+    }
+
+    /// Writes the device's side of the process RAM (its inputs).
+    pub fn set_memory(&mut self, addr: u16, data: &[u8]) {
+        let s = usize::from(addr);
+        let e = (s + data.len()).min(MEMORY);
+        self.mem[s..e].copy_from_slice(&data[..e - s]);
+    }
+
+    /// SyncManager `n`'s configuration as the MainDevice wrote it: start, length, control,
+    /// enabled.
+    pub fn sm(&self, n: usize) -> (u16, u16, u8, bool) {
+        let b = reg::SM + 8 * n as u16;
+        (
+            self.get16(b),
+            self.get16(b + 2),
+            self.mem[usize::from(b + 4)],
+            self.mem[usize::from(b + 6)] & 1 != 0,
+        )
+    }
+
+    fn get16(&self, a: u16) -> u16 {
+        let a = usize::from(a);
+        u16::from_le_bytes([self.mem[a], self.mem[a + 1]])
+    }
+
+    fn put16(&mut self, a: u16, v: u16) {
+        let a = usize::from(a);
+        self.mem[a..a + 2].copy_from_slice(&v.to_le_bytes());
+    }
+
+    fn latch_receive_times(&mut self) {
+        let now = crate::now_ns();
+        for port in 0..4u16 {
+            let t = now as u32;
+            let a = usize::from(reg::DC_RECEIVE_TIME_PORT0 + 4 * port);
+            self.mem[a..a + 4].copy_from_slice(&t.to_le_bytes());
+        }
+        let a = usize::from(reg::DC_SYSTEM_TIME);
+        self.mem[a..a + 8].copy_from_slice(&now.to_le_bytes());
+    }
+
+    /// The SyncManagers the EEPROM names of `kind`, checked against what the MainDevice
+    /// configured: the same start, at least the length, enabled.
+    fn sms_configured(&self, kinds: &[SmKind]) -> bool {
+        self.sii.sms.iter().enumerate().all(|(n, want)| {
+            if !kinds.contains(&want.kind) || want.length == 0 {
+                return true;
+            }
+            let (start, len, _, on) = self.sm(n);
+            start == want.start && len >= want.length && on
+        })
+    }
+
+    /// AL control was written: the state machine takes the request (ETG.1000.6 table "AL
+    /// state transitions").
+    fn al_control(&mut self) {
+        let control = self.get16(reg::AL_CONTROL);
+        let requested = (control & 0x0F) as u8;
+        let ack = control & 0x10 != 0;
+        let status = self.al_status();
+        let current = (status & 0x0F) as u8;
+        let error = status & 0x10 != 0;
+        if error && !ack {
+            return; // an error indication waits for its acknowledgement
+        }
+        let Some(current) = AlState::from_code(current) else {
+            return;
+        };
+        let outcome = match AlState::from_code(requested) {
+            None => Err(al_code::UNKNOWN_STATE),
+            Some(AlState::Bootstrap) => Err(al_code::NO_BOOTSTRAP),
+            Some(AlState::Init) => Ok(AlState::Init),
+            Some(AlState::PreOp) => {
+                let mailbox_ok = self.sii.mailbox.is_none()
+                    || self.sms_configured(&[SmKind::MailboxOut, SmKind::MailboxIn]);
+                if current == AlState::Init && !mailbox_ok {
+                    Err(al_code::INVALID_MAILBOX)
+                } else {
+                    Ok(AlState::PreOp)
+                }
+            }
+            Some(AlState::SafeOp) => match current {
+                AlState::Init => Err(al_code::INVALID_STATE_CHANGE),
+                AlState::PreOp if !self.sms_configured(&[SmKind::Outputs]) => {
+                    Err(al_code::INVALID_OUTPUTS)
+                }
+                AlState::PreOp if !self.sms_configured(&[SmKind::Inputs]) => {
+                    Err(al_code::INVALID_INPUTS)
+                }
+                _ => Ok(AlState::SafeOp),
+            },
+            Some(AlState::Op) => match current {
+                AlState::SafeOp | AlState::Op => Ok(AlState::Op),
+                _ => Err(al_code::INVALID_STATE_CHANGE),
+            },
+        };
+        match outcome {
+            Ok(state) => {
+                self.put16(reg::AL_STATUS, state as u16);
+                self.put16(reg::AL_STATUS_CODE, al_code::NONE);
+            }
+            Err(code) => {
+                self.put16(reg::AL_STATUS, current as u16 | 0x10);
+                self.put16(reg::AL_STATUS_CODE, code);
+            }
+        }
+    }
+
+    /// SII control was written: a read copies 4 words from the word address into SII data; a
+    /// write takes one word (with write enable); either completes at once.
+    fn sii_command(&mut self) {
+        let control = self.get16(reg::SII_CONTROL);
+        let address = u32::from_le_bytes([
+            self.mem[0x0504],
+            self.mem[0x0505],
+            self.mem[0x0506],
+            self.mem[0x0507],
+        ]) as usize;
+        let mut status = control & !(sii_bit::READ | sii_bit::WRITE | sii_bit::RELOAD);
+        status &= !sii_bit::BUSY;
+        status |= sii_bit::READ_SIZE_8;
+        let commands = control & (sii_bit::READ | sii_bit::WRITE | sii_bit::RELOAD);
+        if commands == 0 {
+            // No command: clears the error bits.
+            status &= !(sii_bit::COMMAND_ERROR | sii_bit::WRITE_ERROR);
+        } else if commands.count_ones() > 1 {
+            status |= sii_bit::COMMAND_ERROR;
+        } else if commands == sii_bit::READ {
+            for k in 0..4 {
+                let w = self.eeprom.get(address + k).copied().unwrap_or(0xFFFF);
+                let a = usize::from(reg::SII_DATA) + 2 * k;
+                self.mem[a..a + 2].copy_from_slice(&w.to_le_bytes());
+            }
+        } else if commands == sii_bit::WRITE {
+            if control & sii_bit::WRITE_ENABLE == 0 {
+                status |= sii_bit::WRITE_ERROR;
+            } else {
+                let w = self.get16(reg::SII_DATA);
+                if address >= self.eeprom.len() {
+                    self.eeprom.resize(address + 1, 0xFFFF);
+                }
+                self.eeprom[address] = w;
+            }
+        }
+        self.put16(reg::SII_CONTROL, status);
+    }
+}
