@@ -8,17 +8,19 @@
 //! - [`sii`]: the EEPROM image (identity, strings, general, FMMU, SyncManager and PDO
 //!   categories, its checksum);
 //! - [`terminals`]: EK1100, EL1008, EL2008;
-//! - [`bus`]: a line of SubDevices a frame passes through.
+//! - [`bus`]: a line of SubDevices a frame passes through;
+//! - [`wire`]: the line on a network interface (a raw packet socket), for the
+//!   `ethercat-emulator` binary.
 //!
 //! Not yet here (docs/ethercat.md says what is): the CoE mailbox with the CiA 402 drives, the
-//! SyncManager watchdog, DC system time control, the network side (a raw socket on an
-//! interface) and the faults it can be told to make.
+//! SyncManager watchdog, DC system time control, and the faults it can be told to make.
 
 pub mod bus;
 pub mod esc;
 pub mod frame;
 pub mod sii;
 pub mod terminals;
+pub mod wire;
 
 /// Nanoseconds on the emulator's clock (`CLOCK_MONOTONIC`), for the DC registers.
 pub fn now_ns() -> u64 {

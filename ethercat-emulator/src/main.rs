@@ -1,0 +1,145 @@
+//! `ethercat-emulator`: a line of emulated EtherCAT SubDevices answering on a network
+//! interface (docs/ethercat.md). Stops on SIGTERM or SIGINT.
+
+use clap::Parser;
+use ethercat_emulator::bus::Bus;
+use ethercat_emulator::terminals::Terminal;
+use ethercat_emulator::wire::{Received, Wire};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// Emulated EtherCAT SubDevices on an interface (one end of a veth pair, never a host's own
+/// interface).
+#[derive(Parser, Debug)]
+#[command(name = "ethercat-emulator", version)]
+struct Args {
+    /// The interface to answer on.
+    #[arg(long)]
+    interface: String,
+    /// The SubDevices in wire order: ek1100, el1008, el2008.
+    #[arg(long, value_delimiter = ',', default_value = "ek1100,el1008,el2008")]
+    line: Vec<String>,
+    /// Wire the first EL2008's outputs to the first EL1008's inputs (a test cable): what a
+    /// MainDevice writes comes back in a later exchange.
+    #[arg(long)]
+    loopback: bool,
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+fn terminal(name: &str) -> Option<Terminal> {
+    Some(match name.trim().to_ascii_lowercase().as_str() {
+        "ek1100" => Terminal::Ek1100,
+        "el1008" => Terminal::El1008 { inputs: 0 },
+        "el2008" => Terminal::El2008 { outputs: 0 },
+        _ => return None,
+    })
+}
+
+/// The test cable of `--loopback`: the first EL2008's outputs on the first EL1008's inputs.
+fn loop_back(bus: &mut Bus) {
+    let driven = bus.devices.iter().find_map(|d| match d.terminal {
+        Terminal::El2008 { outputs } => Some(outputs),
+        _ => None,
+    });
+    if let Some(level) = driven
+        && let Some(Terminal::El1008 { inputs }) = bus
+            .devices
+            .iter_mut()
+            .map(|d| &mut d.terminal)
+            .find(|t| matches!(t, Terminal::El1008 { .. }))
+    {
+        *inputs = level;
+    }
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    let args = Args::parse();
+    let mut line = Vec::new();
+    for (k, name) in args.line.iter().enumerate() {
+        match terminal(name) {
+            Some(t) => line.push(t),
+            None => {
+                eprintln!(
+                    "error: --line entry {} ({name:?}) is not a SubDevice this emulator has \
+                     (ek1100, el1008, el2008)",
+                    k + 1
+                );
+                return ExitCode::from(2);
+            }
+        }
+    }
+    let handler = nix::sys::signal::SigHandler::Handler(on_signal);
+    for sig in [
+        nix::sys::signal::Signal::SIGTERM,
+        nix::sys::signal::Signal::SIGINT,
+    ] {
+        // SAFETY: the handler only stores to an atomic.
+        if let Err(e) = unsafe { nix::sys::signal::signal(sig, handler) } {
+            eprintln!("error: cannot handle {sig}: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
+    let wire = match Wire::open(&args.interface, Duration::from_millis(100)) {
+        Ok(w) => w,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let names: Vec<&str> = line.iter().map(Terminal::name).collect();
+    let mut bus = Bus::new(line);
+    tracing::info!(
+        "answering on {}: {} SubDevice(s): {}",
+        args.interface,
+        names.len(),
+        names.join(", ")
+    );
+    let mut buf = vec![0u8; 9216];
+    let (mut answered, mut refused) = (0u64, 0u64);
+    while !STOP.load(Ordering::SeqCst) {
+        let n = match wire.receive(&mut buf) {
+            Ok(Received::Frame(n)) => n,
+            Ok(Received::Nothing) => continue,
+            Err(e) => {
+                tracing::error!("{e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        let frame = &mut buf[..n];
+        // A reply (ours, or another emulator's) is not a request.
+        if frame.len() > 6 && frame[6] & 0x02 != 0 {
+            continue;
+        }
+        match bus.handle(frame) {
+            Ok(_) => {
+                if args.loopback {
+                    loop_back(&mut bus);
+                }
+                if let Err(e) = wire.send(frame) {
+                    tracing::warn!("{e}");
+                }
+                answered += 1;
+            }
+            Err(e) => {
+                refused += 1;
+                tracing::debug!("dropped a frame: {e}");
+            }
+        }
+    }
+    tracing::info!("stopped: {answered} frames answered, {refused} dropped");
+    ExitCode::SUCCESS
+}

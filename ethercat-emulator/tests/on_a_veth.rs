@@ -1,0 +1,168 @@
+//! The `ethercat-emulator` process answering real frames on a Linux interface: one end of a
+//! veth pair in a network namespace the test makes (and removes), ethercrab's own raw-socket
+//! TX/RX task on the other end. Nothing touches the host's interfaces. Needs root (CI is).
+
+use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const MAX_SUBDEVICES: usize = 8;
+const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
+const MAX_FRAMES: usize = 16;
+const MAX_PDI: usize = 64;
+
+static PDU_STORAGE: PduStorage<MAX_FRAMES, MAX_PDU_DATA> = PduStorage::new();
+
+/// A network namespace with a veth pair `m0` (the MainDevice's) and `s0` (the SubDevices'),
+/// and the emulator on `s0`; all removed when dropped.
+struct Line {
+    ns: String,
+    emulator: Option<Child>,
+}
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip").args(args).output().unwrap_or_else(|e| {
+        panic!("this test needs iproute2's `ip` (apt-get install iproute2): {e}")
+    });
+    assert!(
+        out.status.success(),
+        "ip {args:?} failed (this test makes a network namespace: it needs root): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+impl Line {
+    fn up(extra: &[&str]) -> Self {
+        let ns = format!("rtc-ecat-{}", std::process::id());
+        ip(&["netns", "add", &ns]);
+        let mut line = Self {
+            ns: ns.clone(),
+            emulator: None,
+        };
+        ip(&[
+            "-n", &ns, "link", "add", "m0", "type", "veth", "peer", "name", "s0",
+        ]);
+        ip(&["-n", &ns, "link", "set", "m0", "up"]);
+        ip(&["-n", &ns, "link", "set", "s0", "up"]);
+        let emulator = Command::new("ip")
+            .args([
+                "netns",
+                "exec",
+                &ns,
+                env!("CARGO_BIN_EXE_ethercat-emulator"),
+            ])
+            .args(["--interface", "s0"])
+            .args(extra)
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("the emulator");
+        line.emulator = Some(emulator);
+        line
+    }
+}
+
+impl Drop for Line {
+    fn drop(&mut self) {
+        if let Some(mut e) = self.emulator.take() {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(e.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+            let start = Instant::now();
+            while matches!(e.try_wait(), Ok(None)) && start.elapsed() < Duration::from_secs(10) {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = e.kill();
+            let _ = e.wait();
+        }
+        let _ = Command::new("ip").args(["netns", "del", &self.ns]).status();
+    }
+}
+
+#[test]
+fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_back() {
+    let line = Line::up(&["--loopback"]);
+    let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
+    // ethercrab's raw socket is opened in the namespace: by a thread that entered it.
+    let ns = line.ns.clone();
+    let wire = std::thread::spawn(move || {
+        let f = std::fs::File::open(format!("/run/netns/{ns}")).expect("the namespace");
+        nix::sched::setns(f, nix::sched::CloneFlags::CLONE_NEWNET).expect("setns");
+        let task = ethercrab::std::tx_rx_task("m0", tx, rx).expect("ethercrab's raw socket on m0");
+        let _ = futures_lite::future::block_on(task);
+    });
+    let maindevice = MainDevice::new(
+        pdu_loop,
+        Timeouts {
+            pdu: Duration::from_millis(500),
+            eeprom: Duration::from_millis(500),
+            state_transition: Duration::from_secs(10),
+            ..Timeouts::default()
+        },
+        MainDeviceConfig {
+            dc_static_sync_iterations: 0,
+            ..MainDeviceConfig::default()
+        },
+    );
+    futures_lite::future::block_on(async {
+        // The emulator may still be opening its socket: the first scans may find nothing.
+        let start = Instant::now();
+        let group = loop {
+            match maindevice
+                .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(ethercrab::std::ethercat_now)
+                .await
+            {
+                Ok(g) if g.len() == 3 => break g,
+                other => {
+                    assert!(
+                        start.elapsed() < Duration::from_secs(60),
+                        "ethercrab never found the line: {:?}",
+                        other.map(|g| g.len())
+                    );
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+            }
+        };
+        let names: Vec<String> = group
+            .iter(&maindevice)
+            .map(|sd| sd.name().to_string())
+            .collect();
+        assert_eq!(names, ["EK1100", "EL1008", "EL2008"]);
+        let group = group.into_op(&maindevice).await.expect("OP over the veth");
+        // What ethercrab writes to the EL2008 comes back on the EL1008 (the test cable) in a
+        // later exchange; every exchange has the working counter 3.
+        for k in 0u8..20 {
+            let pattern = k.wrapping_mul(73) ^ 0xC3;
+            group
+                .subdevice(&maindevice, 2)
+                .expect("EL2008")
+                .outputs_raw_mut()[0] = pattern;
+            let mut back = None;
+            for _ in 0..3 {
+                let r = group.tx_rx(&maindevice).await.expect("tx_rx over the veth");
+                assert_eq!(r.working_counter, 3, "cycle {k}");
+                let seen = group
+                    .subdevice(&maindevice, 1)
+                    .expect("EL1008")
+                    .inputs_raw()[0];
+                if seen == pattern {
+                    back = Some(seen);
+                    break;
+                }
+            }
+            assert_eq!(
+                back,
+                Some(pattern),
+                "cycle {k}: the outputs did not come back"
+            );
+        }
+        let group = group.into_safe_op(&maindevice).await.expect("SAFE-OP");
+        let group = group.into_pre_op(&maindevice).await.expect("PRE-OP");
+        let _ = group.into_init(&maindevice).await.expect("INIT");
+    });
+    // SAFETY: the MainDevice is not used after this; its loop tells the TX/RX task to stop.
+    let _ = unsafe { maindevice.release_all() };
+    wire.join().expect("the TX/RX thread");
+    drop(line);
+}
