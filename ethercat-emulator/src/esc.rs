@@ -295,8 +295,8 @@ impl Esc {
     }
 
     /// A logical access (LRD, LWR, LRW) of the datagram at logical address `logical`
-    /// through this ESC's active FMMUs; returns the working counter's increment (+1 for a read
-    /// served, +2 for a write taken).
+    /// through this ESC's active FMMUs; returns the working counter's increment (LRD, LWR: +1
+    /// when served; LRW: +1 for a read served, +2 for a write taken).
     pub fn logical(&mut self, logical: u32, data: &mut [u8], read: bool, write: bool) -> u16 {
         let frame_in = data.to_vec();
         let (d0, d1) = (
@@ -347,7 +347,12 @@ impl Esc {
             read_hit |= reads;
             write_hit |= writes;
         }
-        u16::from(read_hit) + 2 * u16::from(write_hit)
+        // LRD and LWR count 1 per SubDevice served; LRW 1 for its read, 2 for its write.
+        if read && write {
+            u16::from(read_hit) + 2 * u16::from(write_hit)
+        } else {
+            u16::from(read_hit || write_hit)
+        }
     }
 
     /// The process RAM at `addr`, `len` bytes (what a SyncManager's buffer holds).
@@ -500,5 +505,119 @@ impl Esc {
             }
         }
         self.put16(reg::SII_CONTROL, status);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::terminals::Terminal;
+
+    /// An ESC with FMMU 0 mapping logical 0x100 (1 byte) onto physical `phys`, of `kind`.
+    fn mapped(t: Terminal, phys: u16, kind: u8) -> Esc {
+        let mut esc = t.esc();
+        let mut f = [0u8; 16];
+        f[0..4].copy_from_slice(&0x100u32.to_le_bytes());
+        f[4..6].copy_from_slice(&1u16.to_le_bytes());
+        f[7] = 7;
+        f[8..10].copy_from_slice(&phys.to_le_bytes());
+        f[11] = kind;
+        f[12] = 1;
+        assert!(esc.write(reg::FMMU, &f));
+        esc
+    }
+
+    #[test]
+    fn logical_commands_count_as_the_standard_says() {
+        let mut inputs = mapped(Terminal::El1008 { inputs: 0 }, 0x1000, 1);
+        inputs.set_memory(0x1000, &[0xA5]);
+        let mut outputs = mapped(Terminal::El2008 { outputs: 0 }, 0x0F00, 2);
+        let mut d = [0u8];
+        assert_eq!(
+            inputs.logical(0x100, &mut d, true, false),
+            1,
+            "LRD of inputs"
+        );
+        assert_eq!(d[0], 0xA5);
+        let mut d = [0x3C];
+        assert_eq!(
+            outputs.logical(0x100, &mut d, false, true),
+            1,
+            "LWR of outputs"
+        );
+        assert_eq!(outputs.memory(0x0F00, 1)[0], 0x3C);
+        assert_eq!(
+            inputs.logical(0x100, &mut [0], false, true),
+            0,
+            "LWR of inputs"
+        );
+        assert_eq!(
+            outputs.logical(0x100, &mut [0], true, false),
+            0,
+            "LRD of outputs"
+        );
+        assert_eq!(
+            inputs.logical(0x100, &mut [0], true, true),
+            1,
+            "LRW of inputs"
+        );
+        assert_eq!(
+            outputs.logical(0x100, &mut [0x11], true, true),
+            2,
+            "LRW of outputs"
+        );
+        assert_eq!(
+            inputs.logical(0x101, &mut [0], true, true),
+            0,
+            "outside the mapping"
+        );
+    }
+
+    #[test]
+    fn the_al_state_machine_refuses_what_the_standard_refuses() {
+        let mut esc = Terminal::El2008 { outputs: 0 }.esc();
+        let request = |esc: &mut Esc, state: u16| {
+            esc.write(reg::AL_CONTROL, &state.to_le_bytes());
+            (esc.al_status(), esc.al_status_code())
+        };
+        assert_eq!(
+            request(&mut esc, 8),
+            (0x11, al_code::INVALID_STATE_CHANGE),
+            "INIT to OP"
+        );
+        assert_eq!(
+            request(&mut esc, 2),
+            (0x11, al_code::INVALID_STATE_CHANGE),
+            "unacknowledged"
+        );
+        assert_eq!(request(&mut esc, 0x12), (2, 0), "acknowledged, to PRE-OP");
+        assert_eq!(
+            request(&mut esc, 4),
+            (0x12, al_code::INVALID_OUTPUTS),
+            "SMs not set"
+        );
+        let mut sm = [0u8; 8];
+        sm[0..2].copy_from_slice(&0x0F00u16.to_le_bytes());
+        sm[2..4].copy_from_slice(&1u16.to_le_bytes());
+        sm[4] = 0x44;
+        sm[6] = 1;
+        esc.write(reg::SM, &sm);
+        assert_eq!(
+            request(&mut esc, 0x14),
+            (4, 0),
+            "SAFE-OP with its SyncManager"
+        );
+        assert_eq!(request(&mut esc, 8), (8, 0), "OP");
+        assert_eq!(
+            request(&mut esc, 3),
+            (0x18, al_code::NO_BOOTSTRAP),
+            "bootstrap"
+        );
+        assert_eq!(
+            request(&mut esc, 0x17),
+            (0x18, al_code::UNKNOWN_STATE),
+            "state 7"
+        );
+        assert_eq!(request(&mut esc, 0x11), (1, 0), "INIT");
     }
 }

@@ -119,11 +119,10 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
+        // Every EtherCAT frame that arrives is processed, whatever its source address (as
+        // an ESC does; masters differ: kickcat's has the locally administered bit). Our own
+        // replies never come back here: the socket leaves out what this host sent.
         let frame = &mut buf[..n];
-        // A reply (ours, or another emulator's) is not a request.
-        if frame.len() > 6 && frame[6] & 0x02 != 0 {
-            continue;
-        }
         match bus.handle(frame) {
             Ok(_) => {
                 if args.loopback {

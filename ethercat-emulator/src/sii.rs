@@ -188,7 +188,9 @@ impl Sii {
         w[0x3E] = 15;
         w[0x3F] = 1;
 
-        let mut strings = vec![self.group.clone(), self.order.clone(), self.name.clone()];
+        // As real devices have them: the type first (SOEM names a device by string 1,
+        // ethercrab by the order index), then the group, then the description.
+        let mut strings = vec![self.order.clone(), self.group.clone(), self.name.clone()];
         let string_index = |s: &str, strings: &mut Vec<String>| -> u8 {
             match strings.iter().position(|x| x == s) {
                 Some(i) => (i + 1) as u8,
@@ -224,9 +226,9 @@ impl Sii {
         let rx = pdo_bytes(&self.rx_pdos, &mut strings);
 
         let mut general = vec![0u8; 32];
-        general[0] = 1; // group: string 1
+        general[0] = 2; // group: string 2
         general[1] = 0; // image
-        general[2] = 2; // order: string 2
+        general[2] = 1; // order: string 1
         general[3] = 3; // name: string 3
         // CoE details: SDO (bit 0), SDO info (1), PDO assign (2), PDO config (3), upload at
         // start-up (4), complete access (5).

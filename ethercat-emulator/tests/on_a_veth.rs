@@ -1,6 +1,7 @@
 //! The `ethercat-emulator` process answering real frames on a Linux interface: one end of a
 //! veth pair in a network namespace the test makes (and removes), ethercrab's own raw-socket
-//! TX/RX task on the other end. Nothing touches the host's interfaces. Needs root (CI is).
+//! TX/RX task on the other end, or SOEM (pysoem) and kickcat, two masters we did not write,
+//! from PyPI. Nothing touches the host's interfaces. Needs root (CI is).
 
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
 use std::process::{Child, Command, Stdio};
@@ -32,8 +33,9 @@ fn ip(args: &[&str]) {
 }
 
 impl Line {
-    fn up(extra: &[&str]) -> Self {
-        let ns = format!("rtc-ecat-{}", std::process::id());
+    /// The line in namespace `rtc-ecat-<pid>-<name>` (each test its own).
+    fn up(name: &str, extra: &[&str]) -> Self {
+        let ns = format!("rtc-ecat-{}-{name}", std::process::id());
         ip(&["netns", "add", &ns]);
         let mut line = Self {
             ns: ns.clone(),
@@ -82,7 +84,7 @@ impl Drop for Line {
 
 #[test]
 fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_back() {
-    let line = Line::up(&["--loopback"]);
+    let line = Line::up("ethercrab", &["--loopback"]);
     let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
     // ethercrab's raw socket is opened in the namespace: by a thread that entered it.
     let ns = line.ns.clone();
@@ -165,4 +167,92 @@ fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_ba
     let _ = unsafe { maindevice.release_all() };
     wire.join().expect("the TX/RX thread");
     drop(line);
+}
+
+/// Runs `tests/python/masters.py MASTER m0` in the line's namespace; its JSON (the last line
+/// of its stdout).
+fn master(line: &Line, name: &str) -> serde_json::Value {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/masters.py");
+    let out = Command::new("ip")
+        .args([
+            "netns", "exec", &line.ns, "timeout", "120", "python3", script, name, "m0",
+        ])
+        .output()
+        .expect("python3");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{name} failed (pip install pysoem==1.1.13 kickcat==2.5; .ci/run does):\n{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let last = stdout.lines().last().unwrap_or("");
+    serde_json::from_str(last).unwrap_or_else(|e| {
+        panic!(
+            "{name}'s output is not JSON ({e}): {}\n{stderr}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })
+}
+
+fn every_pattern_came_back(name: &str, r: &serde_json::Value) {
+    let ex = r["exchanges"].as_array().expect("exchanges");
+    assert_eq!(ex.len(), 20, "{name}: {r}");
+    for e in ex {
+        assert_eq!(
+            e["read"], e["wrote"],
+            "{name}: an output that did not come back: {r}"
+        );
+    }
+}
+
+#[test]
+fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
+    let line = Line::up("pysoem", &["--loopback"]);
+    let r = master(&line, "pysoem");
+    assert_eq!(r["found"], 3, "{r}");
+    let expected = [
+        ("EK1100", 0x044C_2C52u32),
+        ("EL1008", 0x03F0_3052),
+        ("EL2008", 0x07D8_3052),
+    ];
+    for (d, (name, product)) in r["devices"]
+        .as_array()
+        .expect("devices")
+        .iter()
+        .zip(expected)
+    {
+        assert_eq!(d["name"], name, "{r}");
+        assert_eq!(d["vendor"], 2, "{r}");
+        assert_eq!(d["product"], product, "{r}");
+    }
+    assert_eq!(r["iomap"], 2, "one byte in, one out: {r}");
+    assert_eq!(r["expected_wkc"], 3, "{r}");
+    assert_eq!(r["safe_op"], 4, "{r}");
+    assert_eq!(r["op"], serde_json::json!([8, 8, 8]), "{r}");
+    for e in r["exchanges"].as_array().expect("exchanges") {
+        assert_eq!(e["wkc"], 3, "{r}");
+    }
+    every_pattern_came_back("pysoem", &r);
+}
+
+#[test]
+fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
+    let line = Line::up("kickcat", &["--loopback"]);
+    let r = master(&line, "kickcat");
+    assert_eq!(r["found"], 3, "{r}");
+    assert_eq!(
+        r["sizes"],
+        serde_json::json!([[0, 0], [1, 0], [0, 1]]),
+        "{r}"
+    );
+    assert_eq!(
+        r["op"],
+        serde_json::json!([
+            "State.OPERATIONAL",
+            "State.OPERATIONAL",
+            "State.OPERATIONAL"
+        ]),
+        "{r}"
+    );
+    every_pattern_came_back("kickcat", &r);
 }
