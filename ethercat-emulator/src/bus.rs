@@ -24,8 +24,18 @@ impl SubDevice {
         }
     }
 
-    /// Its part of one datagram.
+    /// Its part of one datagram, then the device's answer to a mailbox it completed.
     fn datagram(&mut self, d: &mut Datagram<'_>) {
+        self.access(d);
+        if let Some(request) = self.esc.take_mailbox() {
+            let capacity = self.esc.mailbox_capacity();
+            if let Some(reply) = self.terminal.mailbox(&request, capacity) {
+                self.esc.put_mailbox(&reply);
+            }
+        }
+    }
+
+    fn access(&mut self, d: &mut Datagram<'_>) {
         let esc = &mut self.esc;
         match d.command {
             Command::Nop => {}

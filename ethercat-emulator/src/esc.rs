@@ -11,6 +11,9 @@
 
 use crate::sii::{Sii, SmKind};
 
+/// SyncManager status bit 3: the mailbox is full.
+const SM_FULL: u8 = 0x08;
+
 /// Size of the ESC's address space.
 pub const MEMORY: usize = 0x1_0000;
 /// Start of the process RAM.
@@ -133,6 +136,8 @@ pub struct Esc {
     fmmus: u8,
     sms: u8,
     dc: bool,
+    /// A mailbox the MainDevice wrote whole into SM0's area, for the device to answer.
+    mailbox_in: Option<Vec<u8>>,
 }
 
 impl std::fmt::Debug for Esc {
@@ -156,6 +161,7 @@ impl Esc {
             fmmus: fmmus.min(16),
             sms: sms.min(16),
             dc,
+            mailbox_in: None,
         };
         esc.power_on();
         esc
@@ -164,6 +170,7 @@ impl Esc {
     /// Every register to its power-on value: INIT, no address, FMMUs and SyncManagers off.
     pub fn power_on(&mut self) {
         self.mem.fill(0);
+        self.mailbox_in = None;
         self.mem[usize::from(reg::TYPE)] = 0x11; // ET1100
         self.mem[usize::from(reg::FMMU_COUNT)] = self.fmmus;
         self.mem[usize::from(reg::SM_COUNT)] = self.sms;
@@ -261,7 +268,46 @@ impl Esc {
             let v = self.mem.get(start + k).copied().unwrap_or(0);
             *b = if or { *b | v } else { v };
         }
+        // Reading the last byte of the send mailbox (SM1) empties it.
+        if let Some(last) = self.mailbox_last(1)
+            && (start..start + buf.len()).contains(&last)
+        {
+            self.mem[usize::from(reg::SM + 8 + 5)] &= !SM_FULL;
+        }
         true
+    }
+
+    /// The address of the last byte of mailbox SyncManager `n`'s area, if the device has a
+    /// mailbox and the MainDevice enabled it.
+    fn mailbox_last(&self, n: usize) -> Option<usize> {
+        self.sii.mailbox?;
+        let (start, len, _, on) = self.sm(n);
+        (on && len > 0).then(|| usize::from(start) + usize::from(len) - 1)
+    }
+
+    /// The mailbox the MainDevice wrote, once (for the device to answer).
+    pub fn take_mailbox(&mut self) -> Option<Vec<u8>> {
+        self.mailbox_in.take()
+    }
+
+    /// Puts the device's answer in the send mailbox (SM1) and marks it full; false if SM1 is
+    /// not set up or still full (the MainDevice has not read the previous answer).
+    pub fn put_mailbox(&mut self, reply: &[u8]) -> bool {
+        let (start, len, _, on) = self.sm(1);
+        let status = usize::from(reg::SM + 8 + 5);
+        if !on || self.mem[status] & SM_FULL != 0 || reply.len() > usize::from(len) {
+            return false;
+        }
+        let s = usize::from(start);
+        self.mem[s..s + usize::from(len)].fill(0);
+        self.mem[s..s + reply.len()].copy_from_slice(reply);
+        self.mem[status] |= SM_FULL;
+        true
+    }
+
+    /// The size of the send mailbox (SM1) as the MainDevice set it up.
+    pub fn mailbox_capacity(&self) -> usize {
+        usize::from(self.sm(1).1)
     }
 
     /// A write of `data` at `addr` (the bytes the MainDevice may write), then what it sets
@@ -290,6 +336,14 @@ impl Esc {
         }
         if self.dc && touches(reg::DC_RECEIVE_TIME_PORT0, 1) {
             self.latch_receive_times();
+        }
+        // A write that reaches the last byte of the receive mailbox (SM0) completes it.
+        if let Some(last) = self.mailbox_last(0)
+            && (start..end).contains(&last)
+        {
+            let (s0, len, _, _) = self.sm(0);
+            let s0 = usize::from(s0);
+            self.mailbox_in = Some(self.mem[s0..s0 + usize::from(len)].to_vec());
         }
         true
     }
@@ -571,6 +625,86 @@ mod tests {
             0,
             "outside the mapping"
         );
+    }
+
+    #[test]
+    fn a_mailbox_written_whole_is_answered_in_the_send_mailbox_and_emptied_by_reading_it() {
+        use crate::coe::{Dictionary, answer};
+        use crate::sii::{Identity, Mailbox, Sm};
+        let mailbox = Mailbox {
+            receive_offset: 0x1000,
+            receive_size: 128,
+            send_offset: 0x1080,
+            send_size: 128,
+            protocols: 0x04,
+        };
+        let sm = |start, control, kind| Sm {
+            start,
+            length: 128,
+            control,
+            enable: true,
+            kind,
+        };
+        let sii = Sii {
+            identity: Identity {
+                vendor: 0x1234,
+                product: 1,
+                revision: 1,
+                serial: 1,
+            },
+            alias: 0,
+            order: "DRIVE".into(),
+            group: "Drive".into(),
+            name: "a drive".into(),
+            mailbox: Some(mailbox),
+            fmmus: vec![],
+            sms: vec![
+                sm(0x1000, 0x26, SmKind::MailboxOut),
+                sm(0x1080, 0x22, SmKind::MailboxIn),
+            ],
+            tx_pdos: vec![],
+            rx_pdos: vec![],
+        };
+        let mut esc = Esc::new(sii, 8, 8, false);
+        // PRE-OP is refused until the MainDevice set up both mailbox SyncManagers.
+        esc.write(reg::AL_CONTROL, &2u16.to_le_bytes());
+        assert_eq!(esc.al_status_code(), al_code::INVALID_MAILBOX);
+        for (n, start, control) in [(0u16, 0x1000u16, 0x26u8), (1, 0x1080, 0x22)] {
+            let mut r = [0u8; 8];
+            r[0..2].copy_from_slice(&start.to_le_bytes());
+            r[2..4].copy_from_slice(&128u16.to_le_bytes());
+            r[4] = control;
+            r[6] = 1;
+            esc.write(reg::SM + 8 * n, &r);
+        }
+        esc.write(reg::AL_CONTROL, &0x12u16.to_le_bytes());
+        assert_eq!(esc.al_status(), 2, "PRE-OP");
+        let mut dictionary = Dictionary::default();
+        dictionary.constant(0x1018, 1, &0x1234u32.to_le_bytes());
+        // An SDO upload of 0x1018:01, written in two pieces: only the last completes it.
+        let mut request = [0u8; 128];
+        request[0..2].copy_from_slice(&10u16.to_le_bytes());
+        request[5] = 0x13; // CoE, counter 1
+        request[6..8].copy_from_slice(&0x2000u16.to_le_bytes());
+        request[8..12].copy_from_slice(&[0x40, 0x18, 0x10, 1]);
+        esc.write(0x1000, &request[..64]);
+        assert!(
+            esc.take_mailbox().is_none(),
+            "half a mailbox is not a request"
+        );
+        esc.write(0x1040, &request[64..]);
+        let got = esc.take_mailbox().expect("the whole mailbox");
+        let reply = answer(&mut dictionary, &got, esc.mailbox_capacity()).expect("an answer");
+        assert!(esc.put_mailbox(&reply));
+        assert!(!esc.put_mailbox(&reply), "full until read");
+        let mut status = [0u8];
+        esc.read(reg::SM + 8 + 5, &mut status, false);
+        assert_eq!(status[0] & SM_FULL, SM_FULL);
+        let mut out = [0u8; 128];
+        esc.read(0x1080, &mut out, false);
+        assert_eq!(&out[8..16], &[0x43, 0x18, 0x10, 1, 0x34, 0x12, 0, 0]);
+        esc.read(reg::SM + 8 + 5, &mut status, false);
+        assert_eq!(status[0] & SM_FULL, 0, "emptied by reading its last byte");
     }
 
     #[test]

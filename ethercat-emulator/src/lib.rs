@@ -5,6 +5,7 @@
 //! - [`frame`]: EtherCAT frames and datagrams, walked in place (never panics on any bytes);
 //! - [`esc`]: one SubDevice controller: registers, AL state machine, SII interface, FMMUs,
 //!   SyncManagers, DC registers;
+//! - [`coe`]: CANopen over EtherCAT: the object dictionary, SDO upload and download, aborts;
 //! - [`sii`]: the EEPROM image (identity, strings, general, FMMU, SyncManager and PDO
 //!   categories, its checksum);
 //! - [`terminals`]: EK1100, EL1008, EL2008;
@@ -12,10 +13,12 @@
 //! - [`wire`]: the line on a network interface (a raw packet socket), for the
 //!   `ethercat-emulator` binary.
 //!
-//! Not yet here (docs/ethercat.md says what is): the CoE mailbox with the CiA 402 drives, the
-//! SyncManager watchdog, DC system time control, and the faults it can be told to make.
+//! Not yet here (docs/ethercat.md says what is): the CiA 402 drives (the mailbox and CoE are
+//! ready for them), the SyncManager watchdog, DC system time control, and the faults it can
+//! be told to make.
 
 pub mod bus;
+pub mod coe;
 pub mod esc;
 pub mod frame;
 pub mod sii;

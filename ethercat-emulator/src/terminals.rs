@@ -124,6 +124,11 @@ impl Terminal {
         Esc::new(sii, 8, 8, false)
     }
 
+    /// The device's answer to a mailbox request (none of these terminals has a mailbox).
+    pub fn mailbox(&mut self, _request: &[u8], _capacity: usize) -> Option<Vec<u8>> {
+        None
+    }
+
     /// Before a frame: the device's inputs into its ESC.
     pub fn inputs(&mut self, esc: &mut Esc) {
         if let Self::El1008 { inputs } = self {
