@@ -134,7 +134,7 @@ pub fn answer(dictionary: &mut Dictionary, request: &[u8], capacity: usize) -> O
         match command >> 5 {
             // Upload (read).
             2 => match dictionary.upload(index, sub) {
-                Ok(data) if data.len() <= 4 => {
+                Ok(data) if !data.is_empty() && data.len() <= 4 => {
                     let mut r = vec![0x43 | ((4 - data.len() as u8) << 2)];
                     r.extend_from_slice(&index.to_le_bytes());
                     r.push(sub);

@@ -11,6 +11,9 @@
 
 use crate::sii::{Sii, SmKind};
 
+/// Words of the emulated EEPROM (2 KiB: word 0x3E says 16 KiBit).
+const EEPROM_WORDS: usize = 1024;
+
 /// SyncManager status bit 3: the mailbox is full.
 const SM_FULL: u8 = 0x08;
 
@@ -282,7 +285,9 @@ impl Esc {
     fn mailbox_last(&self, n: usize) -> Option<usize> {
         self.sii.mailbox?;
         let (start, len, _, on) = self.sm(n);
-        (on && len > 0).then(|| usize::from(start) + usize::from(len) - 1)
+        let end = usize::from(start) + usize::from(len);
+        // An area that runs past the memory is no mailbox.
+        (on && len > 0 && end <= MEMORY).then(|| end - 1)
     }
 
     /// The mailbox the MainDevice wrote, once (for the device to answer).
@@ -295,7 +300,8 @@ impl Esc {
     pub fn put_mailbox(&mut self, reply: &[u8]) -> bool {
         let (start, len, _, on) = self.sm(1);
         let status = usize::from(reg::SM + 8 + 5);
-        if !on || self.mem[status] & SM_FULL != 0 || reply.len() > usize::from(len) {
+        let fits = usize::from(start) + usize::from(len) <= MEMORY;
+        if !on || !fits || self.mem[status] & SM_FULL != 0 || reply.len() > usize::from(len) {
             return false;
         }
         let s = usize::from(start);
@@ -550,6 +556,9 @@ impl Esc {
         } else if commands == sii_bit::WRITE {
             if control & sii_bit::WRITE_ENABLE == 0 {
                 status |= sii_bit::WRITE_ERROR;
+            } else if address >= EEPROM_WORDS {
+                // Beyond the EEPROM (2 KiB, as word 0x3E says): refused, nothing grows.
+                status |= sii_bit::COMMAND_ERROR;
             } else {
                 let w = self.get16(reg::SII_DATA);
                 if address >= self.eeprom.len() {
@@ -705,6 +714,24 @@ mod tests {
         assert_eq!(&out[8..16], &[0x43, 0x18, 0x10, 1, 0x34, 0x12, 0, 0]);
         esc.read(reg::SM + 8 + 5, &mut status, false);
         assert_eq!(status[0] & SM_FULL, 0, "emptied by reading its last byte");
+    }
+
+    #[test]
+    fn an_eeprom_write_beyond_the_eeprom_is_refused_and_nothing_grows() {
+        let mut esc = Terminal::Ek1100.esc();
+        // Write enable, write command, address 0x7FFFFFFF, data 0x1234.
+        esc.write(reg::SII_DATA, &[0x34, 0x12]);
+        esc.write(reg::SII_CONTROL, &[0x01, 0x02, 0xFF, 0xFF, 0xFF, 0x7F]);
+        assert_ne!(esc.get16(reg::SII_CONTROL) & sii_bit::COMMAND_ERROR, 0);
+        assert!(esc.eeprom.len() <= EEPROM_WORDS);
+        // A mailbox SyncManager set past the memory is no mailbox (no panic either).
+        let mut sm = [0u8; 8];
+        sm[0..2].copy_from_slice(&0xFFF0u16.to_le_bytes());
+        sm[2..4].copy_from_slice(&0x20u16.to_le_bytes());
+        sm[6] = 1;
+        esc.write(reg::SM, &sm);
+        esc.write(0xFFF0, &[0; 16]);
+        assert!(esc.take_mailbox().is_none());
     }
 
     #[test]

@@ -230,9 +230,9 @@ impl Sii {
         general[1] = 0; // image
         general[2] = 1; // order: string 1
         general[3] = 3; // name: string 3
-        // CoE details: SDO (bit 0), SDO info (1), PDO assign (2), PDO config (3), upload at
-        // start-up (4), complete access (5).
-        general[5] = if self.mailbox.is_some() { 0x0F } else { 0 };
+        // CoE details: SDO (bit 0), PDO assign (2), PDO config (3); not SDO information (1),
+        // upload at start-up (4) nor complete access (5), which `coe` does not serve.
+        general[5] = if self.mailbox.is_some() { 0x0D } else { 0 };
         general[14] = 1;
 
         let mut string_bytes = vec![strings.len() as u8];

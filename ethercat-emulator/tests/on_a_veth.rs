@@ -46,7 +46,7 @@ impl Line {
         ]);
         ip(&["-n", &ns, "link", "set", "m0", "up"]);
         ip(&["-n", &ns, "link", "set", "s0", "up"]);
-        let emulator = Command::new("ip")
+        let mut emulator = Command::new("ip")
             .args([
                 "netns",
                 "exec",
@@ -56,10 +56,27 @@ impl Line {
             .args(["--interface", "s0"])
             .args(extra)
             .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
+            .stderr(Stdio::piped())
             .spawn()
             .expect("the emulator");
+        // Ready once it says it answers; the rest of its log goes to the test's stderr.
+        let (ready, waiting) = std::sync::mpsc::channel();
+        let mut log = std::io::BufReader::new(emulator.stderr.take().expect("stderr"));
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            let mut text = String::new();
+            while log.read_line(&mut text).is_ok_and(|n| n > 0) {
+                eprint!("emulator: {text}");
+                if text.contains("answering on") {
+                    let _ = ready.send(());
+                }
+                text.clear();
+            }
+        });
         line.emulator = Some(emulator);
+        waiting
+            .recv_timeout(Duration::from_secs(120))
+            .expect("the emulator never said it answers");
         line
     }
 }

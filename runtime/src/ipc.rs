@@ -444,7 +444,7 @@ fn remove_orphan_node_files(
             .parse::<u128>();
         let Ok(id) = id else { continue };
         let mut files = Vec::new();
-        if e.path().is_dir() {
+        if is_real_dir(&e) {
             collect_files(&e.path(), &mut files);
         } else {
             files.push(e.path().display().to_string());
@@ -457,7 +457,7 @@ fn remove_orphan_node_files(
     let mut removed = 0;
     for (id, files) in by_id {
         let young = files.iter().any(|f| {
-            std::fs::metadata(f)
+            std::fs::symlink_metadata(f)
                 .and_then(|m| m.modified())
                 .ok()
                 .and_then(|m| m.elapsed().ok())
@@ -530,22 +530,44 @@ pub fn remove_instance_segment(instance: &InstanceName) -> Result<bool, IpcError
 pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
     let _ = remove_dead_nodes(instance);
     let _ = remove_instance_segment(instance);
-    let mut left = Vec::new();
-    let prefix = instance.shm_prefix();
-    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
-        for e in dir.flatten() {
-            let name = e.file_name().to_string_lossy().to_string();
-            if name.starts_with(prefix.as_str()) {
-                left.push(format!("/dev/shm/{name}"));
-            }
-        }
-    }
+    let mut left: Vec<String> = shm_files(instance)
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
     let root = std::path::PathBuf::from(instance.root_dir().as_str());
     collect_files(&root, &mut left);
     if left.is_empty() {
         remove_empty_dirs(&root);
     }
     left
+}
+
+/// The shared-memory files of `instance` in `/dev/shm`: those with its prefix
+/// (`iox2_<instance>_`), but not those of another instance whose name extends it
+/// (`<instance>_b`, whose root folder exists beside ours).
+fn shm_files(instance: &InstanceName) -> Vec<std::path::PathBuf> {
+    let prefix = instance.shm_prefix();
+    let root = std::path::PathBuf::from(instance.root_dir().as_str());
+    let longer: Vec<String> = root
+        .parent()
+        .and_then(|p| std::fs::read_dir(p).ok())
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| e.file_name().into_string().ok())
+        .filter(|n| n.starts_with(&format!("{}_", instance.as_str())))
+        .map(|n| format!("iox2_{n}_"))
+        .collect();
+    let mut out = Vec::new();
+    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
+        for e in dir.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with(prefix.as_str()) && !longer.iter().any(|l| name.starts_with(l)) {
+                out.push(e.path());
+            }
+        }
+    }
+    out
 }
 
 /// Removes every file of `instance`: its root folder and its shared memory. For a supervisor
@@ -555,15 +577,10 @@ pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
 /// `HangsInCreation`, and lists such a node as neither alive nor dead). Returns the files it
 /// removed.
 pub fn purge_instance(instance: &InstanceName) -> Vec<String> {
-    let mut files = Vec::new();
-    let prefix = instance.shm_prefix();
-    if let Ok(dir) = std::fs::read_dir("/dev/shm") {
-        for e in dir.flatten() {
-            if e.file_name().to_string_lossy().starts_with(prefix.as_str()) {
-                files.push(e.path().display().to_string());
-            }
-        }
-    }
+    let mut files: Vec<String> = shm_files(instance)
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
     let root = std::path::PathBuf::from(instance.root_dir().as_str());
     collect_files(&root, &mut files);
     files.retain(|f| std::fs::remove_file(f).is_ok());
@@ -622,14 +639,19 @@ pub fn cleanup_after_client(instance: &InstanceName) {
     }
 }
 
+/// Whether `e` is a real folder (a symbolic link is never followed: a link planted in the
+/// instance's folder must not lead the cleanup elsewhere).
+fn is_real_dir(e: &std::fs::DirEntry) -> bool {
+    e.file_type().is_ok_and(|t| t.is_dir())
+}
+
 fn collect_files(dir: &std::path::Path, out: &mut Vec<String>) {
     if let Ok(rd) = std::fs::read_dir(dir) {
         for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                collect_files(&p, out);
+            if is_real_dir(&e) {
+                collect_files(&e.path(), out);
             } else {
-                out.push(p.display().to_string());
+                out.push(e.path().display().to_string());
             }
         }
     }
@@ -638,7 +660,7 @@ fn collect_files(dir: &std::path::Path, out: &mut Vec<String>) {
 fn remove_empty_dirs(dir: &std::path::Path) {
     if let Ok(rd) = std::fs::read_dir(dir) {
         for e in rd.flatten() {
-            if e.path().is_dir() {
+            if is_real_dir(&e) {
                 remove_empty_dirs(&e.path());
             }
         }

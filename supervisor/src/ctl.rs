@@ -18,7 +18,11 @@
 //!   inside its frame or after it, is refused and nothing is done.
 //! - **Bounds**: at most [`MAX_CONNECTIONS`] connections at once (more are refused "busy"), a
 //!   request complete within [`REQUEST_TIMEOUT`] of connecting, at most [`MAX_BUFFERED`] bytes of
-//!   requests held for all connections together (the rest waits in the kernel).
+//!   requests held for all connections together (the rest waits in the kernel), at most 64
+//!   connections accepted per tick (a flood never holds the loop). Whatever arrived with a
+//!   request, in its frame or after it by the time it is complete, refuses it; bytes sent
+//!   after the request was taken are not read. A client waits at most [`ANSWER_TIMEOUT`] for
+//!   an answer, but for a program's end.
 //!
 //! The server never blocks: connections are non-blocking, read and written a piece per
 //! supervisor tick; a client that does not read its answer only keeps its own connection open
@@ -48,6 +52,12 @@ pub const MAX_BUFFERED: usize = 2 * MAX_REQUEST;
 
 /// A connection's request must be complete this long after it connected.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long a client waits for an answer (all but `exec --wait`).
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Most connections accepted in one poll: a flood of them never holds the loop.
+const ACCEPTS_PER_POLL: usize = 64;
 
 /// After accepting failed (no descriptor left), how long the listener rests.
 const ACCEPT_PAUSE: Duration = Duration::from_millis(100);
@@ -188,12 +198,25 @@ pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CtlError> {
     };
     // A refusal (another user) may be written and the connection closed before the request
     // is even read: read the answer whatever the write did.
+    // Every answer comes within a tick or a bounded wait (a start, a swap, a reset), except
+    // a program's end: a supervisor that does not answer is named, not waited for forever.
+    let waits_for_program = matches!(req, Request::Exec { wait: true, .. });
+    if !waits_for_program {
+        let _ = s.set_read_timeout(Some(ANSWER_TIMEOUT));
+    }
     let wrote = s
         .write_all(&frame(&bytes))
         .and_then(|()| s.shutdown(std::net::Shutdown::Write));
     match read_frame(&mut s) {
         Ok(body) => {
             postcard::from_bytes(&body).map_err(|e| CtlError::Io(format!("a garbled answer: {e}")))
+        }
+        Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+            Err(CtlError::Io(format!(
+                "instance {instance}: the supervisor took the request but did not answer within \
+                 {} s (is it stuck? its log says where)",
+                ANSWER_TIMEOUT.as_secs()
+            )))
         }
         Err(e) => Err(broke(wrote.err().unwrap_or(e))),
     }
@@ -363,7 +386,7 @@ impl Server {
             return;
         }
         self.accept_paused_until = None;
-        loop {
+        for _ in 0..ACCEPTS_PER_POLL {
             let stream = match self.listener.accept() {
                 Ok((stream, _)) => stream,
                 Err(e) if e.kind() == ErrorKind::WouldBlock => return,

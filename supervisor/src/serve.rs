@@ -280,11 +280,14 @@ impl Loop<'_> {
     /// Starts going down: whoever waits is told; a moving program comes to rest along its
     /// path (trajgen aborts it), or, at rest, the drives are disabled.
     fn go_down(&mut self, end: End, why: &str) {
+        // A program sent but not yet moving is dropped too (an abort empties trajgen's queue).
+        let had_program = self.running.is_some();
         self.abandon(why);
-        let moving = self
-            .cell
-            .last_sp
-            .is_some_and(|sp| sp.state == shm_schema::MotionState::Moving as u32);
+        let moving = had_program
+            || self
+                .cell
+                .last_sp
+                .is_some_and(|sp| sp.state == shm_schema::MotionState::Moving as u32);
         let stage = if moving && self.cell.estop.is_none() {
             tracing::info!("going down: the program comes to rest along its path");
             self.cell.motion_control(ControlKind::Abort);

@@ -486,6 +486,17 @@ fn web(inst: &str, extra: &[&str]) -> (View, String) {
     (View(child), addr)
 }
 
+/// Runs a Python `script` as uid 65534 (another local user), under the watchdog.
+fn python_as_nobody(script: &str) -> std::process::Output {
+    run_with_watchdog(
+        Command::new("python3")
+            .args(["-c", script])
+            .uid(65534)
+            .gid(65534),
+        WATCHDOG,
+    )
+}
+
 /// Item 3: the web view without a token serves its own machine's loopback and its own user
 /// only, and nothing changes the cell cross-site: a reset from another origin, without the
 /// page's header, under a foreign `Host` (DNS rebinding), or from another user is refused and
@@ -562,13 +573,7 @@ except urllib.error.HTTPError as e:
     print(e.code, e.read().decode())
 "#
     );
-    let out = run_with_watchdog(
-        Command::new("python3")
-            .args(["-c", &script])
-            .uid(65534)
-            .gid(65534),
-        WATCHDOG,
-    );
+    let out = python_as_nobody(&script);
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(
         said.starts_with("403") && said.contains("uid 65534 may not"),
@@ -621,7 +626,7 @@ except urllib.error.HTTPError as e:
     );
     assert_eq!(code, 401, "a wrong token: {body}");
     drop(view);
-    for bad in ["        ", "spaces in token", "short"] {
+    for bad in ["        ", "spaces in token", "short", "semi;colon-token"] {
         let out = run_with_watchdog(
             supervisor().args([
                 "web",
