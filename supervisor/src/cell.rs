@@ -119,16 +119,17 @@ pub(crate) fn open_cell(
     })?;
     // We hold the instance now: no other supervisor creates or removes anything of it.
     await_orphans(cfg, &instance)?;
-    let _ = ipc::remove_dead_nodes(&instance);
     let removed = if ipc::live_node_pids(&instance)
         .unwrap_or_default()
         .is_empty()
     {
         // Nothing of the instance is alive: whatever is left (a half-created service, a
-        // half-created or half-removed node of a supervisor killed while starting) goes.
+        // half-created or half-removed node of a supervisor killed while starting) goes, as
+        // files, before any iceoryx2 call walks structures a killed process left half made.
         ipc::purge_instance(&instance)
     } else {
         // Observers are attached: only what can belong to no one goes.
+        let _ = ipc::remove_dead_nodes(&instance);
         ipc::remove_unfinished_services(&instance, Duration::from_secs(1))
     };
     if !removed.is_empty() {
