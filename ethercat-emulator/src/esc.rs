@@ -211,13 +211,6 @@ impl Esc {
         self.get16(reg::AL_STATUS_CODE)
     }
 
-    /// The ESC leaves its state for `state` with the error bit and `code` (a device-side
-    /// error: a watchdog, a fault the device reports).
-    pub fn fall_to(&mut self, state: AlState, code: u16) {
-        self.put16(reg::AL_STATUS, state as u16 | 0x10);
-        self.put16(reg::AL_STATUS_CODE, code);
-    }
-
     /// Sets the DL status (links and loops of ports 0 and 1: the bus knows its position).
     pub fn set_links(&mut self, upstream: bool, downstream: bool) {
         let mut s: u16 = 1 | 2; // PDI operational, watchdog not expired
