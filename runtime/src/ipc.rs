@@ -399,14 +399,24 @@ impl Debug for Listener {
 pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
     let cfg = config_for(instance)?;
     let mut dead = Vec::new();
-    let mut alive = Vec::new();
+    // The nodes whose files the orphan sweep below must leave alone.
+    let mut keep = Vec::new();
     Node::<Ipc>::list(&cfg, |state| {
         match state {
-            NodeState::Dead(view) => dead.push(view),
-            NodeState::Alive(view) => alive.push(view.id().value()),
-            // Only a live node's files are kept below; one that cannot be told (another
-            // user's) is kept too.
-            NodeState::Inaccessible(id) => alive.push(id.value()),
+            NodeState::Dead(view) => {
+                // A dead node with its details is iceoryx2's to clean: its files tell which
+                // ports it held. If this attempt fails (another process is cleaning it right
+                // now and holds its cleaner lock), the next one retries; removing its files
+                // here would leave its ports registered in the services for good (a
+                // restarted process then finds no free publisher slot).
+                if view.details().is_some() {
+                    keep.push(view.id().value());
+                }
+                dead.push(view);
+            }
+            NodeState::Alive(view) => keep.push(view.id().value()),
+            // One that cannot be told (another user's) is kept too.
+            NodeState::Inaccessible(id) => keep.push(id.value()),
             NodeState::Undefined(_) => {}
         }
         CallbackProgression::Continue
@@ -418,16 +428,16 @@ pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
             cleaned += 1;
         }
     }
-    Ok(cleaned + remove_orphan_node_files(instance, &alive, std::time::Duration::from_secs(1)))
+    Ok(cleaned + remove_orphan_node_files(instance, &keep, std::time::Duration::from_secs(1)))
 }
 
-/// Removes the files under the instance's `nodes/` folder of every node that is not in `alive`
+/// Removes the files under the instance's `nodes/` folder of every node that is not in `keep`
 /// and whose newest file is `age` old (not a node being created right now): what a process
 /// killed while it created or removed its node leaves, which iceoryx2 lists as undefined, as
 /// dead without details, or not at all. Returns how many nodes' files it removed.
 fn remove_orphan_node_files(
     instance: &InstanceName,
-    alive: &[u128],
+    keep: &[u128],
     age: std::time::Duration,
 ) -> usize {
     use std::collections::BTreeMap;
@@ -463,7 +473,7 @@ fn remove_orphan_node_files(
                 .and_then(|m| m.elapsed().ok())
                 .is_none_or(|a| a < age)
         });
-        if alive.contains(&id) || young {
+        if keep.contains(&id) || young {
             continue;
         }
         for f in &files {

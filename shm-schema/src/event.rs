@@ -224,6 +224,8 @@ pub mod code {
     pub const PROCESS_LOST: u32 = 502;
     /// A process of the cell was started again by its restart policy; value: restarts so far.
     pub const PROCESS_RESTARTED: u32 = 503;
+    /// The supervisor's own heartbeat paused; value: the gap (s). The text says where it went.
+    pub const SUPERVISOR_STALLED: u32 = 504;
 
     /// An e-stop was raised; value: its origin (1 device, 2 external, 3 host), limit: the
     /// cause's event code.
@@ -505,6 +507,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Warning,
         unit: "restarts of this process so far",
         meaning: "The supervisor started a process again after it was lost (`restart = \"on-failure\"`, or `supervisor restart`); the e-stop stays latched until `supervisor reset`.",
+    },
+    CodeInfo {
+        code: code::SUPERVISOR_STALLED,
+        name: "supervisor-stalled",
+        severity: Severity::Warning,
+        unit: "s",
+        meaning: "Two of the supervisor's heartbeats were further apart than a quarter of `supervisor_timeout`; past the whole of it every process takes the supervisor for lost and brings the axes to rest. The text splits the gap by the kernel's accounting: waiting for a CPU (a real-time process or other load held the CPUs), taken by the host (steal time of a virtual machine), and the rest blocked in a call.",
     },
     CodeInfo {
         code: code::ESTOP_RAISED,

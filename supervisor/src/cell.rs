@@ -11,6 +11,7 @@ use crate::ctl;
 use crate::events::{self, Axes};
 use crate::launch::Children;
 use crate::run::{RunError, TICK};
+use crate::stall::StallWatch;
 use runtime::ipc::{self, Pub, Sub};
 use runtime::signals;
 use serde_json::{Value, json};
@@ -269,6 +270,8 @@ pub(crate) struct Cell {
     /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
     /// its history, die with it).
     handover_pub: Pub<TrajgenHandoverV2>,
+    /// Gaps between heartbeats, and where they went.
+    stalls: StallWatch,
     status_subs: Vec<Sub<ProcessStatusV2>>,
     latency_subs: Vec<Sub<LatencyHistogramV1>>,
     exec_subs: Vec<Sub<LatencyHistogramV1>>,
@@ -364,6 +367,9 @@ impl Cell {
             image_sub,
             handover_sub,
             handover_pub,
+            stalls: StallWatch::new(Duration::from_secs_f64(
+                cfg.supervisor.supervisor_timeout / 4.0,
+            )),
             status_subs,
             latency_subs,
             exec_subs,
@@ -513,10 +519,20 @@ impl Cell {
     }
 
     /// The heartbeat: the host state with the latched e-stop, every tick.
+    /// A gap since the last one of over a quarter of `supervisor_timeout` is an event that
+    /// says where the time went (see [`crate::stall`]).
     pub(crate) fn beat(&mut self) {
         self.host.beat += 1;
         self.host.stamp_ns = runtime::time::now_ns();
         self.host_pub.send(&self.host);
+        if let Some(s) = self.stalls.beat() {
+            let cause = s.cause();
+            tracing::warn!(
+                "the supervisor's heartbeat paused {:.0} ms: {cause}",
+                s.gap.as_secs_f64() * 1e3
+            );
+            self.event(code::SUPERVISOR_STALLED, s.gap.as_secs_f64(), &[&cause]);
+        }
     }
 
     /// Reads `<i>/estop` and latches the first trigger in it (every tick, and again where a

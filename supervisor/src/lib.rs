@@ -16,6 +16,7 @@ pub mod record;
 pub mod report;
 pub mod run;
 pub mod serve;
+pub mod stall;
 pub mod status;
 pub mod swap;
 pub mod tune;

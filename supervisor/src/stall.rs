@@ -1,0 +1,146 @@
+//! The supervisor's own stalls: a heartbeat that did not go out for a while, and where that
+//! time went, so that a process's `supervisor-lost` can be told apart from a bug.
+//!
+//! The supervisor runs under `SCHED_OTHER`; its heartbeat is what every process of the cell
+//! watches (`supervisor_timeout`). When two beats are further apart than a quarter of that
+//! timeout, [`StallWatch::beat`] returns a [`Stall`] that splits the gap three ways, from the
+//! kernel's own accounting:
+//!
+//! - **waiting for a CPU**: the main thread was runnable but another task ran
+//!   (`/proc/thread-self/schedstat`, run delay): a real-time process or another load took the
+//!   CPUs;
+//! - **taken by the host**: the vCPUs were not running at all (`/proc/stat`, steal);
+//! - **blocked**: the rest, the thread slept in a call (a file, a pipe, a lock).
+
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::time::{Duration, Instant};
+
+/// The main thread's run-queue delay and the host's steal time, read without opening a file.
+struct Counters {
+    schedstat: Option<File>,
+    stat: Option<File>,
+    buf: [u8; 512],
+}
+
+impl Counters {
+    fn open() -> Self {
+        Self {
+            schedstat: File::open("/proc/thread-self/schedstat").ok(),
+            stat: File::open("/proc/stat").ok(),
+            buf: [0; 512],
+        }
+    }
+
+    /// Time the thread spent runnable but not running, ns.
+    fn run_delay_ns(&mut self) -> Option<u64> {
+        let n = self.schedstat.as_ref()?.read_at(&mut self.buf, 0).ok()?;
+        let text = std::str::from_utf8(&self.buf[..n]).ok()?;
+        text.split_ascii_whitespace().nth(1)?.parse().ok()
+    }
+
+    /// Steal time of all CPUs, ns (the first line of `/proc/stat`, its 8th number).
+    fn steal_ns(&mut self) -> Option<u64> {
+        let n = self.stat.as_ref()?.read_at(&mut self.buf, 0).ok()?;
+        let line = self.buf[..n].split(|&b| b == b'\n').next()?;
+        let line = std::str::from_utf8(line).ok()?;
+        let ticks: u64 = line.split_ascii_whitespace().nth(8)?.parse().ok()?;
+        let hz = nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
+            .ok()
+            .flatten()
+            .filter(|&hz| hz > 0)? as u64;
+        Some(ticks.saturating_mul(1_000_000_000) / hz)
+    }
+}
+
+/// A gap between two heartbeats and where it went.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Stall {
+    /// Time between the two beats.
+    pub gap: Duration,
+    /// Of it, runnable but not running (`None`: the kernel does not say).
+    pub waiting_for_cpu: Option<Duration>,
+    /// Of it, the host ran something else than this machine's vCPUs (all CPUs summed).
+    pub host_steal: Option<Duration>,
+}
+
+impl Stall {
+    /// Where the time went, in words: `"412 ms waiting for a CPU, 0 ms taken by the host,
+    /// the rest blocked in a call"`.
+    pub(crate) fn cause(&self) -> String {
+        let ms = |d: Duration| format!("{:.0} ms", d.as_secs_f64() * 1e3);
+        let cpu = self.waiting_for_cpu.map_or("? ms".into(), ms);
+        let steal = self.host_steal.map_or("? ms".into(), ms);
+        format!("{cpu} waiting for a CPU, {steal} taken by the host, the rest blocked in a call")
+    }
+}
+
+/// Watches the gaps between heartbeats.
+pub(crate) struct StallWatch {
+    threshold: Duration,
+    last: Instant,
+    run_delay_ns: Option<u64>,
+    steal_ns: Option<u64>,
+    counters: Counters,
+}
+
+impl StallWatch {
+    /// Reports gaps longer than `threshold`.
+    pub(crate) fn new(threshold: Duration) -> Self {
+        let mut counters = Counters::open();
+        Self {
+            threshold,
+            last: Instant::now(),
+            run_delay_ns: counters.run_delay_ns(),
+            steal_ns: counters.steal_ns(),
+            counters,
+        }
+    }
+
+    /// A heartbeat goes out now: the stall before it, if the gap since the last one is over
+    /// the threshold. Two small reads of `/proc` files kept open.
+    pub(crate) fn beat(&mut self) -> Option<Stall> {
+        let now = Instant::now();
+        let gap = now - self.last;
+        self.last = now;
+        let run_delay = self.counters.run_delay_ns();
+        let steal = self.counters.steal_ns();
+        let delta = |new: Option<u64>, old: Option<u64>| {
+            Some(Duration::from_nanos(new?.saturating_sub(old?)).min(gap))
+        };
+        let stall = (gap > self.threshold).then(|| Stall {
+            gap,
+            waiting_for_cpu: delta(run_delay, self.run_delay_ns),
+            host_steal: delta(steal, self.steal_ns),
+        });
+        self.run_delay_ns = run_delay;
+        self.steal_ns = steal;
+        stall
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gap_over_the_threshold_is_a_stall_with_its_split_and_close_beats_are_none() {
+        let mut w = StallWatch::new(Duration::from_millis(50));
+        assert_eq!(w.beat(), None, "no gap yet");
+        std::thread::sleep(Duration::from_millis(120));
+        let s = w.beat().expect("a 120 ms gap is over 50 ms");
+        assert!(s.gap >= Duration::from_millis(120), "{s:?}");
+        assert!(
+            s.waiting_for_cpu.is_some(),
+            "the kernel's run delay was read: {s:?}"
+        );
+        assert!(
+            s.host_steal.is_some(),
+            "the host's steal time was read: {s:?}"
+        );
+        assert!(s.cause().contains("waiting for a CPU"), "{}", s.cause());
+        for _ in 0..100 {
+            assert_eq!(w.beat(), None, "beats close together are no stall");
+        }
+    }
+}
