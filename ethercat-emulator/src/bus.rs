@@ -29,7 +29,8 @@ impl SubDevice {
         self.access(d);
         if let Some(request) = self.esc.take_mailbox() {
             let capacity = self.esc.mailbox_capacity();
-            if let Some(reply) = self.terminal.mailbox(&request, capacity) {
+            let al = self.esc.al_state();
+            if let Some(reply) = self.terminal.mailbox(&request, capacity, al) {
                 self.esc.put_mailbox(&reply);
             }
         }
@@ -138,9 +139,18 @@ impl Bus {
                 d.datagram(dg);
             }
         })?;
+        let now = crate::now_ns();
         for d in &mut self.devices {
-            d.terminal.outputs(&d.esc);
+            d.terminal.outputs(&mut d.esc, now);
         }
         Ok(n)
+    }
+
+    /// Between frames (the emulator's idle ticks): the drives' models run on.
+    pub fn idle(&mut self) {
+        let now = crate::now_ns();
+        for d in &mut self.devices {
+            d.terminal.idle(&d.esc, now);
+        }
     }
 }

@@ -27,6 +27,10 @@ pub mod abort {
     pub const LENGTH: u32 = 0x0607_0010;
     /// Subindex does not exist.
     pub const NO_SUBINDEX: u32 = 0x0609_0011;
+    /// Object cannot be mapped to the PDO.
+    pub const NOT_MAPPABLE: u32 = 0x0604_0041;
+    /// The number and length of the objects to be mapped would exceed the PDO length.
+    pub const MAPPING_LENGTH: u32 = 0x0604_0042;
     /// Data cannot be transferred or stored because of the present device state.
     pub const STATE: u32 = 0x0800_0022;
 }
@@ -75,6 +79,46 @@ impl Dictionary {
     /// The entry at `index`:`sub`.
     pub fn get(&self, index: u16, sub: u8) -> Option<&Entry> {
         self.entries.get(&(index, sub))
+    }
+
+    /// The device's own write of an entry (its inputs, its state), whatever its access; the
+    /// length must be the entry's (else nothing changes).
+    pub fn set(&mut self, index: u16, sub: u8, data: &[u8]) {
+        if let Some(e) = self.entries.get_mut(&(index, sub))
+            && e.data.len() == data.len()
+        {
+            e.data.copy_from_slice(data);
+        }
+    }
+
+    fn bytes<const N: usize>(&self, index: u16) -> [u8; N] {
+        let mut b = [0; N];
+        if let Some(e) = self.get(index, 0)
+            && e.data.len() == N
+        {
+            b.copy_from_slice(&e.data);
+        }
+        b
+    }
+
+    /// Subindex 0 of `index` as a UNSIGNED16 (0 if it is not one).
+    pub fn u16(&self, index: u16) -> u16 {
+        u16::from_le_bytes(self.bytes(index))
+    }
+
+    /// Subindex 0 of `index` as an INTEGER8.
+    pub fn i8(&self, index: u16) -> i8 {
+        i8::from_le_bytes(self.bytes(index))
+    }
+
+    /// Subindex 0 of `index` as an INTEGER16.
+    pub fn i16(&self, index: u16) -> i16 {
+        i16::from_le_bytes(self.bytes(index))
+    }
+
+    /// Subindex 0 of `index` as an INTEGER32.
+    pub fn i32(&self, index: u16) -> i32 {
+        i32::from_le_bytes(self.bytes(index))
     }
 
     fn index_exists(&self, index: u16) -> bool {
@@ -157,21 +201,8 @@ pub fn answer(dictionary: &mut Dictionary, request: &[u8], capacity: usize) -> O
             },
             // Download (write).
             1 => {
-                let expedited = command & 0x02 != 0;
-                let data: Option<&[u8]> = if expedited {
-                    let size = if command & 0x01 != 0 {
-                        4 - usize::from((command >> 2) & 0x03)
-                    } else {
-                        4
-                    };
-                    sdo.get(4..4 + size)
-                } else {
-                    let size = sdo
-                        .get(4..8)
-                        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)?;
-                    sdo.get(8..8 + size)
-                };
-                match data.map(|d| dictionary.download(index, sub, d)) {
+                let data = download_target(request).map(|(_, _, d)| d);
+                match data.map(|d| dictionary.download(index, sub, &d)) {
                     Some(Ok(())) => {
                         let mut r = vec![0x60];
                         r.extend_from_slice(&index.to_le_bytes());
@@ -186,14 +217,51 @@ pub fn answer(dictionary: &mut Dictionary, request: &[u8], capacity: usize) -> O
             _ => abort_sdo(index, sub, abort::COMMAND),
         }
     };
-    let mut reply = Vec::with_capacity(MAILBOX_HEADER + 2 + reply_sdo.len());
-    reply.extend_from_slice(&((2 + reply_sdo.len()) as u16).to_le_bytes());
+    Some(sdo_response(kind, &reply_sdo))
+}
+
+/// A mailbox with the SDO response `sdo`, answering a request whose type byte was `kind`.
+fn sdo_response(kind: u8, sdo: &[u8]) -> Vec<u8> {
+    let mut reply = Vec::with_capacity(MAILBOX_HEADER + 2 + sdo.len());
+    reply.extend_from_slice(&((2 + sdo.len()) as u16).to_le_bytes());
     reply.extend_from_slice(&[0, 0]); // address
     reply.push(0); // channel, priority
     reply.push(MAILBOX_COE | (kind & 0x70)); // the request's counter
     reply.extend_from_slice(&(u16::from(SDO_RESPONSE) << 12).to_le_bytes());
-    reply.extend_from_slice(&reply_sdo);
-    Some(reply)
+    reply.extend_from_slice(sdo);
+    reply
+}
+
+/// What an SDO download `request` would write: index, subindex and data (`None` for
+/// anything else, or a malformed request).
+pub fn download_target(request: &[u8]) -> Option<(u16, u8, Vec<u8>)> {
+    let length = usize::from(u16::from_le_bytes([*request.first()?, *request.get(1)?]));
+    if *request.get(5)? & 0x0F != MAILBOX_COE || length < 2 + 8 {
+        return None;
+    }
+    let body = request.get(MAILBOX_HEADER..MAILBOX_HEADER + length)?;
+    let sdo = &body[2..];
+    if body[1] >> 4 != SDO_REQUEST || sdo[0] >> 5 != 1 || sdo[0] & 0x10 != 0 {
+        return None;
+    }
+    let index = u16::from_le_bytes([sdo[1], sdo[2]]);
+    let data = if sdo[0] & 0x02 != 0 {
+        let size = if sdo[0] & 0x01 != 0 {
+            4 - usize::from((sdo[0] >> 2) & 0x03)
+        } else {
+            4
+        };
+        sdo.get(4..4 + size)?
+    } else {
+        let size = u32::from_le_bytes(sdo.get(4..8)?.try_into().ok()?) as usize;
+        sdo.get(8..8usize.checked_add(size)?)?
+    };
+    Some((index, sdo[3], data.to_vec()))
+}
+
+/// The abort `code` of `index`:`sub` as the answer to `request` (its counter kept).
+pub fn abort_reply(request: &[u8], index: u16, sub: u8, code: u32) -> Option<Vec<u8>> {
+    Some(sdo_response(*request.get(5)?, &abort_sdo(index, sub, code)))
 }
 
 fn abort_sdo(index: u16, sub: u8, code: u32) -> Vec<u8> {

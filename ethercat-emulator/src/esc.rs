@@ -141,6 +141,8 @@ pub struct Esc {
     dc: bool,
     /// A mailbox the MainDevice wrote whole into SM0's area, for the device to answer.
     mailbox_in: Option<Vec<u8>>,
+    /// A logical write reached the process RAM since the device last looked.
+    outputs_written: bool,
 }
 
 impl std::fmt::Debug for Esc {
@@ -165,6 +167,7 @@ impl Esc {
             sms: sms.min(16),
             dc,
             mailbox_in: None,
+            outputs_written: false,
         };
         esc.power_on();
         esc
@@ -283,6 +286,12 @@ impl Esc {
         (on && len > 0 && end <= MEMORY).then(|| end - 1)
     }
 
+    /// Whether a logical write reached the process data since the last call (the device
+    /// takes its outputs once per frame that wrote them).
+    pub fn take_outputs_written(&mut self) -> bool {
+        std::mem::take(&mut self.outputs_written)
+    }
+
     /// The mailbox the MainDevice wrote, once (for the device to answer).
     pub fn take_mailbox(&mut self) -> Option<Vec<u8>> {
         self.mailbox_in.take()
@@ -391,6 +400,7 @@ impl Esc {
                 if writes {
                     let v = (frame_in[db] >> di) & 1;
                     self.mem[pb] = (self.mem[pb] & !(1 << pi)) | (v << pi);
+                    self.outputs_written = true;
                 }
                 if reads {
                     let v = (self.mem[pb] >> pi) & 1;

@@ -8,17 +8,20 @@
 //! - [`coe`]: CANopen over EtherCAT: the object dictionary, SDO upload and download, aborts;
 //! - [`sii`]: the EEPROM image (identity, strings, general, FMMU, SyncManager and PDO
 //!   categories, its checksum);
-//! - [`terminals`]: EK1100, EL1008, EL2008;
+//! - [`drive`]: a CiA 402 servo drive (its objects, the PDO mapping written in PRE-OP) moving
+//!   `machine-sim`'s drive and mechanics model;
+//! - [`terminals`]: EK1100, EL1008, EL2008, and the drive;
 //! - [`bus`]: a line of SubDevices a frame passes through;
 //! - [`wire`]: the line on a network interface (a raw packet socket), for the
 //!   `ethercat-emulator` binary.
 //!
-//! Not yet here (docs/ethercat.md says what is): the CiA 402 drives (the mailbox and CoE are
-//! ready for them), the SyncManager watchdog, DC system time control, and the faults it can
-//! be told to make.
+//! Not yet here (docs/ethercat.md says what is): the ESC's own SyncManager watchdog (the
+//! drive's command watchdog stands in for it), DC system time control, emergencies, and the
+//! faults it can be told to make.
 
 pub mod bus;
 pub mod coe;
+pub mod drive;
 pub mod esc;
 pub mod frame;
 pub mod sii;

@@ -17,7 +17,8 @@ struct Args {
     /// The interface to answer on.
     #[arg(long)]
     interface: String,
-    /// The SubDevices in wire order: ek1100, el1008, el2008.
+    /// The SubDevices in wire order: ek1100, el1008, el2008, drive (a CiA 402 drive moving
+    /// the standalone axis of `drive::standalone`; the k-th drive is named `axis<k>`).
     #[arg(long, value_delimiter = ',', default_value = "ek1100,el1008,el2008")]
     line: Vec<String>,
     /// Wire the first EL2008's outputs to the first EL1008's inputs (a test cable): what a
@@ -32,14 +33,28 @@ extern "C" fn on_signal(_: libc::c_int) {
     STOP.store(true, Ordering::SeqCst);
 }
 
-fn terminal(name: &str) -> Option<Terminal> {
+fn terminal(name: &str, drives: &mut usize) -> Option<Terminal> {
     Some(match name.trim().to_ascii_lowercase().as_str() {
         "ek1100" => Terminal::Ek1100,
         "el1008" => Terminal::El1008 { inputs: 0 },
         "el2008" => Terminal::El2008 { outputs: 0 },
+        "drive" => {
+            let (axis, scaling) = ethercat_emulator::drive::standalone();
+            *drives += 1;
+            Terminal::Drive(Box::new(ethercat_emulator::drive::Drive::new(
+                &format!("axis{drives}"),
+                &axis,
+                scaling,
+                DRIVE_WATCHDOG_NS,
+            )))
+        }
         _ => return None,
     })
 }
+
+/// The drives' command watchdog: without a frame writing their outputs this long while
+/// powered, they fault and ramp down.
+const DRIVE_WATCHDOG_NS: u64 = 100_000_000;
 
 /// The test cable of `--loopback`: the first EL2008's outputs on the first EL1008's inputs.
 fn loop_back(bus: &mut Bus) {
@@ -69,13 +84,14 @@ fn main() -> ExitCode {
         .init();
     let args = Args::parse();
     let mut line = Vec::new();
+    let mut drives = 0;
     for (k, name) in args.line.iter().enumerate() {
-        match terminal(name) {
+        match terminal(name, &mut drives) {
             Some(t) => line.push(t),
             None => {
                 eprintln!(
                     "error: --line entry {} ({name:?}) is not a SubDevice this emulator has \
-                     (ek1100, el1008, el2008)",
+                     (ek1100, el1008, el2008, drive)",
                     k + 1
                 );
                 return ExitCode::from(2);
@@ -93,14 +109,15 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     }
-    let wire = match Wire::open(&args.interface, Duration::from_millis(100)) {
+    // A short receive timeout: between frames the drives' models run on (their watchdog).
+    let wire = match Wire::open(&args.interface, Duration::from_millis(5)) {
         Ok(w) => w,
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::from(2);
         }
     };
-    let names: Vec<&str> = line.iter().map(Terminal::name).collect();
+    let names: Vec<String> = line.iter().map(|t| t.name().to_string()).collect();
     let mut bus = Bus::new(line);
     tracing::info!(
         "answering on {}: {} SubDevice(s): {}",
@@ -113,7 +130,10 @@ fn main() -> ExitCode {
     while !STOP.load(Ordering::SeqCst) {
         let n = match wire.receive(&mut buf) {
             Ok(Received::Frame(n)) => n,
-            Ok(Received::Nothing) => continue,
+            Ok(Received::Nothing) => {
+                bus.idle();
+                continue;
+            }
             Err(e) => {
                 tracing::error!("{e}");
                 return ExitCode::FAILURE;

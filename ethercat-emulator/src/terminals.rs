@@ -1,7 +1,9 @@
 //! The devices behind the ESCs: Beckhoff's EK1100 coupler, EL1008 (8 digital inputs) and
 //! EL2008 (8 digital outputs), with the identities and the EEPROM categories of the real
-//! terminals' kind (no mailbox: a MainDevice configures them from their SII).
+//! terminals' kind (no mailbox: a MainDevice configures them from their SII), and the
+//! emulator's CiA 402 drive ([`crate::drive`]).
 
+use crate::drive::Drive;
 use crate::esc::{AlState, Esc};
 use crate::sii::{Identity, Pdo, PdoEntry, Sii, Sm, SmKind};
 
@@ -9,7 +11,7 @@ use crate::sii::{Identity, Pdo, PdoEntry, Sii, Sm, SmKind};
 pub const BECKHOFF: u32 = 0x0000_0002;
 
 /// A terminal of the line.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug)]
 pub enum Terminal {
     /// EK1100 EtherCAT coupler: no process data.
     Ek1100,
@@ -23,6 +25,8 @@ pub enum Terminal {
         /// The driven levels.
         outputs: u8,
     },
+    /// A CiA 402 servo drive with its axis.
+    Drive(Box<Drive>),
 }
 
 /// The physical start of EL1008's input SyncManager.
@@ -31,12 +35,13 @@ const EL1008_INPUTS: u16 = 0x1000;
 const EL2008_OUTPUTS: u16 = 0x0F00;
 
 impl Terminal {
-    /// Its name: the type its EEPROM gives as order number.
-    pub fn name(&self) -> &'static str {
+    /// Its name: the type its EEPROM gives as order number (a drive: its own name).
+    pub fn name(&self) -> &str {
         match self {
             Self::Ek1100 => "EK1100",
             Self::El1008 { .. } => "EL1008",
             Self::El2008 { .. } => "EL2008",
+            Self::Drive(d) => d.name(),
         }
     }
 
@@ -46,6 +51,7 @@ impl Terminal {
             Self::Ek1100 => (0x044C_2C52, 0x0011_0000),
             Self::El1008 { .. } => (0x03F0_3052, 0x0010_0000),
             Self::El2008 { .. } => (0x07D8_3052, 0x0010_0000),
+            Self::Drive(d) => return d.identity(),
         };
         Identity {
             vendor: BECKHOFF,
@@ -57,6 +63,9 @@ impl Terminal {
 
     /// Its ESC, with its EEPROM, powered on (INIT).
     pub fn esc(&self) -> Esc {
+        if let Self::Drive(d) = self {
+            return d.esc();
+        }
         let bits = |base: u16, count: u16, pdo: u16, sm: u8| -> Vec<Pdo> {
             (0..count)
                 .map(|k| Pdo {
@@ -94,6 +103,7 @@ impl Terminal {
                 bits(0x6000, 8, 0x1A00, 0),
                 vec![],
             ),
+            Self::Drive(_) => unreachable!("a drive makes its own ESC"),
             Self::El2008 { .. } => (
                 "DigOut",
                 "EL2008 8Ch. Dig. Output 24V, 0.5A",
@@ -124,27 +134,51 @@ impl Terminal {
         Esc::new(sii, 8, 8, false)
     }
 
-    /// The device's answer to a mailbox request (none of these terminals has a mailbox).
-    pub fn mailbox(&mut self, _request: &[u8], _capacity: usize) -> Option<Vec<u8>> {
-        None
+    /// The device's answer to a mailbox request in AL state `al` (only a drive has a
+    /// mailbox).
+    pub fn mailbox(
+        &mut self,
+        request: &[u8],
+        capacity: usize,
+        al: Option<AlState>,
+    ) -> Option<Vec<u8>> {
+        match self {
+            Self::Drive(d) => d.mailbox(request, capacity, al),
+            _ => None,
+        }
     }
 
     /// Before a frame: the device's inputs into its ESC.
     pub fn inputs(&mut self, esc: &mut Esc) {
-        if let Self::El1008 { inputs } = self {
-            esc.set_memory(EL1008_INPUTS, &[*inputs]);
+        match self {
+            Self::El1008 { inputs } => esc.set_memory(EL1008_INPUTS, &[*inputs]),
+            Self::Drive(d) => d.inputs(esc),
+            _ => {}
         }
     }
 
-    /// After a frame: the device takes its outputs (a terminal drives them only in OP).
-    pub fn outputs(&mut self, esc: &Esc) {
-        if let Self::El2008 { outputs } = self {
-            let (_, _, _, enabled) = esc.sm(0);
-            *outputs = if esc.al_state() == Some(AlState::Op) && enabled {
-                esc.memory(EL2008_OUTPUTS, 1)[0]
-            } else {
-                0
-            };
+    /// After a frame at `now_ns`: the device takes its outputs (a terminal drives them only
+    /// in OP; a drive takes a new command when the frame wrote its outputs).
+    pub fn outputs(&mut self, esc: &mut Esc, now_ns: u64) {
+        let written = esc.take_outputs_written();
+        match self {
+            Self::El2008 { outputs } => {
+                let (_, _, _, enabled) = esc.sm(0);
+                *outputs = if esc.al_state() == Some(AlState::Op) && enabled {
+                    esc.memory(EL2008_OUTPUTS, 1)[0]
+                } else {
+                    0
+                };
+            }
+            Self::Drive(d) => d.outputs(esc, written, now_ns),
+            _ => {}
+        }
+    }
+
+    /// Between frames: a drive's model runs on (its watchdog counts the silence).
+    pub fn idle(&mut self, esc: &Esc, now_ns: u64) {
+        if let Self::Drive(d) = self {
+            d.step(now_ns, esc.al_state() == Some(AlState::Op));
         }
     }
 }

@@ -4,60 +4,15 @@
 //! with the expected working counter. In process: ethercrab's frames go straight into the
 //! emulator (`PduTx`/`PduRx`) and its replies come straight back, no network.
 
+mod common;
+
+use common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
 use ethercat_emulator::bus::Bus;
 use ethercat_emulator::esc::AlState;
 use ethercat_emulator::terminals::{BECKHOFF, Terminal};
-use ethercrab::{MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, Timeouts};
-use std::future::Future;
-use std::pin::Pin;
 use std::sync::{Arc, Mutex};
-use std::task::{Context, Poll};
-use std::time::Duration;
 
-const MAX_SUBDEVICES: usize = 8;
-const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
-const MAX_FRAMES: usize = 16;
-const MAX_PDI: usize = 64;
-
-static PDU_STORAGE: PduStorage<MAX_FRAMES, MAX_PDU_DATA> = PduStorage::new();
-
-/// The wire: every frame ethercrab sends passes the emulated line and comes back.
-struct Wire {
-    tx: PduTx<'static>,
-    rx: PduRx<'static>,
-    bus: Arc<Mutex<Bus>>,
-}
-
-impl Future for Wire {
-    type Output = ();
-
-    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
-        let this = &mut *self;
-        this.tx.replace_waker(cx.waker());
-        while let Some(frame) = this.tx.next_sendable_frame() {
-            let mut reply = None;
-            let sent = frame.send_blocking(|bytes| {
-                let mut f = bytes.to_vec();
-                let mut bus = this.bus.lock().expect("bus");
-                if bus.handle(&mut f).is_ok() {
-                    reply = Some(f);
-                }
-                Ok(bytes.len())
-            });
-            assert!(sent.is_ok(), "ethercrab could not send");
-            if let Some(r) = reply {
-                this.rx
-                    .receive_frame(&r)
-                    .expect("ethercrab takes the reply");
-            }
-        }
-        if this.tx.should_exit() {
-            Poll::Ready(())
-        } else {
-            Poll::Pending
-        }
-    }
-}
+static PDU_STORAGE: Storage = Storage::new();
 
 #[test]
 fn ethercrab_brings_the_emulated_line_to_op_and_exchanges_its_process_data() {
@@ -66,27 +21,7 @@ fn ethercrab_brings_the_emulated_line_to_op_and_exchanges_its_process_data() {
         Terminal::El1008 { inputs: 0 },
         Terminal::El2008 { outputs: 0 },
     ])));
-    let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
-    let wire = Wire {
-        tx,
-        rx,
-        bus: bus.clone(),
-    };
-    let wire = std::thread::spawn(move || futures_lite::future::block_on(wire));
-    let maindevice = MainDevice::new(
-        pdu_loop,
-        Timeouts {
-            // Generous: the test machine is a noisy 2-vCPU VM.
-            pdu: Duration::from_millis(500),
-            eeprom: Duration::from_millis(500),
-            state_transition: Duration::from_secs(10),
-            ..Timeouts::default()
-        },
-        MainDeviceConfig {
-            dc_static_sync_iterations: 0,
-            ..MainDeviceConfig::default()
-        },
-    );
+    let (maindevice, wire) = main_device(&PDU_STORAGE, bus.clone());
     futures_lite::future::block_on(async {
         let group = maindevice
             .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(ethercrab::std::ethercat_now)

@@ -3,16 +3,13 @@
 //! TX/RX task on the other end, or SOEM (pysoem) and kickcat, two masters we did not write,
 //! from PyPI. Nothing touches the host's interfaces. Needs root (CI is).
 
-use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+mod common;
+
+use common::{MAX_PDI, MAX_SUBDEVICES, Storage};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const MAX_SUBDEVICES: usize = 8;
-const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
-const MAX_FRAMES: usize = 16;
-const MAX_PDI: usize = 64;
-
-static PDU_STORAGE: PduStorage<MAX_FRAMES, MAX_PDU_DATA> = PduStorage::new();
+static PDU_STORAGE: Storage = Storage::new();
 
 /// A network namespace with a veth pair `m0` (the MainDevice's) and `s0` (the SubDevices'),
 /// and the emulator on `s0`; all removed when dropped.
@@ -111,19 +108,7 @@ fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_ba
         let task = ethercrab::std::tx_rx_task("m0", tx, rx).expect("ethercrab's raw socket on m0");
         let _ = futures_lite::future::block_on(task);
     });
-    let maindevice = MainDevice::new(
-        pdu_loop,
-        Timeouts {
-            pdu: Duration::from_millis(500),
-            eeprom: Duration::from_millis(500),
-            state_transition: Duration::from_secs(10),
-            ..Timeouts::default()
-        },
-        MainDeviceConfig {
-            dc_static_sync_iterations: 0,
-            ..MainDeviceConfig::default()
-        },
-    );
+    let maindevice = common::maindevice_on(pdu_loop);
     futures_lite::future::block_on(async {
         // The emulator may still be opening its socket: the first scans may find nothing.
         let start = Instant::now();

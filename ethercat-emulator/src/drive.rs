@@ -1,0 +1,565 @@
+//! A CiA 402 servo drive behind an ESC (ETG.6010): the objects of the drive profile in a CoE
+//! object dictionary, the process data mapped by the MainDevice in PRE-OP (0x1C12/0x1C13 and
+//! 0x1600/0x1A00 written by SDO, as a real drive takes them), and behind them the drive and
+//! mechanics of `machine-sim` — one physics for the simulated machine and the emulated bus.
+//!
+//! Units on the wire are the drive's own: position in encoder counts, velocity in counts per
+//! second, torque in thousandths of the rated torque; [`Scaling`] converts them to the axis'
+//! units for the model, rounded and saturated to the objects' types.
+//!
+//! The drive runs its model over real elapsed time whenever it is stepped ([`Drive::step`],
+//! from every frame and from the emulator's idle ticks). A frame that writes its outputs
+//! (SM2) is a new command; without one for [`Drive::watchdog`] while the power stage is on,
+//! the drive faults as `machine-sim`'s command watchdog does (0xFF01) and ramps the axis
+//! down: what the SyncManager watchdog of a real drive does when its master dies.
+
+use crate::coe::{self, Dictionary};
+use crate::esc::{AlState, Esc};
+use crate::sii::{Identity, Mailbox, Pdo, PdoEntry, Sii, Sm, SmKind};
+use machine_sim::Machine;
+use shm_schema::event::EventQueue;
+use shm_schema::{AxisConfigV2, CellConfigV6, DriveCommandV2};
+
+/// The emulator's vendor id: not one ETG assigned to a manufacturer, so that no tool takes
+/// an emulated drive for a real one.
+pub const VENDOR: u32 = 0xE1A0_0001;
+/// The emulated drive's product code.
+pub const PRODUCT: u32 = 0x0000_0402;
+/// Its revision.
+pub const REVISION: u32 = 0x0001_0000;
+
+/// Physical start of the receive mailbox (SM0).
+const MBX_OUT: u16 = 0x1000;
+/// Physical start of the send mailbox (SM1).
+const MBX_IN: u16 = 0x1080;
+/// Mailbox size (each way).
+const MBX_SIZE: u16 = 128;
+/// Physical start of the outputs (SM2).
+const OUTPUTS: u16 = 0x1100;
+/// Physical start of the inputs (SM3).
+const INPUTS: u16 = 0x1180;
+/// Entries a PDO mapping object holds.
+const MAX_ENTRIES: u8 = 16;
+
+/// CiA 402 objects, and the ones the communication profile adds.
+pub mod obj {
+    /// Device type: 0x0192 (drive profile 402), servo (0x0002 in the high word).
+    pub const DEVICE_TYPE: u16 = 0x1000;
+    /// Device name.
+    pub const NAME: u16 = 0x1008;
+    /// Identity.
+    pub const IDENTITY: u16 = 0x1018;
+    /// The first RxPDO mapping (outputs).
+    pub const RXPDO: u16 = 0x1600;
+    /// The first TxPDO mapping (inputs).
+    pub const TXPDO: u16 = 0x1A00;
+    /// SM2's PDO assignment.
+    pub const SM2_ASSIGN: u16 = 0x1C12;
+    /// SM3's PDO assignment.
+    pub const SM3_ASSIGN: u16 = 0x1C13;
+    /// Error code.
+    pub const ERROR_CODE: u16 = 0x603F;
+    /// Controlword.
+    pub const CONTROLWORD: u16 = 0x6040;
+    /// Statusword.
+    pub const STATUSWORD: u16 = 0x6041;
+    /// Quick stop option code.
+    pub const QUICK_STOP_OPTION: u16 = 0x605A;
+    /// Modes of operation.
+    pub const MODE: u16 = 0x6060;
+    /// Modes of operation display.
+    pub const MODE_DISPLAY: u16 = 0x6061;
+    /// Position actual value (counts).
+    pub const POSITION_ACTUAL: u16 = 0x6064;
+    /// Velocity actual value (counts/s).
+    pub const VELOCITY_ACTUAL: u16 = 0x606C;
+    /// Target torque (‰ of the rated torque).
+    pub const TARGET_TORQUE: u16 = 0x6071;
+    /// Rated torque (mN·m: the axis' effort unit times 1000).
+    pub const RATED_TORQUE: u16 = 0x6076;
+    /// Torque actual value (‰).
+    pub const TORQUE_ACTUAL: u16 = 0x6077;
+    /// Target position (counts).
+    pub const TARGET_POSITION: u16 = 0x607A;
+    /// Quick stop deceleration (counts/s²).
+    pub const QUICK_STOP_DECELERATION: u16 = 0x6085;
+    /// Velocity offset (counts/s).
+    pub const VELOCITY_OFFSET: u16 = 0x60B1;
+    /// Torque offset (‰).
+    pub const TORQUE_OFFSET: u16 = 0x60B2;
+    /// Following error actual value (counts).
+    pub const FOLLOWING_ERROR: u16 = 0x60F4;
+    /// Target velocity (counts/s).
+    pub const TARGET_VELOCITY: u16 = 0x60FF;
+    /// Supported drive modes: CSP (bit 7), CSV (bit 8), CST (bit 9).
+    pub const SUPPORTED_MODES: u16 = 0x6502;
+}
+
+/// The default RxPDO (outputs): what the cell's bus process writes, in this order.
+pub const RX_DEFAULT: [(u16, u8); 7] = [
+    (obj::CONTROLWORD, 16),
+    (obj::MODE, 8),
+    (obj::TARGET_POSITION, 32),
+    (obj::TARGET_VELOCITY, 32),
+    (obj::TARGET_TORQUE, 16),
+    (obj::VELOCITY_OFFSET, 32),
+    (obj::TORQUE_OFFSET, 16),
+];
+/// The default TxPDO (inputs).
+pub const TX_DEFAULT: [(u16, u8); 7] = [
+    (obj::STATUSWORD, 16),
+    (obj::MODE_DISPLAY, 8),
+    (obj::ERROR_CODE, 16),
+    (obj::POSITION_ACTUAL, 32),
+    (obj::VELOCITY_ACTUAL, 32),
+    (obj::TORQUE_ACTUAL, 16),
+    (obj::FOLLOWING_ERROR, 32),
+];
+
+/// The objects that may be mapped: index, bits, CoE data type, and whether they go out
+/// (RxPDO) or in (TxPDO).
+const MAPPABLE: [(u16, u8, u8, bool); 14] = [
+    (obj::CONTROLWORD, 16, 6, true),
+    (obj::MODE, 8, 2, true),
+    (obj::TARGET_POSITION, 32, 4, true),
+    (obj::TARGET_VELOCITY, 32, 4, true),
+    (obj::TARGET_TORQUE, 16, 3, true),
+    (obj::VELOCITY_OFFSET, 32, 4, true),
+    (obj::TORQUE_OFFSET, 16, 3, true),
+    (obj::STATUSWORD, 16, 6, false),
+    (obj::MODE_DISPLAY, 8, 2, false),
+    (obj::ERROR_CODE, 16, 6, false),
+    (obj::POSITION_ACTUAL, 32, 4, false),
+    (obj::VELOCITY_ACTUAL, 32, 4, false),
+    (obj::TORQUE_ACTUAL, 16, 3, false),
+    (obj::FOLLOWING_ERROR, 32, 4, false),
+];
+
+/// The drive's units against the axis': counts per axis unit (position and velocity) and the
+/// rated torque in the axis' effort unit (1000 ‰).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scaling {
+    /// Encoder counts per axis unit.
+    pub counts_per_unit: f64,
+    /// The rated torque, in the axis' effort unit.
+    pub rated_effort: f64,
+}
+
+impl Scaling {
+    /// A count value of `units`, rounded and saturated to i32 (a non-finite value is 0).
+    pub fn counts(&self, units: f64) -> i32 {
+        saturate_i32(units * self.counts_per_unit)
+    }
+
+    /// Axis units of `counts`.
+    pub fn units(&self, counts: i32) -> f64 {
+        f64::from(counts) / self.counts_per_unit
+    }
+
+    /// Thousandths of the rated torque of `effort`, rounded and saturated to i16.
+    pub fn permille(&self, effort: f64) -> i16 {
+        let v = (effort / self.rated_effort * 1000.0).round();
+        if v.is_nan() {
+            0
+        } else {
+            v.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+        }
+    }
+
+    /// The effort of `permille`.
+    pub fn effort(&self, permille: i16) -> f64 {
+        f64::from(permille) * self.rated_effort / 1000.0
+    }
+}
+
+fn saturate_i32(v: f64) -> i32 {
+    let v = v.round();
+    if v.is_nan() {
+        0
+    } else {
+        v.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+    }
+}
+
+/// The axis of a drive the emulator runs on its own (`--line ek1100,drive`), without a cell
+/// to take the mechanics from: a light linear axis in mm starting at 40, its drive closing a
+/// stiff position loop (CSP), 1000 counts per mm, a rated torque of 10 effort units.
+pub fn standalone() -> (AxisConfigV2, Scaling) {
+    (
+        AxisConfigV2 {
+            start: 40.0,
+            inertia: 0.01,
+            viscous: 0.02,
+            coulomb: 0.05,
+            effort_limit: 30.0,
+            encoder_resolution: 0.001,
+            drive_kp: 40.0,
+            drive_ki: 0.0,
+            drive_kd: 1.0,
+            quick_stop_deceleration: 500.0,
+            quick_stop_option: 2,
+            ..AxisConfigV2::default()
+        },
+        Scaling {
+            counts_per_unit: 1000.0,
+            rated_effort: 10.0,
+        },
+    )
+}
+
+/// One emulated drive: its object dictionary, its mapping and its model.
+#[derive(Clone, Debug)]
+pub struct Drive {
+    name: String,
+    dictionary: Dictionary,
+    scaling: Scaling,
+    machine: Machine,
+    command: DriveCommandV2,
+    events: EventQueue,
+    /// Time of the last SM2 write (ns).
+    last_output_ns: u64,
+    /// Frames that wrote the outputs.
+    outputs_taken: u64,
+}
+
+impl Drive {
+    /// A drive named `name` moving axis `axis` (its mechanics, drive gains and quick stop),
+    /// its units `scaling`; the command watchdog `watchdog_ns`.
+    pub fn new(name: &str, axis: &AxisConfigV2, scaling: Scaling, watchdog_ns: u64) -> Self {
+        let mut cell = CellConfigV6 {
+            axes: 1,
+            machine_substeps: 4,
+            drive_command_timeout_ns: watchdog_ns,
+            ..Default::default()
+        };
+        cell.axis[0] = *axis;
+        let mut d = Dictionary::default();
+        d.constant(obj::DEVICE_TYPE, 0, &0x0002_0192u32.to_le_bytes())
+            .constant(obj::NAME, 0, name.as_bytes())
+            .constant(obj::IDENTITY, 0, &[4])
+            .constant(obj::IDENTITY, 1, &VENDOR.to_le_bytes())
+            .constant(obj::IDENTITY, 2, &PRODUCT.to_le_bytes())
+            .constant(obj::IDENTITY, 3, &REVISION.to_le_bytes())
+            .constant(obj::IDENTITY, 4, &0u32.to_le_bytes())
+            .constant(obj::SUPPORTED_MODES, 0, &0x0380u32.to_le_bytes())
+            .constant(
+                obj::RATED_TORQUE,
+                0,
+                &((scaling.rated_effort * 1000.0).round().max(0.0) as u32).to_le_bytes(),
+            )
+            .variable(
+                obj::QUICK_STOP_OPTION,
+                0,
+                &(axis.quick_stop_option as i16).to_le_bytes(),
+            )
+            .variable(
+                obj::QUICK_STOP_DECELERATION,
+                0,
+                &(scaling.counts(axis.quick_stop_deceleration).max(0) as u32).to_le_bytes(),
+            );
+        for &(index, bits, _, _) in &MAPPABLE {
+            d.variable(index, 0, &vec![0u8; usize::from(bits / 8)]);
+        }
+        d.set(obj::MODE, 0, &[8]); // CSP until told otherwise
+        for (pdo, entries, assign) in [
+            (obj::RXPDO, &RX_DEFAULT, obj::SM2_ASSIGN),
+            (obj::TXPDO, &TX_DEFAULT, obj::SM3_ASSIGN),
+        ] {
+            d.variable(pdo, 0, &[entries.len() as u8]);
+            for k in 1..=MAX_ENTRIES {
+                let e = entries
+                    .get(usize::from(k - 1))
+                    .map_or(0, |&(i, b)| mapping(i, 0, b));
+                d.variable(pdo, k, &e.to_le_bytes());
+            }
+            d.variable(assign, 0, &[1])
+                .variable(assign, 1, &pdo.to_le_bytes());
+        }
+        Self {
+            name: name.into(),
+            dictionary: d,
+            scaling,
+            machine: Machine::new(&cell, 1_000_000),
+            command: DriveCommandV2 {
+                axes: 1,
+                ..Default::default()
+            },
+            events: EventQueue::default(),
+            last_output_ns: 0,
+            outputs_taken: 0,
+        }
+    }
+
+    /// Its name (0x1008).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Its identity.
+    pub fn identity(&self) -> Identity {
+        Identity {
+            vendor: VENDOR,
+            product: PRODUCT,
+            revision: REVISION,
+            serial: 0,
+        }
+    }
+
+    /// The object dictionary (for tests and tools).
+    pub fn dictionary(&self) -> &Dictionary {
+        &self.dictionary
+    }
+
+    /// The model (for tests).
+    pub fn machine(&self) -> &Machine {
+        &self.machine
+    }
+
+    /// Frames that wrote its outputs so far.
+    pub fn outputs_taken(&self) -> u64 {
+        self.outputs_taken
+    }
+
+    /// Its ESC: a mailbox (SM0, SM1), outputs (SM2) and inputs (SM3) whose lengths follow the
+    /// mapping, three FMMUs, DC.
+    pub fn esc(&self) -> Esc {
+        let pdo = |index: u16, sm: u8, entries: &[(u16, u8)]| Pdo {
+            index,
+            sm,
+            entries: entries
+                .iter()
+                .map(|&(index, bits)| PdoEntry {
+                    index,
+                    subindex: 0,
+                    bits,
+                    data_type: MAPPABLE.iter().find(|m| m.0 == index).map_or(0, |m| m.2),
+                })
+                .collect(),
+        };
+        let sm = |start, control, kind| Sm {
+            start,
+            // Process data: its length is what the mapping makes it (0: not checked
+            // against the EEPROM).
+            length: if matches!(kind, SmKind::MailboxOut | SmKind::MailboxIn) {
+                MBX_SIZE
+            } else {
+                0
+            },
+            control,
+            enable: true,
+            kind,
+        };
+        let sii = Sii {
+            identity: self.identity(),
+            alias: 0,
+            order: "RTC-EMU-402".into(),
+            group: "Drive".into(),
+            name: format!("Emulated CiA 402 drive ({})", self.name),
+            mailbox: Some(Mailbox {
+                receive_offset: MBX_OUT,
+                receive_size: MBX_SIZE,
+                send_offset: MBX_IN,
+                send_size: MBX_SIZE,
+                protocols: 0x0004, // CoE
+            }),
+            fmmus: vec![1, 2, 3],
+            sms: vec![
+                sm(MBX_OUT, 0x26, SmKind::MailboxOut),
+                sm(MBX_IN, 0x22, SmKind::MailboxIn),
+                sm(OUTPUTS, 0x64, SmKind::Outputs),
+                sm(INPUTS, 0x20, SmKind::Inputs),
+            ],
+            tx_pdos: vec![pdo(obj::TXPDO, 3, &TX_DEFAULT)],
+            rx_pdos: vec![pdo(obj::RXPDO, 2, &RX_DEFAULT)],
+        };
+        Esc::new(sii, 3, 8, true)
+    }
+
+    /// The answer to a CoE mailbox request. The PDO assignment and mapping may be written in
+    /// PRE-OP only (abort 0x0800_0022 otherwise), and only with objects that can be mapped in
+    /// that direction (abort 0x0604_0041).
+    pub fn mailbox(
+        &mut self,
+        request: &[u8],
+        capacity: usize,
+        al: Option<AlState>,
+    ) -> Option<Vec<u8>> {
+        let target = coe::download_target(request);
+        if let Some((index, sub, data)) = target {
+            let mapping_object = matches!(
+                index,
+                obj::RXPDO | obj::TXPDO | obj::SM2_ASSIGN | obj::SM3_ASSIGN
+            );
+            if mapping_object && al != Some(AlState::PreOp) {
+                return coe::abort_reply(request, index, sub, coe::abort::STATE);
+            }
+            if let Some(code) = self.refuse_mapping(index, sub, &data) {
+                return coe::abort_reply(request, index, sub, code);
+            }
+        }
+        coe::answer(&mut self.dictionary, request, capacity)
+    }
+
+    /// Why a write of `data` to `index`:`sub` makes a mapping this drive cannot serve.
+    fn refuse_mapping(&self, index: u16, sub: u8, data: &[u8]) -> Option<u32> {
+        let word = |d: &[u8]| {
+            d.get(..4)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        };
+        let byte = |d: &[u8]| d.first().copied();
+        match (index, sub) {
+            (obj::RXPDO | obj::TXPDO, 0) => {
+                (byte(data)? > MAX_ENTRIES).then_some(coe::abort::MAPPING_LENGTH)
+            }
+            (obj::RXPDO | obj::TXPDO, _) => {
+                let e = word(data)?;
+                if e == 0 {
+                    return None;
+                }
+                let (i, s, bits) = ((e >> 16) as u16, (e >> 8) as u8, e as u8);
+                let out = index == obj::RXPDO;
+                let ok = MAPPABLE
+                    .iter()
+                    .any(|&(m, b, _, o)| m == i && s == 0 && b == bits && o == out);
+                (!ok).then_some(coe::abort::NOT_MAPPABLE)
+            }
+            (obj::SM2_ASSIGN | obj::SM3_ASSIGN, 0) => {
+                (byte(data)? > 1).then_some(coe::abort::MAPPING_LENGTH)
+            }
+            (obj::SM2_ASSIGN, 1) => (u16::from_le_bytes([*data.first()?, *data.get(1)?])
+                != obj::RXPDO)
+                .then_some(coe::abort::NOT_MAPPABLE),
+            (obj::SM3_ASSIGN, 1) => (u16::from_le_bytes([*data.first()?, *data.get(1)?])
+                != obj::TXPDO)
+                .then_some(coe::abort::NOT_MAPPABLE),
+            _ => None,
+        }
+    }
+
+    /// The mapped entries of `pdo` (index, bits), as assigned to its SyncManager (none if
+    /// the SyncManager has no PDO assigned).
+    fn mapped(&self, assign: u16, pdo: u16) -> Vec<(u16, u8)> {
+        let value = |i: u16, s: u8| {
+            self.dictionary
+                .get(i, s)
+                .map(|e| e.data.clone())
+                .unwrap_or_default()
+        };
+        if value(assign, 0).first().copied().unwrap_or(0) == 0 {
+            return Vec::new();
+        }
+        let n = value(pdo, 0).first().copied().unwrap_or(0).min(MAX_ENTRIES);
+        (1..=n)
+            .filter_map(|k| {
+                let d = value(pdo, k);
+                let e = u32::from_le_bytes(d.get(..4)?.try_into().ok()?);
+                (e != 0).then_some(((e >> 16) as u16, e as u8))
+            })
+            .collect()
+    }
+
+    /// Bytes of the process data each way, as mapped now: (outputs, inputs).
+    pub fn pdo_sizes(&self) -> (usize, usize) {
+        let bytes = |m: Vec<(u16, u8)>| m.iter().map(|&(_, b)| usize::from(b)).sum::<usize>() / 8;
+        (
+            bytes(self.mapped(obj::SM2_ASSIGN, obj::RXPDO)),
+            bytes(self.mapped(obj::SM3_ASSIGN, obj::TXPDO)),
+        )
+    }
+
+    /// Before a frame: the inputs (TxPDO) packed into SM3's buffer.
+    pub fn inputs(&mut self, esc: &mut Esc) {
+        let (start, len, _, on) = esc.sm(3);
+        if !on || start != INPUTS {
+            return;
+        }
+        let mut buf = Vec::with_capacity(usize::from(len));
+        for (index, _) in self.mapped(obj::SM3_ASSIGN, obj::TXPDO) {
+            if let Some(e) = self.dictionary.get(index, 0) {
+                buf.extend_from_slice(&e.data);
+            }
+        }
+        buf.resize(usize::from(len), 0);
+        esc.set_memory(INPUTS, &buf);
+    }
+
+    /// After a frame: in SAFE-OP and OP the outputs (RxPDO) from SM2's buffer, if the frame
+    /// wrote them (`written`), become the drive's new command; then the model steps.
+    pub fn outputs(&mut self, esc: &Esc, written: bool, now_ns: u64) {
+        let op = esc.al_state() == Some(AlState::Op);
+        let (start, len, _, on) = esc.sm(2);
+        if op && written && on && start == OUTPUTS {
+            let data = esc.memory(OUTPUTS, usize::from(len)).to_vec();
+            let mut at = 0;
+            for (index, bits) in self.mapped(obj::SM2_ASSIGN, obj::RXPDO) {
+                let n = usize::from(bits / 8);
+                if let Some(v) = data.get(at..at + n) {
+                    self.dictionary.set(index, 0, v);
+                }
+                at += n;
+            }
+            self.take_command();
+            self.last_output_ns = now_ns;
+            self.outputs_taken += 1;
+        }
+        self.step(now_ns, op);
+    }
+
+    /// The command in the dictionary, in the model's units.
+    fn take_command(&mut self) {
+        let s = self.scaling;
+        let c = &mut self.command;
+        c.seq += 1;
+        c.controlword[0] = self.dictionary.u16(obj::CONTROLWORD);
+        c.mode[0] = self.dictionary.i8(obj::MODE);
+        c.target_position[0] = s.units(self.dictionary.i32(obj::TARGET_POSITION));
+        c.target_velocity[0] = s.units(self.dictionary.i32(obj::TARGET_VELOCITY));
+        c.target_torque[0] = s.effort(self.dictionary.i16(obj::TARGET_TORQUE));
+        c.velocity_offset[0] = s.units(self.dictionary.i32(obj::VELOCITY_OFFSET));
+        c.torque_offset[0] = s.effort(self.dictionary.i16(obj::TORQUE_OFFSET));
+    }
+
+    /// Runs the model up to `now_ns` (with the newest command if it has not taken it yet)
+    /// and puts its feedback in the dictionary. Outside OP the controlword it sees is 0
+    /// (Disable voltage): a drive whose master left OP is brought down.
+    pub fn step(&mut self, now_ns: u64, op: bool) {
+        if !op && self.command.controlword[0] != 0 {
+            self.command.controlword[0] = 0;
+            self.command.seq += 1;
+        }
+        let fb = self
+            .machine
+            .cycle(now_ns, Some(&self.command), None, &mut self.events);
+        self.events.clear();
+        let s = self.scaling;
+        let d = &mut self.dictionary;
+        d.set(obj::STATUSWORD, 0, &fb.statusword[0].to_le_bytes());
+        d.set(obj::MODE_DISPLAY, 0, &fb.mode_display[0].to_le_bytes());
+        d.set(obj::ERROR_CODE, 0, &fb.error_code[0].to_le_bytes());
+        d.set(
+            obj::POSITION_ACTUAL,
+            0,
+            &s.counts(fb.position[0]).to_le_bytes(),
+        );
+        d.set(
+            obj::VELOCITY_ACTUAL,
+            0,
+            &s.counts(fb.velocity[0]).to_le_bytes(),
+        );
+        d.set(
+            obj::TORQUE_ACTUAL,
+            0,
+            &s.permille(fb.torque[0]).to_le_bytes(),
+        );
+        d.set(
+            obj::FOLLOWING_ERROR,
+            0,
+            &s.counts(fb.following_error[0]).to_le_bytes(),
+        );
+    }
+}
+
+/// A PDO mapping entry: index, subindex, bits.
+pub fn mapping(index: u16, sub: u8, bits: u8) -> u32 {
+    (u32::from(index) << 16) | (u32::from(sub) << 8) | u32::from(bits)
+}

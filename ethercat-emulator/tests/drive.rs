@@ -1,0 +1,169 @@
+//! The emulated CiA 402 drive under a MainDevice we did not write (ethercrab 0.7.1, in
+//! process): its identity and 0x6502 by SDO, its PDO mapping written in PRE-OP as the cell's
+//! bus process writes it (refused objects answered with an abort), OP, the CiA 402 power-up
+//! sequence seen in the statusword, a position target followed through the model of
+//! `machine-sim`, and its command watchdog: silence while powered faults the drive (0xFF01).
+
+mod common;
+
+use common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
+use ethercat_emulator::bus::Bus;
+use ethercat_emulator::drive::{self, Drive, RX_DEFAULT, TX_DEFAULT, mapping, obj};
+use ethercat_emulator::terminals::Terminal;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+static PDU_STORAGE: Storage = Storage::new();
+
+/// The outputs of the default RxPDO.
+fn outputs(controlword: u16, mode: i8, position: i32) -> Vec<u8> {
+    let mut o = Vec::new();
+    o.extend_from_slice(&controlword.to_le_bytes());
+    o.extend_from_slice(&mode.to_le_bytes());
+    o.extend_from_slice(&position.to_le_bytes());
+    o.extend_from_slice(&0i32.to_le_bytes()); // target velocity
+    o.extend_from_slice(&0i16.to_le_bytes()); // target torque
+    o.extend_from_slice(&0i32.to_le_bytes()); // velocity offset
+    o.extend_from_slice(&0i16.to_le_bytes()); // torque offset
+    o
+}
+
+/// The default TxPDO's statusword, error code and position actual value.
+fn inputs(i: &[u8]) -> (u16, u16, i32) {
+    (
+        u16::from_le_bytes([i[0], i[1]]),
+        u16::from_le_bytes([i[3], i[4]]),
+        i32::from_le_bytes([i[5], i[6], i[7], i[8]]),
+    )
+}
+
+#[test]
+fn ethercrab_maps_enables_and_moves_the_emulated_drive_and_its_watchdog_faults_it() {
+    let (axis, scaling) = drive::standalone();
+    let drive = Drive::new("x", &axis, scaling, 100_000_000);
+    let bus = Arc::new(Mutex::new(Bus::new([Terminal::Drive(Box::new(drive))])));
+    let (maindevice, wire) = main_device(&PDU_STORAGE, bus.clone());
+    futures_lite::future::block_on(async {
+        let group = maindevice
+            .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(ethercrab::std::ethercat_now)
+            .await
+            .expect("ethercrab's init of the emulated drive");
+        let sd = group.subdevice(&maindevice, 0).expect("the drive");
+        assert_eq!(sd.identity().vendor_id, drive::VENDOR);
+        assert_eq!(sd.identity().product_id, drive::PRODUCT);
+        let modes: u32 = sd.sdo_read(obj::SUPPORTED_MODES, 0).await.expect("0x6502");
+        assert_eq!(modes, 0x0380, "CSP, CSV, CST");
+        let identity: u32 = sd.sdo_read(obj::IDENTITY, 2).await.expect("0x1018:2");
+        assert_eq!(identity, drive::PRODUCT);
+        // The mapping as the bus process writes it: assignment off, entries, count, back on.
+        for (assign, pdo, entries) in [
+            (obj::SM2_ASSIGN, obj::RXPDO, &RX_DEFAULT),
+            (obj::SM3_ASSIGN, obj::TXPDO, &TX_DEFAULT),
+        ] {
+            sd.sdo_write(assign, 0, 0u8).await.expect("assignment off");
+            sd.sdo_write(pdo, 0, 0u8).await.expect("mapping off");
+            for (k, &(index, bits)) in entries.iter().enumerate() {
+                sd.sdo_write(pdo, k as u8 + 1, mapping(index, 0, bits))
+                    .await
+                    .expect("an entry");
+            }
+            sd.sdo_write(pdo, 0, entries.len() as u8)
+                .await
+                .expect("count");
+            sd.sdo_write(assign, 1, pdo).await.expect("assign");
+            sd.sdo_write(assign, 0, 1u8).await.expect("assignment on");
+        }
+        // An input object in the outputs' mapping, and too many entries: refused, named.
+        let e = sd
+            .sdo_write(obj::RXPDO, 8, mapping(obj::STATUSWORD, 0, 16))
+            .await
+            .expect_err("the statusword cannot be an output");
+        // ethercrab's names of 0x06040041 and 0x06040042.
+        assert!(format!("{e:?}").contains("PdoMappingFailed"), "{e:?}");
+        let e = sd
+            .sdo_write(obj::RXPDO, 0, 40u8)
+            .await
+            .expect_err("40 entries");
+        assert!(format!("{e:?}").contains("PdoTooSmall"), "{e:?}");
+
+        let group = group
+            .into_op(&maindevice)
+            .await
+            .expect("the drive goes to OP");
+        {
+            let sd = group.subdevice(&maindevice, 0).expect("the drive");
+            assert_eq!((sd.outputs_raw().len(), sd.inputs_raw().len()), (19, 19));
+            // The mapping cannot change outside PRE-OP.
+            let e = sd
+                .sdo_write(obj::RXPDO, 0, 0u8)
+                .await
+                .expect_err("mapping in OP");
+            assert!(format!("{e:?}").contains("InvalidState"), "{e:?}");
+        }
+
+        let start = scaling.counts(40.0);
+        let exchange = |cw: u16, pos: i32| {
+            let group = &group;
+            let maindevice = &maindevice;
+            async move {
+                group
+                    .subdevice(maindevice, 0)
+                    .expect("the drive")
+                    .outputs_raw_mut()
+                    .copy_from_slice(&outputs(cw, 8, pos));
+                let r = group.tx_rx(maindevice).await.expect("tx_rx");
+                assert_eq!(r.working_counter, 3, "LRW: inputs read, outputs written");
+                std::thread::sleep(Duration::from_millis(1));
+                inputs(
+                    &group
+                        .subdevice(maindevice, 0)
+                        .expect("the drive")
+                        .inputs_raw(),
+                )
+            }
+        };
+        // Shutdown, Switch on, Enable operation: the states in the statusword (0x6F mask).
+        let mut seen = Vec::new();
+        for cw in [0x06, 0x06, 0x07, 0x07, 0x0F, 0x0F, 0x0F] {
+            let (sw, _, _) = exchange(cw, start).await;
+            seen.push(sw & 0x6F);
+        }
+        assert!(seen.contains(&0x21), "Ready to switch on in {seen:x?}");
+        assert!(seen.contains(&0x23), "Switched on in {seen:x?}");
+        assert_eq!(
+            *seen.last().expect("states"),
+            0x27,
+            "Operation enabled: {seen:x?}"
+        );
+        // CSP: a ramp of 5 units over 0.5 s, then hold; the axis follows.
+        let mut actual = 0;
+        for k in 0..=700 {
+            let target = 40.0 + 5.0 * (f64::from(k) / 500.0).min(1.0);
+            let (sw, _, pos) = exchange(0x0F, scaling.counts(target)).await;
+            assert_eq!(sw & 0x6F, 0x27, "still enabled at cycle {k}");
+            actual = pos;
+        }
+        let reached = scaling.units(actual);
+        assert!(
+            (reached - 45.0).abs() < 0.05,
+            "the axis at {reached}, not 45"
+        );
+        // The master goes silent (the emulator's idle ticks run the model): after the
+        // watchdog the drive is in Fault with 0xFF01 and the axis comes to rest.
+        for _ in 0..30 {
+            std::thread::sleep(Duration::from_millis(10));
+            bus.lock().expect("bus").idle();
+        }
+        let (sw, code, _) = exchange(0x0F, scaling.counts(45.0)).await;
+        assert_eq!(sw & 0x4F, 0x08, "Fault: {sw:#06x}");
+        assert_eq!(code, 0xFF01, "command watchdog expired");
+        let b = bus.lock().expect("bus");
+        let Terminal::Drive(d) = &b.devices[0].terminal else {
+            unreachable!("one drive")
+        };
+        assert_eq!(d.machine().axes()[0].velocity, 0.0, "at rest");
+    });
+    // SAFETY: the MainDevice is not used after this; its loop tells the wire to stop.
+    let _ = unsafe { maindevice.release_all() };
+    wire.join().expect("the wire thread");
+}
