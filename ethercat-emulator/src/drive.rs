@@ -53,6 +53,8 @@ pub mod obj {
     pub const RXPDO: u16 = 0x1600;
     /// The first TxPDO mapping (inputs).
     pub const TXPDO: u16 = 0x1A00;
+    /// Each SyncManager's communication type (1, 2 mailbox; 3 outputs; 4 inputs).
+    pub const SM_TYPES: u16 = 0x1C00;
     /// SM2's PDO assignment.
     pub const SM2_ASSIGN: u16 = 0x1C12;
     /// SM3's PDO assignment.
@@ -216,8 +218,6 @@ pub struct Drive {
     machine: Machine,
     command: DriveCommandV2,
     events: EventQueue,
-    /// Time of the last SM2 write (ns).
-    last_output_ns: u64,
     /// Frames that wrote the outputs.
     outputs_taken: u64,
 }
@@ -242,6 +242,11 @@ impl Drive {
             .constant(obj::IDENTITY, 3, &REVISION.to_le_bytes())
             .constant(obj::IDENTITY, 4, &0u32.to_le_bytes())
             .constant(obj::SUPPORTED_MODES, 0, &0x0380u32.to_le_bytes())
+            .constant(obj::SM_TYPES, 0, &[4])
+            .constant(obj::SM_TYPES, 1, &[1])
+            .constant(obj::SM_TYPES, 2, &[2])
+            .constant(obj::SM_TYPES, 3, &[3])
+            .constant(obj::SM_TYPES, 4, &[4])
             .constant(
                 obj::RATED_TORQUE,
                 0,
@@ -275,7 +280,7 @@ impl Drive {
             d.variable(assign, 0, &[1])
                 .variable(assign, 1, &pdo.to_le_bytes());
         }
-        Self {
+        let mut drive = Self {
             name: name.into(),
             dictionary: d,
             scaling,
@@ -285,9 +290,11 @@ impl Drive {
                 ..Default::default()
             },
             events: EventQueue::default(),
-            last_output_ns: 0,
             outputs_taken: 0,
-        }
+        };
+        // Its first command is its dictionary's: Disable voltage, CSP.
+        drive.take_command();
+        drive
     }
 
     /// Its name (0x1008).
@@ -499,7 +506,6 @@ impl Drive {
                 at += n;
             }
             self.take_command();
-            self.last_output_ns = now_ns;
             self.outputs_taken += 1;
         }
         self.step(now_ns, op);

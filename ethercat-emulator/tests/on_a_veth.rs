@@ -207,44 +207,93 @@ fn every_pattern_came_back(name: &str, r: &serde_json::Value) {
     }
 }
 
+/// The line the masters check: the IO terminals and a drive.
+const LINE: &[&str] = &["--loopback", "--line", "ek1100,el1008,el2008,drive"];
+
+/// What a master read of the drive by SDO before OP, and the CiA 402 states it took it
+/// through in OP.
+fn the_drive_answered_and_enabled(name: &str, r: &serde_json::Value) {
+    let sdo = &r["sdo"];
+    assert_eq!(
+        sdo["vendor"],
+        ethercat_emulator::drive::VENDOR,
+        "{name}: {r}"
+    );
+    assert_eq!(
+        sdo["product"],
+        ethercat_emulator::drive::PRODUCT,
+        "{name}: {r}"
+    );
+    assert_eq!(sdo["modes"], 0x0380, "{name}: CSP, CSV, CST: {r}");
+    assert_eq!(
+        sdo["statusword"].as_u64().map(|s| s & 0x4F),
+        Some(0x40),
+        "{name}: Switch on disabled before OP: {r}"
+    );
+    assert_eq!(sdo["mode_display"], 8, "{name}: CSP: {r}");
+    let d = &r["drive"];
+    assert_eq!(
+        d["states"],
+        serde_json::json!([0x21, 0x23, 0x27]),
+        "{name}: Ready to switch on, Switched on, Operation enabled: {r}"
+    );
+    assert_eq!(d["mode_display"], 8, "{name}: {r}");
+    assert_eq!(
+        d["position"], 40_000,
+        "{name}: the axis where it started: {r}"
+    );
+}
+
 #[test]
 fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
-    let line = Line::up("pysoem", &["--loopback"]);
+    let line = Line::up("pysoem", LINE);
     let r = master(&line, "pysoem");
-    assert_eq!(r["found"], 3, "{r}");
+    assert_eq!(r["found"], 4, "{r}");
     let expected = [
-        ("EK1100", 0x044C_2C52u32),
-        ("EL1008", 0x03F0_3052),
-        ("EL2008", 0x07D8_3052),
+        ("EK1100", 2, 0x044C_2C52u32),
+        ("EL1008", 2, 0x03F0_3052),
+        ("EL2008", 2, 0x07D8_3052),
+        (
+            "RTC-EMU-402",
+            ethercat_emulator::drive::VENDOR,
+            ethercat_emulator::drive::PRODUCT,
+        ),
     ];
-    for (d, (name, product)) in r["devices"]
+    for (d, (name, vendor, product)) in r["devices"]
         .as_array()
         .expect("devices")
         .iter()
         .zip(expected)
     {
         assert_eq!(d["name"], name, "{r}");
-        assert_eq!(d["vendor"], 2, "{r}");
+        assert_eq!(d["vendor"], vendor, "{r}");
         assert_eq!(d["product"], product, "{r}");
     }
-    assert_eq!(r["iomap"], 2, "one byte in, one out: {r}");
-    assert_eq!(r["expected_wkc"], 3, "{r}");
+    assert_eq!(
+        r["iomap"],
+        2 + 19 + 19,
+        "a byte each way for the IO, 19 for the drive: {r}"
+    );
+    // LRW: the EL2008 and the drive written (2 each), the EL1008 and the drive read (1 each).
+    assert_eq!(r["expected_wkc"], 6, "{r}");
     assert_eq!(r["safe_op"], 4, "{r}");
-    assert_eq!(r["op"], serde_json::json!([8, 8, 8]), "{r}");
+    assert_eq!(r["op"], serde_json::json!([8, 8, 8, 8]), "{r}");
     for e in r["exchanges"].as_array().expect("exchanges") {
-        assert_eq!(e["wkc"], 3, "{r}");
+        assert_eq!(e["wkc"], 6, "{r}");
     }
     every_pattern_came_back("pysoem", &r);
+    the_drive_answered_and_enabled("pysoem", &r);
+    assert_eq!(r["drive"]["wkc"], serde_json::json!([6]), "{r}");
 }
 
 #[test]
 fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
-    let line = Line::up("kickcat", &["--loopback"]);
+    let line = Line::up("kickcat", LINE);
     let r = master(&line, "kickcat");
-    assert_eq!(r["found"], 3, "{r}");
+    assert_eq!(r["found"], 4, "{r}");
     assert_eq!(
         r["sizes"],
-        serde_json::json!([[0, 0], [1, 0], [0, 1]]),
+        serde_json::json!([[0, 0], [1, 0], [0, 1], [19, 19]]),
         "{r}"
     );
     assert_eq!(
@@ -252,9 +301,11 @@ fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
         serde_json::json!([
             "State.OPERATIONAL",
             "State.OPERATIONAL",
+            "State.OPERATIONAL",
             "State.OPERATIONAL"
         ]),
         "{r}"
     );
     every_pattern_came_back("kickcat", &r);
+    the_drive_answered_and_enabled("kickcat", &r);
 }

@@ -1,20 +1,49 @@
 """Masters we did not write, against the emulated line: `masters.py pysoem|kickcat IFACE`.
 
-Each scans the line, brings it to OP, writes 20 patterns to the EL2008 and reads them back
-on the EL1008 (the emulator's --loopback test cable), and prints one JSON object: what it
-found and every exchange's working counter (pysoem) and inputs, as its last line of stdout
-(kickcat prints its own lines before it). The Rust test checks it.
+The line is an EK1100, an EL1008, an EL2008 and a CiA 402 drive. Each master scans it, reads
+the drive's identity (0x1018), supported modes (0x6502), statusword (0x6041) and mode display
+(0x6061) by SDO, brings the line to OP, writes 20 patterns to the EL2008 and reads them back
+on the EL1008 (the emulator's --loopback test cable), then takes the drive through Shutdown,
+Switch on and Enable operation in CSP, holding where it stands. It prints one JSON object:
+what it found, every exchange's working counter (pysoem) and inputs, the drive's states, as
+its last line of stdout (kickcat prints its own lines before it). The Rust test checks it.
 """
 import datetime
 import json
+import struct
 import sys
 
 
 TIMEOUT_US = 100_000
+DRIVE = 3
 
 
 def patterns():
     return [(k * 73 ^ 0xC3) & 0xFF for k in range(20)]
+
+
+def sdo_u32(data):
+    return int.from_bytes(bytes(data)[:4].ljust(4, b"\0"), "little")
+
+
+def enable(exchange):
+    """Shutdown, Switch on, Enable operation (CSP, the target where the axis stands) through
+    `exchange(outputs) -> inputs`, each until the statusword shows its state: the states
+    seen (statusword & 0x6F), in order, and the last statusword."""
+    # Default mapping: 0x6040 u16, 0x6060 i8, 0x607A i32, 0x60FF i32, 0x6071 i16, 0x60B1 i32,
+    # 0x60B2 i16 out; 0x6041 u16, 0x6061 i8, 0x603F u16, 0x6064 i32, ... in.
+    inputs = exchange(struct.pack("<Hbiihih", 0, 8, 0, 0, 0, 0, 0))
+    position = struct.unpack_from("<i", inputs, 5)[0]
+    seen, statusword = [], None
+    for controlword, want in [(0x06, 0x21), (0x07, 0x23), (0x0F, 0x27)]:
+        for _ in range(200):
+            inputs = exchange(struct.pack("<Hbiihih", controlword, 8, position, 0, 0, 0, 0))
+            statusword = struct.unpack_from("<H", inputs, 0)[0]
+            if statusword & 0x6F == want:
+                break
+        seen.append(statusword & 0x6F)
+    mode = struct.unpack_from("<b", inputs, 2)[0]
+    return {"states": seen, "statusword": statusword, "mode_display": mode, "position": position}
 
 
 def with_pysoem(ifname):
@@ -27,6 +56,14 @@ def with_pysoem(ifname):
         {"name": s.name, "vendor": s.man, "product": s.id, "revision": s.rev}
         for s in m.slaves
     ]
+    drive = m.slaves[DRIVE]
+    sdo = {
+        "vendor": sdo_u32(drive.sdo_read(0x1018, 1)),
+        "product": sdo_u32(drive.sdo_read(0x1018, 2)),
+        "modes": sdo_u32(drive.sdo_read(0x6502, 0)),
+        "statusword": sdo_u32(drive.sdo_read(0x6041, 0)),
+        "mode_display": sdo_u32(drive.sdo_read(0x6061, 0)),
+    }
     iomap = m.config_map()
     # Timeouts in µs, generous: the test host is a noisy 2-vCPU VM whose stalls reach 1 s.
     safe_op = m.state_check(pysoem.SAFEOP_STATE, 5_000_000)
@@ -55,6 +92,20 @@ def with_pysoem(ifname):
                 break
             late += wkc != m.expected_wkc
         exchanges.append({"wrote": p, "read": seen, "wkc": wkc, "late": late})
+    wkcs = []
+
+    def exchange(outputs):
+        drive.output = outputs
+        for _ in range(50):
+            m.send_processdata()
+            wkc = m.receive_processdata(TIMEOUT_US)
+            if wkc == m.expected_wkc:
+                break
+        wkcs.append(wkc)
+        return bytes(drive.input)
+
+    enabled = enable(exchange)
+    enabled["wkc"] = sorted(set(wkcs))
     m.state = pysoem.INIT_STATE
     m.write_state()
     m.close()
@@ -66,6 +117,8 @@ def with_pysoem(ifname):
         "safe_op": safe_op,
         "op": op,
         "exchanges": exchanges,
+        "sdo": sdo,
+        "drive": enabled,
     }
 
 
@@ -80,6 +133,17 @@ def with_kickcat(ifname):
     bus = kickcat.Bus(link)
     bus.init(ms(2000))
     slaves = bus.slaves()
+    drive = slaves[DRIVE]
+    read = lambda index, sub, size: sdo_u32(
+        bus.read_sdo(drive, index, sub, kickcat.Access.PARTIAL, size, ms(1000))
+    )
+    sdo = {
+        "vendor": read(0x1018, 1, 4),
+        "product": read(0x1018, 2, 4),
+        "modes": read(0x6502, 0, 4),
+        "statusword": read(0x6041, 0, 2),
+        "mode_display": read(0x6061, 0, 1),
+    }
     bus.create_mapping()
     link.set_timeout(ms(1000))
     sizes = [[s.input_size, s.output_size] for s in slaves]
@@ -105,6 +169,20 @@ def with_kickcat(ifname):
             if seen == p:
                 break
         exchanges.append({"wrote": p, "read": seen, "errors": errors})
+    errors = [0]
+
+    def exchange(outputs):
+        drive.set_output_bytes(outputs)
+        for _ in range(50):
+            try:
+                bus.process_data()
+                break
+            except RuntimeError:
+                errors[0] += 1
+        return bytes(drive.input_data)
+
+    enabled = enable(exchange)
+    enabled["errors"] = errors[0]
     bus.request_state(kickcat.State.INIT)
     return {
         "found": len(slaves),
@@ -112,6 +190,8 @@ def with_kickcat(ifname):
         "sizes": sizes,
         "op": op,
         "exchanges": exchanges,
+        "sdo": sdo,
+        "drive": enabled,
     }
 
 
