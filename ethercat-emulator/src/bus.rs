@@ -130,7 +130,9 @@ impl Bus {
     /// devices take their outputs. A frame that does not add up is refused (and dropped: the
     /// MainDevice sees a lost frame).
     pub fn handle(&mut self, frame: &mut [u8]) -> Result<usize, FrameError> {
+        let now = crate::now_ns();
         for d in &mut self.devices {
+            d.esc.check_watchdog(now);
             d.terminal.inputs(&mut d.esc);
         }
         let devices = &mut self.devices;
@@ -139,17 +141,18 @@ impl Bus {
                 d.datagram(dg);
             }
         })?;
-        let now = crate::now_ns();
         for d in &mut self.devices {
             d.terminal.outputs(&mut d.esc, now);
         }
         Ok(n)
     }
 
-    /// Between frames (the emulator's idle ticks): the drives' models run on.
+    /// Between frames (the emulator's idle ticks): the SyncManager watchdogs count, the
+    /// drives' models run on.
     pub fn idle(&mut self) {
         let now = crate::now_ns();
         for d in &mut self.devices {
+            d.esc.check_watchdog(now);
             d.terminal.idle(&d.esc, now);
         }
     }

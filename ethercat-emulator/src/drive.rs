@@ -16,6 +16,7 @@
 use crate::coe::{self, Dictionary};
 use crate::esc::{AlState, Esc};
 use crate::sii::{Identity, Mailbox, Pdo, PdoEntry, Sii, Sm, SmKind};
+use cia402::{State, cw};
 use machine_sim::Machine;
 use shm_schema::event::EventQueue;
 use shm_schema::{AxisConfigV2, CellConfigV6, DriveCommandV2};
@@ -526,12 +527,21 @@ impl Drive {
     }
 
     /// Runs the model up to `now_ns` (with the newest command if it has not taken it yet)
-    /// and puts its feedback in the dictionary. Outside OP the controlword it sees is 0
-    /// (Disable voltage): a drive whose master left OP is brought down.
+    /// and puts its feedback in the dictionary. Outside OP (the master left it, or the
+    /// SyncManager watchdog took the drive out of it) the drive does what 0x6007 option 3
+    /// asks on a lost connection: a powered axis quick-stops along its ramp and is left
+    /// without power; an unpowered one stays so (Disable voltage).
     pub fn step(&mut self, now_ns: u64, op: bool) {
-        if !op && self.command.controlword[0] != 0 {
-            self.command.controlword[0] = 0;
-            self.command.seq += 1;
+        if !op {
+            let stopping = matches!(
+                self.machine.drives()[0].state(),
+                State::OperationEnabled | State::QuickStopActive
+            );
+            let controlword = if stopping { cw::QUICK_STOP_CMD } else { 0 };
+            if self.command.controlword[0] != controlword {
+                self.command.controlword[0] = controlword;
+                self.command.seq += 1;
+            }
         }
         let fb = self
             .machine

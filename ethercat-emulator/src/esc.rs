@@ -48,6 +48,14 @@ pub mod reg {
     pub const AL_STATUS: u16 = 0x0130;
     /// AL status code.
     pub const AL_STATUS_CODE: u16 = 0x0134;
+    /// Watchdog divider: the watchdog's increment is (divider + 2) × 40 ns.
+    pub const WATCHDOG_DIVIDER: u16 = 0x0400;
+    /// Process data watchdog time, in increments (0: off).
+    pub const WATCHDOG_TIME_PD: u16 = 0x0420;
+    /// Process data watchdog status: bit 0 set while it has not expired.
+    pub const WATCHDOG_STATUS_PD: u16 = 0x0440;
+    /// Process data watchdog expirations (counter).
+    pub const WATCHDOG_COUNTER_PD: u16 = 0x0442;
     /// SII EEPROM configuration (owner).
     pub const SII_CONFIG: u16 = 0x0500;
     /// SII EEPROM control and status.
@@ -143,6 +151,8 @@ pub struct Esc {
     mailbox_in: Option<Vec<u8>>,
     /// A logical write reached the process RAM since the device last looked.
     outputs_written: bool,
+    /// The last write into a SyncManager whose watchdog trigger is on (ns), if any.
+    watchdog_trigger_ns: Option<u64>,
 }
 
 impl std::fmt::Debug for Esc {
@@ -168,6 +178,7 @@ impl Esc {
             dc,
             mailbox_in: None,
             outputs_written: false,
+            watchdog_trigger_ns: None,
         };
         esc.power_on();
         esc
@@ -187,6 +198,44 @@ impl Esc {
         self.put16(reg::STATION_ALIAS, self.sii.alias);
         self.put16(reg::AL_STATUS, AlState::Init as u16);
         self.put16(reg::SII_CONTROL, sii_bit::READ_SIZE_8);
+        // The ET1100's defaults: an increment of 100 µs, the process data watchdog 100 ms.
+        self.put16(reg::WATCHDOG_DIVIDER, 0x09C2);
+        self.put16(reg::WATCHDOG_TIME_PD, 1000);
+        self.watchdog_trigger_ns = None;
+    }
+
+    /// The process data watchdog's time (ns; 0: off).
+    pub fn watchdog_ns(&self) -> u64 {
+        let increment = (u64::from(self.get16(reg::WATCHDOG_DIVIDER)) + 2) * 40;
+        increment * u64::from(self.get16(reg::WATCHDOG_TIME_PD))
+    }
+
+    /// The process data watchdog at `now_ns` (ETG.1000.4 6.3): armed by a write into a
+    /// SyncManager buffer whose watchdog trigger is on (control bit 6), it expires when no
+    /// such write came for its time. Expired in OP, the digital outputs (0x0F00) go to 0 and
+    /// the SubDevice drops to SAFE-OP with the error flag and code 0x001B; its status bit 0
+    /// clears and its counter counts. True when it expired now.
+    pub fn check_watchdog(&mut self, now_ns: u64) -> bool {
+        let limit = self.watchdog_ns();
+        let expired = match self.watchdog_trigger_ns {
+            Some(t) => limit > 0 && now_ns.saturating_sub(t) > limit,
+            None => false,
+        };
+        let status = usize::from(reg::WATCHDOG_STATUS_PD);
+        if !expired {
+            self.mem[status] |= u8::from(self.watchdog_trigger_ns.is_some());
+            return false;
+        }
+        self.watchdog_trigger_ns = None;
+        self.mem[status] &= !1;
+        let counter = usize::from(reg::WATCHDOG_COUNTER_PD);
+        self.mem[counter] = self.mem[counter].saturating_add(1);
+        self.mem[0x0F00..0x0F08].fill(0);
+        if self.al_state() == Some(AlState::Op) {
+            self.put16(reg::AL_STATUS, AlState::SafeOp as u16 | 0x10);
+            self.put16(reg::AL_STATUS_CODE, al_code::SM_WATCHDOG);
+        }
+        true
     }
 
     /// The EEPROM's content.
@@ -410,12 +459,38 @@ impl Esc {
             read_hit |= reads;
             write_hit |= writes;
         }
+        if write_hit && self.writes_trigger_watchdog(&frame_in, logical) {
+            self.watchdog_trigger_ns = Some(crate::now_ns());
+        }
         // LRD and LWR count 1 per SubDevice served; LRW 1 for its read, 2 for its write.
         if read && write {
             u16::from(read_hit) + 2 * u16::from(write_hit)
         } else {
             u16::from(read_hit || write_hit)
         }
+    }
+
+    /// Whether a logical write at `logical` of `data`'s length reached the buffer of an enabled
+    /// SyncManager whose watchdog trigger is on.
+    fn writes_trigger_watchdog(&self, data: &[u8], logical: u32) -> bool {
+        let (d0, d1) = (u64::from(logical), u64::from(logical) + data.len() as u64);
+        (0..usize::from(self.fmmus)).any(|n| {
+            let b = usize::from(reg::FMMU) + 16 * n;
+            let f = &self.mem[b..b + 16];
+            let log = u64::from(u32::from_le_bytes([f[0], f[1], f[2], f[3]]));
+            let len = u64::from(u16::from_le_bytes([f[4], f[5]]));
+            let phys = u16::from_le_bytes([f[8], f[9]]);
+            let writes = f[12] & 1 != 0 && f[11] & 2 != 0;
+            writes
+                && log < d1
+                && d0 < log + len
+                && (0..usize::from(self.sms)).any(|k| {
+                    let (start, length, control, on) = self.sm(k);
+                    on && control & 0x40 != 0
+                        && phys < start.saturating_add(length)
+                        && start < phys.saturating_add(len as u16)
+                })
+        })
     }
 
     /// The process RAM at `addr`, `len` bytes (what a SyncManager's buffer holds).
@@ -591,6 +666,49 @@ mod tests {
         f[12] = 1;
         assert!(esc.write(reg::FMMU, &f));
         esc
+    }
+
+    /// An EL2008 in OP with its outputs mapped, its SyncManager as its EEPROM says.
+    fn el2008_in_op() -> Esc {
+        let mut esc = mapped(Terminal::El2008 { outputs: 0 }, 0x0F00, 2);
+        assert!(esc.write(reg::SM, &[0x00, 0x0F, 1, 0, 0x44, 0, 1, 0]));
+        for state in [AlState::PreOp, AlState::SafeOp, AlState::Op] {
+            assert!(esc.write(reg::AL_CONTROL, &[state as u8, 0]));
+            assert_eq!(esc.al_state(), Some(state), "{:#x}", esc.al_status_code());
+        }
+        esc
+    }
+
+    #[test]
+    fn the_process_data_watchdog_takes_the_outputs_down_and_the_subdevice_to_safe_op() {
+        let mut esc = el2008_in_op();
+        assert_eq!(
+            esc.watchdog_ns(),
+            100_000_000,
+            "the ET1100's default: 100 ms"
+        );
+        let t0 = crate::now_ns();
+        assert!(
+            !esc.check_watchdog(t0 + 1_000_000_000),
+            "not armed before a write"
+        );
+        assert_eq!(esc.logical(0x100, &mut [0x3C], false, true), 1);
+        let t = crate::now_ns();
+        assert!(!esc.check_watchdog(t + 90_000_000), "90 ms after the write");
+        assert_eq!(esc.memory(reg::WATCHDOG_STATUS_PD, 1)[0] & 1, 1, "running");
+        assert_eq!(esc.memory(0x0F00, 1)[0], 0x3C);
+        assert!(esc.check_watchdog(t + 110_000_000), "110 ms after it");
+        assert_eq!(esc.memory(0x0F00, 1)[0], 0, "outputs off");
+        assert_eq!(esc.al_status(), AlState::SafeOp as u16 | 0x10);
+        assert_eq!(esc.al_status_code(), al_code::SM_WATCHDOG);
+        assert_eq!(esc.memory(reg::WATCHDOG_STATUS_PD, 1)[0] & 1, 0, "expired");
+        assert_eq!(esc.memory(reg::WATCHDOG_COUNTER_PD, 1)[0], 1);
+        // Its time 0 turns it off.
+        let mut esc = el2008_in_op();
+        assert!(esc.write(reg::WATCHDOG_TIME_PD, &[0, 0]));
+        assert_eq!(esc.logical(0x100, &mut [0x3C], false, true), 1);
+        assert!(!esc.check_watchdog(crate::now_ns() + 10_000_000_000));
+        assert_eq!(esc.al_state(), Some(AlState::Op));
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //!
 //! - [`frame`]: EtherCAT frames and datagrams, walked in place (never panics on any bytes);
 //! - [`esc`]: one SubDevice controller: registers, AL state machine, SII interface, FMMUs,
-//!   SyncManagers, DC registers;
+//!   SyncManagers and their process data watchdog, DC registers;
 //! - [`coe`]: CANopen over EtherCAT: the object dictionary, SDO upload and download, aborts;
 //! - [`sii`]: the EEPROM image (identity, strings, general, FMMU, SyncManager and PDO
 //!   categories, its checksum);
@@ -15,9 +15,8 @@
 //! - [`wire`]: the line on a network interface (a raw packet socket), for the
 //!   `ethercat-emulator` binary.
 //!
-//! Not yet here (docs/ethercat.md says what is): the ESC's own SyncManager watchdog (the
-//! drive's command watchdog stands in for it), DC system time control, emergencies, and the
-//! faults it can be told to make.
+//! Not yet here (docs/ethercat.md says what is): DC system time control, emergencies, and
+//! the faults it can be told to make.
 
 pub mod bus;
 pub mod coe;

@@ -25,6 +25,10 @@ struct Args {
     /// MainDevice writes comes back in a later exchange.
     #[arg(long)]
     loopback: bool,
+    /// The process data watchdog every ESC starts with (ms; 0: off; at most 6553), until a
+    /// MainDevice writes its own (registers 0x0400, 0x0420). A real ESC starts with 100.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u16).range(0..=6553))]
+    pd_watchdog_ms: u16,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -33,7 +37,7 @@ extern "C" fn on_signal(_: libc::c_int) {
     STOP.store(true, Ordering::SeqCst);
 }
 
-fn terminal(name: &str, drives: &mut usize) -> Option<Terminal> {
+fn terminal(name: &str, drives: &mut usize, watchdog_ns: u64) -> Option<Terminal> {
     Some(match name.trim().to_ascii_lowercase().as_str() {
         "ek1100" => Terminal::Ek1100,
         "el1008" => Terminal::El1008 { inputs: 0 },
@@ -45,16 +49,16 @@ fn terminal(name: &str, drives: &mut usize) -> Option<Terminal> {
                 &format!("axis{drives}"),
                 &axis,
                 scaling,
-                DRIVE_WATCHDOG_NS,
+                watchdog_ns,
             )))
         }
         _ => return None,
     })
 }
 
-/// The drives' command watchdog: without a frame writing their outputs this long while
-/// powered, they fault and ramp down.
-const DRIVE_WATCHDOG_NS: u64 = 100_000_000;
+/// The shortest command watchdog of a drive: without a frame writing its outputs this long
+/// while powered, it faults and ramps down (it is never shorter than the ESC's watchdog).
+const DRIVE_WATCHDOG_MIN_NS: u64 = 100_000_000;
 
 /// The test cable of `--loopback`: the first EL2008's outputs on the first EL1008's inputs.
 fn loop_back(bus: &mut Bus) {
@@ -86,7 +90,8 @@ fn main() -> ExitCode {
     let mut line = Vec::new();
     let mut drives = 0;
     for (k, name) in args.line.iter().enumerate() {
-        match terminal(name, &mut drives) {
+        let watchdog_ns = (u64::from(args.pd_watchdog_ms) * 1_000_000).max(DRIVE_WATCHDOG_MIN_NS);
+        match terminal(name, &mut drives, watchdog_ns) {
             Some(t) => line.push(t),
             None => {
                 eprintln!(
@@ -119,6 +124,11 @@ fn main() -> ExitCode {
     };
     let names: Vec<String> = line.iter().map(|t| t.name().to_string()).collect();
     let mut bus = Bus::new(line);
+    for d in &mut bus.devices {
+        // Increments of 100 µs (the default divider).
+        d.esc
+            .write(0x0420, &(args.pd_watchdog_ms * 10).to_le_bytes());
+    }
     tracing::info!(
         "answering on {}: {} SubDevice(s): {}",
         args.interface,

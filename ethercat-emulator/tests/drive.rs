@@ -2,7 +2,10 @@
 //! process): its identity and 0x6502 by SDO, its PDO mapping written in PRE-OP as the cell's
 //! bus process writes it (refused objects answered with an abort), OP, the CiA 402 power-up
 //! sequence seen in the statusword, a position target followed through the model of
-//! `machine-sim`, and its command watchdog: silence while powered faults the drive (0xFF01).
+//! `machine-sim`; then the master goes silent mid-motion: a drive whose SyncManager watchdog
+//! the master set (300 ms) drops to SAFE-OP with AL code 0x001B and quick-stops to Switch on
+//! disabled; one whose watchdog the master turned off faults by its own command watchdog
+//! (0xFF01).
 
 mod common;
 
@@ -38,41 +41,50 @@ fn inputs(i: &[u8]) -> (u16, u16, i32) {
 }
 
 #[test]
-fn ethercrab_maps_enables_and_moves_the_emulated_drive_and_its_watchdog_faults_it() {
+fn ethercrab_maps_enables_and_moves_the_emulated_drives_and_their_watchdogs_stop_them() {
     let (axis, scaling) = drive::standalone();
-    let drive = Drive::new("x", &axis, scaling, 100_000_000);
-    let bus = Arc::new(Mutex::new(Bus::new([Terminal::Drive(Box::new(drive))])));
+    // Watchdogs of 300 ms (the drives' own, the ESC's of x): room for the host's stalls
+    // while the test exchanges (this VM stalls a process for tens of ms now and then).
+    let drive = |name| Terminal::Drive(Box::new(Drive::new(name, &axis, scaling, 300_000_000)));
+    let bus = Arc::new(Mutex::new(Bus::new([drive("x"), drive("y")])));
     let (maindevice, wire) = main_device(&PDU_STORAGE, bus.clone());
     futures_lite::future::block_on(async {
         let group = maindevice
             .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(ethercrab::std::ethercat_now)
             .await
             .expect("ethercrab's init of the emulated drive");
-        let sd = group.subdevice(&maindevice, 0).expect("the drive");
-        assert_eq!(sd.identity().vendor_id, drive::VENDOR);
-        assert_eq!(sd.identity().product_id, drive::PRODUCT);
-        let modes: u32 = sd.sdo_read(obj::SUPPORTED_MODES, 0).await.expect("0x6502");
-        assert_eq!(modes, 0x0380, "CSP, CSV, CST");
-        let identity: u32 = sd.sdo_read(obj::IDENTITY, 2).await.expect("0x1018:2");
-        assert_eq!(identity, drive::PRODUCT);
-        // The mapping as the bus process writes it: assignment off, entries, count, back on.
-        for (assign, pdo, entries) in [
-            (obj::SM2_ASSIGN, obj::RXPDO, &RX_DEFAULT),
-            (obj::SM3_ASSIGN, obj::TXPDO, &TX_DEFAULT),
-        ] {
-            sd.sdo_write(assign, 0, 0u8).await.expect("assignment off");
-            sd.sdo_write(pdo, 0, 0u8).await.expect("mapping off");
-            for (k, &(index, bits)) in entries.iter().enumerate() {
-                sd.sdo_write(pdo, k as u8 + 1, mapping(index, 0, bits))
+        for (k, sd) in group.iter(&maindevice).enumerate() {
+            assert_eq!(sd.identity().vendor_id, drive::VENDOR);
+            assert_eq!(sd.identity().product_id, drive::PRODUCT);
+            let modes: u32 = sd.sdo_read(obj::SUPPORTED_MODES, 0).await.expect("0x6502");
+            assert_eq!(modes, 0x0380, "CSP, CSV, CST");
+            let identity: u32 = sd.sdo_read(obj::IDENTITY, 2).await.expect("0x1018:2");
+            assert_eq!(identity, drive::PRODUCT);
+            // The mapping as the bus process writes it: assignment off, entries, count, on.
+            for (assign, pdo, entries) in [
+                (obj::SM2_ASSIGN, obj::RXPDO, &RX_DEFAULT),
+                (obj::SM3_ASSIGN, obj::TXPDO, &TX_DEFAULT),
+            ] {
+                sd.sdo_write(assign, 0, 0u8).await.expect("assignment off");
+                sd.sdo_write(pdo, 0, 0u8).await.expect("mapping off");
+                for (k, &(index, bits)) in entries.iter().enumerate() {
+                    sd.sdo_write(pdo, k as u8 + 1, mapping(index, 0, bits))
+                        .await
+                        .expect("an entry");
+                }
+                sd.sdo_write(pdo, 0, entries.len() as u8)
                     .await
-                    .expect("an entry");
+                    .expect("count");
+                sd.sdo_write(assign, 1, pdo).await.expect("assign");
+                sd.sdo_write(assign, 0, 1u8).await.expect("assignment on");
             }
-            sd.sdo_write(pdo, 0, entries.len() as u8)
+            // The process data watchdog: 3000 increments of 100 µs on x, off on y.
+            let time: u16 = if k == 0 { 3000 } else { 0 };
+            sd.register_write(0x0420u16, time)
                 .await
-                .expect("count");
-            sd.sdo_write(assign, 1, pdo).await.expect("assign");
-            sd.sdo_write(assign, 0, 1u8).await.expect("assignment on");
+                .expect("watchdog time");
         }
+        let sd = group.subdevice(&maindevice, 0).expect("the drive");
         // An input object in the outputs' mapping, and too many entries: refused, named.
         let e = sd
             .sdo_write(obj::RXPDO, 8, mapping(obj::STATUSWORD, 0, 16))
@@ -106,20 +118,20 @@ fn ethercrab_maps_enables_and_moves_the_emulated_drive_and_its_watchdog_faults_i
             let group = &group;
             let maindevice = &maindevice;
             async move {
-                group
-                    .subdevice(maindevice, 0)
-                    .expect("the drive")
-                    .outputs_raw_mut()
-                    .copy_from_slice(&outputs(cw, 8, pos));
+                for k in 0..2 {
+                    group
+                        .subdevice(maindevice, k)
+                        .expect("a drive")
+                        .outputs_raw_mut()
+                        .copy_from_slice(&outputs(cw, 8, pos));
+                }
                 let r = group.tx_rx(maindevice).await.expect("tx_rx");
-                assert_eq!(r.working_counter, 3, "LRW: inputs read, outputs written");
+                assert_eq!(r.working_counter, 6, "LRW: each drive read and written");
                 std::thread::sleep(Duration::from_millis(1));
-                inputs(
-                    &group
-                        .subdevice(maindevice, 0)
-                        .expect("the drive")
-                        .inputs_raw(),
-                )
+                let x = inputs(&group.subdevice(maindevice, 0).expect("x").inputs_raw());
+                let y = inputs(&group.subdevice(maindevice, 1).expect("y").inputs_raw());
+                assert_eq!(x.0 & 0x6F, y.0 & 0x6F, "both drives in the same state");
+                x
             }
         };
         // Shutdown, Switch on, Enable operation: the states in the statusword (0x6F mask).
@@ -135,7 +147,7 @@ fn ethercrab_maps_enables_and_moves_the_emulated_drive_and_its_watchdog_faults_i
             0x27,
             "Operation enabled: {seen:x?}"
         );
-        // CSP: a ramp of 5 units over 0.5 s, then hold; the axis follows.
+        // CSP: a ramp of 5 units over 0.5 s, then hold; the axes follow.
         let mut actual = 0;
         for k in 0..=700 {
             let target = 40.0 + 5.0 * (f64::from(k) / 500.0).min(1.0);
@@ -148,20 +160,49 @@ fn ethercrab_maps_enables_and_moves_the_emulated_drive_and_its_watchdog_faults_i
             (reached - 45.0).abs() < 0.05,
             "the axis at {reached}, not 45"
         );
-        // The master goes silent (the emulator's idle ticks run the model): after the
-        // watchdog the drive is in Fault with 0xFF01 and the axis comes to rest.
-        for _ in 0..30 {
+        // Back to 40 at 10 units/s; half way the master goes silent (the emulator's idle
+        // ticks run the ESCs and the models).
+        for k in 0..=250 {
+            let target = 45.0 - 5.0 * f64::from(k) / 500.0;
+            exchange(0x0F, scaling.counts(target)).await;
+        }
+        for _ in 0..100 {
             std::thread::sleep(Duration::from_millis(10));
             bus.lock().expect("bus").idle();
         }
-        let (sw, code, _) = exchange(0x0F, scaling.counts(45.0)).await;
-        assert_eq!(sw & 0x4F, 0x08, "Fault: {sw:#06x}");
-        assert_eq!(code, 0xFF01, "command watchdog expired");
         let b = bus.lock().expect("bus");
-        let Terminal::Drive(d) = &b.devices[0].terminal else {
-            unreachable!("one drive")
+        let drive = |k: usize| match &b.devices[k].terminal {
+            Terminal::Drive(d) => d,
+            _ => unreachable!("two drives"),
         };
-        assert_eq!(d.machine().axes()[0].velocity, 0.0, "at rest");
+        // x: its ESC's watchdog expired: SAFE-OP with the error flag and 0x001B, its status
+        // bit cleared and counted; the drive quick-stopped and is without power, no fault.
+        let x = &b.devices[0].esc;
+        assert_eq!(x.al_status(), 0x14, "SAFE-OP + error");
+        assert_eq!(x.al_status_code(), 0x001B, "SyncManager watchdog");
+        assert_eq!(x.memory(0x0440, 1)[0] & 1, 0, "watchdog status: expired");
+        assert_eq!(x.memory(0x0442, 1)[0], 1, "one expiry counted");
+        let sw = drive(0).dictionary().u16(obj::STATUSWORD);
+        assert_eq!(sw & 0x4F, 0x40, "x: Switch on disabled: {sw:#06x}");
+        assert_eq!(drive(0).dictionary().u16(obj::ERROR_CODE), 0, "x: no fault");
+        // y: no ESC watchdog; its command watchdog faulted it (0xFF01), still in OP.
+        assert_eq!(b.devices[1].esc.al_status(), 0x08, "y: still OP");
+        let sw = drive(1).dictionary().u16(obj::STATUSWORD);
+        assert_eq!(sw & 0x4F, 0x08, "y: Fault: {sw:#06x}");
+        assert_eq!(
+            drive(1).dictionary().u16(obj::ERROR_CODE),
+            0xFF01,
+            "command watchdog expired"
+        );
+        for k in 0..2 {
+            let axis = drive(k).machine().axes()[0];
+            assert_eq!(axis.velocity, 0.0, "drive {k} at rest");
+            assert!(
+                axis.position > 42.0 && axis.position < 43.0,
+                "drive {k} stopped near where the silence began: {}",
+                axis.position
+            );
+        }
     });
     // SAFETY: the MainDevice is not used after this; its loop tells the wire to stop.
     let _ = unsafe { maindevice.release_all() };

@@ -98,7 +98,7 @@ impl Drop for Line {
 
 #[test]
 fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_back() {
-    let line = Line::up("ethercrab", &["--loopback"]);
+    let line = Line::up("ethercrab", &["--loopback", "--pd-watchdog-ms", "2000"]);
     let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
     // ethercrab's raw socket is opened in the namespace: by a thread that entered it.
     let ns = line.ns.clone();
@@ -208,7 +208,15 @@ fn every_pattern_came_back(name: &str, r: &serde_json::Value) {
 }
 
 /// The line the masters check: the IO terminals and a drive.
-const LINE: &[&str] = &["--loopback", "--line", "ek1100,el1008,el2008,drive"];
+/// The ESCs' process data watchdog at 2 s: room for the host's stalls between two exchanges
+/// of a master (this VM stalls a process for tens of ms now and then, rarely for a second).
+const LINE: &[&str] = &[
+    "--loopback",
+    "--line",
+    "ek1100,el1008,el2008,drive",
+    "--pd-watchdog-ms",
+    "2000",
+];
 
 /// What a master read of the drive by SDO before OP, and the CiA 402 states it took it
 /// through in OP.

@@ -16,7 +16,7 @@ use std::time::Duration;
 pub const MAX_SUBDEVICES: usize = 8;
 pub const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
 pub const MAX_FRAMES: usize = 16;
-pub const MAX_PDI: usize = 64;
+pub const MAX_PDI: usize = 128;
 
 /// The PDU storage one MainDevice uses (a `static` per test: it is split once).
 pub type Storage = PduStorage<MAX_FRAMES, MAX_PDU_DATA>;
