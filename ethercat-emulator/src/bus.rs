@@ -13,6 +13,9 @@ pub struct SubDevice {
     pub esc: Esc,
     /// The device behind it.
     pub terminal: Terminal,
+    /// Mailboxes the device has written and the MainDevice not yet read (an emergency, an
+    /// answer behind it), oldest first: each goes into the send mailbox (SM1) once it is empty.
+    outbox: std::collections::VecDeque<Vec<u8>>,
 }
 
 impl SubDevice {
@@ -21,18 +24,37 @@ impl SubDevice {
         Self {
             esc: terminal.esc(),
             terminal,
+            outbox: std::collections::VecDeque::new(),
         }
     }
 
-    /// Its part of one datagram, then the device's answer to a mailbox it completed.
+    /// Its part of one datagram, then the device's answer to a mailbox it completed (behind
+    /// what the device had to say first: an emergency), then the next mailbox out if SM1 is
+    /// free.
     fn datagram(&mut self, d: &mut Datagram<'_>) {
         self.access(d);
         if let Some(request) = self.esc.take_mailbox() {
             let capacity = self.esc.mailbox_capacity();
             let al = self.esc.al_state();
+            self.outbox.extend(self.terminal.emergencies(true));
             if let Some(reply) = self.terminal.mailbox(&request, capacity, al) {
-                self.esc.put_mailbox(&reply);
+                self.outbox.push_back(reply);
             }
+        }
+        self.post();
+    }
+
+    /// The device's emergencies into the outbox, and the oldest mailbox out into SM1 if it is
+    /// free. (A real drive's mailbox holds a few; this one holds 16, the oldest dropped.)
+    fn post(&mut self) {
+        self.outbox.extend(self.terminal.emergencies(false));
+        while self.outbox.len() > 16 {
+            self.outbox.pop_front();
+        }
+        if let Some(m) = self.outbox.front()
+            && self.esc.put_mailbox(m)
+        {
+            self.outbox.pop_front();
         }
     }
 
@@ -143,6 +165,7 @@ impl Bus {
         })?;
         for d in &mut self.devices {
             d.terminal.outputs(&mut d.esc, now);
+            d.post();
         }
         Ok(n)
     }
@@ -154,6 +177,7 @@ impl Bus {
         for d in &mut self.devices {
             d.esc.check_watchdog(now);
             d.terminal.idle(&d.esc, now);
+            d.post();
         }
     }
 }

@@ -10,6 +10,8 @@ use std::collections::BTreeMap;
 pub const MAILBOX_COE: u8 = 3;
 /// The mailbox header: length, address, channel and priority, type and counter.
 pub const MAILBOX_HEADER: usize = 6;
+/// CoE service of an emergency.
+const EMERGENCY: u8 = 1;
 /// CoE service of an SDO request.
 const SDO_REQUEST: u8 = 2;
 /// CoE service of an SDO response.
@@ -230,6 +232,20 @@ fn sdo_response(kind: u8, sdo: &[u8]) -> Vec<u8> {
     reply.extend_from_slice(&(u16::from(SDO_RESPONSE) << 12).to_le_bytes());
     reply.extend_from_slice(sdo);
     reply
+}
+
+/// A CoE emergency mailbox (ETG.1000.6 5.6.4): error code, error register, five bytes of
+/// the manufacturer's; `counter` 1..=7 (the mailbox counter).
+pub fn emergency(code: u16, register: u8, data: [u8; 5], counter: u8) -> Vec<u8> {
+    let mut m = Vec::with_capacity(MAILBOX_HEADER + 10);
+    m.extend_from_slice(&10u16.to_le_bytes());
+    m.extend_from_slice(&[0, 0, 0]);
+    m.push(MAILBOX_COE | ((counter & 0x07) << 4));
+    m.extend_from_slice(&(u16::from(EMERGENCY) << 12).to_le_bytes());
+    m.extend_from_slice(&code.to_le_bytes());
+    m.push(register);
+    m.extend_from_slice(&data);
+    m
 }
 
 /// What an SDO download `request` would write: index, subindex and data (`None` for

@@ -221,6 +221,15 @@ pub struct Drive {
     events: EventQueue,
     /// Frames that wrote the outputs.
     outputs_taken: u64,
+    /// The error code last reported (0x603F), for an emergency when it changes.
+    reported_error: u16,
+    /// Emergencies not yet handed to the ESC.
+    emergencies: Vec<Vec<u8>>,
+    /// The next mailbox request is answered by this emergency first (a fault it can be told
+    /// to make: the worst moment for a MainDevice).
+    emergency_on_request: Option<u16>,
+    /// The mailbox counter of the next emergency (1..=7).
+    counter: u8,
 }
 
 impl Drive {
@@ -292,6 +301,10 @@ impl Drive {
             },
             events: EventQueue::default(),
             outputs_taken: 0,
+            reported_error: 0,
+            emergencies: Vec::new(),
+            emergency_on_request: None,
+            counter: 1,
         };
         // Its first command is its dictionary's: Disable voltage, CSP.
         drive.take_command();
@@ -326,6 +339,29 @@ impl Drive {
     /// Frames that wrote its outputs so far.
     pub fn outputs_taken(&self) -> u64 {
         self.outputs_taken
+    }
+
+    /// Answers the next mailbox request with an emergency of `code` first (the answer
+    /// follows once it is read): what a drive does when it faults while the MainDevice waits
+    /// for an SDO.
+    pub fn emergency_on_next_request(&mut self, code: u16) {
+        self.emergency_on_request = Some(code);
+    }
+
+    /// The emergencies to send: one per change of its error code to a fault (code, error
+    /// register 0x01 generic error, no manufacturer data), and the one it was told to send on
+    /// a request when `request`.
+    pub fn emergencies(&mut self, request: bool) -> Vec<Vec<u8>> {
+        if request && let Some(code) = self.emergency_on_request.take() {
+            self.push_emergency(code);
+        }
+        std::mem::take(&mut self.emergencies)
+    }
+
+    fn push_emergency(&mut self, code: u16) {
+        self.emergencies
+            .push(coe::emergency(code, 0x01, [0; 5], self.counter));
+        self.counter = self.counter % 7 + 1;
     }
 
     /// Its ESC: a mailbox (SM0, SM1), outputs (SM2) and inputs (SM3) whose lengths follow the
@@ -572,6 +608,13 @@ impl Drive {
             0,
             &s.counts(fb.following_error[0]).to_le_bytes(),
         );
+        let error = fb.error_code[0];
+        if error != self.reported_error {
+            self.reported_error = error;
+            if error != 0 {
+                self.push_emergency(error);
+            }
+        }
     }
 }
 

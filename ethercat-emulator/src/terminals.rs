@@ -148,6 +148,15 @@ impl Terminal {
         }
     }
 
+    /// The CoE emergencies the device has to send (a drive's; `request`: a mailbox request
+    /// just arrived, when one told to answer the next request with an emergency does).
+    pub fn emergencies(&mut self, request: bool) -> Vec<Vec<u8>> {
+        match self {
+            Self::Drive(d) => d.emergencies(request),
+            _ => Vec::new(),
+        }
+    }
+
     /// Before a frame: the device's inputs into its ESC.
     pub fn inputs(&mut self, esc: &mut Esc) {
         match self {

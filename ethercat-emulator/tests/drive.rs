@@ -194,6 +194,19 @@ fn ethercrab_maps_enables_and_moves_the_emulated_drives_and_their_watchdogs_stop
             0xFF01,
             "command watchdog expired"
         );
+        // y's fault is announced by a CoE emergency in its send mailbox: 0xFF01, error
+        // register 0x01 (ethercrab polls no mailbox: it stays there unread).
+        let y = &b.devices[1].esc;
+        let m = y.memory(0x1080, 16);
+        assert_eq!(m[5] & 0x0F, 3, "CoE");
+        assert_eq!(u16::from_le_bytes([m[6], m[7]]) >> 12, 1, "emergency");
+        assert_eq!((u16::from_le_bytes([m[8], m[9]]), m[10]), (0xFF01, 0x01));
+        assert_eq!(y.memory(0x080D, 1)[0] & 0x08, 0x08, "SM1 full");
+        assert_eq!(
+            b.devices[0].esc.memory(0x080D, 1)[0] & 0x08,
+            0,
+            "x did not fault: no emergency"
+        );
         for k in 0..2 {
             let axis = drive(k).machine().axes()[0];
             assert_eq!(axis.velocity, 0.0, "drive {k} at rest");
