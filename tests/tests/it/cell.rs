@@ -124,107 +124,113 @@ pub(crate) fn check_figures(path: &Path, processes: usize) {
 
 #[test]
 fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
-    let inst = instance("triangle");
-    let trace = std::env::temp_dir().join(format!("{inst}.csv"));
-    let plot = std::env::temp_dir().join(format!("{inst}.png"));
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--json", "--instance", &inst, "--trace"])
-            .arg(&trace)
-            .arg("--plot")
-            .arg(&plot)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j = json_of(&out);
-    assert!(
-        (j["theoretical_s"].as_f64().expect("t") - 19.10).abs() < 1e-9,
-        "{j}"
-    );
-    check_run(&j, [40.0, 40.0, 0.0]);
-    assert_eq!(j["t_acc"].as_f64(), Some(0.525));
-    assert_eq!(j["vmax"]["x"].as_f64(), Some(16.0));
-    assert_eq!(j["periods_us"]["servo"].as_u64(), Some(1000));
-    assert_eq!(
-        j["processes"]["trajgen"]["period_us"].as_f64(),
-        Some(4000.0)
-    );
+    integration_tests::attributable(|| {
+        let inst = instance("triangle");
+        let trace = std::env::temp_dir().join(format!("{inst}.csv"));
+        let plot = std::env::temp_dir().join(format!("{inst}.png"));
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["run", "--json", "--instance", &inst, "--trace"])
+                .arg(&trace)
+                .arg("--plot")
+                .arg(&plot)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let j = json_of(&out);
+        assert!(
+            (j["theoretical_s"].as_f64().expect("t") - 19.10).abs() < 1e-9,
+            "{j}"
+        );
+        check_run(&j, [40.0, 40.0, 0.0]);
+        assert_eq!(j["t_acc"].as_f64(), Some(0.525));
+        assert_eq!(j["vmax"]["x"].as_f64(), Some(16.0));
+        assert_eq!(j["periods_us"]["servo"].as_u64(), Some(1000));
+        assert_eq!(
+            j["processes"]["trajgen"]["period_us"].as_f64(),
+            Some(4000.0)
+        );
 
-    // The trace: a header, one row per setpoint, t_s rising from 0 to the measured time.
-    let csv = std::fs::read_to_string(&trace).expect("trace written");
-    let mut lines = csv.lines();
-    assert_eq!(
-        lines.next(),
-        Some("t_s,cmd_x,cmd_y,cmd_theta,act_x,act_y,act_theta")
-    );
-    let rows: Vec<Vec<f64>> = lines
-        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
-        .collect();
-    assert_eq!(
-        rows.len() as u64,
-        j["setpoints"].as_u64().expect("setpoints")
-    );
-    assert_eq!(rows[0][0], 0.0);
-    assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
-    // The triangle's corner (140, 40) is blended: x passes near it, never beyond 140.
-    let max_x = rows.iter().map(|r| r[1]).fold(f64::MIN, f64::max);
-    assert!(max_x < 140.0 && max_x > 135.0, "{max_x}");
-    // The machine followed: measured within the following error limit of commanded.
-    assert!(
-        rows.iter()
-            .all(|r| (r[1] - r[4]).abs() < 1.0 && (r[2] - r[5]).abs() < 1.0)
-    );
-    let _ = std::fs::remove_file(&trace);
-    // The figures: every process of the default cell has its histogram.
-    check_figures(&plot, j["processes"].as_object().expect("processes").len());
-    let _ = std::fs::remove_file(&plot);
-    assert_clean(&inst);
+        // The trace: a header, one row per setpoint, t_s rising from 0 to the measured time.
+        let csv = std::fs::read_to_string(&trace).expect("trace written");
+        let mut lines = csv.lines();
+        assert_eq!(
+            lines.next(),
+            Some("t_s,cmd_x,cmd_y,cmd_theta,act_x,act_y,act_theta")
+        );
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
+            .collect();
+        assert_eq!(
+            rows.len() as u64,
+            j["setpoints"].as_u64().expect("setpoints")
+        );
+        assert_eq!(rows[0][0], 0.0);
+        assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
+        // The triangle's corner (140, 40) is blended: x passes near it, never beyond 140.
+        let max_x = rows.iter().map(|r| r[1]).fold(f64::MIN, f64::max);
+        assert!(max_x < 140.0 && max_x > 135.0, "{max_x}");
+        // The machine followed: measured within the following error limit of commanded.
+        assert!(
+            rows.iter()
+                .all(|r| (r[1] - r[4]).abs() < 1.0 && (r[2] - r[5]).abs() < 1.0)
+        );
+        let _ = std::fs::remove_file(&trace);
+        // The figures: every process of the default cell has its histogram.
+        check_figures(&plot, j["processes"].as_object().expect("processes").len());
+        let _ = std::fs::remove_file(&plot);
+        assert_clean(&inst);
+    });
 }
 
 /// The paper's failure was a motion that took longer when the processor was busy. Two
 /// busy threads (both cores) for the whole run must change nothing.
 #[test]
 fn motion_time_holds_with_both_cores_loaded() {
-    let inst = instance("loaded");
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let hogs: Vec<_> = (0..2)
-        .map(|_| {
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                let mut x = 0u64;
-                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
-                }
+    integration_tests::attributable(|| {
+        let inst = instance("loaded");
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let hogs: Vec<_> = (0..2)
+            .map(|_| {
+                let stop = stop.clone();
+                std::thread::spawn(move || {
+                    let mut x = 0u64;
+                    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                        x = std::hint::black_box(
+                            x.wrapping_mul(6364136223846793005).wrapping_add(1),
+                        );
+                    }
+                })
             })
-        })
-        .collect();
-    let prog = scratch(
-        "loaded",
-        "square.prog",
-        "MOVE(140,40,0)\nMOVE(140,120,90)\nMOVE(40,120,0)\nMOVE(40,40,0)\nSTOP\nEND\n",
-    );
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--json", "--instance", &inst])
-            .arg(&prog),
-        WATCHDOG,
-    );
-    stop.store(true, std::sync::atomic::Ordering::Relaxed);
-    for h in hogs {
-        let _ = h.join();
-    }
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    check_run(&json_of(&out), [40.0, 40.0, 0.0]);
-    assert_clean(&inst);
+            .collect();
+        let prog = scratch(
+            "loaded",
+            "square.prog",
+            "MOVE(140,40,0)\nMOVE(140,120,90)\nMOVE(40,120,0)\nMOVE(40,40,0)\nSTOP\nEND\n",
+        );
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["run", "--json", "--instance", &inst])
+                .arg(&prog),
+            WATCHDOG,
+        );
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        for h in hogs {
+            let _ = h.join();
+        }
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        check_run(&json_of(&out), [40.0, 40.0, 0.0]);
+        assert_clean(&inst);
+    });
 }
 
 /// Runs `program` on a fresh instance; it must be refused with exit code 2 and `message`,
@@ -248,164 +254,176 @@ fn refused(test: &str, program: &str, message: &str) {
 
 #[test]
 fn a_program_error_names_line_and_column_and_starts_nothing() {
-    refused(
-        "badprog",
-        "MOVE(40,40,0)\nMOVE(140,40)\nEND\n",
-        "2:12: MOVE has 2 coordinates; the cell has 3 (x, y, theta)",
-    );
+    integration_tests::attributable(|| {
+        refused(
+            "badprog",
+            "MOVE(40,40,0)\nMOVE(140,40)\nEND\n",
+            "2:12: MOVE has 2 coordinates; the cell has 3 (x, y, theta)",
+        );
+    });
 }
 
 #[test]
 fn a_target_outside_the_limits_is_refused_before_anything_moves() {
-    refused(
-        "limits",
-        "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
-        "2:9: y = 400 mm is outside the axis limits 0 .. 150 mm",
-    );
+    integration_tests::attributable(|| {
+        refused(
+            "limits",
+            "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
+            "2:9: y = 400 mm is outside the axis limits 0 .. 150 mm",
+        );
+    });
 }
 
 #[test]
 fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
-    let inst = instance("badout");
-    let tri = examples().join("triangle.prog");
-    let dir = std::env::temp_dir();
-    for (flag, path, why) in [
-        (
-            "--plot",
-            "/nonexistent/dir/p.png",
-            "the directory /nonexistent/dir does not exist",
-        ),
-        ("--trace", dir.to_str().expect("utf-8"), "is a directory"),
-        (
-            "--record",
-            "/nonexistent/r.mcap",
-            "the directory /nonexistent does not exist",
-        ),
-    ] {
-        let out = run_with_watchdog(
-            supervisor()
-                .args(["run", "--instance", &inst, flag, path])
-                .arg(&tri),
-            WATCHDOG,
-        );
-        assert_eq!(out.status.code(), Some(2));
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains(&format!("{flag} {path}: {why}")), "{err}");
-        assert!(
-            pids_with(&["--instance", &inst]).is_empty(),
-            "a process was started"
-        );
-    }
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("badout");
+        let tri = examples().join("triangle.prog");
+        let dir = std::env::temp_dir();
+        for (flag, path, why) in [
+            (
+                "--plot",
+                "/nonexistent/dir/p.png",
+                "the directory /nonexistent/dir does not exist",
+            ),
+            ("--trace", dir.to_str().expect("utf-8"), "is a directory"),
+            (
+                "--record",
+                "/nonexistent/r.mcap",
+                "the directory /nonexistent does not exist",
+            ),
+        ] {
+            let out = run_with_watchdog(
+                supervisor()
+                    .args(["run", "--instance", &inst, flag, path])
+                    .arg(&tri),
+                WATCHDOG,
+            );
+            assert_eq!(out.status.code(), Some(2));
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(err.contains(&format!("{flag} {path}: {why}")), "{err}");
+            assert!(
+                pids_with(&["--instance", &inst]).is_empty(),
+                "a process was started"
+            );
+        }
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn a_bad_config_names_file_line_and_reason() {
-    let inst = instance("badcfg");
-    let default = integration_tests::default_cell();
-    let line = default
-        .lines()
-        .position(|l| l.starts_with("t_acc"))
-        .expect("t_acc")
-        + 1;
-    let cfg = config_with("badcfg", "t_acc = 0.525", "t_acc = 0.525\nt_dec = 1");
-    let out = run_triangle_with(&inst, &cfg);
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains(&format!("cell.toml:{}:1: unknown field `t_dec`", line + 1)),
-        "{err}"
-    );
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("badcfg");
+        let default = integration_tests::default_cell();
+        let line = default
+            .lines()
+            .position(|l| l.starts_with("t_acc"))
+            .expect("t_acc")
+            + 1;
+        let cfg = config_with("badcfg", "t_acc = 0.525", "t_acc = 0.525\nt_dec = 1");
+        let out = run_triangle_with(&inst, &cfg);
+        assert_eq!(out.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(&format!("cell.toml:{}:1: unknown field `t_dec`", line + 1)),
+            "{err}"
+        );
+        assert_clean(&inst);
+    });
 }
 
 /// Any process can be replaced by another command line; here iobridge runs through a shell
 /// wrapper, as a process in another language would be started.
 #[test]
 fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
-    let inst = instance("kill");
-    let wrapped = format!(
-        "command = [\"sh\", \"-c\", \"exec {} --instance {{instance}}\"]",
-        bin("iobridge").display()
-    );
-    let cfg = config_with(
-        "kill",
-        "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
-        &wrapped,
-    );
-    let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
-    let mut child = supervisor()
-        .args(["run", "--instance", &inst, "--config"])
-        .arg(&cfg)
-        .arg(&prog)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn supervisor");
-    // Wait until servo runs, let the motion start, then kill servo the hard way.
-    let mut servo = Vec::new();
-    for _ in 0..500 {
-        servo = pids_with(&["servo", "--instance", &inst]);
-        if !servo.is_empty() && !pids_with(&["iobridge", "--instance", &inst]).is_empty() {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert_eq!(servo.len(), 1, "servo not found");
-    std::thread::sleep(Duration::from_secs(3));
-    // SAFETY: kill(2) on a process this test's supervisor started.
-    unsafe { libc::kill(servo[0], libc::SIGKILL) };
-    let out = {
-        let start = std::time::Instant::now();
-        while child.try_wait().expect("wait").is_none() {
-            assert!(
-                start.elapsed() < WATCHDOG,
-                "supervisor stuck after servo died"
-            );
+    integration_tests::attributable(|| {
+        let inst = instance("kill");
+        let wrapped = format!(
+            "command = [\"sh\", \"-c\", \"exec {} --instance {{instance}}\"]",
+            bin("iobridge").display()
+        );
+        let cfg = config_with(
+            "kill",
+            "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
+            &wrapped,
+        );
+        let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
+        let mut child = supervisor()
+            .args(["run", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(&prog)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn supervisor");
+        // Wait until servo runs, let the motion start, then kill servo the hard way.
+        let mut servo = Vec::new();
+        for _ in 0..500 {
+            servo = pids_with(&["servo", "--instance", &inst]);
+            if !servo.is_empty() && !pids_with(&["iobridge", "--instance", &inst]).is_empty() {
+                break;
+            }
             std::thread::sleep(Duration::from_millis(20));
         }
-        child.wait_with_output().expect("output")
-    };
-    assert_eq!(out.status.code(), Some(1));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains(&format!("servo (pid {}) exited unexpectedly", servo[0])),
-        "{err}"
-    );
-    assert!(
-        pids_with(&["--instance", &inst]).is_empty(),
-        "processes left running"
-    );
-    assert_clean(&inst);
+        assert_eq!(servo.len(), 1, "servo not found");
+        std::thread::sleep(Duration::from_secs(3));
+        // SAFETY: kill(2) on a process this test's supervisor started.
+        unsafe { libc::kill(servo[0], libc::SIGKILL) };
+        let out = {
+            let start = std::time::Instant::now();
+            while child.try_wait().expect("wait").is_none() {
+                assert!(
+                    start.elapsed() < WATCHDOG,
+                    "supervisor stuck after servo died"
+                );
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            child.wait_with_output().expect("output")
+        };
+        assert_eq!(out.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(&format!("servo (pid {}) exited unexpectedly", servo[0])),
+            "{err}"
+        );
+        assert!(
+            pids_with(&["--instance", &inst]).is_empty(),
+            "processes left running"
+        );
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
-    let inst = instance("nostart");
-    let cfg = config_with(
-        "nostart",
-        "command = [\"iobridge\"",
-        "command = [\"no-such-iobridge\"",
-    );
-    let out = run_triangle_with(&inst, &cfg);
-    // Refused before anything starts, as `check-config` refuses it.
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
+    integration_tests::attributable(|| {
+        let inst = instance("nostart");
+        let cfg = config_with(
+            "nostart",
+            "command = [\"iobridge\"",
+            "command = [\"no-such-iobridge\"",
+        );
+        let out = run_triangle_with(&inst, &cfg);
+        // Refused before anything starts, as `check-config` refuses it.
+        assert_eq!(out.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
         err.contains(
             "process iobridge: \"no-such-iobridge\" is neither next to the supervisor nor in PATH"
         ),
         "{err}"
     );
-    let check = supervisor()
-        .arg("check-config")
-        .arg(&cfg)
-        .output()
-        .expect("check-config runs");
-    assert_eq!(check.status.code(), Some(2), "check-config refuses it too");
-    assert!(
-        pids_with(&["--instance", &inst]).is_empty(),
-        "processes left running"
-    );
-    assert_clean(&inst);
+        let check = supervisor()
+            .arg("check-config")
+            .arg(&cfg)
+            .output()
+            .expect("check-config runs");
+        assert_eq!(check.status.code(), Some(2), "check-config refuses it too");
+        assert!(
+            pids_with(&["--instance", &inst]).is_empty(),
+            "processes left running"
+        );
+        assert_clean(&inst);
+    });
 }

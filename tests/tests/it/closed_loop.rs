@@ -69,30 +69,35 @@ fn triangle(cfg: &Config) -> [f64; 3] {
 
 #[test]
 fn the_default_gains_follow_the_triangle_and_settle() {
-    let cfg = Config::default_cell();
-    let fe = triangle(&cfg);
-    for (i, a) in cfg.axis.iter().enumerate() {
-        assert!(
-            fe[i] < a.following_error_limit / 5.0,
-            "{}: {}",
-            a.name,
-            fe[i]
-        );
-    }
+    integration_tests::attributable(|| {
+        let cfg = Config::default_cell();
+        let fe = triangle(&cfg);
+        for (i, a) in cfg.axis.iter().enumerate() {
+            assert!(
+                fe[i] < a.following_error_limit / 5.0,
+                "{}: {}",
+                a.name,
+                fe[i]
+            );
+        }
+    });
 }
 
 #[test]
 fn csp_axes_follow_the_triangle_with_the_drives_closing_the_loop() {
-    let cfg = Config::parse(&integration_tests::cell_in_csp(), "csp").expect("valid csp config");
-    let fe = triangle(&cfg);
-    for (i, a) in cfg.axis.iter().enumerate() {
-        assert!(
-            fe[i] < a.following_error_limit / 5.0,
-            "{}: {}",
-            a.name,
-            fe[i]
-        );
-    }
+    integration_tests::attributable(|| {
+        let cfg =
+            Config::parse(&integration_tests::cell_in_csp(), "csp").expect("valid csp config");
+        let fe = triangle(&cfg);
+        for (i, a) in cfg.axis.iter().enumerate() {
+            assert!(
+                fe[i] < a.following_error_limit / 5.0,
+                "{}: {}",
+                a.name,
+                fe[i]
+            );
+        }
+    });
 }
 
 /// The default cell with the machine and servo at `period_us`.
@@ -102,14 +107,16 @@ pub fn at_rate(period_us: u64) -> Config {
 
 #[test]
 fn at_4_khz_the_following_error_is_no_worse_than_at_1_khz() {
-    let slow = triangle(&Config::default_cell());
-    let fast = triangle(&at_rate(250));
-    for i in 0..3 {
-        assert!(
-            fast[i] <= slow[i] * 1.05 + 1e-4,
-            "axis {i}: {} at 4 kHz vs {} at 1 kHz",
-            fast[i],
-            slow[i]
-        );
-    }
+    integration_tests::attributable(|| {
+        let slow = triangle(&Config::default_cell());
+        let fast = triangle(&at_rate(250));
+        for i in 0..3 {
+            assert!(
+                fast[i] <= slow[i] * 1.05 + 1e-4,
+                "axis {i}: {} at 4 kHz vs {} at 1 kHz",
+                fast[i],
+                slow[i]
+            );
+        }
+    });
 }

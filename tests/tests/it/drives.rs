@@ -91,295 +91,311 @@ pub(crate) fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a 
 
 #[test]
 fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
-    let inst = instance("inject-cfg");
-    let cfg = integration_tests::default_cell().replace(
+    integration_tests::attributable(|| {
+        let inst = instance("inject-cfg");
+        let cfg = integration_tests::default_cell().replace(
         "substeps = 4 ",
         "substeps = 4\n\n[[drives.inject]]\naxis = \"y\"\nfault = \"over-current\"\nat = 2.0\n\n#",
     );
-    let cfg = scratch("inject-cfg", "cell.toml", &cfg);
-    let plot = scratch("inject-cfg", "failed.png", "");
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg("--plot")
-            .arg(&plot)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("servo cut power: drive-reports-fault on axis y"),
-        "{err}"
-    );
-    // The figures up to the failure: x's first 2 s of motion, the processes' latency.
-    assert!(
-        err.contains(&format!("figures up to the failure: {}", plot.display())),
-        "{err}"
-    );
-    crate::cell::check_figures(&plot, 4);
-    // Printed as they happened, and in the report.
-    assert!(err.contains("fault-injected axis y"), "{err}");
-    let j = json_of(&out);
-    assert_eq!(j["ok"], false);
-    let fault = events_named(&j, "drive-fault");
-    assert!(
-        fault.iter().any(|e| e["axis"] == "y"
-            && e["value"].as_f64() == Some(0x2310 as f64)
-            && e["source"] == "machine"),
-        "{j}"
-    );
-    let cut = events_named(&j, "power-cut");
-    assert_eq!(cut.len(), 1, "{j}");
-    assert_eq!(cut[0]["source"], "servo");
-    // Every axis lost power: the drive of y by its fault reaction (13), the others by
-    // servo's quick stop (11).
-    let transitions = events_named(&j, "drive-transition");
-    for (axis, number) in [("y", 13), ("x", 11), ("theta", 11)] {
-        assert!(
-            transitions
-                .iter()
-                .any(|e| e["axis"] == axis && e["value"].as_f64() == Some(number as f64)),
-            "{axis}: transition {number} missing in {transitions:?}"
+        let cfg = scratch("inject-cfg", "cell.toml", &cfg);
+        let plot = scratch("inject-cfg", "failed.png", "");
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["run", "--json", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg("--plot")
+                .arg(&plot)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
         );
-    }
-    assert!(pids_with(&["--instance", &inst]).is_empty());
-    assert_clean(&inst);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("servo cut power: drive-reports-fault on axis y"),
+            "{err}"
+        );
+        // The figures up to the failure: x's first 2 s of motion, the processes' latency.
+        assert!(
+            err.contains(&format!("figures up to the failure: {}", plot.display())),
+            "{err}"
+        );
+        crate::cell::check_figures(&plot, 4);
+        // Printed as they happened, and in the report.
+        assert!(err.contains("fault-injected axis y"), "{err}");
+        let j = json_of(&out);
+        assert_eq!(j["ok"], false);
+        let fault = events_named(&j, "drive-fault");
+        assert!(
+            fault.iter().any(|e| e["axis"] == "y"
+                && e["value"].as_f64() == Some(0x2310 as f64)
+                && e["source"] == "machine"),
+            "{j}"
+        );
+        let cut = events_named(&j, "power-cut");
+        assert_eq!(cut.len(), 1, "{j}");
+        assert_eq!(cut[0]["source"], "servo");
+        // Every axis lost power: the drive of y by its fault reaction (13), the others by
+        // servo's quick stop (11).
+        let transitions = events_named(&j, "drive-transition");
+        for (axis, number) in [("y", 13), ("x", 11), ("theta", 11)] {
+            assert!(
+                transitions
+                    .iter()
+                    .any(|e| e["axis"] == axis && e["value"].as_f64() == Some(number as f64)),
+                "{axis}: transition {number} missing in {transitions:?}"
+            );
+        }
+        assert!(pids_with(&["--instance", &inst]).is_empty());
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
-    let inst = instance("inject-cmd");
-    let run = triangle_in_background(&inst);
-    // Wait until the arm is enabled, reading the instance's events from this shell.
-    let start = Instant::now();
-    loop {
-        assert!(start.elapsed() < WATCHDOG, "the cell never enabled");
-        let status = supervisor()
-            .args(["status", "--json", "--instance", &inst])
-            .output()
-            .expect("status");
-        let text = String::from_utf8_lossy(&status.stdout);
-        if text.contains("\"power\":\"enabled\"") {
-            break;
+    integration_tests::attributable(|| {
+        let inst = instance("inject-cmd");
+        let run = triangle_in_background(&inst);
+        // Wait until the arm is enabled, reading the instance's events from this shell.
+        let start = Instant::now();
+        loop {
+            assert!(start.elapsed() < WATCHDOG, "the cell never enabled");
+            let status = supervisor()
+                .args(["status", "--json", "--instance", &inst])
+                .output()
+                .expect("status");
+            let text = String::from_utf8_lossy(&status.stdout);
+            if text.contains("\"power\":\"enabled\"") {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(100));
         }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    // A bad injection is refused by name (the axes of the running cell) and changes nothing.
-    let bad = supervisor()
-        .args(["inject", "--instance", &inst, "--axis", "w", "over-current"])
-        .output()
-        .expect("inject");
-    assert_eq!(bad.status.code(), Some(2));
-    let why = String::from_utf8_lossy(&bad.stderr);
-    assert!(
-        why.contains("--axis \"w\": the cell has axes x, y, theta"),
-        "{why}"
-    );
-    let out = supervisor()
-        .args(["inject", "--instance", &inst, "--axis", "x", "encoder-loss"])
-        .output()
-        .expect("inject");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(
-        String::from_utf8_lossy(&out.stdout).trim(),
-        format!("injected encoder-loss on axis x of instance {inst}")
-    );
-    let out = wait_for(run);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("servo cut power: feedback-not-finite on axis x"),
-        "{err}"
-    );
-    // The drives acknowledged it (the tool waits for their event before it says so).
-    assert!(err.contains("fault-injected axis x: 0x7320"), "{err}");
-    assert_clean(&inst);
+        // A bad injection is refused by name (the axes of the running cell) and changes nothing.
+        let bad = supervisor()
+            .args(["inject", "--instance", &inst, "--axis", "w", "over-current"])
+            .output()
+            .expect("inject");
+        assert_eq!(bad.status.code(), Some(2));
+        let why = String::from_utf8_lossy(&bad.stderr);
+        assert!(
+            why.contains("--axis \"w\": the cell has axes x, y, theta"),
+            "{why}"
+        );
+        let out = supervisor()
+            .args(["inject", "--instance", &inst, "--axis", "x", "encoder-loss"])
+            .output()
+            .expect("inject");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            String::from_utf8_lossy(&out.stdout).trim(),
+            format!("injected encoder-loss on axis x of instance {inst}")
+        );
+        let out = wait_for(run);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("servo cut power: feedback-not-finite on axis x"),
+            "{err}"
+        );
+        // The drives acknowledged it (the tool waits for their event before it says so).
+        assert!(err.contains("fault-injected axis x: 0x7320"), "{err}");
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn an_absurd_inertia_is_refused_before_anything_starts() {
-    let inst = instance("inertia");
-    let cfg = integration_tests::default_cell().replacen("inertia = 0.008", "inertia = 1e-300", 1);
-    let cfg = scratch("inertia", "cell.toml", &cfg);
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains(
-            "cell.toml:32:9: axis x: sim inertia 1e-300 makes servo's position loop unstable"
-        ),
-        "{err}"
-    );
-    assert!(pids_with(&["--instance", &inst]).is_empty());
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("inertia");
+        let cfg =
+            integration_tests::default_cell().replacen("inertia = 0.008", "inertia = 1e-300", 1);
+        let cfg = scratch("inertia", "cell.toml", &cfg);
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["run", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
+        );
+        assert_eq!(out.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(
+                "cell.toml:32:9: axis x: sim inertia 1e-300 makes servo's position loop unstable"
+            ),
+            "{err}"
+        );
+        assert!(pids_with(&["--instance", &inst]).is_empty());
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn csp_axes_follow_the_triangle_on_the_real_processes() {
-    let inst = instance("csp");
-    let cfg = integration_tests::cell_in_csp();
-    let cfg = scratch("csp", "cell.toml", &cfg);
-    let j = triangle_json(&inst, &cfg);
-    on_target(&j);
-    assert!(j["sense_to_command_us"]["p50_us"].as_f64().expect("sense") > 0.0);
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("csp");
+        let cfg = integration_tests::cell_in_csp();
+        let cfg = scratch("csp", "cell.toml", &cfg);
+        let j = triangle_json(&inst, &cfg);
+        on_target(&j);
+        assert!(j["sense_to_command_us"]["p50_us"].as_f64().expect("sense") > 0.0);
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
-    let inst = instance("tune");
-    let png = std::env::temp_dir().join(format!("{inst}.png"));
-    let out = run_with_watchdog(
-        supervisor()
-            .args([
-                "tune",
-                "--json",
-                "--instance",
-                &inst,
-                "--axis",
-                "y",
-                "--step",
-                "-0.2",
-                "--ramp",
-                "5",
-                "--plot",
-            ])
-            .arg(&png),
-        WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j = json_of(&out);
-    let f = &j["step_response"];
-    let rise = f["rise_s"].as_f64().expect("the axis rose");
-    assert!(rise > 0.0, "{j}");
-    assert!(f["settling_s"].as_f64().expect("it settled") >= rise, "{j}");
-    assert!(
-        f["overshoot_pct"].as_f64().expect("overshoot") < 50.0,
-        "{j}"
-    );
-    assert!((f["peak_following_error"].as_f64().expect("fe") - 0.2).abs() < 0.01);
-    let ramp = j["ramp"]["peak_following_error"].as_f64().expect("ramp");
-    assert!(ramp > 0.0 && ramp < 1.0, "{j}");
-    assert!(
-        events_named(&j, "tune-step").len() == 2,
-        "step and step back: {j}"
-    );
-    let bytes = std::fs::read(&png).expect("plot written");
-    assert_eq!(&bytes[1..4], b"PNG");
-    let _ = std::fs::remove_file(&png);
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("tune");
+        let png = std::env::temp_dir().join(format!("{inst}.png"));
+        let out = run_with_watchdog(
+            supervisor()
+                .args([
+                    "tune",
+                    "--json",
+                    "--instance",
+                    &inst,
+                    "--axis",
+                    "y",
+                    "--step",
+                    "-0.2",
+                    "--ramp",
+                    "5",
+                    "--plot",
+                ])
+                .arg(&png),
+            WATCHDOG,
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let j = json_of(&out);
+        let f = &j["step_response"];
+        let rise = f["rise_s"].as_f64().expect("the axis rose");
+        assert!(rise > 0.0, "{j}");
+        assert!(f["settling_s"].as_f64().expect("it settled") >= rise, "{j}");
+        assert!(
+            f["overshoot_pct"].as_f64().expect("overshoot") < 50.0,
+            "{j}"
+        );
+        assert!((f["peak_following_error"].as_f64().expect("fe") - 0.2).abs() < 0.01);
+        let ramp = j["ramp"]["peak_following_error"].as_f64().expect("ramp");
+        assert!(ramp > 0.0 && ramp < 1.0, "{j}");
+        assert!(
+            events_named(&j, "tune-step").len() == 2,
+            "step and step back: {j}"
+        );
+        let bytes = std::fs::read(&png).expect("plot written");
+        assert_eq!(&bytes[1..4], b"PNG");
+        let _ = std::fs::remove_file(&png);
+        assert_clean(&inst);
 
-    // Bad requests are refused by name before anything starts.
-    for (args, want) in [
-        (
-            vec!["--axis", "y", "--step", "0.8"],
-            "at most half the following-error limit",
-        ),
-        (
-            vec!["--axis", "w", "--step", "0.1"],
-            "--axis \"w\": the cell has axes x, y, theta",
-        ),
-        (
-            vec!["--axis", "x", "--step", "0.1", "--ramp", "500"],
-            "would leave its range",
-        ),
-    ] {
-        let out = supervisor()
-            .args(["tune", "--instance", &inst])
-            .args(&args)
-            .output()
-            .expect("tune");
-        assert_eq!(out.status.code(), Some(2), "{args:?}");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains(want), "{args:?}: {err}");
-    }
-    assert_clean(&inst);
+        // Bad requests are refused by name before anything starts.
+        for (args, want) in [
+            (
+                vec!["--axis", "y", "--step", "0.8"],
+                "at most half the following-error limit",
+            ),
+            (
+                vec!["--axis", "w", "--step", "0.1"],
+                "--axis \"w\": the cell has axes x, y, theta",
+            ),
+            (
+                vec!["--axis", "x", "--step", "0.1", "--ramp", "500"],
+                "would leave its range",
+            ),
+        ] {
+            let out = supervisor()
+                .args(["tune", "--instance", &inst])
+                .args(&args)
+                .output()
+                .expect("tune");
+            assert_eq!(out.status.code(), Some(2), "{args:?}");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(err.contains(want), "{args:?}: {err}");
+        }
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
-    let inst = instance("4khz");
-    let cfg = integration_tests::cell_at_rate(250);
-    let cfg = scratch("4khz", "cell.toml", &cfg);
-    let j = triangle_json(&inst, &cfg);
-    assert_eq!(j["processes"]["servo"]["period_us"].as_f64(), Some(250.0));
-    on_target(&j);
-    // The drives measured it (its figures belong to the benchmark, not to a test).
-    let s2c = j["sense_to_command_us"]["p50_us"].as_f64().expect("sense");
-    assert!(s2c > 0.0, "{s2c}");
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("4khz");
+        let cfg = integration_tests::cell_at_rate(250);
+        let cfg = scratch("4khz", "cell.toml", &cfg);
+        let j = triangle_json(&inst, &cfg);
+        assert_eq!(j["processes"]["servo"]["period_us"].as_f64(), Some(250.0));
+        on_target(&j);
+        // The drives measured it (its figures belong to the benchmark, not to a test).
+        let s2c = j["sense_to_command_us"]["p50_us"].as_f64().expect("sense");
+        assert!(s2c > 0.0, "{s2c}");
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
-    use runtime::ipc::{self, Pub, Sub};
-    use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV3};
-    let inst = instance("disable");
-    let run = triangle_in_background(&inst);
-    // Connect once the cell is up (an instance with a live client is refused by `run`).
-    let name = InstanceName::new(&inst).expect("instance");
-    let start = Instant::now();
-    while ipc::live_node_pids(&name).unwrap_or_default().len() < 5 {
-        assert!(start.elapsed() < WATCHDOG, "the cell never came up");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let node = ipc::node(&name, "test-client").expect("node");
-    let requests = Pub::<ServoRequestV1>::new(&node, &name, ServiceId::ServoRequest).expect("pub");
-    let state = Sub::<ServoStateV3>::new(&node, &name, ServiceId::ServoState, 64).expect("sub");
-    // Wait until the arm is enabled and moving, then ask servo to disable it.
-    loop {
-        assert!(start.elapsed() < WATCHDOG, "the arm never moved");
-        if state
-            .latest()
-            .is_some_and(|s| s.cmd_velocity[0].abs() > 1.0)
-        {
-            break;
+    integration_tests::attributable(|| {
+        use runtime::ipc::{self, Pub, Sub};
+        use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV3};
+        let inst = instance("disable");
+        let run = triangle_in_background(&inst);
+        // Connect once the cell is up (an instance with a live client is refused by `run`).
+        let name = InstanceName::new(&inst).expect("instance");
+        let start = Instant::now();
+        while ipc::live_node_pids(&name).unwrap_or_default().len() < 5 {
+            assert!(start.elapsed() < WATCHDOG, "the cell never came up");
+            std::thread::sleep(Duration::from_millis(20));
         }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let seq = 1_000_000 + u64::from(std::process::id());
-    requests.update_connections();
-    assert!(requests.send(&ServoRequestV1 {
-        seq,
-        kind: RequestKind::Disable as u32,
-        axis: 0,
-        value: 0.0,
-    }));
-    // Servo echoes the request and goes disabling, then disabled.
-    let mut echoed = false;
-    while !echoed {
-        assert!(start.elapsed() < WATCHDOG, "servo never took the request");
-        echoed = state.latest().is_some_and(|s| s.request_seq == seq);
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    let out = wait_for(run);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("the arm is no longer enabled") && err.contains("disabling"),
-        "{err}"
-    );
-    // This test's node outlived the run: the files of the instance go with the last client.
-    drop((requests, state));
-    drop(node);
-    ipc::cleanup_after_client(&name);
-    assert_clean(&inst);
+        let node = ipc::node(&name, "test-client").expect("node");
+        let requests =
+            Pub::<ServoRequestV1>::new(&node, &name, ServiceId::ServoRequest).expect("pub");
+        let state = Sub::<ServoStateV3>::new(&node, &name, ServiceId::ServoState, 64).expect("sub");
+        // Wait until the arm is enabled and moving, then ask servo to disable it.
+        loop {
+            assert!(start.elapsed() < WATCHDOG, "the arm never moved");
+            if state
+                .latest()
+                .is_some_and(|s| s.cmd_velocity[0].abs() > 1.0)
+            {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let seq = 1_000_000 + u64::from(std::process::id());
+        requests.update_connections();
+        assert!(requests.send(&ServoRequestV1 {
+            seq,
+            kind: RequestKind::Disable as u32,
+            axis: 0,
+            value: 0.0,
+        }));
+        // Servo echoes the request and goes disabling, then disabled.
+        let mut echoed = false;
+        while !echoed {
+            assert!(start.elapsed() < WATCHDOG, "servo never took the request");
+            echoed = state.latest().is_some_and(|s| s.request_seq == seq);
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let out = wait_for(run);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("the arm is no longer enabled") && err.contains("disabling"),
+            "{err}"
+        );
+        // This test's node outlived the run: the files of the instance go with the last client.
+        drop((requests, state));
+        drop(node);
+        ipc::cleanup_after_client(&name);
+        assert_clean(&inst);
+    });
 }
 
 /// The default cell with a supervisor heartbeat of 5 s, so a test can stall one process for
@@ -484,78 +500,82 @@ pub(crate) fn client_of(
 
 #[test]
 fn servo_cuts_power_when_the_drives_process_stalls() {
-    let inst = instance("stall-machine");
-    let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-machine")));
-    let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name, &mut run);
-    // The drives' process stops (as a hung fieldbus would): its feedback stops coming.
-    let machine = pid_of("machine-sim", &inst);
-    // SAFETY: kill(2) on a process this test's supervisor started.
-    unsafe { libc::kill(machine, libc::SIGSTOP) };
-    let start = Instant::now();
-    let mut latched = None;
-    while latched.is_none() {
-        assert!(start.elapsed() < WATCHDOG, "servo never noticed");
-        latched = std::iter::from_fn(|| state.next()).find(|s| s.status & st::FAULT_LATCHED != 0);
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    // SAFETY: as above.
-    unsafe { libc::kill(machine, libc::SIGCONT) };
-    let s = latched.expect("latched");
-    assert_eq!(s.fault_code, shm_schema::event::code::FEEDBACK_STALE);
-    assert!(s.fault_value > s.fault_limit, "{s:?}");
-    let out = wait_for(run);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("servo cut power: feedback-stale"), "{err}");
-    drop(state);
-    drop(node);
-    runtime::ipc::cleanup_after_client(&name);
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("stall-machine");
+        let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-machine")));
+        let (name, node) = client_of(&inst);
+        let state = until_moving(&node, &name, &mut run);
+        // The drives' process stops (as a hung fieldbus would): its feedback stops coming.
+        let machine = pid_of("machine-sim", &inst);
+        // SAFETY: kill(2) on a process this test's supervisor started.
+        unsafe { libc::kill(machine, libc::SIGSTOP) };
+        let start = Instant::now();
+        let mut latched = None;
+        while latched.is_none() {
+            assert!(start.elapsed() < WATCHDOG, "servo never noticed");
+            latched =
+                std::iter::from_fn(|| state.next()).find(|s| s.status & st::FAULT_LATCHED != 0);
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        // SAFETY: as above.
+        unsafe { libc::kill(machine, libc::SIGCONT) };
+        let s = latched.expect("latched");
+        assert_eq!(s.fault_code, shm_schema::event::code::FEEDBACK_STALE);
+        assert!(s.fault_value > s.fault_limit, "{s:?}");
+        let out = wait_for(run);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("servo cut power: feedback-stale"), "{err}");
+        drop(state);
+        drop(node);
+        runtime::ipc::cleanup_after_client(&name);
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
-    let inst = instance("stall-trajgen");
-    let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
-    let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name, &mut run);
-    // trajgen stops publishing in the middle of a move; servo must bring the axes to rest
-    // along their path and hold, enabled, with nothing latched. (The supervisor ends the run
-    // after its heartbeat timeout, here 5 s.)
-    let trajgen = pid_of("trajgen", &inst);
-    // SAFETY: kill(2) on a process this test's supervisor started.
-    unsafe { libc::kill(trajgen, libc::SIGSTOP) };
-    let start = Instant::now();
-    let mut log = Vec::new();
-    loop {
-        assert!(start.elapsed() < WATCHDOG, "servo never came to rest");
-        while let Some(s) = state.next() {
-            log.push(s);
+    integration_tests::attributable(|| {
+        let inst = instance("stall-trajgen");
+        let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
+        let (name, node) = client_of(&inst);
+        let state = until_moving(&node, &name, &mut run);
+        // trajgen stops publishing in the middle of a move; servo must bring the axes to rest
+        // along their path and hold, enabled, with nothing latched. (The supervisor ends the run
+        // after its heartbeat timeout, here 5 s.)
+        let trajgen = pid_of("trajgen", &inst);
+        // SAFETY: kill(2) on a process this test's supervisor started.
+        unsafe { libc::kill(trajgen, libc::SIGSTOP) };
+        let start = Instant::now();
+        let mut log = Vec::new();
+        loop {
+            assert!(start.elapsed() < WATCHDOG, "servo never came to rest");
+            while let Some(s) = state.next() {
+                log.push(s);
+            }
+            if log.last().is_some_and(|s| {
+                s.status & st::SETPOINT_STALE != 0 && s.cmd_velocity[..3] == [0.0; 3]
+            }) {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(5));
         }
-        if log
-            .last()
-            .is_some_and(|s| s.status & st::SETPOINT_STALE != 0 && s.cmd_velocity[..3] == [0.0; 3])
-        {
-            break;
+        // SAFETY: as above.
+        unsafe { libc::kill(trajgen, libc::SIGCONT) };
+        assert!(
+            log.iter().all(|s| s.status & st::FAULT_LATCHED == 0),
+            "servo cut power"
+        );
+        let last = log.last().expect("states");
+        assert_ne!(last.status & st::ENABLED, 0);
+        for i in 0..3 {
+            assert!(log.iter().all(|s| s.following_error[i].abs() < 1.0));
         }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    // SAFETY: as above.
-    unsafe { libc::kill(trajgen, libc::SIGCONT) };
-    assert!(
-        log.iter().all(|s| s.status & st::FAULT_LATCHED == 0),
-        "servo cut power"
-    );
-    let last = log.last().expect("states");
-    assert_ne!(last.status & st::ENABLED, 0);
-    for i in 0..3 {
-        assert!(log.iter().all(|s| s.following_error[i].abs() < 1.0));
-    }
-    let out = wait_for(run);
-    assert_eq!(out.status.code(), Some(1));
-    drop(state);
-    drop(node);
-    runtime::ipc::cleanup_after_client(&name);
-    assert_clean(&inst);
+        let out = wait_for(run);
+        assert_eq!(out.status.code(), Some(1));
+        drop(state);
+        drop(node);
+        runtime::ipc::cleanup_after_client(&name);
+        assert_clean(&inst);
+    });
 }

@@ -59,149 +59,161 @@ fn user_estop_mid_motion(inst: &str, cfg: Option<&std::path::Path>) -> (String, 
 
 #[test]
 fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_drives() {
-    let inst = instance("estop-user");
-    let cfg = cell_with_behaviour("estop-user", true, false);
-    let (_, j) = user_estop_mid_motion(&inst, Some(&cfg));
-    // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
-    // and the drives disabled, after the e-stop was raised.
-    let safe = events_named(&j, "estop-safe");
-    for p in ["servo", "trajgen", "iobridge", "machine"] {
-        assert!(safe.iter().any(|e| e["source"] == p), "{p}: {safe:?}");
-    }
-    let servo = safe
-        .iter()
-        .find(|e| e["source"] == "servo")
-        .expect("servo safe");
-    let to_rest = servo["value"].as_f64().expect("seconds");
-    assert!(to_rest > 0.0, "{servo}");
-    let disabled = events_named(&j, "disabled");
-    assert!(
-        disabled
+    integration_tests::attributable(|| {
+        let inst = instance("estop-user");
+        let cfg = cell_with_behaviour("estop-user", true, false);
+        let (_, j) = user_estop_mid_motion(&inst, Some(&cfg));
+        // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
+        // and the drives disabled, after the e-stop was raised.
+        let safe = events_named(&j, "estop-safe");
+        for p in ["servo", "trajgen", "iobridge", "machine"] {
+            assert!(safe.iter().any(|e| e["source"] == p), "{p}: {safe:?}");
+        }
+        let servo = safe
             .iter()
-            .any(|e| e["t_s"].as_f64() <= servo["t_s"].as_f64()),
-        "servo was safe before its drives were disabled: {disabled:?}"
-    );
-    let refused = events_named(&j, "motion-command-refused");
-    assert!(
-        refused
-            .iter()
-            .any(|e| e["text"] == "an e-stop dropped the program"),
-        "{refused:?}"
-    );
-    println!(
-        "e-stop to axes at rest and drives disabled: {:.1} ms",
-        to_rest * 1e3
-    );
+            .find(|e| e["source"] == "servo")
+            .expect("servo safe");
+        let to_rest = servo["value"].as_f64().expect("seconds");
+        assert!(to_rest > 0.0, "{servo}");
+        let disabled = events_named(&j, "disabled");
+        assert!(
+            disabled
+                .iter()
+                .any(|e| e["t_s"].as_f64() <= servo["t_s"].as_f64()),
+            "servo was safe before its drives were disabled: {disabled:?}"
+        );
+        let refused = events_named(&j, "motion-command-refused");
+        assert!(
+            refused
+                .iter()
+                .any(|e| e["text"] == "an e-stop dropped the program"),
+            "{refused:?}"
+        );
+        println!(
+            "e-stop to axes at rest and drives disabled: {:.1} ms",
+            to_rest * 1e3
+        );
+    });
 }
 
 #[test]
 fn without_propagation_a_user_estop_latches_but_the_motion_goes_on() {
-    let inst = instance("estop-nopropagate");
-    let cfg = cell_with_behaviour("estop-nopropagate", false, false);
-    let (err, j) = user_estop_mid_motion(&inst, Some(&cfg));
-    assert!(err.contains("the motion completed"), "{err}");
-    assert!(
-        events_named(&j, "estop-safe").is_empty(),
-        "no process reacts: {:?}",
-        events_named(&j, "estop-safe")
-    );
+    integration_tests::attributable(|| {
+        let inst = instance("estop-nopropagate");
+        let cfg = cell_with_behaviour("estop-nopropagate", false, false);
+        let (err, j) = user_estop_mid_motion(&inst, Some(&cfg));
+        assert!(err.contains("the motion completed"), "{err}");
+        assert!(
+            events_named(&j, "estop-safe").is_empty(),
+            "no process reacts: {:?}",
+            events_named(&j, "estop-safe")
+        );
+    });
 }
 
 #[test]
 fn propagate_external_estop_stops_the_motion_without_propagate_estop() {
-    let inst = instance("estop-external");
-    let cfg = cell_with_behaviour("estop-external", false, true);
-    let (err, j) = user_estop_mid_motion(&inst, Some(&cfg));
-    assert!(!err.contains("the motion completed"), "{err}");
-    assert!(
-        events_named(&j, "estop-safe")
-            .iter()
-            .any(|e| e["source"] == "servo"),
-        "{j}"
-    );
+    integration_tests::attributable(|| {
+        let inst = instance("estop-external");
+        let cfg = cell_with_behaviour("estop-external", false, true);
+        let (err, j) = user_estop_mid_motion(&inst, Some(&cfg));
+        assert!(!err.contains("the motion completed"), "{err}");
+        assert!(
+            events_named(&j, "estop-safe")
+                .iter()
+                .any(|e| e["source"] == "servo"),
+            "{j}"
+        );
+    });
 }
 
 #[test]
 fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
-    let inst = instance("estop-stall");
-    // The supervisor's heartbeat watch is made slower than the detector, so the detector is
-    // what catches the stall.
-    let cfg = scratch(
-        "estop-stall",
-        "cell.toml",
-        &default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1),
-    );
-    let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
-    let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name, &mut run);
-    let trajgen = pid_of("trajgen", &inst);
-    // SAFETY: kill(2) on a process this test's supervisor started.
-    unsafe { libc::kill(trajgen, libc::SIGSTOP) };
-    let out = wait_for(run);
-    // SAFETY: as above (it may be gone already).
-    unsafe { libc::kill(trajgen, libc::SIGCONT) };
-    drop(state);
-    drop(node);
-    runtime::ipc::cleanup_after_client(&name);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("e-stop (host) raised by servo: pending_sequence_overrun expired in servo"),
-        "{err}"
-    );
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let inst = instance("estop-stall");
+        // The supervisor's heartbeat watch is made slower than the detector, so the detector is
+        // what catches the stall.
+        let cfg = scratch(
+            "estop-stall",
+            "cell.toml",
+            &default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1),
+        );
+        let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
+        let (name, node) = client_of(&inst);
+        let state = until_moving(&node, &name, &mut run);
+        let trajgen = pid_of("trajgen", &inst);
+        // SAFETY: kill(2) on a process this test's supervisor started.
+        unsafe { libc::kill(trajgen, libc::SIGSTOP) };
+        let out = wait_for(run);
+        // SAFETY: as above (it may be gone already).
+        unsafe { libc::kill(trajgen, libc::SIGCONT) };
+        drop(state);
+        drop(node);
+        runtime::ipc::cleanup_after_client(&name);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains(
+                "e-stop (host) raised by servo: pending_sequence_overrun expired in servo"
+            ),
+            "{err}"
+        );
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit() {
-    let inst = instance("estop-orphan");
-    let cfg = scratch(
-        "estop-orphan",
-        "cell.toml",
-        &with_stall_room(&default_cell()),
-    );
-    let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
-    let (name, node) = client_of(&inst);
-    let state = until_moving(&node, &name, &mut run);
-    let cell = pids_with(&["--instance", &inst]);
-    run.kill().expect("SIGKILL the supervisor");
-    let _ = run.wait();
-    // Servo brings the axes to rest and disables the drives before it leaves.
-    let start = Instant::now();
-    let mut last = None;
-    loop {
-        while let Some(s) = state.next() {
-            last = Some(s);
-        }
-        if pids_with(&["--instance", &inst]).is_empty() {
-            break;
-        }
-        assert!(
-            start.elapsed() < WATCHDOG,
-            "processes still running: {cell:?}"
+    integration_tests::attributable(|| {
+        let inst = instance("estop-orphan");
+        let cfg = scratch(
+            "estop-orphan",
+            "cell.toml",
+            &with_stall_room(&default_cell()),
         );
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let last = last.expect("servo published");
-    assert_eq!(last.power, Power::Disabled as u8, "{last:?}");
-    assert!(
-        last.act_velocity[..3].iter().all(|v| v.abs() < 0.1),
-        "{last:?}"
-    );
-    drop(state);
-    drop(node);
-    runtime::ipc::cleanup_after_client(&name);
-    // The next run of the instance starts, cleaning what the killed supervisor left.
-    let out = supervisor()
-        .args(["run", "--instance", &inst, "--config"])
-        .arg(&cfg)
-        .arg(integration_tests::examples().join("triangle.prog"))
-        .output()
-        .expect("run");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_clean(&inst);
+        let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
+        let (name, node) = client_of(&inst);
+        let state = until_moving(&node, &name, &mut run);
+        let cell = pids_with(&["--instance", &inst]);
+        run.kill().expect("SIGKILL the supervisor");
+        let _ = run.wait();
+        // Servo brings the axes to rest and disables the drives before it leaves.
+        let start = Instant::now();
+        let mut last = None;
+        loop {
+            while let Some(s) = state.next() {
+                last = Some(s);
+            }
+            if pids_with(&["--instance", &inst]).is_empty() {
+                break;
+            }
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "processes still running: {cell:?}"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let last = last.expect("servo published");
+        assert_eq!(last.power, Power::Disabled as u8, "{last:?}");
+        assert!(
+            last.act_velocity[..3].iter().all(|v| v.abs() < 0.1),
+            "{last:?}"
+        );
+        drop(state);
+        drop(node);
+        runtime::ipc::cleanup_after_client(&name);
+        // The next run of the instance starts, cleaning what the killed supervisor left.
+        let out = supervisor()
+            .args(["run", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(integration_tests::examples().join("triangle.prog"))
+            .output()
+            .expect("run");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_clean(&inst);
+    });
 }

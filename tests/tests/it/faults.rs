@@ -65,33 +65,35 @@ fn kill_while_starting(inst: &str, cfg: &Path, when: Kill) {
             (stuck before its first log line; reproduced 2 of 4 under load, not root-caused): \
             run with --ignored"]
 fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
-    let test = "killed-up";
-    let inst = instance(test);
-    let cfg = cell(test, &[]);
-    let mut kills: Vec<Kill> = (0..=100)
-        .step_by(5)
-        .map(|ms| Kill::After(Duration::from_millis(ms)))
-        .collect();
-    // The windows themselves, whatever the host's speed: while the first services and the
-    // supervisor's node are being created.
-    for n in 1..=4 {
-        kills.push(Kill::WhenCreated("services", n));
-    }
-    for n in 1..=3 {
-        kills.push(Kill::WhenCreated("nodes", n));
-    }
-    for k in kills {
-        kill_while_starting(&inst, &cfg, k);
-        // Every kill is followed by one more: each `up` also cleans what the previous left.
-    }
-    // Now the next `up` must come up and go down clean (Up::start waits for the drives).
-    let up = Up::start(test, &cfg);
-    assert!(
-        !up.log().contains("left behind"),
-        "the new up found files it could not remove:\n{}",
-        up.log()
-    );
-    up.down();
+    integration_tests::attributable(|| {
+        let test = "killed-up";
+        let inst = instance(test);
+        let cfg = cell(test, &[]);
+        let mut kills: Vec<Kill> = (0..=100)
+            .step_by(5)
+            .map(|ms| Kill::After(Duration::from_millis(ms)))
+            .collect();
+        // The windows themselves, whatever the host's speed: while the first services and the
+        // supervisor's node are being created.
+        for n in 1..=4 {
+            kills.push(Kill::WhenCreated("services", n));
+        }
+        for n in 1..=3 {
+            kills.push(Kill::WhenCreated("nodes", n));
+        }
+        for k in kills {
+            kill_while_starting(&inst, &cfg, k);
+            // Every kill is followed by one more: each `up` also cleans what the previous left.
+        }
+        // Now the next `up` must come up and go down clean (Up::start waits for the drives).
+        let up = Up::start(test, &cfg);
+        assert!(
+            !up.log().contains("left behind"),
+            "the new up found files it could not remove:\n{}",
+            up.log()
+        );
+        up.down();
+    });
 }
 
 /// An observer (`supervisor status` here) SIGKILLed at any moment of attaching to a running
@@ -100,24 +102,26 @@ fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
 /// resources left behind".
 #[test]
 fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
-    let test = "killed-observer";
-    let cfg = cell(test, &[]);
-    let up = Up::start(test, &cfg);
-    for ms in (0..=40).step_by(2) {
-        let mut status = supervisor()
-            .args(["status", "--instance", &up.inst])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("status");
-        std::thread::sleep(Duration::from_millis(ms));
-        let _ = status.kill();
-        let _ = status.wait();
-    }
-    // Half-created nodes are cleaned once a second old (not one being created right now).
-    std::thread::sleep(Duration::from_millis(1500));
-    let log = up.down();
-    assert!(!log.contains("left behind"), "{log}");
+    integration_tests::attributable(|| {
+        let test = "killed-observer";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        for ms in (0..=40).step_by(2) {
+            let mut status = supervisor()
+                .args(["status", "--instance", &up.inst])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .expect("status");
+            std::thread::sleep(Duration::from_millis(ms));
+            let _ = status.kill();
+            let _ = status.wait();
+        }
+        // Half-created nodes are cleaned once a second old (not one being created right now).
+        std::thread::sleep(Duration::from_millis(1500));
+        let log = up.down();
+        assert!(!log.contains("left behind"), "{log}");
+    });
 }
 
 /// Event lines of a severity `error` in a supervisor's log (faults, cuts).
@@ -147,32 +151,34 @@ fn moving(up: &Up) {
 /// and quick-stopped the axes in 4 of 4 runs.
 #[test]
 fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() {
-    for how in ["down", "sigterm"] {
-        let test = &format!("down-moving-{how}");
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
-        moving(&up);
-        let log = if how == "down" {
-            up.down()
-        } else {
-            up.terminate()
-        };
-        let rest = log
-            .find("going down: the program comes to rest along its path")
-            .unwrap_or_else(|| panic!("{how}: the program was not brought to rest:\n{log}"));
-        let disabled = log[rest..]
-            .find("servo     disabled")
-            .unwrap_or_else(|| panic!("{how}: servo did not disable the drives:\n{log}"));
-        assert!(
-            log[rest + disabled..].contains("going down ("),
-            "{how}: the processes stopped before the drives were disabled:\n{log}"
-        );
-        let errors = error_events(&log);
-        assert!(
-            errors.is_empty(),
-            "{how}: a fault on the way down: {errors:#?}\n{log}"
-        );
-    }
+    integration_tests::attributable(|| {
+        for how in ["down", "sigterm"] {
+            let test = &format!("down-moving-{how}");
+            let cfg = cell(test, &[]);
+            let up = Up::start(test, &cfg);
+            moving(&up);
+            let log = if how == "down" {
+                up.down()
+            } else {
+                up.terminate()
+            };
+            let rest = log
+                .find("going down: the program comes to rest along its path")
+                .unwrap_or_else(|| panic!("{how}: the program was not brought to rest:\n{log}"));
+            let disabled = log[rest..]
+                .find("servo     disabled")
+                .unwrap_or_else(|| panic!("{how}: servo did not disable the drives:\n{log}"));
+            assert!(
+                log[rest + disabled..].contains("going down ("),
+                "{how}: the processes stopped before the drives were disabled:\n{log}"
+            );
+            let errors = error_events(&log);
+            assert!(
+                errors.is_empty(),
+                "{how}: a fault on the way down: {errors:#?}\n{log}"
+            );
+        }
+    });
 }
 
 /// Item 5: after the drives' process was restarted or swapped (its pid is then the newest),
@@ -180,22 +186,24 @@ fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() 
 /// the new machine was stopped first: servo latched `feedback-stale` and cut power.
 #[test]
 fn down_after_the_drives_process_restarted_stops_in_the_graph_order() {
-    let test = "down-after-restart";
-    let cfg = cell(test, &[]);
-    let up = Up::start(test, &cfg);
-    for how in ["restart", "swap"] {
-        let out = up.ok(&[how, "machine"]);
-        assert!(out.contains("re-enabling"), "{how}: {out}");
-        up.until("re-enabled", |s| {
-            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
-        });
-    }
-    let log = up.down();
-    let errors = error_events(&log);
-    assert!(
-        errors.is_empty() && !log.contains("feedback-stale"),
-        "a fault on the way down: {errors:#?}\n{log}"
-    );
+    integration_tests::attributable(|| {
+        let test = "down-after-restart";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        for how in ["restart", "swap"] {
+            let out = up.ok(&[how, "machine"]);
+            assert!(out.contains("re-enabling"), "{how}: {out}");
+            up.until("re-enabled", |s| {
+                s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+            });
+        }
+        let log = up.down();
+        let errors = error_events(&log);
+        assert!(
+            errors.is_empty() && !log.contains("feedback-stale"),
+            "a fault on the way down: {errors:#?}\n{log}"
+        );
+    });
 }
 
 /// A control-channel frame: the length, then the bytes.
@@ -240,68 +248,70 @@ fn refused_with(r: Option<supervisor::ctl::Reply>, what: &str, words: &str) {
 /// oversized one are refused at once.
 #[test]
 fn control_frames_are_taken_whole_or_not_at_all() {
-    let test = "ctl-frames";
-    let cfg = cell(test, &[]);
-    let up = Up::start(test, &cfg);
-    let down = postcard::to_allocvec(&supervisor::ctl::Request::Down).expect("encode");
+    integration_tests::attributable(|| {
+        let test = "ctl-frames";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        let down = postcard::to_allocvec(&supervisor::ctl::Request::Down).expect("encode");
 
-    let mut inside = down.clone();
-    inside.extend_from_slice(b"junk");
-    let mut s = connect(&up.inst);
-    s.write_all(&frame(&inside)).expect("write");
-    refused_with(
-        answer(&mut s),
-        "junk inside the frame",
-        "junk after the request",
-    );
+        let mut inside = down.clone();
+        inside.extend_from_slice(b"junk");
+        let mut s = connect(&up.inst);
+        s.write_all(&frame(&inside)).expect("write");
+        refused_with(
+            answer(&mut s),
+            "junk inside the frame",
+            "junk after the request",
+        );
 
-    let mut after = frame(&down);
-    after.extend_from_slice(b"junk");
-    let mut s = connect(&up.inst);
-    s.write_all(&after).expect("write");
-    refused_with(answer(&mut s), "junk after the frame", "follow the request");
+        let mut after = frame(&down);
+        after.extend_from_slice(b"junk");
+        let mut s = connect(&up.inst);
+        s.write_all(&after).expect("write");
+        refused_with(answer(&mut s), "junk after the frame", "follow the request");
 
-    let mut s = connect(&up.inst);
-    s.write_all(&frame(&down)[..3]).expect("write");
-    s.shutdown(std::net::Shutdown::Write).expect("half-close");
-    refused_with(
-        answer(&mut s),
-        "an incomplete frame",
-        "before its frame was complete",
-    );
+        let mut s = connect(&up.inst);
+        s.write_all(&frame(&down)[..3]).expect("write");
+        s.shutdown(std::net::Shutdown::Write).expect("half-close");
+        refused_with(
+            answer(&mut s),
+            "an incomplete frame",
+            "before its frame was complete",
+        );
 
-    let mut s = connect(&up.inst);
-    s.write_all(&(60u32 << 20).to_le_bytes()).expect("write");
-    refused_with(answer(&mut s), "a 60 MB request", "at most");
+        let mut s = connect(&up.inst);
+        s.write_all(&(60u32 << 20).to_le_bytes()).expect("write");
+        refused_with(answer(&mut s), "a 60 MB request", "at most");
 
-    // The cell is still up and enabled: none of them was executed.
-    let st = up.status();
-    assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
+        // The cell is still up and enabled: none of them was executed.
+        let st = up.status();
+        assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
 
-    // A client that half-closes after its request gets the answer.
-    let info = postcard::to_allocvec(&supervisor::ctl::Request::Info).expect("encode");
-    let mut s = connect(&up.inst);
-    s.write_all(&frame(&info)).expect("write");
-    s.shutdown(std::net::Shutdown::Write).expect("half-close");
-    match answer(&mut s) {
-        Some(supervisor::ctl::Reply::Json(j)) => assert!(j.contains("\"arm\""), "{j}"),
-        other => panic!("a half-closed client got {other:?}"),
-    }
+        // A client that half-closes after its request gets the answer.
+        let info = postcard::to_allocvec(&supervisor::ctl::Request::Info).expect("encode");
+        let mut s = connect(&up.inst);
+        s.write_all(&frame(&info)).expect("write");
+        s.shutdown(std::net::Shutdown::Write).expect("half-close");
+        match answer(&mut s) {
+            Some(supervisor::ctl::Reply::Json(j)) => assert!(j.contains("\"arm\""), "{j}"),
+            other => panic!("a half-closed client got {other:?}"),
+        }
 
-    // Connections beyond the limit are refused "busy" at once; the held ones go when their
-    // request does not come; then the channel serves again.
-    let held: Vec<_> = (0..supervisor::ctl::MAX_CONNECTIONS)
-        .map(|_| connect(&up.inst))
-        .collect();
-    std::thread::sleep(Duration::from_millis(200));
-    let mut s = connect(&up.inst);
-    // The refusal is written and the connection closed at accept, maybe before this write
-    // (then it fails, EPIPE): the answer is read whatever the write did, as the CLI does.
-    let _ = s.write_all(&frame(&info));
-    refused_with(answer(&mut s), "a connection over the limit", "busy");
-    drop(held);
-    up.status();
-    up.down();
+        // Connections beyond the limit are refused "busy" at once; the held ones go when their
+        // request does not come; then the channel serves again.
+        let held: Vec<_> = (0..supervisor::ctl::MAX_CONNECTIONS)
+            .map(|_| connect(&up.inst))
+            .collect();
+        std::thread::sleep(Duration::from_millis(200));
+        let mut s = connect(&up.inst);
+        // The refusal is written and the connection closed at accept, maybe before this write
+        // (then it fails, EPIPE): the answer is read whatever the write did, as the CLI does.
+        let _ = s.write_all(&frame(&info));
+        refused_with(answer(&mut s), "a connection over the limit", "busy");
+        drop(held);
+        up.status();
+        up.down();
+    });
 }
 
 /// Sets the soft and hard limit of open files of the process being started.
@@ -333,24 +343,25 @@ fn open_fds(pid: u32) -> usize {
 /// and a crashed iobridge stayed down ("Too many open files").
 #[test]
 fn other_users_connections_cost_the_supervisor_nothing() {
-    let test = "ctl-other-user";
-    let inst = instance(test);
-    let cfg = cell(test, &[]);
-    let log = integration_tests::scratch(test, "up.log", "");
-    let mut cmd = supervisor();
-    cmd.args(["up", "--instance", &inst, "--config"])
-        .arg(&cfg)
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&log).expect("log"));
-    with_nofile(&mut cmd, 1024);
-    let child = cmd.spawn().expect("up");
-    let up = Up::adopt(inst.clone(), child, log);
-    let sup = up.child.as_ref().expect("running").id();
-    let before = open_fds(sup);
+    integration_tests::attributable(|| {
+        let test = "ctl-other-user";
+        let inst = instance(test);
+        let cfg = cell(test, &[]);
+        let log = integration_tests::scratch(test, "up.log", "");
+        let mut cmd = supervisor();
+        cmd.args(["up", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).expect("log"));
+        with_nofile(&mut cmd, 1024);
+        let child = cmd.spawn().expect("up");
+        let up = Up::adopt(inst.clone(), child, log);
+        let sup = up.child.as_ref().expect("running").id();
+        let before = open_fds(sup);
 
-    // uid 65534 opens 1000 connections and holds them, each with the start of a 60 MB frame.
-    let script = format!(
-        r#"
+        // uid 65534 opens 1000 connections and holds them, each with the start of a 60 MB frame.
+        let script = format!(
+            r#"
 import resource, socket, sys, time
 soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
 resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
@@ -367,65 +378,66 @@ for i in range(1000):
 print("held", len(held), flush=True)
 sys.stdin.read()
 "#
-    );
-    let mut attacker = Command::new("python3")
-        .args(["-c", &script])
-        .uid(65534)
-        .gid(65534)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("python3 as uid 65534");
-    let mut line = String::new();
-    BufReader::new(attacker.stdout.take().expect("stdout"))
-        .read_line(&mut line)
-        .expect("attacker's report");
-    assert_eq!(line.trim(), "held 1000", "the attacker could not connect");
+        );
+        let mut attacker = Command::new("python3")
+            .args(["-c", &script])
+            .uid(65534)
+            .gid(65534)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("python3 as uid 65534");
+        let mut line = String::new();
+        BufReader::new(attacker.stdout.take().expect("stdout"))
+            .read_line(&mut line)
+            .expect("attacker's report");
+        assert_eq!(line.trim(), "held 1000", "the attacker could not connect");
 
-    // While they are held: the supervisor holds no more descriptors than before (a few for
-    // the clients below), answers, and restarts a lost process.
-    let during = open_fds(sup);
-    assert!(
-        during < before + 20,
-        "the supervisor went from {before} to {during} open descriptors"
-    );
-    let st = up.status();
-    assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
-    let iobridge = st["supervisor"]["processes"]
-        .as_array()
-        .expect("processes")
-        .iter()
-        .find(|p| p["name"] == "iobridge")
-        .and_then(|p| p["pid"].as_i64())
-        .expect("iobridge's pid");
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(iobridge as i32),
-        nix::sys::signal::Signal::SIGKILL,
-    )
-    .expect("kill iobridge");
-    up.until("iobridge restarted", |s| {
-        s["supervisor"]["processes"]
+        // While they are held: the supervisor holds no more descriptors than before (a few for
+        // the clients below), answers, and restarts a lost process.
+        let during = open_fds(sup);
+        assert!(
+            during < before + 20,
+            "the supervisor went from {before} to {during} open descriptors"
+        );
+        let st = up.status();
+        assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
+        let iobridge = st["supervisor"]["processes"]
             .as_array()
-            .into_iter()
-            .flatten()
-            .any(|p| {
-                p["name"] == "iobridge"
-                    && p["pid"].as_i64().is_some_and(|pid| pid != iobridge)
-                    && p["life"] == "running"
-                    && p["restarts"] == 1
-            })
+            .expect("processes")
+            .iter()
+            .find(|p| p["name"] == "iobridge")
+            .and_then(|p| p["pid"].as_i64())
+            .expect("iobridge's pid");
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(iobridge as i32),
+            nix::sys::signal::Signal::SIGKILL,
+        )
+        .expect("kill iobridge");
+        up.until("iobridge restarted", |s| {
+            s["supervisor"]["processes"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .any(|p| {
+                    p["name"] == "iobridge"
+                        && p["pid"].as_i64().is_some_and(|pid| pid != iobridge)
+                        && p["life"] == "running"
+                        && p["restarts"] == 1
+                })
+        });
+        assert!(
+            up.log()
+                .contains("refused 1 connection(s), the last from uid 65534"),
+            "the refusal is not in the log:\n{}",
+            up.log()
+        );
+        drop(attacker.stdin.take());
+        let _ = attacker.wait();
+        up.ok(&["reset"]);
+        up.down();
     });
-    assert!(
-        up.log()
-            .contains("refused 1 connection(s), the last from uid 65534"),
-        "the refusal is not in the log:\n{}",
-        up.log()
-    );
-    drop(attacker.stdin.take());
-    let _ = attacker.wait();
-    up.ok(&["reset"]);
-    up.down();
 }
 
 /// An HTTP/1.1 request to `addr` with `headers` (`Host` among them or not); the status code
@@ -509,66 +521,67 @@ fn python_as_nobody(script: &str) -> std::process::Output {
 /// every request needs it, the page and its script included, and a blank token is refused.
 #[test]
 fn the_web_view_takes_commands_from_its_own_page_only() {
-    let test = "web-guard";
-    let cfg = cell(test, &[]);
-    let up = Up::start(test, &cfg);
-    let (view, addr) = web(&up.inst, &[]);
-    let host = addr.as_str();
-    let own = format!("http://{addr}");
-    up.ok(&["estop"]);
-    up.until("the e-stop latched", |s| {
-        !s["supervisor"]["estop"].is_null()
-    });
-    let latched = |why: &str| {
-        let st = up.status();
-        assert!(
-            !st["supervisor"]["estop"].is_null(),
-            "{why} cleared the e-stop"
-        );
-    };
+    integration_tests::attributable(|| {
+        let test = "web-guard";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        let (view, addr) = web(&up.inst, &[]);
+        let host = addr.as_str();
+        let own = format!("http://{addr}");
+        up.ok(&["estop"]);
+        up.until("the e-stop latched", |s| {
+            !s["supervisor"]["estop"].is_null()
+        });
+        let latched = |why: &str| {
+            let st = up.status();
+            assert!(
+                !st["supervisor"]["estop"].is_null(),
+                "{why} cleared the e-stop"
+            );
+        };
 
-    for (why, headers) in [
-        (
-            "another origin",
-            vec![
+        for (why, headers) in [
+            (
+                "another origin",
+                vec![
+                    ("Host", host),
+                    ("Origin", "http://evil.example"),
+                    ("X-Rtc-Request", "1"),
+                ],
+            ),
+            (
+                "no X-Rtc-Request header",
+                vec![("Host", host), ("Origin", own.as_str())],
+            ),
+            (
+                "a foreign Host (DNS rebinding)",
+                vec![("Host", "evil.example:80"), ("X-Rtc-Request", "1")],
+            ),
+        ] {
+            let (code, body) = http(&addr, "POST", "/api/reset", &headers);
+            assert_eq!(code, 403, "{why}: {body}");
+            latched(why);
+        }
+        let (code, body) = http(&addr, "GET", "/", &[("Host", "evil.example")]);
+        assert_eq!(code, 403, "a page under a foreign Host: {body}");
+        let (code, body) = http(
+            &addr,
+            "GET",
+            "/ws",
+            &[
                 ("Host", host),
                 ("Origin", "http://evil.example"),
-                ("X-Rtc-Request", "1"),
+                ("Connection", "Upgrade"),
+                ("Upgrade", "websocket"),
+                ("Sec-WebSocket-Version", "13"),
+                ("Sec-WebSocket-Key", "dGhlIHNhbXBsZSBub25jZQ=="),
             ],
-        ),
-        (
-            "no X-Rtc-Request header",
-            vec![("Host", host), ("Origin", own.as_str())],
-        ),
-        (
-            "a foreign Host (DNS rebinding)",
-            vec![("Host", "evil.example:80"), ("X-Rtc-Request", "1")],
-        ),
-    ] {
-        let (code, body) = http(&addr, "POST", "/api/reset", &headers);
-        assert_eq!(code, 403, "{why}: {body}");
-        latched(why);
-    }
-    let (code, body) = http(&addr, "GET", "/", &[("Host", "evil.example")]);
-    assert_eq!(code, 403, "a page under a foreign Host: {body}");
-    let (code, body) = http(
-        &addr,
-        "GET",
-        "/ws",
-        &[
-            ("Host", host),
-            ("Origin", "http://evil.example"),
-            ("Connection", "Upgrade"),
-            ("Upgrade", "websocket"),
-            ("Sec-WebSocket-Version", "13"),
-            ("Sec-WebSocket-Key", "dGhlIHNhbXBsZSBub25jZQ=="),
-        ],
-    );
-    assert_eq!(code, 403, "a cross-origin WebSocket: {body}");
+        );
+        assert_eq!(code, 403, "a cross-origin WebSocket: {body}");
 
-    // Another local user, with every header right.
-    let script = format!(
-        r#"
+        // Another local user, with every header right.
+        let script = format!(
+            r#"
 import urllib.request, urllib.error
 r = urllib.request.Request("http://{addr}/api/reset", method="POST",
     headers={{"X-Rtc-Request": "1", "Origin": "http://{addr}"}})
@@ -577,74 +590,75 @@ try:
 except urllib.error.HTTPError as e:
     print(e.code, e.read().decode())
 "#
-    );
-    let out = python_as_nobody(&script);
-    let said = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        said.starts_with("403") && said.contains("uid 65534 may not"),
-        "another user: {said}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    latched("another user");
-
-    // The page's own request clears it.
-    let (code, body) = http(
-        &addr,
-        "POST",
-        "/api/reset",
-        &[("Host", host), ("Origin", &own), ("X-Rtc-Request", "1")],
-    );
-    assert_eq!(code, 200, "the page's own reset: {body}");
-    up.until("the e-stop cleared", |s| s["supervisor"]["estop"].is_null());
-    drop(view);
-
-    // With a token: nothing without it, the page included; the page with it sets a cookie
-    // that carries it for its script.
-    let token = "s3cret-token-42";
-    let (view, addr) = web(&up.inst, &["--token", token]);
-    let host = addr.as_str();
-    for path in ["/", "/app.js", "/vendor/three.module.js"] {
-        let (code, body) = http(&addr, "GET", path, &[("Host", host)]);
-        assert_eq!(code, 401, "{path} without the token: {body}");
-    }
-    let (code, page) = http(&addr, "GET", &format!("/?token={token}"), &[("Host", host)]);
-    assert_eq!(code, 200, "the page with its token: {page}");
-    let cookie = page
-        .lines()
-        .find_map(|l| l.strip_prefix("set-cookie: "))
-        .and_then(|c| c.split(';').next())
-        .unwrap_or_else(|| panic!("no cookie:\n{page}"))
-        .to_string();
-    assert!(page.contains("SameSite=Strict"), "{page}");
-    let (code, body) = http(
-        &addr,
-        "GET",
-        "/app.js",
-        &[("Host", host), ("Cookie", &cookie)],
-    );
-    assert_eq!(code, 200, "the script with the cookie: {body}");
-    let (code, body) = http(
-        &addr,
-        "GET",
-        "/app.js",
-        &[("Host", host), ("Authorization", "Bearer wrong-token-42")],
-    );
-    assert_eq!(code, 401, "a wrong token: {body}");
-    drop(view);
-    for bad in ["        ", "spaces in token", "short", "semi;colon-token"] {
-        let out = run_with_watchdog(
-            supervisor().args([
-                "web",
-                "--instance",
-                &up.inst,
-                "--listen",
-                "127.0.0.1:0",
-                "--token",
-                bad,
-            ]),
-            WATCHDOG,
         );
-        assert_eq!(out.status.code(), Some(2), "--token {bad:?} accepted");
-    }
-    up.down();
+        let out = python_as_nobody(&script);
+        let said = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            said.starts_with("403") && said.contains("uid 65534 may not"),
+            "another user: {said}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        latched("another user");
+
+        // The page's own request clears it.
+        let (code, body) = http(
+            &addr,
+            "POST",
+            "/api/reset",
+            &[("Host", host), ("Origin", &own), ("X-Rtc-Request", "1")],
+        );
+        assert_eq!(code, 200, "the page's own reset: {body}");
+        up.until("the e-stop cleared", |s| s["supervisor"]["estop"].is_null());
+        drop(view);
+
+        // With a token: nothing without it, the page included; the page with it sets a cookie
+        // that carries it for its script.
+        let token = "s3cret-token-42";
+        let (view, addr) = web(&up.inst, &["--token", token]);
+        let host = addr.as_str();
+        for path in ["/", "/app.js", "/vendor/three.module.js"] {
+            let (code, body) = http(&addr, "GET", path, &[("Host", host)]);
+            assert_eq!(code, 401, "{path} without the token: {body}");
+        }
+        let (code, page) = http(&addr, "GET", &format!("/?token={token}"), &[("Host", host)]);
+        assert_eq!(code, 200, "the page with its token: {page}");
+        let cookie = page
+            .lines()
+            .find_map(|l| l.strip_prefix("set-cookie: "))
+            .and_then(|c| c.split(';').next())
+            .unwrap_or_else(|| panic!("no cookie:\n{page}"))
+            .to_string();
+        assert!(page.contains("SameSite=Strict"), "{page}");
+        let (code, body) = http(
+            &addr,
+            "GET",
+            "/app.js",
+            &[("Host", host), ("Cookie", &cookie)],
+        );
+        assert_eq!(code, 200, "the script with the cookie: {body}");
+        let (code, body) = http(
+            &addr,
+            "GET",
+            "/app.js",
+            &[("Host", host), ("Authorization", "Bearer wrong-token-42")],
+        );
+        assert_eq!(code, 401, "a wrong token: {body}");
+        drop(view);
+        for bad in ["        ", "spaces in token", "short", "semi;colon-token"] {
+            let out = run_with_watchdog(
+                supervisor().args([
+                    "web",
+                    "--instance",
+                    &up.inst,
+                    "--listen",
+                    "127.0.0.1:0",
+                    "--token",
+                    bad,
+                ]),
+                WATCHDOG,
+            );
+            assert_eq!(out.status.code(), Some(2), "--token {bad:?} accepted");
+        }
+        up.down();
+    });
 }

@@ -209,293 +209,301 @@ fn to_segment(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_them() {
-    let test = "mb-read";
-    let up = Up::start(test, &cell(test, &[]));
-    let a = address(&up);
-    // At rest, with mbpoll: each axis' block (position, command, following error, velocity).
-    let rest = mbpoll_i32(a, 32, 12);
-    assert_eq!(rest[0], 40_000, "x at 40 mm: {rest:?}");
-    assert_eq!(rest[4], 40_000, "y at 40 mm: {rest:?}");
-    assert_eq!(rest[8], 0, "theta at 0 deg: {rest:?}");
-    // pymodbus polls while the triangle runs.
-    let poller = Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/modbus_poll.py"))
-        .args([&a.ip().to_string(), &a.port().to_string(), "120", "3"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("python3");
-    let tr = scratch(test, "trace.csv", "");
-    let triangle = examples().join("triangle.prog");
-    let out = up.ok(&[
-        "exec",
-        triangle.to_str().expect("utf-8"),
-        "--wait",
-        "--json",
-        "--trace",
-        tr.to_str().expect("utf-8"),
-    ]);
-    let report: Value = serde_json::from_str(out.trim()).expect("report");
-    assert_eq!(report["ok"], true, "{report}");
-    let mut poller = poller;
-    let _ = poller.kill();
-    let polled = poller.wait_with_output().expect("poller output");
-    let stdout = String::from_utf8_lossy(&polled.stdout);
-    let stderr = String::from_utf8_lossy(&polled.stderr);
-    assert!(!stderr.contains("exception"), "{stderr}");
-    let rows: Vec<Vec<f64>> = stdout
-        .lines()
-        .filter(|l| !l.is_empty())
-        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
-        .collect();
-    // image, measured_us, written_us, motion, line, then (position, command, error) per axis.
-    let moving: Vec<&Vec<f64>> = rows.iter().filter(|r| r[3] == 1.0).collect();
-    let trace = trace(&tr);
-    println!(
-        "pymodbus: {} images read, {} while moving; trace {} rows",
-        rows.len(),
-        moving.len(),
-        trace.len()
-    );
-    assert!(moving.len() >= 100, "too few images read while moving");
-    for w in rows.windows(2) {
-        assert!(w[1][0] > w[0][0], "image numbers increase: {w:?}");
-        assert!(w[1][1] >= w[0][1], "measurement times increase: {w:?}");
-    }
-    let mut ages: Vec<f64> = rows.iter().map(|r| r[2] - r[1]).collect();
-    ages.sort_by(f64::total_cmp);
-    println!(
-        "age of the positions when iobridge wrote them: median {:.0} µs, max {:.0} µs",
-        ages[ages.len() / 2],
-        ages[ages.len() - 1]
-    );
-    for r in &rows {
-        let age_us = r[2] - r[1];
-        assert!(age_us >= 0.0, "measured before written: {r:?}");
-        for k in 0..3 {
-            let (p, c, e) = (r[5 + 3 * k], r[6 + 3 * k], r[7 + 3 * k]);
+    integration_tests::attributable(|| {
+        let test = "mb-read";
+        let up = Up::start(test, &cell(test, &[]));
+        let a = address(&up);
+        // At rest, with mbpoll: each axis' block (position, command, following error, velocity).
+        let rest = mbpoll_i32(a, 32, 12);
+        assert_eq!(rest[0], 40_000, "x at 40 mm: {rest:?}");
+        assert_eq!(rest[4], 40_000, "y at 40 mm: {rest:?}");
+        assert_eq!(rest[8], 0, "theta at 0 deg: {rest:?}");
+        // pymodbus polls while the triangle runs.
+        let poller = Command::new("python3")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/modbus_poll.py"))
+            .args([&a.ip().to_string(), &a.port().to_string(), "120", "3"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("python3");
+        let tr = scratch(test, "trace.csv", "");
+        let triangle = examples().join("triangle.prog");
+        let out = up.ok(&[
+            "exec",
+            triangle.to_str().expect("utf-8"),
+            "--wait",
+            "--json",
+            "--trace",
+            tr.to_str().expect("utf-8"),
+        ]);
+        let report: Value = serde_json::from_str(out.trim()).expect("report");
+        assert_eq!(report["ok"], true, "{report}");
+        let mut poller = poller;
+        let _ = poller.kill();
+        let polled = poller.wait_with_output().expect("poller output");
+        let stdout = String::from_utf8_lossy(&polled.stdout);
+        let stderr = String::from_utf8_lossy(&polled.stderr);
+        assert!(!stderr.contains("exception"), "{stderr}");
+        let rows: Vec<Vec<f64>> = stdout
+            .lines()
+            .filter(|l| !l.is_empty())
+            .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
+            .collect();
+        // image, measured_us, written_us, motion, line, then (position, command, error) per axis.
+        let moving: Vec<&Vec<f64>> = rows.iter().filter(|r| r[3] == 1.0).collect();
+        let trace = trace(&tr);
+        println!(
+            "pymodbus: {} images read, {} while moving; trace {} rows",
+            rows.len(),
+            moving.len(),
+            trace.len()
+        );
+        assert!(moving.len() >= 100, "too few images read while moving");
+        for w in rows.windows(2) {
+            assert!(w[1][0] > w[0][0], "image numbers increase: {w:?}");
+            assert!(w[1][1] >= w[0][1], "measurement times increase: {w:?}");
+        }
+        let mut ages: Vec<f64> = rows.iter().map(|r| r[2] - r[1]).collect();
+        ages.sort_by(f64::total_cmp);
+        println!(
+            "age of the positions when iobridge wrote them: median {:.0} µs, max {:.0} µs",
+            ages[ages.len() / 2],
+            ages[ages.len() - 1]
+        );
+        for r in &rows {
+            let age_us = r[2] - r[1];
+            assert!(age_us >= 0.0, "measured before written: {r:?}");
+            for k in 0..3 {
+                let (p, c, e) = (r[5 + 3 * k], r[6 + 3 * k], r[7 + 3 * k]);
+                assert!(
+                    (c - p - e).abs() <= 0.0015,
+                    "following error = command - position within rounding: {r:?}"
+                );
+            }
+        }
+        // Every position read while moving lies on the trace's measured path (between two of its
+        // rows, 4 ms apart), in the order of the trace.
+        let act: Vec<[f64; 3]> = trace.iter().map(|r| [r[4], r[5], r[6]]).collect();
+        let mut at = 0usize;
+        let mut worst = 0.0f64;
+        for r in &moving {
+            let p = [r[5], r[8], r[11]];
+            let (best, d) = (at..(at + 2000).min(act.len() - 1))
+                .map(|i| (i, to_segment(&p, &act[i], &act[i + 1])))
+                .fold((at, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b });
             assert!(
-                (c - p - e).abs() <= 0.0015,
-                "following error = command - position within rounding: {r:?}"
+                d <= 0.002,
+                "position {p:?} (image {}) is {d:.4} from the trace's path near row {best}",
+                r[0]
+            );
+            worst = worst.max(d);
+            at = best;
+        }
+        println!("largest distance from the trace's path: {worst:.4} (units)");
+        // At rest again, mbpoll reads where the trace ends.
+        let end = mbpoll_i32(a, 32, 12);
+        let last = trace.last().expect("rows");
+        for (k, v) in [end[0], end[4], end[8]].into_iter().enumerate() {
+            assert!(
+                (v as f64 / 1000.0 - last[4 + k]).abs() <= 0.0015,
+                "axis {k}: {v} against the trace's {last:?}"
             );
         }
-    }
-    // Every position read while moving lies on the trace's measured path (between two of its
-    // rows, 4 ms apart), in the order of the trace.
-    let act: Vec<[f64; 3]> = trace.iter().map(|r| [r[4], r[5], r[6]]).collect();
-    let mut at = 0usize;
-    let mut worst = 0.0f64;
-    for r in &moving {
-        let p = [r[5], r[8], r[11]];
-        let (best, d) = (at..(at + 2000).min(act.len() - 1))
-            .map(|i| (i, to_segment(&p, &act[i], &act[i + 1])))
-            .fold((at, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b });
-        assert!(
-            d <= 0.002,
-            "position {p:?} (image {}) is {d:.4} from the trace's path near row {best}",
-            r[0]
-        );
-        worst = worst.max(d);
-        at = best;
-    }
-    println!("largest distance from the trace's path: {worst:.4} (units)");
-    // At rest again, mbpoll reads where the trace ends.
-    let end = mbpoll_i32(a, 32, 12);
-    let last = trace.last().expect("rows");
-    for (k, v) in [end[0], end[4], end[8]].into_iter().enumerate() {
-        assert!(
-            (v as f64 / 1000.0 - last[4 + k]).abs() <= 0.0015,
-            "axis {k}: {v} against the trace's {last:?}"
-        );
-    }
-    up.down();
+        up.down();
+    });
 }
 
 #[test]
 fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost_server_is_no_estop()
  {
-    let test = "mb-write";
-    let up = Up::start(test, &cell(test, &[]));
-    let mut c = Raw::connect(address(&up));
-    // Coil 1 is the gripper (an output); the sensor that follows it closes 80 ms later.
-    assert_eq!(c.write_coil(1, true), Ok(vec![5, 0, 1, 0xFF, 0]));
-    up.until("gripper closed", |s| {
-        s["io"]["entries"][1]["value"] == 1 && s["io"]["entries"][2]["value"] == 1
+    integration_tests::attributable(|| {
+        let test = "mb-write";
+        let up = Up::start(test, &cell(test, &[]));
+        let mut c = Raw::connect(address(&up));
+        // Coil 1 is the gripper (an output); the sensor that follows it closes 80 ms later.
+        assert_eq!(c.write_coil(1, true), Ok(vec![5, 0, 1, 0xFF, 0]));
+        up.until("gripper closed", |s| {
+            s["io"]["entries"][1]["value"] == 1 && s["io"]["entries"][2]["value"] == 1
+        });
+        let bits = c.bits(2, 0, 5).expect("discrete inputs");
+        assert_eq!(
+            bits,
+            [true, true, true, false, false],
+            "estop_ok, gripper, closed"
+        );
+        assert_eq!(c.bits(1, 0, 5).expect("coils"), bits);
+        // Inputs and addresses past the table are not writable; nothing changes.
+        assert_eq!(c.write_coil(0, false), Err(ILLEGAL_ADDRESS));
+        assert_eq!(c.write_coil(2, false), Err(ILLEGAL_ADDRESS));
+        assert_eq!(c.write_coil(5, true), Err(ILLEGAL_ADDRESS));
+        assert_eq!(
+            c.registers(4, 0, 57),
+            Err(ILLEGAL_ADDRESS),
+            "56 input registers"
+        );
+        assert_eq!(c.registers(4, 0, 0), Err(ILLEGAL_VALUE));
+        assert_eq!(c.registers(4, 0, 56).map(|r| r.len()), Ok(56));
+        // Functions this server does not implement: a user-defined one, device identification.
+        assert_eq!(c.ask(&[0x41, 1, 2, 3]), Some(Err(ILLEGAL_FUNCTION)));
+        assert_eq!(c.ask(&[0x2B, 0x0E, 1, 0]), Some(Err(ILLEGAL_FUNCTION)));
+        // The speed override: 1..=100 %.
+        assert_eq!(c.write_register(1, 0), Err(ILLEGAL_VALUE));
+        assert_eq!(c.write_register(1, 101), Err(ILLEGAL_VALUE));
+        assert_eq!(c.write_register(2, 1), Err(ILLEGAL_ADDRESS));
+        assert!(c.write_register(1, 40).is_ok());
+        let start = Instant::now();
+        while c.registers(3, 1, 1) != Ok(vec![40]) {
+            assert!(start.elapsed() < WATCHDOG, "the override never read back");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let s = up.status();
+        assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
+        assert!(s["supervisor"]["estop"].is_null(), "{s}");
+        // The server is not critical: killed, it restarts without an e-stop.
+        let pid = pid_of("modbus", &up.inst);
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid),
+            nix::sys::signal::Signal::SIGKILL,
+        )
+        .expect("kill");
+        let s = up.until("modbus restarted", |s| {
+            process_in(s, "modbus")["restarts"] == 1 && process_in(s, "modbus")["life"] == "running"
+        });
+        assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
+        for p in ["machine", "servo", "trajgen", "iobridge"] {
+            assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
+        }
+        assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
+        let mut c = Raw::connect(address(&up));
+        // The outputs kept their values through it.
+        assert_eq!(c.bits(1, 1, 1), Ok(vec![true]));
+        // The e-stop register: 0 does nothing, 1 raises the e-stop, named after the client.
+        assert!(c.write_register(0, 0).is_ok());
+        assert_eq!(c.write_register(0, 2), Err(ILLEGAL_VALUE));
+        assert_eq!(c.registers(3, 0, 2), Ok(vec![0, 40]));
+        assert!(c.write_register(0, 1).is_ok());
+        let s = up.until("e-stop latched", |s| !s["supervisor"]["estop"].is_null());
+        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+        assert!(reason.contains("Modbus by 127.0.0.1:"), "{s}");
+        assert_eq!(s["supervisor"]["estop"]["origin"], "external", "{s}");
+        up.until("outputs safe", |s| s["io"]["outputs_safe"] == true);
+        let start = Instant::now();
+        while c.registers(3, 0, 1) != Ok(vec![1]) {
+            assert!(start.elapsed() < WATCHDOG, "the e-stop never read back");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        // outputs_safe (input register 29) reaches the server's snapshot with iobridge's image.
+        let start = Instant::now();
+        while c.registers(4, 29, 1) != Ok(vec![1]) {
+            assert!(start.elapsed() < WATCHDOG, "outputs_safe never read 1");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert_eq!(c.write_coil(4, true), Err(BUSY), "outputs held safe");
+        up.ok(&["reset"]);
+        up.until("e-stop clear", |s| s["supervisor"]["estop"].is_null());
+        up.down();
     });
-    let bits = c.bits(2, 0, 5).expect("discrete inputs");
-    assert_eq!(
-        bits,
-        [true, true, true, false, false],
-        "estop_ok, gripper, closed"
-    );
-    assert_eq!(c.bits(1, 0, 5).expect("coils"), bits);
-    // Inputs and addresses past the table are not writable; nothing changes.
-    assert_eq!(c.write_coil(0, false), Err(ILLEGAL_ADDRESS));
-    assert_eq!(c.write_coil(2, false), Err(ILLEGAL_ADDRESS));
-    assert_eq!(c.write_coil(5, true), Err(ILLEGAL_ADDRESS));
-    assert_eq!(
-        c.registers(4, 0, 57),
-        Err(ILLEGAL_ADDRESS),
-        "56 input registers"
-    );
-    assert_eq!(c.registers(4, 0, 0), Err(ILLEGAL_VALUE));
-    assert_eq!(c.registers(4, 0, 56).map(|r| r.len()), Ok(56));
-    // Functions this server does not implement: a user-defined one, device identification.
-    assert_eq!(c.ask(&[0x41, 1, 2, 3]), Some(Err(ILLEGAL_FUNCTION)));
-    assert_eq!(c.ask(&[0x2B, 0x0E, 1, 0]), Some(Err(ILLEGAL_FUNCTION)));
-    // The speed override: 1..=100 %.
-    assert_eq!(c.write_register(1, 0), Err(ILLEGAL_VALUE));
-    assert_eq!(c.write_register(1, 101), Err(ILLEGAL_VALUE));
-    assert_eq!(c.write_register(2, 1), Err(ILLEGAL_ADDRESS));
-    assert!(c.write_register(1, 40).is_ok());
-    let start = Instant::now();
-    while c.registers(3, 1, 1) != Ok(vec![40]) {
-        assert!(start.elapsed() < WATCHDOG, "the override never read back");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let s = up.status();
-    assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
-    assert!(s["supervisor"]["estop"].is_null(), "{s}");
-    // The server is not critical: killed, it restarts without an e-stop.
-    let pid = pid_of("modbus", &up.inst);
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(pid),
-        nix::sys::signal::Signal::SIGKILL,
-    )
-    .expect("kill");
-    let s = up.until("modbus restarted", |s| {
-        process_in(s, "modbus")["restarts"] == 1 && process_in(s, "modbus")["life"] == "running"
-    });
-    assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
-    for p in ["machine", "servo", "trajgen", "iobridge"] {
-        assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
-    }
-    assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
-    let mut c = Raw::connect(address(&up));
-    // The outputs kept their values through it.
-    assert_eq!(c.bits(1, 1, 1), Ok(vec![true]));
-    // The e-stop register: 0 does nothing, 1 raises the e-stop, named after the client.
-    assert!(c.write_register(0, 0).is_ok());
-    assert_eq!(c.write_register(0, 2), Err(ILLEGAL_VALUE));
-    assert_eq!(c.registers(3, 0, 2), Ok(vec![0, 40]));
-    assert!(c.write_register(0, 1).is_ok());
-    let s = up.until("e-stop latched", |s| !s["supervisor"]["estop"].is_null());
-    let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-    assert!(reason.contains("Modbus by 127.0.0.1:"), "{s}");
-    assert_eq!(s["supervisor"]["estop"]["origin"], "external", "{s}");
-    up.until("outputs safe", |s| s["io"]["outputs_safe"] == true);
-    let start = Instant::now();
-    while c.registers(3, 0, 1) != Ok(vec![1]) {
-        assert!(start.elapsed() < WATCHDOG, "the e-stop never read back");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    // outputs_safe (input register 29) reaches the server's snapshot with iobridge's image.
-    let start = Instant::now();
-    while c.registers(4, 29, 1) != Ok(vec![1]) {
-        assert!(start.elapsed() < WATCHDOG, "outputs_safe never read 1");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert_eq!(c.write_coil(4, true), Err(BUSY), "outputs held safe");
-    up.ok(&["reset"]);
-    up.until("e-stop clear", |s| s["supervisor"]["estop"].is_null());
-    up.down();
 }
 
 #[test]
 fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
-    let test = "mb-hostile";
-    let cfg = cell(
-        test,
-        &[
-            ("max_connections = 8", "max_connections = 2"),
-            ("idle_timeout = 60.0", "idle_timeout = 3.0"),
-            ("writes = true", "writes = false"),
-        ],
-    );
-    let up = Up::start(test, &cfg);
-    let a = address(&up);
-    // A program runs meanwhile; it must end as if nothing happened.
-    let short = scratch(
-        test,
-        "short.prog",
-        "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
-    );
-    let job = up.exec_in_background(&short);
-    let mut c1 = Raw::connect(a);
-    let mut c2 = Raw::connect(a);
-    assert!(c1.registers(4, 0, 4).is_ok());
-    assert!(c2.registers(4, 0, 4).is_ok());
-    // A third client is closed at once; so is a flood of them.
-    for _ in 0..50 {
-        let mut c = Raw::connect(a);
-        assert!(c.closed(), "a connection beyond max_connections was served");
-    }
-    // Writes are off: exception 1, nothing changes.
-    assert_eq!(c1.write_coil(1, true), Err(ILLEGAL_FUNCTION));
-    assert_eq!(c1.write_register(0, 1), Err(ILLEGAL_FUNCTION));
-    // Garbage: a frame longer than any Modbus frame, bytes that are no frame at all, and a
-    // write of 16 coils with one data byte (it crashes tokio-modbus 0.17's decoder,
-    // slowtec/tokio-modbus#298): each closes its connection at once, long before the idle
-    // timeout (3 s), and the server goes on.
-    let t = Instant::now();
-    c1.s.write_all(&[0, 1, 0, 0, 0xFF, 0xFF, 1, 4])
-        .expect("send");
-    assert!(c1.closed(), "a 65535-byte frame was not refused");
-    c2.s.write_all(&[0xFF; 300]).expect("send");
-    assert!(c2.closed(), "garbage was not refused");
-    let mut c4 = Raw::connect(a);
-    c4.s.write_all(&[0, 1, 0, 0, 0, 8, 1, 0x0F, 0, 0, 0, 16, 1, 0xFF])
-        .expect("send");
-    assert!(c4.closed(), "a short coil write was not refused");
-    let refused_in = t.elapsed();
-    // Their places are free again; an idle client is closed after idle_timeout.
-    let start = Instant::now();
-    let mut c3 = loop {
-        let mut c = Raw::connect(a);
-        if let Some(Ok(_)) = c.ask(&[4, 0, 0, 0, 4]) {
-            break c;
+    integration_tests::attributable(|| {
+        let test = "mb-hostile";
+        let cfg = cell(
+            test,
+            &[
+                ("max_connections = 8", "max_connections = 2"),
+                ("idle_timeout = 60.0", "idle_timeout = 3.0"),
+                ("writes = true", "writes = false"),
+            ],
+        );
+        let up = Up::start(test, &cfg);
+        let a = address(&up);
+        // A program runs meanwhile; it must end as if nothing happened.
+        let short = scratch(
+            test,
+            "short.prog",
+            "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
+        );
+        let job = up.exec_in_background(&short);
+        let mut c1 = Raw::connect(a);
+        let mut c2 = Raw::connect(a);
+        assert!(c1.registers(4, 0, 4).is_ok());
+        assert!(c2.registers(4, 0, 4).is_ok());
+        // A third client is closed at once; so is a flood of them.
+        for _ in 0..50 {
+            let mut c = Raw::connect(a);
+            assert!(c.closed(), "a connection beyond max_connections was served");
         }
-        assert!(start.elapsed() < WATCHDOG, "never served again");
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    // The short coil write would have aborted the server without the frame check.
-    assert_eq!(
-        process_in(&up.status(), "modbus")["restarts"],
-        0,
-        "the server crashed"
-    );
-    println!("three malformed frames refused in {refused_in:?}");
-    std::thread::sleep(Duration::from_millis(3500));
-    assert!(c3.closed(), "an idle client kept its connection");
-    // Nothing else noticed.
-    let out = job.wait_with_output().expect("exec");
-    let report: Value = serde_json::from_slice(&out.stdout).expect("report");
-    assert_eq!(report["ok"], true, "{report}");
-    let s = up.status();
-    assert!(s["supervisor"]["estop"].is_null(), "{s}");
-    for p in ["machine", "servo", "trajgen", "iobridge", "modbus"] {
-        assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
-    }
-    up.down();
+        // Writes are off: exception 1, nothing changes.
+        assert_eq!(c1.write_coil(1, true), Err(ILLEGAL_FUNCTION));
+        assert_eq!(c1.write_register(0, 1), Err(ILLEGAL_FUNCTION));
+        // Garbage: a frame longer than any Modbus frame, bytes that are no frame at all, and a
+        // write of 16 coils with one data byte (it crashes tokio-modbus 0.17's decoder,
+        // slowtec/tokio-modbus#298): each closes its connection at once, long before the idle
+        // timeout (3 s), and the server goes on.
+        let t = Instant::now();
+        c1.s.write_all(&[0, 1, 0, 0, 0xFF, 0xFF, 1, 4])
+            .expect("send");
+        assert!(c1.closed(), "a 65535-byte frame was not refused");
+        c2.s.write_all(&[0xFF; 300]).expect("send");
+        assert!(c2.closed(), "garbage was not refused");
+        let mut c4 = Raw::connect(a);
+        c4.s.write_all(&[0, 1, 0, 0, 0, 8, 1, 0x0F, 0, 0, 0, 16, 1, 0xFF])
+            .expect("send");
+        assert!(c4.closed(), "a short coil write was not refused");
+        let refused_in = t.elapsed();
+        // Their places are free again; an idle client is closed after idle_timeout.
+        let start = Instant::now();
+        let mut c3 = loop {
+            let mut c = Raw::connect(a);
+            if let Some(Ok(_)) = c.ask(&[4, 0, 0, 0, 4]) {
+                break c;
+            }
+            assert!(start.elapsed() < WATCHDOG, "never served again");
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        // The short coil write would have aborted the server without the frame check.
+        assert_eq!(
+            process_in(&up.status(), "modbus")["restarts"],
+            0,
+            "the server crashed"
+        );
+        println!("three malformed frames refused in {refused_in:?}");
+        std::thread::sleep(Duration::from_millis(3500));
+        assert!(c3.closed(), "an idle client kept its connection");
+        // Nothing else noticed.
+        let out = job.wait_with_output().expect("exec");
+        let report: Value = serde_json::from_slice(&out.stdout).expect("report");
+        assert_eq!(report["ok"], true, "{report}");
+        let s = up.status();
+        assert!(s["supervisor"]["estop"].is_null(), "{s}");
+        for p in ["machine", "servo", "trajgen", "iobridge", "modbus"] {
+            assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
+        }
+        up.down();
+    });
 }
 
 #[test]
 fn the_register_map_document_is_the_codes() {
-    let cell = supervisor::config::Config::default_cell().to_shm();
-    let map = modbus::map::markdown(&cell);
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/fieldbus.md");
-    let doc = std::fs::read_to_string(&path).unwrap_or_default();
-    const BEGIN: &str = "<!-- register map: generated by the test the_register_map_document_is_the_codes; BLESS=1 regenerates -->\n";
-    const END: &str = "<!-- end of the register map -->\n";
-    let (before, rest) = doc.split_once(BEGIN).unwrap_or((&doc, ""));
-    let after = rest.split_once(END).map_or("", |(_, a)| a);
-    let want = format!("{before}{BEGIN}{map}{END}{after}");
-    if std::env::var_os("BLESS").is_some() {
-        std::fs::write(&path, &want).expect("write docs/fieldbus.md");
-        return;
-    }
-    assert!(
-        doc == want,
-        "docs/fieldbus.md's register map differs from the code: BLESS=1 cargo test -p integration-tests the_register_map"
-    );
+    integration_tests::attributable(|| {
+        let cell = supervisor::config::Config::default_cell().to_shm();
+        let map = modbus::map::markdown(&cell);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/fieldbus.md");
+        let doc = std::fs::read_to_string(&path).unwrap_or_default();
+        const BEGIN: &str = "<!-- register map: generated by the test the_register_map_document_is_the_codes; BLESS=1 regenerates -->\n";
+        const END: &str = "<!-- end of the register map -->\n";
+        let (before, rest) = doc.split_once(BEGIN).unwrap_or((&doc, ""));
+        let after = rest.split_once(END).map_or("", |(_, a)| a);
+        let want = format!("{before}{BEGIN}{map}{END}{after}");
+        if std::env::var_os("BLESS").is_some() {
+            std::fs::write(&path, &want).expect("write docs/fieldbus.md");
+            return;
+        }
+        assert!(
+            doc == want,
+            "docs/fieldbus.md's register map differs from the code: BLESS=1 cargo test -p integration-tests the_register_map"
+        );
+    });
 }

@@ -53,356 +53,372 @@ fn signal(program: &str, inst: &str, sig: nix::sys::signal::Signal) {
 
 #[test]
 fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
-    let test = "ops-up";
-    let cfg = cell(test);
-    let up = Up::start(test, &cfg);
-    // A second supervisor of the instance is refused, whether `up` or `run`.
-    let err = up.refused(&["up", "--config", cfg.to_str().expect("utf-8")]);
-    assert!(err.contains("is in use"), "{err}");
-    let triangle = integration_tests::examples().join("triangle.prog");
-    let tri = triangle.to_str().expect("utf-8");
-    let err = up.refused(&["run", tri]);
-    assert!(err.contains("is in use"), "{err}");
-    // A bad program is refused with its line and column; nothing moves.
-    let bad = program(test, "MOVE(140, 40)\nEND\n");
-    let err = up.refused(&["exec", &bad]);
-    assert!(err.contains("p.prog:1:"), "{err}");
-    // exec --wait prints run's report and draws its figures; an output where none can be
-    // written is refused before anything moves.
-    let err = up.refused(&["exec", tri, "--wait", "--plot", "/nonexistent/dir/p.png"]);
-    assert!(err.contains("--plot /nonexistent/dir/p.png"), "{err}");
-    let plot = integration_tests::scratch(test, "exec.png", "");
-    let plot_arg = plot.to_str().expect("utf-8");
-    let out = up.ok(&["exec", tri, "--wait", "--json", "--plot", plot_arg]);
-    let r: Value = serde_json::from_str(out.trim()).expect("report");
-    assert_eq!(r["ok"], true);
-    crate::cell::check_figures(&plot, r["processes"].as_object().expect("processes").len());
-    let diff = r["difference_s"].as_f64().expect("difference");
-    println!("exec --wait: measured - theoretical = {:.3} ms", diff * 1e3);
-    assert!(diff >= 0.0, "{r}");
-    for p in ["machine", "servo", "trajgen", "iobridge"] {
-        assert!(r["processes"][p]["cycles"].as_u64().unwrap_or(0) > 0, "{p}");
-    }
-    // Pause: the axes come to rest on the path and hold; resume goes on; abort drops it.
-    up.ok(&["exec", tri]);
-    up.until("moving", moving);
-    let paused = up.ok(&["pause"]);
-    assert!(paused.contains("paused at rest on the path"), "{paused}");
-    let s = up.status();
-    assert_eq!(s["supervisor"]["job"]["paused"], true, "{s}");
-    assert!(
-        s["supervisor"]["estop"].is_null(),
-        "a pause is no e-stop: {s}"
-    );
-    let line = s["supervisor"]["job"]["line"].clone();
-    std::thread::sleep(Duration::from_millis(500));
-    let s2 = up.status();
-    assert_eq!(s2["supervisor"]["job"]["line"], line, "held while paused");
-    let err = up.refused(&["exec", tri]);
-    assert!(err.contains("busy"), "{err}");
-    up.ok(&["resume"]);
-    up.until("moving again", |s| {
-        s["supervisor"]["job"]["path_speed"].as_f64() == Some(1.0)
+    integration_tests::attributable(|| {
+        let test = "ops-up";
+        let cfg = cell(test);
+        let up = Up::start(test, &cfg);
+        // A second supervisor of the instance is refused, whether `up` or `run`.
+        let err = up.refused(&["up", "--config", cfg.to_str().expect("utf-8")]);
+        assert!(err.contains("is in use"), "{err}");
+        let triangle = integration_tests::examples().join("triangle.prog");
+        let tri = triangle.to_str().expect("utf-8");
+        let err = up.refused(&["run", tri]);
+        assert!(err.contains("is in use"), "{err}");
+        // A bad program is refused with its line and column; nothing moves.
+        let bad = program(test, "MOVE(140, 40)\nEND\n");
+        let err = up.refused(&["exec", &bad]);
+        assert!(err.contains("p.prog:1:"), "{err}");
+        // exec --wait prints run's report and draws its figures; an output where none can be
+        // written is refused before anything moves.
+        let err = up.refused(&["exec", tri, "--wait", "--plot", "/nonexistent/dir/p.png"]);
+        assert!(err.contains("--plot /nonexistent/dir/p.png"), "{err}");
+        let plot = integration_tests::scratch(test, "exec.png", "");
+        let plot_arg = plot.to_str().expect("utf-8");
+        let out = up.ok(&["exec", tri, "--wait", "--json", "--plot", plot_arg]);
+        let r: Value = serde_json::from_str(out.trim()).expect("report");
+        assert_eq!(r["ok"], true);
+        crate::cell::check_figures(&plot, r["processes"].as_object().expect("processes").len());
+        let diff = r["difference_s"].as_f64().expect("difference");
+        println!("exec --wait: measured - theoretical = {:.3} ms", diff * 1e3);
+        assert!(diff >= 0.0, "{r}");
+        for p in ["machine", "servo", "trajgen", "iobridge"] {
+            assert!(r["processes"][p]["cycles"].as_u64().unwrap_or(0) > 0, "{p}");
+        }
+        // Pause: the axes come to rest on the path and hold; resume goes on; abort drops it.
+        up.ok(&["exec", tri]);
+        up.until("moving", moving);
+        let paused = up.ok(&["pause"]);
+        assert!(paused.contains("paused at rest on the path"), "{paused}");
+        let s = up.status();
+        assert_eq!(s["supervisor"]["job"]["paused"], true, "{s}");
+        assert!(
+            s["supervisor"]["estop"].is_null(),
+            "a pause is no e-stop: {s}"
+        );
+        let line = s["supervisor"]["job"]["line"].clone();
+        std::thread::sleep(Duration::from_millis(500));
+        let s2 = up.status();
+        assert_eq!(s2["supervisor"]["job"]["line"], line, "held while paused");
+        let err = up.refused(&["exec", tri]);
+        assert!(err.contains("busy"), "{err}");
+        up.ok(&["resume"]);
+        up.until("moving again", |s| {
+            s["supervisor"]["job"]["path_speed"].as_f64() == Some(1.0)
+        });
+        // The live override: the path speed ramps to it and stays, along the same path.
+        let slow = up.ok(&["speed", "40"]);
+        assert!(slow.contains("speed override 40 %"), "{slow}");
+        let s = up.until("at 40 %", |s| {
+            s["supervisor"]["job"]["path_speed"].as_f64() == Some(0.4)
+        });
+        assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
+        assert!(up.refused(&["speed", "0"]).contains("1 to 100 %"));
+        assert!(up.refused(&["speed", "250"]).contains("1 to 100 %"));
+        up.ok(&["speed", "100"]);
+        let aborted = up.ok(&["abort"]);
+        assert!(aborted.contains("aborted"), "{aborted}");
+        let s = up.status();
+        assert!(s["supervisor"]["job"].is_null(), "{s}");
+        assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
+        assert!(
+            s["supervisor"]["estop"].is_null(),
+            "an abort is no e-stop: {s}"
+        );
+        assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
+        // The next program starts where the abort left the axes.
+        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        // `down` while a client waits for a program: the client is told, not dropped.
+        let waiting = supervisor()
+            .args(["exec", "--wait", "--instance", &up.inst])
+            .arg(program(test, SHORT))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("exec");
+        up.until("moving", moving);
+        let inst = up.inst.clone();
+        up.down();
+        let out = waiting.wait_with_output().expect("exec");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
+        assert_clean(&inst);
+        // A command to an instance that is not up says so.
+        let out = supervisor()
+            .args(["status", "--instance", &instance(test)])
+            .output()
+            .expect("status");
+        assert_eq!(out.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&out.stderr).contains("is not up"));
     });
-    // The live override: the path speed ramps to it and stays, along the same path.
-    let slow = up.ok(&["speed", "40"]);
-    assert!(slow.contains("speed override 40 %"), "{slow}");
-    let s = up.until("at 40 %", |s| {
-        s["supervisor"]["job"]["path_speed"].as_f64() == Some(0.4)
-    });
-    assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
-    assert!(up.refused(&["speed", "0"]).contains("1 to 100 %"));
-    assert!(up.refused(&["speed", "250"]).contains("1 to 100 %"));
-    up.ok(&["speed", "100"]);
-    let aborted = up.ok(&["abort"]);
-    assert!(aborted.contains("aborted"), "{aborted}");
-    let s = up.status();
-    assert!(s["supervisor"]["job"].is_null(), "{s}");
-    assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
-    assert!(
-        s["supervisor"]["estop"].is_null(),
-        "an abort is no e-stop: {s}"
-    );
-    assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
-    // The next program starts where the abort left the axes.
-    up.ok(&["exec", &program(test, SHORT), "--wait"]);
-    // `down` while a client waits for a program: the client is told, not dropped.
-    let waiting = supervisor()
-        .args(["exec", "--wait", "--instance", &up.inst])
-        .arg(program(test, SHORT))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("exec");
-    up.until("moving", moving);
-    let inst = up.inst.clone();
-    up.down();
-    let out = waiting.wait_with_output().expect("exec");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
-    assert_clean(&inst);
-    // A command to an instance that is not up says so.
-    let out = supervisor()
-        .args(["status", "--instance", &instance(test)])
-        .output()
-        .expect("status");
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("is not up"));
 }
 
 #[test]
 fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named() {
-    let test = "ops-reset";
-    let up = Up::start(test, &cell(test));
-    up.ok(&["estop", "--reason", "ops test"]);
-    let s = up.until("latched and safe", |s| {
-        latched(s) && s["supervisor"]["arm"]["enabled"] == false
+    integration_tests::attributable(|| {
+        let test = "ops-reset";
+        let up = Up::start(test, &cell(test));
+        up.ok(&["estop", "--reason", "ops test"]);
+        let s = up.until("latched and safe", |s| {
+            latched(s) && s["supervisor"]["arm"]["enabled"] == false
+        });
+        assert!(
+            s["supervisor"]["estop"]["reason"]
+                .as_str()
+                .is_some_and(|r| r.contains("ops test")),
+            "{s}"
+        );
+        // Nothing runs and nothing enables while it is latched.
+        assert!(
+            up.refused(&["exec", &program(test, SHORT)])
+                .contains("e-stop is latched")
+        );
+        assert!(up.refused(&["start"]).contains("reset"));
+        up.ok(&["reset"]);
+        // Drives never re-enable by themselves.
+        std::thread::sleep(Duration::from_millis(500));
+        assert_eq!(up.status()["supervisor"]["arm"]["enabled"], false);
+        up.ok(&["start"]);
+        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        // A fault whose cause is still there: reset clears the e-stop and says what stays.
+        up.ok(&["inject", "--axis", "x", "encoder-loss"]);
+        up.until("servo's fault", |s| {
+            latched(s) && s["supervisor"]["arm"]["fault_latched"] == true
+        });
+        let out = up.ctl(&["reset"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("its cause is still present"), "{err}");
+        up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.down();
     });
-    assert!(
-        s["supervisor"]["estop"]["reason"]
-            .as_str()
-            .is_some_and(|r| r.contains("ops test")),
-        "{s}"
-    );
-    // Nothing runs and nothing enables while it is latched.
-    assert!(
-        up.refused(&["exec", &program(test, SHORT)])
-            .contains("e-stop is latched")
-    );
-    assert!(up.refused(&["start"]).contains("reset"));
-    up.ok(&["reset"]);
-    // Drives never re-enable by themselves.
-    std::thread::sleep(Duration::from_millis(500));
-    assert_eq!(up.status()["supervisor"]["arm"]["enabled"], false);
-    up.ok(&["start"]);
-    up.ok(&["exec", &program(test, SHORT), "--wait"]);
-    // A fault whose cause is still there: reset clears the e-stop and says what stays.
-    up.ok(&["inject", "--axis", "x", "encoder-loss"]);
-    up.until("servo's fault", |s| {
-        latched(s) && s["supervisor"]["arm"]["fault_latched"] == true
-    });
-    let out = up.ctl(&["reset"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("its cause is still present"), "{err}");
-    up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
-    up.ok(&["reset"]);
-    up.ok(&["start"]);
-    up.ok(&["exec", &program(test, SHORT), "--wait"]);
-    up.down();
 }
 
 #[test]
 fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_recovers() {
-    let test = "ops-kill";
-    let up = Up::start(test, &cell(test));
-    let long = program(
-        test,
-        "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nMOVE(140, 40, 0)\nEND\n",
-    );
-    for (victim, program) in [
-        ("trajgen", "trajgen"),
-        ("servo", "servo"),
-        ("iobridge", "iobridge"),
-        ("machine", "machine-sim"),
-    ] {
-        up.ok(&["exec", &long]);
-        up.until("moving", moving);
-        signal(program, &up.inst, nix::sys::signal::Signal::SIGKILL);
-        // The host e-stop names the process; the axes come to rest with the drives off; the
-        // supervisor stays up and restarts the process (restart = "on-failure").
-        let s = up.until("restarted and at rest", |s| {
-            latched(s)
-                && s["supervisor"]["job"].is_null()
-                && s["supervisor"]["arm"]["enabled"] == false
-                && process_in(s, victim)
-                    .is_some_and(|p| p["life"] == "running" && p["restarts"] == 1)
-        });
-        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-        assert!(reason.contains(victim), "{victim}: {s}");
-        assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
-        assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
-        up.until("all cyclic", all_running);
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
-    }
-    up.ok(&["exec", &program(test, SHORT), "--wait"]);
-    up.down();
+    integration_tests::attributable(|| {
+        let test = "ops-kill";
+        let up = Up::start(test, &cell(test));
+        let long = program(
+            test,
+            "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nMOVE(140, 40, 0)\nEND\n",
+        );
+        for (victim, program) in [
+            ("trajgen", "trajgen"),
+            ("servo", "servo"),
+            ("iobridge", "iobridge"),
+            ("machine", "machine-sim"),
+        ] {
+            up.ok(&["exec", &long]);
+            up.until("moving", moving);
+            signal(program, &up.inst, nix::sys::signal::Signal::SIGKILL);
+            // The host e-stop names the process; the axes come to rest with the drives off; the
+            // supervisor stays up and restarts the process (restart = "on-failure").
+            let s = up.until("restarted and at rest", |s| {
+                latched(s)
+                    && s["supervisor"]["job"].is_null()
+                    && s["supervisor"]["arm"]["enabled"] == false
+                    && process_in(s, victim)
+                        .is_some_and(|p| p["life"] == "running" && p["restarts"] == 1)
+            });
+            let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+            assert!(reason.contains(victim), "{victim}: {s}");
+            assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
+            assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
+            up.until("all cyclic", all_running);
+            up.ok(&["reset"]);
+            up.ok(&["start"]);
+        }
+        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.down();
+    });
 }
 
 #[test]
 fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
-    let test = "ops-stall";
-    let up = Up::start(test, &cell(test));
-    signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
-    let s = up.until("stall found, iobridge restarted", |s| {
-        latched(s)
-            && process_in(s, "iobridge")
-                .is_some_and(|p| p["restarts"] == 1 && p["life"] == "running")
+    integration_tests::attributable(|| {
+        let test = "ops-stall";
+        let up = Up::start(test, &cell(test));
+        signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
+        let s = up.until("stall found, iobridge restarted", |s| {
+            latched(s)
+                && process_in(s, "iobridge")
+                    .is_some_and(|p| p["restarts"] == 1 && p["life"] == "running")
+        });
+        assert!(
+            s["supervisor"]["estop"]["reason"]
+                .as_str()
+                .is_some_and(|r| r.contains("iobridge")),
+            "{s}"
+        );
+        assert!(up.log().contains("stalled"), "{}", up.log());
+        up.until("cyclic", all_running);
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        up.down();
     });
-    assert!(
-        s["supervisor"]["estop"]["reason"]
-            .as_str()
-            .is_some_and(|r| r.contains("iobridge")),
-        "{s}"
-    );
-    assert!(up.log().contains("stalled"), "{}", up.log());
-    up.until("cyclic", all_running);
-    up.ok(&["reset"]);
-    up.ok(&["start"]);
-    up.down();
 }
 
 #[test]
 fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
-    let test = "ops-swap";
-    let up = Up::start(test, &cell(test));
-    // The gripper holds a part: no swap may open it.
-    up.ok(&["io", "gripper", "1"]);
-    let triangle = integration_tests::examples().join("triangle.prog");
-    let mut run = up.exec_in_background(&triangle);
-    up.until("moving", moving);
-    let out = up.ok(&["swap", "iobridge"]);
-    println!("{}", out.trim());
-    assert!(out.contains("largest gap"), "{out}");
-    let s = up.status();
-    assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
-    // trajgen carries the motion: swapped during it, the program goes on along the path.
-    let out = up.ok(&["swap", "trajgen"]);
-    println!("{}", out.trim());
-    assert!(out.contains("trajgen swapped during"), "{out}");
-    let swap_ms: f64 = out
-        .split(" in ")
-        .nth(1)
-        .and_then(|r| r.split(" ms").next())
-        .and_then(|v| v.parse().ok())
-        .expect("the swap's duration");
-    // servo cannot be swapped under a moving arm.
-    let err = up.refused(&["swap", "servo"]);
-    assert!(err.contains("only while no program runs"), "{err}");
-    let start = Instant::now();
-    while run.try_wait().expect("wait").is_none() {
-        assert!(start.elapsed() < WATCHDOG, "the program did not end");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = run.wait_with_output().expect("output");
-    assert!(
-        out.status.success(),
-        "{}\nlog:\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        up.log()
-    );
-    // No e-stop, the following error within its limit (or servo would have cut power), and
-    // the motion time grew by about what the swap took (the pause's ramps included).
-    let r: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).expect("json");
-    let opened = r["events"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|e| e["text"] == "gripper = 0" || e["text"] == "gripper_closed = 0")
-        .count();
-    assert_eq!(opened, 0, "the new iobridge took over the gripper: {r}");
-    let extra_ms = r["difference_s"].as_f64().expect("difference") * 1e3;
-    println!(
-        "motion time grew by {extra_ms:.0} ms; the trajgen swap took {swap_ms:.0} ms; max following error {}",
-        r["max_following_error"]
-    );
-    assert!(
-        extra_ms > 0.0 && extra_ms < swap_ms + 525.0,
-        "{extra_ms} vs {swap_ms}"
-    );
-    // At rest: trajgen swapped for the same build, with a command of its own.
-    let trajgen = integration_tests::bin("trajgen");
-    let cmd = format!(
-        "{} --instance {{instance}} --name {{name}}",
-        trajgen.display()
-    );
-    let out = up.ok(&["swap", "trajgen", "--command", &cmd]);
-    println!("{}", out.trim());
-    up.until("enabled again", |s| {
-        s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+    integration_tests::attributable(|| {
+        let test = "ops-swap";
+        let up = Up::start(test, &cell(test));
+        // The gripper holds a part: no swap may open it.
+        up.ok(&["io", "gripper", "1"]);
+        let triangle = integration_tests::examples().join("triangle.prog");
+        let mut run = up.exec_in_background(&triangle);
+        up.until("moving", moving);
+        let out = up.ok(&["swap", "iobridge"]);
+        println!("{}", out.trim());
+        assert!(out.contains("largest gap"), "{out}");
+        let s = up.status();
+        assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
+        // trajgen carries the motion: swapped during it, the program goes on along the path.
+        let out = up.ok(&["swap", "trajgen"]);
+        println!("{}", out.trim());
+        assert!(out.contains("trajgen swapped during"), "{out}");
+        let swap_ms: f64 = out
+            .split(" in ")
+            .nth(1)
+            .and_then(|r| r.split(" ms").next())
+            .and_then(|v| v.parse().ok())
+            .expect("the swap's duration");
+        // servo cannot be swapped under a moving arm.
+        let err = up.refused(&["swap", "servo"]);
+        assert!(err.contains("only while no program runs"), "{err}");
+        let start = Instant::now();
+        while run.try_wait().expect("wait").is_none() {
+            assert!(start.elapsed() < WATCHDOG, "the program did not end");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let out = run.wait_with_output().expect("output");
+        assert!(
+            out.status.success(),
+            "{}\nlog:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            up.log()
+        );
+        // No e-stop, the following error within its limit (or servo would have cut power), and
+        // the motion time grew by about what the swap took (the pause's ramps included).
+        let r: Value =
+            serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).expect("json");
+        let opened = r["events"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|e| e["text"] == "gripper = 0" || e["text"] == "gripper_closed = 0")
+            .count();
+        assert_eq!(opened, 0, "the new iobridge took over the gripper: {r}");
+        let extra_ms = r["difference_s"].as_f64().expect("difference") * 1e3;
+        println!(
+            "motion time grew by {extra_ms:.0} ms; the trajgen swap took {swap_ms:.0} ms; max following error {}",
+            r["max_following_error"]
+        );
+        assert!(
+            extra_ms > 0.0 && extra_ms < swap_ms + 525.0,
+            "{extra_ms} vs {swap_ms}"
+        );
+        // At rest: trajgen swapped for the same build, with a command of its own.
+        let trajgen = integration_tests::bin("trajgen");
+        let cmd = format!(
+            "{} --instance {{instance}} --name {{name}}",
+            trajgen.display()
+        );
+        let out = up.ok(&["swap", "trajgen", "--command", &cmd]);
+        println!("{}", out.trim());
+        up.until("enabled again", |s| {
+            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
+        });
+        let s = up.status();
+        assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
+        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        // A bad command changes nothing.
+        let err = up.refused(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
+        assert!(err.contains("nothing was changed"), "{err}");
+        assert!(up.refused(&["swap", "nosuch"]).contains("no process"));
+        up.down();
     });
-    let s = up.status();
-    assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
-    up.ok(&["exec", &program(test, SHORT), "--wait"]);
-    // A bad command changes nothing.
-    let err = up.refused(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
-    assert!(err.contains("nothing was changed"), "{err}");
-    assert!(up.refused(&["swap", "nosuch"]).contains("no process"));
-    up.down();
 }
 
 #[test]
 fn another_user_is_refused_by_the_control_channel() {
-    if !nix::unistd::geteuid().is_root() {
-        eprintln!("skipped: needs root to run a command as another user");
-        return;
-    }
-    let test = "ops-user";
-    let up = Up::start(test, &cell(test));
-    let out = std::process::Command::new("setpriv")
-        .args(["--reuid", "65534", "--regid", "65534", "--clear-groups"])
-        .arg(integration_tests::bin("supervisor"))
-        .args(["down", "--instance", &up.inst])
-        .output()
-        .expect("setpriv");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("uid 65534 may not control it"), "{err}");
-    // Nothing changed: the cell is still up.
-    assert_eq!(up.status()["supervisor"]["arm"]["enabled"], true);
-    up.down();
+    integration_tests::attributable(|| {
+        if !nix::unistd::geteuid().is_root() {
+            eprintln!("skipped: needs root to run a command as another user");
+            return;
+        }
+        let test = "ops-user";
+        let up = Up::start(test, &cell(test));
+        let out = std::process::Command::new("setpriv")
+            .args(["--reuid", "65534", "--regid", "65534", "--clear-groups"])
+            .arg(integration_tests::bin("supervisor"))
+            .args(["down", "--instance", &up.inst])
+            .output()
+            .expect("setpriv");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("uid 65534 may not control it"), "{err}");
+        // Nothing changed: the cell is still up.
+        assert_eq!(up.status()["supervisor"]["arm"]["enabled"], true);
+        up.down();
+    });
 }
 
 #[test]
 fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
-    let test = "ops-sigkill";
-    let cfg = cell(test);
-    let mut up = Up::start(test, &cfg);
-    let mut child = up.child.take().expect("running");
-    child.kill().expect("SIGKILL");
-    let _ = child.wait();
-    let inst = up.inst.clone();
-    drop(up);
-    // Its processes notice (the heartbeat stops), bring the axes to rest and exit.
-    let start = Instant::now();
-    while !integration_tests::pids_with(&["--instance", &inst]).is_empty() {
-        assert!(start.elapsed() < WATCHDOG, "processes left running");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    // The same instance comes up again and works.
-    let mut cmd = supervisor();
-    cmd.args(["run", "--instance", &inst, "--config"])
-        .arg(&cfg)
-        .arg(program(test, SHORT));
-    let out = run_with_watchdog(&mut cmd, WATCHDOG);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let test = "ops-sigkill";
+        let cfg = cell(test);
+        let mut up = Up::start(test, &cfg);
+        let mut child = up.child.take().expect("running");
+        child.kill().expect("SIGKILL");
+        let _ = child.wait();
+        let inst = up.inst.clone();
+        drop(up);
+        // Its processes notice (the heartbeat stops), bring the axes to rest and exit.
+        let start = Instant::now();
+        while !integration_tests::pids_with(&["--instance", &inst]).is_empty() {
+            assert!(start.elapsed() < WATCHDOG, "processes left running");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        // The same instance comes up again and works.
+        let mut cmd = supervisor();
+        cmd.args(["run", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(program(test, SHORT));
+        let out = run_with_watchdog(&mut cmd, WATCHDOG);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_clean(&inst);
+    });
 }
 
 #[test]
 fn a_python_iobridge_written_from_the_documents_takes_the_role() {
-    // The bindings come from PyPI (`pip install iceoryx2==0.10.0`; .ci/run installs them).
-    let probe = std::process::Command::new("python3")
-        .args(["-c", "import iceoryx2"])
-        .output()
-        .expect("python3");
-    assert!(
-        probe.status.success(),
-        "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0\n{}",
-        String::from_utf8_lossy(&probe.stderr)
-    );
-    let test = "ops-python";
-    let script = integration_tests::examples().join("python/iobridge.py");
-    let rust = r#"command = ["iobridge", "--instance", "{instance}"]"#;
-    let src = with_stall_room(&default_cell());
-    assert!(src.contains(rust), "the default cell's iobridge command");
-    let cfg = scratch(
+    integration_tests::attributable(|| {
+        // The bindings come from PyPI (`pip install iceoryx2==0.10.0`; .ci/run installs them).
+        let probe = std::process::Command::new("python3")
+            .args(["-c", "import iceoryx2"])
+            .output()
+            .expect("python3");
+        assert!(
+            probe.status.success(),
+            "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0\n{}",
+            String::from_utf8_lossy(&probe.stderr)
+        );
+        let test = "ops-python";
+        let script = integration_tests::examples().join("python/iobridge.py");
+        let rust = r#"command = ["iobridge", "--instance", "{instance}"]"#;
+        let src = with_stall_room(&default_cell());
+        assert!(src.contains(rust), "the default cell's iobridge command");
+        let cfg = scratch(
         test,
         "cell.toml",
         &src.replace(
@@ -413,25 +429,26 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
             ),
         ),
     );
-    let inst = instance(test);
-    let mut cmd = supervisor();
-    cmd.args(["run", "--json", "--instance", &inst, "--config"])
-        .arg(&cfg)
-        .arg(program(test, SHORT));
-    let out = run_with_watchdog(&mut cmd, WATCHDOG);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r = integration_tests::json_of(&out);
-    // The Python process was cyclic, and its fieldbus images reached the supervisor.
-    assert!(
-        r["processes"]["iobridge"]["cycles"].as_u64().unwrap_or(0) > 100,
-        "{r}"
-    );
-    assert!(!r["iobridge_delay_us"].is_null(), "no fieldbus image: {r}");
-    assert_clean(&inst);
+        let inst = instance(test);
+        let mut cmd = supervisor();
+        cmd.args(["run", "--json", "--instance", &inst, "--config"])
+            .arg(&cfg)
+            .arg(program(test, SHORT));
+        let out = run_with_watchdog(&mut cmd, WATCHDOG);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let r = integration_tests::json_of(&out);
+        // The Python process was cyclic, and its fieldbus images reached the supervisor.
+        assert!(
+            r["processes"]["iobridge"]["cycles"].as_u64().unwrap_or(0) > 100,
+            "{r}"
+        );
+        assert!(!r["iobridge_delay_us"].is_null(), "no fieldbus image: {r}");
+        assert_clean(&inst);
+    });
 }
 
 /// Stops process `program` of `inst` for `ms` milliseconds (SIGSTOP, then SIGCONT).
@@ -443,39 +460,41 @@ fn stall(program: &str, inst: &str, ms: u64) {
 
 #[test]
 fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit() {
-    // The embedded cell's detectors, unwidened: iobridge at 4 ms forgives 30 % of its
-    // rate, 75 missed periods, leaking one every 50 ms. The supervisor's heartbeat watch is
-    // made slower than the detector, so the detector is what catches the stall.
-    let test = "ops-iostall";
-    let src = default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1);
-    let up = Up::start(test, &scratch(test, "cell.toml", &src));
-    let pending = |s: &Value| {
-        s["processes"]["iobridge"]["health"]["pending_sequence_overrun"]["total"]
-            .as_u64()
-            .unwrap_or(0)
-    };
-    let before = pending(&up.status());
-    // 20 ms: 5 periods missed, below the limit: counted, no trip.
-    stall("iobridge", &up.inst, 20);
-    let s = up.until("the gap counted", |s| pending(s) > before);
-    std::thread::sleep(Duration::from_millis(500));
-    let s2 = up.status();
-    assert!(!latched(&s2), "a 20 ms gap tripped: {s2}\nbefore: {s}");
-    // 1 s: 250 periods, three times the limit: a host e-stop naming the detector.
-    stall("iobridge", &up.inst, 1000);
-    let s = up.until("the trip", latched);
-    let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-    assert!(
-        reason.contains("pending_sequence_overrun") && reason.contains("iobridge"),
-        "{s}"
-    );
-    assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
-    up.until("at rest, drives off", |s| {
-        s["supervisor"]["arm"]["enabled"] == false
+    integration_tests::attributable(|| {
+        // The embedded cell's detectors, unwidened: iobridge at 4 ms forgives 30 % of its
+        // rate, 75 missed periods, leaking one every 50 ms. The supervisor's heartbeat watch is
+        // made slower than the detector, so the detector is what catches the stall.
+        let test = "ops-iostall";
+        let src = default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1);
+        let up = Up::start(test, &scratch(test, "cell.toml", &src));
+        let pending = |s: &Value| {
+            s["processes"]["iobridge"]["health"]["pending_sequence_overrun"]["total"]
+                .as_u64()
+                .unwrap_or(0)
+        };
+        let before = pending(&up.status());
+        // 20 ms: 5 periods missed, below the limit: counted, no trip.
+        stall("iobridge", &up.inst, 20);
+        let s = up.until("the gap counted", |s| pending(s) > before);
+        std::thread::sleep(Duration::from_millis(500));
+        let s2 = up.status();
+        assert!(!latched(&s2), "a 20 ms gap tripped: {s2}\nbefore: {s}");
+        // 1 s: 250 periods, three times the limit: a host e-stop naming the detector.
+        stall("iobridge", &up.inst, 1000);
+        let s = up.until("the trip", latched);
+        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+        assert!(
+            reason.contains("pending_sequence_overrun") && reason.contains("iobridge"),
+            "{s}"
+        );
+        assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
+        up.until("at rest, drives off", |s| {
+            s["supervisor"]["arm"]["enabled"] == false
+        });
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        up.down();
     });
-    up.ok(&["reset"]);
-    up.ok(&["start"]);
-    up.down();
 }
 
 /// A pipe already full, its write end blocking: whoever writes to it without care blocks for
@@ -492,46 +511,48 @@ fn full_pipe() -> (std::os::fd::OwnedFd, std::os::fd::OwnedFd) {
 
 #[test]
 fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
-    // Found by fault injection: with its stderr blocked, the supervisor blocked in a write and
-    // missed a killed servo. Now its lines are dropped, and it still sees everything.
-    let test = "ops-stderr";
-    let inst = instance(test);
-    let (_r, w) = full_pipe();
-    let triangle = integration_tests::examples().join("triangle.prog");
-    let run = supervisor()
-        .args(["run", "--json", "--instance", &inst, "--config"])
-        .arg(cell(test))
-        .arg(&triangle)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::from(w))
-        .spawn()
-        .expect("run");
-    // While it moves, servo dies.
-    let start = Instant::now();
-    loop {
-        let mut cmd = supervisor();
-        cmd.args(["status", "--json", "--instance", &inst]);
-        let out = run_with_watchdog(&mut cmd, WATCHDOG);
-        if serde_json::from_slice::<Value>(&out.stdout).is_ok_and(|s| moving(&s)) {
-            break;
+    integration_tests::attributable(|| {
+        // Found by fault injection: with its stderr blocked, the supervisor blocked in a write and
+        // missed a killed servo. Now its lines are dropped, and it still sees everything.
+        let test = "ops-stderr";
+        let inst = instance(test);
+        let (_r, w) = full_pipe();
+        let triangle = integration_tests::examples().join("triangle.prog");
+        let run = supervisor()
+            .args(["run", "--json", "--instance", &inst, "--config"])
+            .arg(cell(test))
+            .arg(&triangle)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::from(w))
+            .spawn()
+            .expect("run");
+        // While it moves, servo dies.
+        let start = Instant::now();
+        loop {
+            let mut cmd = supervisor();
+            cmd.args(["status", "--json", "--instance", &inst]);
+            let out = run_with_watchdog(&mut cmd, WATCHDOG);
+            if serde_json::from_slice::<Value>(&out.stdout).is_ok_and(|s| moving(&s)) {
+                break;
+            }
+            assert!(start.elapsed() < WATCHDOG, "never moved");
+            std::thread::sleep(Duration::from_millis(50));
         }
-        assert!(start.elapsed() < WATCHDOG, "never moved");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    signal("servo", &inst, nix::sys::signal::Signal::SIGKILL);
-    let start = Instant::now();
-    let mut run = run;
-    while run.try_wait().expect("wait").is_none() {
-        assert!(start.elapsed() < WATCHDOG, "the supervisor is stuck");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = run.wait_with_output().expect("output");
-    assert_eq!(out.status.code(), Some(1));
-    let j = integration_tests::json_of(&out);
-    assert_eq!(j["ok"], false);
-    let error = j["error"].as_str().unwrap_or("");
-    assert!(error.contains("servo"), "{j}");
-    assert_clean(&inst);
+        signal("servo", &inst, nix::sys::signal::Signal::SIGKILL);
+        let start = Instant::now();
+        let mut run = run;
+        while run.try_wait().expect("wait").is_none() {
+            assert!(start.elapsed() < WATCHDOG, "the supervisor is stuck");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let out = run.wait_with_output().expect("output");
+        assert_eq!(out.status.code(), Some(1));
+        let j = integration_tests::json_of(&out);
+        assert_eq!(j["ok"], false);
+        let error = j["error"].as_str().unwrap_or("");
+        assert!(error.contains("servo"), "{j}");
+        assert_clean(&inst);
+    });
 }
 
 /// The value of IO `name` in `status --json`.
@@ -609,10 +630,14 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
 
 #[test]
 fn an_estop_input_stops_the_motion_with_propagate_external_estop() {
-    an_estop_input_mid_motion("ops-input-ext", true);
+    integration_tests::attributable(|| {
+        an_estop_input_mid_motion("ops-input-ext", true);
+    });
 }
 
 #[test]
 fn an_estop_input_without_propagate_external_estop_only_sets_the_outputs_safe() {
-    an_estop_input_mid_motion("ops-input-noext", false);
+    integration_tests::attributable(|| {
+        an_estop_input_mid_motion("ops-input-noext", false);
+    });
 }

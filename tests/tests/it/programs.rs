@@ -85,105 +85,109 @@ fn run_as_predicted(test: &str, cell: &str, program: &str) -> serde_json::Value 
 
 #[test]
 fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
-    let j = run_as_predicted("prog-pick", &default_cell(), PICK_AND_PLACE);
-    let waited = j["waited_s"].as_f64().expect("waited_s");
-    assert!(
-        waited > 4.0 * 0.08,
-        "four waits of at least the 80 ms switching time: {waited}"
-    );
-    // The IO timeline: each OUT, then the sensor following it, in order, twice.
-    let changes: Vec<(f64, String)> = events_named(&j, "io-changed")
-        .iter()
-        .map(|e| {
-            (
-                e["t_s"].as_f64().expect("t_s"),
-                e["text"].as_str().expect("text").to_string(),
-            )
-        })
-        .collect();
-    let texts: Vec<&str> = changes.iter().map(|(_, t)| t.as_str()).collect();
-    let cycle = [
-        "gripper = 1",
-        "gripper_closed = 1",
-        "gripper = 0",
-        "gripper_closed = 0",
-    ];
-    assert_eq!(texts, [cycle, cycle].concat(), "{changes:?}");
-    for pair in changes.chunks(2) {
-        let dt = pair[1].0 - pair[0].0;
+    integration_tests::attributable(|| {
+        let j = run_as_predicted("prog-pick", &default_cell(), PICK_AND_PLACE);
+        let waited = j["waited_s"].as_f64().expect("waited_s");
         assert!(
-            dt >= 0.08 - 0.005,
-            "the sensor switched {dt} s after the output"
+            waited > 4.0 * 0.08,
+            "four waits of at least the 80 ms switching time: {waited}"
         );
-    }
-    // Servo followed: its own latched figure, within the limit.
-    let fe = j["max_following_error"]["x"].as_f64().expect("fe");
-    assert!(fe > 0.0 && fe < 1.0, "{fe}");
+        // The IO timeline: each OUT, then the sensor following it, in order, twice.
+        let changes: Vec<(f64, String)> = events_named(&j, "io-changed")
+            .iter()
+            .map(|e| {
+                (
+                    e["t_s"].as_f64().expect("t_s"),
+                    e["text"].as_str().expect("text").to_string(),
+                )
+            })
+            .collect();
+        let texts: Vec<&str> = changes.iter().map(|(_, t)| t.as_str()).collect();
+        let cycle = [
+            "gripper = 1",
+            "gripper_closed = 1",
+            "gripper = 0",
+            "gripper_closed = 0",
+        ];
+        assert_eq!(texts, [cycle, cycle].concat(), "{changes:?}");
+        for pair in changes.chunks(2) {
+            let dt = pair[1].0 - pair[0].0;
+            assert!(
+                dt >= 0.08 - 0.005,
+                "the sensor switched {dt} s after the output"
+            );
+        }
+        // Servo followed: its own latched figure, within the limit.
+        let fe = j["max_following_error"]["x"].as_f64().expect("fe");
+        assert!(fe > 0.0 && fe < 1.0, "{fe}");
+    });
 }
 
 #[test]
 fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
-    let test = "prog-check";
-    let cases = [
-        (
-            "MOVE(40,40,0)\nOUT(gripper_closed, 1)\nEND\n",
-            "2:5: gripper_closed is an input, not an output",
-        ),
-        (
-            "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
-            "2:9: y = 400 mm is outside the axis limits 0 .. 150 mm",
-        ),
-        (
-            "MOVE(40,40,0, T=1e9)\nEND\n",
-            "1:17: the segment time T (s) = 1000000000",
-        ),
-        (
-            "DELAY(86400)\nDELAY(86400)\nEND\n",
-            "the program runs longer than 24 h",
-        ),
-    ];
-    for (k, (src, want)) in cases.iter().enumerate() {
-        let prog = scratch(test, &format!("p{k}.prog"), src);
+    integration_tests::attributable(|| {
+        let test = "prog-check";
+        let cases = [
+            (
+                "MOVE(40,40,0)\nOUT(gripper_closed, 1)\nEND\n",
+                "2:5: gripper_closed is an input, not an output",
+            ),
+            (
+                "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
+                "2:9: y = 400 mm is outside the axis limits 0 .. 150 mm",
+            ),
+            (
+                "MOVE(40,40,0, T=1e9)\nEND\n",
+                "1:17: the segment time T (s) = 1000000000",
+            ),
+            (
+                "DELAY(86400)\nDELAY(86400)\nEND\n",
+                "the program runs longer than 24 h",
+            ),
+        ];
+        for (k, (src, want)) in cases.iter().enumerate() {
+            let prog = scratch(test, &format!("p{k}.prog"), src);
+            let out = run_with_watchdog(supervisor().arg("check").arg(&prog), WATCHDOG);
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{src}: {err}");
+            assert!(err.contains(want), "{src}: {err}");
+        }
+        // A path whose joint speed exceeds an axis' vmax (the polar arm's radial axis, 16 mm/s,
+        // with the tool allowed 40 mm/s): found through the kinematics, before anything moves.
+        let polar = std::fs::read_to_string(integration_tests::examples().join("polar.toml"))
+            .expect("examples/polar.toml")
+            .replace("vmax = [10.0, 10.0]", "vmax = [40.0, 40.0]");
+        let cfg = scratch(test, "polar.toml", &polar);
+        let prog = scratch(
+            test,
+            "polar.prog",
+            "MOVE(120, 90)\nMOVE(60, 160)\nMOVE(150, 0)\nEND\n",
+        );
+        let out = run_with_watchdog(
+            supervisor()
+                .arg("check")
+                .arg(&prog)
+                .arg("--config")
+                .arg(&cfg),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("r reaches") && err.contains("above its vmax 16 mm/s"),
+            "{err}"
+        );
+        // Not UTF-8: the place of the first bad byte.
+        let prog = scratch(test, "bin.prog", "");
+        std::fs::write(&prog, b"MOVE(40,40,0)\nMO\xffVE(1,2,3)\nEND\n").expect("write");
         let out = run_with_watchdog(supervisor().arg("check").arg(&prog), WATCHDOG);
         let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{src}: {err}");
-        assert!(err.contains(want), "{src}: {err}");
-    }
-    // A path whose joint speed exceeds an axis' vmax (the polar arm's radial axis, 16 mm/s,
-    // with the tool allowed 40 mm/s): found through the kinematics, before anything moves.
-    let polar = std::fs::read_to_string(integration_tests::examples().join("polar.toml"))
-        .expect("examples/polar.toml")
-        .replace("vmax = [10.0, 10.0]", "vmax = [40.0, 40.0]");
-    let cfg = scratch(test, "polar.toml", &polar);
-    let prog = scratch(
-        test,
-        "polar.prog",
-        "MOVE(120, 90)\nMOVE(60, 160)\nMOVE(150, 0)\nEND\n",
-    );
-    let out = run_with_watchdog(
-        supervisor()
-            .arg("check")
-            .arg(&prog)
-            .arg("--config")
-            .arg(&cfg),
-        WATCHDOG,
-    );
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("r reaches") && err.contains("above its vmax 16 mm/s"),
-        "{err}"
-    );
-    // Not UTF-8: the place of the first bad byte.
-    let prog = scratch(test, "bin.prog", "");
-    std::fs::write(&prog, b"MOVE(40,40,0)\nMO\xffVE(1,2,3)\nEND\n").expect("write");
-    let out = run_with_watchdog(supervisor().arg("check").arg(&prog), WATCHDOG);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("bin.prog:2:3: byte 0xFF is not UTF-8 text"),
-        "{err}"
-    );
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("bin.prog:2:3: byte 0xFF is not UTF-8 text"),
+            "{err}"
+        );
+    });
 }
 
 /// The same pick-and-place on seed 004's five-bar (examples/five-bar.toml): Cartesian moves
@@ -207,54 +211,58 @@ END
 
 #[test]
 fn the_five_bar_runs_a_pick_and_place_through_its_kinematics_as_predicted() {
-    let five_bar = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
-        .expect("examples/five-bar.toml");
-    let j = run_as_predicted("prog-fivebar", &five_bar, FIVE_BAR_PICK);
-    let texts: Vec<String> = events_named(&j, "io-changed")
-        .iter()
-        .map(|e| e["text"].as_str().expect("text").to_string())
-        .collect();
-    assert_eq!(
-        texts.iter().filter(|t| *t == "gripper = 1").count(),
-        2,
-        "{texts:?}"
-    );
-    assert_eq!(
-        texts.iter().filter(|t| *t == "gripper_closed = 0").count(),
-        2,
-        "{texts:?}"
-    );
-    // Back at the null posture: both joints at 0.
-    for joint in ["a0", "a1"] {
-        let q = j["final_position"][joint].as_f64().expect("final");
-        assert!(q.abs() < 0.01, "{joint} = {q}");
-        let fe = j["max_following_error"][joint].as_f64().expect("fe");
-        assert!(fe > 0.0 && fe < 1.0, "{joint}: {fe}");
-    }
+    integration_tests::attributable(|| {
+        let five_bar = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
+            .expect("examples/five-bar.toml");
+        let j = run_as_predicted("prog-fivebar", &five_bar, FIVE_BAR_PICK);
+        let texts: Vec<String> = events_named(&j, "io-changed")
+            .iter()
+            .map(|e| e["text"].as_str().expect("text").to_string())
+            .collect();
+        assert_eq!(
+            texts.iter().filter(|t| *t == "gripper = 1").count(),
+            2,
+            "{texts:?}"
+        );
+        assert_eq!(
+            texts.iter().filter(|t| *t == "gripper_closed = 0").count(),
+            2,
+            "{texts:?}"
+        );
+        // Back at the null posture: both joints at 0.
+        for joint in ["a0", "a1"] {
+            let q = j["final_position"][joint].as_f64().expect("final");
+            assert!(q.abs() < 0.01, "{joint} = {q}");
+            let fe = j["max_following_error"][joint].as_f64().expect("fe");
+            assert!(fe > 0.0 && fe < 1.0, "{joint}: {fe}");
+        }
+    });
 }
 
 #[test]
 fn every_example_cell_and_its_program_pass_check() {
-    // The gantry's triangle on the embedded default, and each other cell's own program.
-    let examples = integration_tests::examples();
-    for (cell, prog) in [
-        ("gantry-uba.toml", "triangle.prog"),
-        ("five-bar.toml", "five-bar.prog"),
-        ("scara.toml", "scara.prog"),
-        ("polar.toml", "polar.prog"),
-    ] {
-        let out = run_with_watchdog(
-            supervisor()
-                .arg("check")
-                .arg(examples.join(prog))
-                .arg("--config")
-                .arg(examples.join(cell)),
-            WATCHDOG,
-        );
-        assert!(
-            out.status.success(),
-            "{cell} {prog}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
+    integration_tests::attributable(|| {
+        // The gantry's triangle on the embedded default, and each other cell's own program.
+        let examples = integration_tests::examples();
+        for (cell, prog) in [
+            ("gantry-uba.toml", "triangle.prog"),
+            ("five-bar.toml", "five-bar.prog"),
+            ("scara.toml", "scara.prog"),
+            ("polar.toml", "polar.prog"),
+        ] {
+            let out = run_with_watchdog(
+                supervisor()
+                    .arg("check")
+                    .arg(examples.join(prog))
+                    .arg("--config")
+                    .arg(examples.join(cell)),
+                WATCHDOG,
+            );
+            assert!(
+                out.status.success(),
+                "{cell} {prog}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+    });
 }

@@ -31,221 +31,227 @@ fn read_back(files: &[PathBuf]) -> Value {
 
 #[test]
 fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_reader_decodes() {
-    let test = "rec-run";
-    let inst = instance(test);
-    let mcap = scratch(test, "run.mcap", "");
-    let trace = scratch(test, "trace.csv", "");
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(cell(test, &[]))
-            .arg("--record")
-            .arg(&mcap)
-            .arg("--trace")
-            .arg(&trace)
-            .arg(examples().join("triangle.prog")),
-        WATCHDOG,
-    );
-    let report = json_of(&out);
-    assert_eq!(report["ok"], true, "{report}");
-    // The recorder's summary, per topic (the setpoints' loss is checked below, one to one).
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    let line = stderr
-        .lines()
-        .find(|l| l.trim_start().starts_with("/trajgen/setpoint"))
-        .unwrap_or_else(|| panic!("no summary: {stderr}"));
-    println!("recorder: {}", line.trim());
-    assert_clean(&inst);
-    let file = read_back(&[mcap]);
-    let topics = file["topics"].as_object().expect("topics");
-    for t in [
-        "/trajgen/setpoint",
-        "/servo/state",
-        "/machine/feedback",
-        "/servo/drive_command",
-        "/iobridge/output",
-        "/io/state",
-        "/events",
-        "/host/state",
-        "/servo/status",
-        "/servo/latency",
-        "/modbus/status",
-    ] {
-        let topic = &topics[t];
-        assert!(topic["count"].as_u64().unwrap_or(0) > 0, "{t}: {topic}");
-        assert_eq!(topic["schema_encoding"], "jsonschema", "{t}");
-        assert_eq!(topic["encoding"], "json", "{t}");
-        if t != "/events" {
-            assert_eq!(topic["in_order"], true, "{t}: log times from the samples");
-        }
-    }
-    // Every setpoint of the program, as the trace has it (one trace row per setpoint).
-    let rows: Vec<Vec<f64>> = std::fs::read_to_string(&trace)
-        .expect("trace")
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
-        .collect();
-    let setpoints = file["setpoints"].as_array().expect("setpoints");
-    let program = setpoints
-        .iter()
-        .filter_map(|s| s[0].as_u64())
-        .max()
-        .expect("a program");
-    let ours: Vec<&Value> = setpoints.iter().filter(|s| s[0] == program).collect();
-    println!(
-        "{} setpoints of program {program} recorded, {} trace rows",
-        ours.len(),
-        rows.len()
-    );
-    // The trace holds the job's setpoints (trajgen goes on publishing after it while the
-    // axes settle): over the trace's span the recording has exactly its rows, one to one.
-    let same = |s: &Value, r: &[f64]| {
-        let p = &s[3];
-        let pos = [&p["x"], &p["y"], &p["theta"]].map(|v| v.as_f64().unwrap_or(f64::NAN));
-        (s[1].as_f64().unwrap_or(f64::NAN) - r[0]).abs() <= 1e-6
-            && (0..3).all(|k| (pos[k] - r[1 + k]).abs() <= 1e-6)
-    };
-    let first = ours
-        .iter()
-        .position(|s| same(s, &rows[0]))
-        .expect("the trace's first setpoint is recorded");
-    assert!(
-        ours.len() - first >= rows.len(),
-        "too few setpoints recorded"
-    );
-    for (k, r) in rows.iter().enumerate() {
-        let s = ours[first + k];
-        assert!(
-            same(s, r),
-            "setpoint {k} of the trace: recorded {s}, traced {r:?}"
+    integration_tests::attributable(|| {
+        let test = "rec-run";
+        let inst = instance(test);
+        let mcap = scratch(test, "run.mcap", "");
+        let trace = scratch(test, "trace.csv", "");
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["run", "--json", "--instance", &inst, "--config"])
+                .arg(cell(test, &[]))
+                .arg("--record")
+                .arg(&mcap)
+                .arg("--trace")
+                .arg(&trace)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
         );
-    }
+        let report = json_of(&out);
+        assert_eq!(report["ok"], true, "{report}");
+        // The recorder's summary, per topic (the setpoints' loss is checked below, one to one).
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let line = stderr
+            .lines()
+            .find(|l| l.trim_start().starts_with("/trajgen/setpoint"))
+            .unwrap_or_else(|| panic!("no summary: {stderr}"));
+        println!("recorder: {}", line.trim());
+        assert_clean(&inst);
+        let file = read_back(&[mcap]);
+        let topics = file["topics"].as_object().expect("topics");
+        for t in [
+            "/trajgen/setpoint",
+            "/servo/state",
+            "/machine/feedback",
+            "/servo/drive_command",
+            "/iobridge/output",
+            "/io/state",
+            "/events",
+            "/host/state",
+            "/servo/status",
+            "/servo/latency",
+            "/modbus/status",
+        ] {
+            let topic = &topics[t];
+            assert!(topic["count"].as_u64().unwrap_or(0) > 0, "{t}: {topic}");
+            assert_eq!(topic["schema_encoding"], "jsonschema", "{t}");
+            assert_eq!(topic["encoding"], "json", "{t}");
+            if t != "/events" {
+                assert_eq!(topic["in_order"], true, "{t}: log times from the samples");
+            }
+        }
+        // Every setpoint of the program, as the trace has it (one trace row per setpoint).
+        let rows: Vec<Vec<f64>> = std::fs::read_to_string(&trace)
+            .expect("trace")
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
+            .collect();
+        let setpoints = file["setpoints"].as_array().expect("setpoints");
+        let program = setpoints
+            .iter()
+            .filter_map(|s| s[0].as_u64())
+            .max()
+            .expect("a program");
+        let ours: Vec<&Value> = setpoints.iter().filter(|s| s[0] == program).collect();
+        println!(
+            "{} setpoints of program {program} recorded, {} trace rows",
+            ours.len(),
+            rows.len()
+        );
+        // The trace holds the job's setpoints (trajgen goes on publishing after it while the
+        // axes settle): over the trace's span the recording has exactly its rows, one to one.
+        let same = |s: &Value, r: &[f64]| {
+            let p = &s[3];
+            let pos = [&p["x"], &p["y"], &p["theta"]].map(|v| v.as_f64().unwrap_or(f64::NAN));
+            (s[1].as_f64().unwrap_or(f64::NAN) - r[0]).abs() <= 1e-6
+                && (0..3).all(|k| (pos[k] - r[1 + k]).abs() <= 1e-6)
+        };
+        let first = ours
+            .iter()
+            .position(|s| same(s, &rows[0]))
+            .expect("the trace's first setpoint is recorded");
+        assert!(
+            ours.len() - first >= rows.len(),
+            "too few setpoints recorded"
+        );
+        for (k, r) in rows.iter().enumerate() {
+            let s = ours[first + k];
+            assert!(
+                same(s, r),
+                "setpoint {k} of the trace: recorded {s}, traced {r:?}"
+            );
+        }
+    });
 }
 
 #[test]
 fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
-    let test = "rec-up";
-    let up = Up::start(test, &cell(test, &[]));
-    let base = scratch(test, "cell.mcap", "");
-    let out = run_with_watchdog(
-        supervisor()
-            .args(["record", "--instance", &up.inst, "--out"])
-            .arg(&base)
-            .args(["--duration", "3.5", "--rotate-time", "1"]),
-        WATCHDOG,
-    );
-    let text = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(text.contains("its duration is over"), "{text}");
-    let files: Vec<PathBuf> = (0..10)
-        .map(|k| base.with_file_name(format!("cell-{k:03}.mcap")))
-        .filter(|f| f.exists())
-        .collect();
-    assert!(files.len() >= 3, "rotated every second: {files:?}\n{text}");
-    let read = read_back(&files);
-    let servo = read["topics"]["/servo/state"]["count"]
-        .as_u64()
-        .unwrap_or(0);
-    assert!(servo > 1000, "{}", read["topics"]);
-    // The cell noticed nothing; it goes down clean.
-    let s = up.status();
-    assert!(s["supervisor"]["estop"].is_null(), "{s}");
-    // A cell that is not up: exit 2 and a clear word.
-    let gone = run_with_watchdog(
-        supervisor()
-            .args(["record", "--instance", "nobody-here", "--out"])
-            .arg(&base),
-        WATCHDOG,
-    );
-    assert_eq!(gone.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&gone.stderr).contains("is not up"));
-    let inst = up.inst.clone();
-    up.down();
-    // `up --record` where no file can be written: refused before anything starts (exit 2,
-    // the flag named), nothing of the instance left.
-    let refused = run_with_watchdog(
-        supervisor()
-            .args([
-                "up",
-                "--instance",
-                &inst,
-                "--record",
-                "/nonexistent/dir/c.mcap",
-            ])
-            .arg("--config")
-            .arg(cell(test, &[])),
-        WATCHDOG,
-    );
-    let err = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(2), "{err}");
-    assert!(err.contains("--record /nonexistent/dir/c.mcap"), "{err}");
-    integration_tests::assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let test = "rec-up";
+        let up = Up::start(test, &cell(test, &[]));
+        let base = scratch(test, "cell.mcap", "");
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["record", "--instance", &up.inst, "--out"])
+                .arg(&base)
+                .args(["--duration", "3.5", "--rotate-time", "1"]),
+            WATCHDOG,
+        );
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(
+            out.status.success(),
+            "{text}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(text.contains("its duration is over"), "{text}");
+        let files: Vec<PathBuf> = (0..10)
+            .map(|k| base.with_file_name(format!("cell-{k:03}.mcap")))
+            .filter(|f| f.exists())
+            .collect();
+        assert!(files.len() >= 3, "rotated every second: {files:?}\n{text}");
+        let read = read_back(&files);
+        let servo = read["topics"]["/servo/state"]["count"]
+            .as_u64()
+            .unwrap_or(0);
+        assert!(servo > 1000, "{}", read["topics"]);
+        // The cell noticed nothing; it goes down clean.
+        let s = up.status();
+        assert!(s["supervisor"]["estop"].is_null(), "{s}");
+        // A cell that is not up: exit 2 and a clear word.
+        let gone = run_with_watchdog(
+            supervisor()
+                .args(["record", "--instance", "nobody-here", "--out"])
+                .arg(&base),
+            WATCHDOG,
+        );
+        assert_eq!(gone.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&gone.stderr).contains("is not up"));
+        let inst = up.inst.clone();
+        up.down();
+        // `up --record` where no file can be written: refused before anything starts (exit 2,
+        // the flag named), nothing of the instance left.
+        let refused = run_with_watchdog(
+            supervisor()
+                .args([
+                    "up",
+                    "--instance",
+                    &inst,
+                    "--record",
+                    "/nonexistent/dir/c.mcap",
+                ])
+                .arg("--config")
+                .arg(cell(test, &[])),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{err}");
+        assert!(err.contains("--record /nonexistent/dir/c.mcap"), "{err}");
+        integration_tests::assert_clean(&inst);
+    });
 }
 
 #[test]
 fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behind() {
-    let test = "rec-observer";
-    let inst = instance(test);
-    let run = supervisor()
-        .args(["run", "--json", "--instance", &inst, "--config"])
-        .arg(cell(test, &[]))
-        .arg(scratch(
-            test,
-            "p.prog",
-            "WAIT(part_present, 1)\nMOVE(60, 40, 0)\nEND\n",
-        ))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run");
-    // Attach once the cell is up.
-    let start = Instant::now();
-    while !supervisor()
-        .args(["status", "--json", "--instance", &inst])
-        .output()
-        .is_ok_and(|o| o.status.success())
-    {
-        assert!(start.elapsed() < WATCHDOG, "the cell never came up");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let file = scratch(test, "observer.mcap", "");
-    let mut observer = supervisor()
-        .args(["record", "--instance", &inst, "--out"])
-        .arg(&file)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("record");
-    // The program waits for the part until the observer records.
-    let mut first = String::new();
-    std::io::BufRead::read_line(
-        &mut std::io::BufReader::new(observer.stdout.as_mut().expect("stdout")),
-        &mut first,
-    )
-    .expect("read");
-    assert!(first.starts_with("recording"), "{first}");
-    let released = run_with_watchdog(
-        supervisor().args(["io", "part_present", "1", "--instance", &inst]),
-        WATCHDOG,
-    );
-    assert!(released.status.success(), "{released:?}");
-    let out = run.wait_with_output().expect("run");
-    let report = json_of(&out);
-    assert_eq!(out.status.code(), Some(0), "{report}");
-    assert_eq!(report["ok"], true, "{report}");
-    // The observer ends by itself once the cell is gone, and leaves nothing.
-    let obs = observer.wait_with_output().expect("record");
-    let text = String::from_utf8_lossy(&obs.stdout);
-    assert!(
-        obs.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&obs.stderr)
-    );
-    assert!(text.contains("went down"), "{text}");
-    assert_clean(&inst);
+    integration_tests::attributable(|| {
+        let test = "rec-observer";
+        let inst = instance(test);
+        let run = supervisor()
+            .args(["run", "--json", "--instance", &inst, "--config"])
+            .arg(cell(test, &[]))
+            .arg(scratch(
+                test,
+                "p.prog",
+                "WAIT(part_present, 1)\nMOVE(60, 40, 0)\nEND\n",
+            ))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("run");
+        // Attach once the cell is up.
+        let start = Instant::now();
+        while !supervisor()
+            .args(["status", "--json", "--instance", &inst])
+            .output()
+            .is_ok_and(|o| o.status.success())
+        {
+            assert!(start.elapsed() < WATCHDOG, "the cell never came up");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let file = scratch(test, "observer.mcap", "");
+        let mut observer = supervisor()
+            .args(["record", "--instance", &inst, "--out"])
+            .arg(&file)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("record");
+        // The program waits for the part until the observer records.
+        let mut first = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(observer.stdout.as_mut().expect("stdout")),
+            &mut first,
+        )
+        .expect("read");
+        assert!(first.starts_with("recording"), "{first}");
+        let released = run_with_watchdog(
+            supervisor().args(["io", "part_present", "1", "--instance", &inst]),
+            WATCHDOG,
+        );
+        assert!(released.status.success(), "{released:?}");
+        let out = run.wait_with_output().expect("run");
+        let report = json_of(&out);
+        assert_eq!(out.status.code(), Some(0), "{report}");
+        assert_eq!(report["ok"], true, "{report}");
+        // The observer ends by itself once the cell is gone, and leaves nothing.
+        let obs = observer.wait_with_output().expect("record");
+        let text = String::from_utf8_lossy(&obs.stdout);
+        assert!(
+            obs.status.success(),
+            "{text}{}",
+            String::from_utf8_lossy(&obs.stderr)
+        );
+        assert!(text.contains("went down"), "{text}");
+        assert_clean(&inst);
+    });
 }

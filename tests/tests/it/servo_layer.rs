@@ -99,638 +99,668 @@ fn check_latched_then_recover(lp: &mut Loop, want: u32) {
 
 #[test]
 fn enable_and_disable_take_effect_in_the_next_cycle_and_a_disable_aborts_an_enable() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    let s = lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
-    assert_eq!(s.power, Power::Disabled as u8);
-    // The drives sit without power until asked.
-    for _ in 0..100 {
-        let s = lp.step();
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        let s = lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
+        assert_eq!(s.power, Power::Disabled as u8);
+        // The drives sit without power until asked.
+        for _ in 0..100 {
+            let s = lp.step();
+            assert_eq!(s.status & st::ENABLED, 0);
+        }
+        assert!(states(&lp).iter().all(|s| !s.power_stage_on()));
+        let s = lp.step_with(Some(RequestKind::Enable), None, None);
+        assert_eq!(s.power, Power::Enabling as u8);
+        assert!(s.controlword[..3].iter().all(|w| *w == cw::SWITCH_ON_CMD));
+        let s = lp.step_with(Some(RequestKind::Disable), None, None);
+        assert_eq!(
+            s.power,
+            Power::Disabling as u8,
+            "the disable aborts the pending enable"
+        );
+        let s = lp.until(None, 50, |s| s.power == Power::Disabled as u8);
         assert_eq!(s.status & st::ENABLED, 0);
-    }
-    assert!(states(&lp).iter().all(|s| !s.power_stage_on()));
-    let s = lp.step_with(Some(RequestKind::Enable), None, None);
-    assert_eq!(s.power, Power::Enabling as u8);
-    assert!(s.controlword[..3].iter().all(|w| *w == cw::SWITCH_ON_CMD));
-    let s = lp.step_with(Some(RequestKind::Disable), None, None);
-    assert_eq!(
-        s.power,
-        Power::Disabling as u8,
-        "the disable aborts the pending enable"
-    );
-    let s = lp.until(None, 50, |s| s.power == Power::Disabled as u8);
-    assert_eq!(s.status & st::ENABLED, 0);
-    assert!(lp.codes().contains(&code::DISABLING) && !lp.codes().contains(&code::ENABLED));
-    let s = lp.enable();
-    assert!(s.axis_power[..3].iter().all(|p| *p == Power::Enabled as u8));
-    let s = lp.step_with(Some(RequestKind::Disable), None, None);
-    assert!(
-        s.controlword[..3].iter().all(|w| *w == cw::SHUTDOWN),
-        "transition 8"
-    );
-    lp.until(None, 50, |s| s.power == Power::Disabled as u8);
-    assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
+        assert!(lp.codes().contains(&code::DISABLING) && !lp.codes().contains(&code::ENABLED));
+        let s = lp.enable();
+        assert!(s.axis_power[..3].iter().all(|p| *p == Power::Enabled as u8));
+        let s = lp.step_with(Some(RequestKind::Disable), None, None);
+        assert!(
+            s.controlword[..3].iter().all(|w| *w == cw::SHUTDOWN),
+            "transition 8"
+        );
+        lp.until(None, 50, |s| s.power == Power::Disabled as u8);
+        assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
+    });
 }
 
 #[test]
 fn servo_does_not_follow_setpoints_unless_enabled() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
-    for k in 1..200 {
-        let sp = setpoint(&lp, k, 40.0 + k as f64 * 0.01, 10.0);
-        let s = lp.step_with(None, Some(&sp), None);
-        assert_eq!(s.setpoint_seq, 0);
-    }
-    assert_eq!(lp.machine.axes()[0].position, 40.0, "the axis never moved");
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
+        for k in 1..200 {
+            let sp = setpoint(&lp, k, 40.0 + k as f64 * 0.01, 10.0);
+            let s = lp.step_with(None, Some(&sp), None);
+            assert_eq!(s.setpoint_seq, 0);
+        }
+        assert_eq!(lp.machine.axes()[0].position, 40.0, "the axis never moved");
+    });
 }
 
 #[test]
 fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
-    // (what, configuration change, setpoint x and x velocity relative to the start, code)
-    type Case<'a> = (&'a str, (&'a str, &'a str), f64, f64, u32);
-    let cases: [Case; 5] = [
-        (
-            "range",
-            ("max = 200.0", "max = 40.005"),
-            0.02,
-            0.0,
-            code::POSITION_OUT_OF_RANGE,
-        ),
-        ("velocity", ("", ""), 0.0, 20.0, code::VELOCITY_OVER_LIMIT),
-        (
-            "position step",
-            ("", ""),
-            0.03,
-            0.0,
-            code::POSITION_STEP_OVER_LIMIT,
-        ),
-        (
-            "velocity step",
-            ("", ""),
-            0.0,
-            1.0,
-            code::VELOCITY_STEP_OVER_LIMIT,
-        ),
-        (
-            "not finite",
-            ("", ""),
-            f64::NAN,
-            0.0,
-            code::COMMAND_NOT_FINITE,
-        ),
-    ];
-    for (what, (from, to), dx, vx, want) in cases {
-        let cfg = if from.is_empty() {
-            Config::default_cell()
-        } else {
-            cfg_with(from, to)
-        };
-        let mut lp = Loop::new(&cfg.to_shm());
-        lp.enable();
-        // Hold with a valid setpoint for a while, then the bad one.
-        for k in 1..50 {
-            let sp = setpoint(&lp, k, 40.0, 0.0);
+    integration_tests::attributable(|| {
+        // (what, configuration change, setpoint x and x velocity relative to the start, code)
+        type Case<'a> = (&'a str, (&'a str, &'a str), f64, f64, u32);
+        let cases: [Case; 5] = [
+            (
+                "range",
+                ("max = 200.0", "max = 40.005"),
+                0.02,
+                0.0,
+                code::POSITION_OUT_OF_RANGE,
+            ),
+            ("velocity", ("", ""), 0.0, 20.0, code::VELOCITY_OVER_LIMIT),
+            (
+                "position step",
+                ("", ""),
+                0.03,
+                0.0,
+                code::POSITION_STEP_OVER_LIMIT,
+            ),
+            (
+                "velocity step",
+                ("", ""),
+                0.0,
+                1.0,
+                code::VELOCITY_STEP_OVER_LIMIT,
+            ),
+            (
+                "not finite",
+                ("", ""),
+                f64::NAN,
+                0.0,
+                code::COMMAND_NOT_FINITE,
+            ),
+        ];
+        for (what, (from, to), dx, vx, want) in cases {
+            let cfg = if from.is_empty() {
+                Config::default_cell()
+            } else {
+                cfg_with(from, to)
+            };
+            let mut lp = Loop::new(&cfg.to_shm());
+            lp.enable();
+            // Hold with a valid setpoint for a while, then the bad one.
+            for k in 1..50 {
+                let sp = setpoint(&lp, k, 40.0, 0.0);
+                let s = lp.step_with(None, Some(&sp), None);
+                assert_eq!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
+            }
+            let sp = setpoint(&lp, 50, 40.0 + dx, vx);
             let s = lp.step_with(None, Some(&sp), None);
-            assert_eq!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
+            // The cycle that latches still sends the last good targets, never 0.
+            let cmd = lp.cmd.expect("command");
+            assert_eq!(cmd.target_position[..3], [40.0, 40.0, 0.0], "{what}");
+            assert_ne!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
+            assert_eq!(s.fault_code, want, "{what}");
+            let e = lp
+                .events
+                .iter()
+                .find(|e| e.code == want)
+                .expect("the rule's event");
+            if want != code::COMMAND_NOT_FINITE {
+                assert_eq!(e.axis, 0, "{what}: names the axis");
+                assert!(
+                    e.limit > 0.0 && e.value.abs() > e.limit.abs() * 0.99,
+                    "{what}: {e:?}"
+                );
+            }
+            check_latched_then_recover(&mut lp, want);
         }
-        let sp = setpoint(&lp, 50, 40.0 + dx, vx);
-        let s = lp.step_with(None, Some(&sp), None);
-        // The cycle that latches still sends the last good targets, never 0.
-        let cmd = lp.cmd.expect("command");
-        assert_eq!(cmd.target_position[..3], [40.0, 40.0, 0.0], "{what}");
-        assert_ne!(s.status & st::FAULT_LATCHED, 0, "{what}: {:?}", lp.codes());
-        assert_eq!(s.fault_code, want, "{what}");
-        let e = lp
-            .events
-            .iter()
-            .find(|e| e.code == want)
-            .expect("the rule's event");
-        if want != code::COMMAND_NOT_FINITE {
-            assert_eq!(e.axis, 0, "{what}: names the axis");
-            assert!(
-                e.limit > 0.0 && e.value.abs() > e.limit.abs() * 0.99,
-                "{what}: {e:?}"
-            );
-        }
-        check_latched_then_recover(&mut lp, want);
-    }
+    });
 }
 
 #[test]
 fn a_following_error_latches_like_a_device_estop() {
-    // x cannot produce the force to follow (its effort barely beats friction).
-    let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
-    let cell = cfg.to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-    let mut latched = false;
-    for k in 0..20_000u64 {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        if s.status & st::FAULT_LATCHED != 0 {
-            latched = true;
-            assert_eq!(s.fault_code, code::FOLLOWING_ERROR);
-            assert_eq!(s.fault_axis, 0);
-            assert!(s.fault_value.abs() > 1.0 && s.fault_limit == 1.0);
-            break;
+    integration_tests::attributable(|| {
+        // x cannot produce the force to follow (its effort barely beats friction).
+        let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
+        let cell = cfg.to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+        let mut latched = false;
+        for k in 0..20_000u64 {
+            let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            if s.status & st::FAULT_LATCHED != 0 {
+                latched = true;
+                assert_eq!(s.fault_code, code::FOLLOWING_ERROR);
+                assert_eq!(s.fault_axis, 0);
+                assert!(s.fault_value.abs() > 1.0 && s.fault_limit == 1.0);
+                break;
+            }
         }
-    }
-    assert!(latched, "no following error: {:?}", lp.codes());
-    check_latched_then_recover(&mut lp, code::FOLLOWING_ERROR);
+        assert!(latched, "no following error: {:?}", lp.codes());
+        check_latched_then_recover(&mut lp, code::FOLLOWING_ERROR);
+    });
 }
 
 #[test]
 fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let inject = |seq, active| FaultInjectionV1 {
-        seq,
-        axis: 1,
-        code: injected::OVER_CURRENT,
-        active,
-    };
-    lp.step_with(None, None, Some(&inject(1, 1)));
-    let s = lp.until(None, 50, |s| s.status & st::FAULT_LATCHED != 0);
-    assert_eq!(s.fault_code, code::DRIVE_REPORTS_FAULT);
-    assert_eq!((s.fault_axis, s.fault_value), (1, 0x2310 as f64));
-    let fault = lp
-        .events
-        .iter()
-        .find(|e| e.code == code::DRIVE_FAULT)
-        .expect("drive event");
-    assert_eq!(
-        (fault.axis, fault.value, fault.text()),
-        (1, 0x2310 as f64, "y: over-current")
-    );
-    lp.until(None, 500, |s| {
-        State::from_statusword(s.statusword[1]) == Some(State::Fault)
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let inject = |seq, active| FaultInjectionV1 {
+            seq,
+            axis: 1,
+            code: injected::OVER_CURRENT,
+            active,
+        };
+        lp.step_with(None, None, Some(&inject(1, 1)));
+        let s = lp.until(None, 50, |s| s.status & st::FAULT_LATCHED != 0);
+        assert_eq!(s.fault_code, code::DRIVE_REPORTS_FAULT);
+        assert_eq!((s.fault_axis, s.fault_value), (1, 0x2310 as f64));
+        let fault = lp
+            .events
+            .iter()
+            .find(|e| e.code == code::DRIVE_FAULT)
+            .expect("drive event");
+        assert_eq!(
+            (fault.axis, fault.value, fault.text()),
+            (1, 0x2310 as f64, "y: over-current")
+        );
+        lp.until(None, 500, |s| {
+            State::from_statusword(s.statusword[1]) == Some(State::Fault)
+        });
+        // The condition persists: a reset is refused and the drive stays in Fault.
+        let before = lp.events.len();
+        lp.step_with(Some(RequestKind::Reset), None, None);
+        for _ in 0..700 {
+            lp.step();
+        }
+        assert_eq!(states(&lp)[1], State::Fault);
+        assert_ne!(lp.state.status & st::FAULT_LATCHED, 0);
+        assert!(
+            lp.events[before..]
+                .iter()
+                .any(|e| e.code == code::REQUEST_REFUSED && e.text().contains("still in Fault"))
+        );
+        // Cleared: the reset works (transition 15), power stays off until enable.
+        lp.step_with(None, None, Some(&inject(2, 0)));
+        check_latched_then_recover(&mut lp, code::DRIVE_REPORTS_FAULT);
+        assert!(
+            lp.events
+                .iter()
+                .any(|e| e.code == code::DRIVE_TRANSITION && e.value == 15.0)
+        );
     });
-    // The condition persists: a reset is refused and the drive stays in Fault.
-    let before = lp.events.len();
-    lp.step_with(Some(RequestKind::Reset), None, None);
-    for _ in 0..700 {
-        lp.step();
-    }
-    assert_eq!(states(&lp)[1], State::Fault);
-    assert_ne!(lp.state.status & st::FAULT_LATCHED, 0);
-    assert!(
-        lp.events[before..]
-            .iter()
-            .any(|e| e.code == code::REQUEST_REFUSED && e.text().contains("still in Fault"))
-    );
-    // Cleared: the reset works (transition 15), power stays off until enable.
-    lp.step_with(None, None, Some(&inject(2, 0)));
-    check_latched_then_recover(&mut lp, code::DRIVE_REPORTS_FAULT);
-    assert!(
-        lp.events
-            .iter()
-            .any(|e| e.code == code::DRIVE_TRANSITION && e.value == 15.0)
-    );
 }
 
 #[test]
 fn a_lost_encoder_is_a_fault_at_once_and_never_a_believable_number() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let f = FaultInjectionV1 {
-        seq: 1,
-        axis: 0,
-        code: injected::ENCODER_LOSS,
-        active: 1,
-    };
-    lp.step_with(None, None, Some(&f));
-    let s = lp.step();
-    assert_eq!(s.fault_code, code::FEEDBACK_NOT_FINITE);
-    assert!(s.act_position[0].is_nan());
-    let image = iobridge::write_image(1, 0, &s);
-    assert!(
-        iobridge::read_image(&image).1[0].is_nan(),
-        "the image marks it invalid"
-    );
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let f = FaultInjectionV1 {
+            seq: 1,
+            axis: 0,
+            code: injected::ENCODER_LOSS,
+            active: 1,
+        };
+        lp.step_with(None, None, Some(&f));
+        let s = lp.step();
+        assert_eq!(s.fault_code, code::FEEDBACK_NOT_FINITE);
+        assert!(s.act_position[0].is_nan());
+        let image = iobridge::write_image(1, 0, &s);
+        assert!(
+            iobridge::read_image(&image).1[0].is_nan(),
+            "the image marks it invalid"
+        );
+    });
 }
 
 #[test]
 fn no_drive_re_enables_after_a_command_timeout_without_reset() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    // Servo goes silent for longer than the drives' watchdog (0.1 s): the machine runs alone.
-    let mut q = shm_schema::EventQueue::default();
-    for _ in 0..150 {
-        lp.machine.cycle(lp.now, None, None, &mut q);
-        lp.now += lp.period;
-    }
-    assert!(
-        lp.machine
-            .drives()
-            .iter()
-            .all(|d| d.state() == State::Fault)
-    );
-    assert!(q.as_slice().iter().any(|e| e.code == code::COMMAND_TIMEOUT));
-    lp.events.extend_from_slice(q.as_slice());
-    // Servo comes back: it sees the faults, latches, and nothing powers up by itself.
-    for _ in 0..500 {
-        let s = lp.step();
-        assert_eq!(s.status & st::ENABLED, 0);
-    }
-    assert_eq!(lp.state.fault_code, code::DRIVE_REPORTS_FAULT);
-    assert_eq!(
-        lp.fb.expect("fb").error_code[0],
-        cia402::error_code::COMMAND_TIMEOUT
-    );
-    check_latched_then_recover(&mut lp, code::DRIVE_REPORTS_FAULT);
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        // Servo goes silent for longer than the drives' watchdog (0.1 s): the machine runs alone.
+        let mut q = shm_schema::EventQueue::default();
+        for _ in 0..150 {
+            lp.machine.cycle(lp.now, None, None, &mut q);
+            lp.now += lp.period;
+        }
+        assert!(
+            lp.machine
+                .drives()
+                .iter()
+                .all(|d| d.state() == State::Fault)
+        );
+        assert!(q.as_slice().iter().any(|e| e.code == code::COMMAND_TIMEOUT));
+        lp.events.extend_from_slice(q.as_slice());
+        // Servo comes back: it sees the faults, latches, and nothing powers up by itself.
+        for _ in 0..500 {
+            let s = lp.step();
+            assert_eq!(s.status & st::ENABLED, 0);
+        }
+        assert_eq!(lp.state.fault_code, code::DRIVE_REPORTS_FAULT);
+        assert_eq!(
+            lp.fb.expect("fb").error_code[0],
+            cia402::error_code::COMMAND_TIMEOUT
+        );
+        check_latched_then_recover(&mut lp, code::DRIVE_REPORTS_FAULT);
+    });
 }
 
 #[test]
 fn servo_notices_stale_feedback_and_cuts_power() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    // The drives' feedback stops (the machine process stalls or died); servo keeps cycling.
-    let fb = lp.fb;
-    let mut q = shm_schema::EventQueue::default();
-    let mut s = lp.state;
-    for k in 0..200 {
-        let t = lp.now + k * MS;
-        s = lp.servo.cycle(t, None, None, fb.as_ref(), &mut q).1;
-        if s.status & st::FAULT_LATCHED != 0 {
-            // Within the feedback timeout (0.1 s) plus a cycle.
-            assert!(k * MS <= cell.feedback_timeout_ns + 2 * MS, "after {k} ms");
-            break;
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        // The drives' feedback stops (the machine process stalls or died); servo keeps cycling.
+        let fb = lp.fb;
+        let mut q = shm_schema::EventQueue::default();
+        let mut s = lp.state;
+        for k in 0..200 {
+            let t = lp.now + k * MS;
+            s = lp.servo.cycle(t, None, None, fb.as_ref(), &mut q).1;
+            if s.status & st::FAULT_LATCHED != 0 {
+                // Within the feedback timeout (0.1 s) plus a cycle.
+                assert!(k * MS <= cell.feedback_timeout_ns + 2 * MS, "after {k} ms");
+                break;
+            }
         }
-    }
-    assert_eq!(s.fault_code, code::FEEDBACK_STALE);
-    let e = q
-        .as_slice()
-        .iter()
-        .find(|e| e.code == code::FEEDBACK_STALE)
-        .expect("event");
-    assert!(e.value > e.limit && e.limit == 0.1, "{e:?}");
-    let (cmd, _) = lp
-        .servo
-        .cycle(lp.now + 201 * MS, None, None, fb.as_ref(), &mut q);
-    assert!(
-        cmd.controlword[..3]
+        assert_eq!(s.fault_code, code::FEEDBACK_STALE);
+        let e = q
+            .as_slice()
             .iter()
-            .all(|w| *w == cw::QUICK_STOP_CMD)
-    );
-    // A reset while the feedback is still stale is refused; the fault stays latched.
-    let reset = shm_schema::ServoRequestV1 {
-        seq: 9,
-        kind: RequestKind::Reset as u32,
-        axis: 0,
-        value: 0.0,
-    };
-    let mut q = shm_schema::EventQueue::default();
-    let mut s = lp.state;
-    let (mut refused, mut cleared) = (false, false);
-    for k in 0..700u64 {
-        let r = (k == 0).then_some(&reset);
-        s = lp
+            .find(|e| e.code == code::FEEDBACK_STALE)
+            .expect("event");
+        assert!(e.value > e.limit && e.limit == 0.1, "{e:?}");
+        let (cmd, _) = lp
             .servo
-            .cycle(lp.now + (202 + k) * MS, r, None, fb.as_ref(), &mut q)
-            .1;
-        refused |= q.as_slice().iter().any(|e| e.code == code::REQUEST_REFUSED);
-        cleared |= q.as_slice().iter().any(|e| e.code == code::FAULT_CLEARED);
-        q.clear();
-    }
-    assert!(refused && !cleared, "refused {refused}, cleared {cleared}");
-    assert_ne!(s.status & st::FAULT_LATCHED, 0);
-    assert_eq!(s.fault_code, code::FEEDBACK_STALE);
+            .cycle(lp.now + 201 * MS, None, None, fb.as_ref(), &mut q);
+        assert!(
+            cmd.controlword[..3]
+                .iter()
+                .all(|w| *w == cw::QUICK_STOP_CMD)
+        );
+        // A reset while the feedback is still stale is refused; the fault stays latched.
+        let reset = shm_schema::ServoRequestV1 {
+            seq: 9,
+            kind: RequestKind::Reset as u32,
+            axis: 0,
+            value: 0.0,
+        };
+        let mut q = shm_schema::EventQueue::default();
+        let mut s = lp.state;
+        let (mut refused, mut cleared) = (false, false);
+        for k in 0..700u64 {
+            let r = (k == 0).then_some(&reset);
+            s = lp
+                .servo
+                .cycle(lp.now + (202 + k) * MS, r, None, fb.as_ref(), &mut q)
+                .1;
+            refused |= q.as_slice().iter().any(|e| e.code == code::REQUEST_REFUSED);
+            cleared |= q.as_slice().iter().any(|e| e.code == code::FAULT_CLEARED);
+            q.clear();
+        }
+        assert!(refused && !cleared, "refused {refused}, cleared {cleared}");
+        assert_ne!(s.status & st::FAULT_LATCHED, 0);
+        assert_eq!(s.fault_code, code::FEEDBACK_STALE);
+    });
 }
 
 #[test]
 fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
-    // 2 s of motion at full speed, then trajgen dies.
-    for k in 0..2000 {
-        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
-        lp.step_with(None, sp.as_ref(), None);
-    }
-    assert!(
-        lp.state.cmd_velocity[0] > 10.0,
-        "moving at {}",
-        lp.state.cmd_velocity[0]
-    );
-    let mut max_fe = [0.0f64; 3];
-    for _ in 0..2000 {
-        let s = lp.step();
-        for (m, e) in max_fe.iter_mut().zip(&s.following_error) {
-            *m = m.max(e.abs());
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
+        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        // 2 s of motion at full speed, then trajgen dies.
+        for k in 0..2000 {
+            let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
+            lp.step_with(None, sp.as_ref(), None);
         }
-    }
-    let s = lp.state;
-    assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
-    assert_ne!(s.status & st::ENABLED, 0);
-    assert_ne!(s.status & st::SETPOINT_STALE, 0);
-    assert!(lp.codes().contains(&code::SETPOINT_STALE));
-    for (i, fe) in max_fe.iter().enumerate() {
-        assert!(*fe < 0.5, "axis {i}: following error {fe}");
-        assert_eq!(s.cmd_velocity[i], 0.0);
-    }
-    // At rest, and no drift: another 5 s change nothing beyond the in-position band.
-    let held = lp
-        .machine
-        .axes()
-        .iter()
-        .map(|a| a.position)
-        .collect::<Vec<_>>();
-    for _ in 0..5000 {
-        lp.step();
-    }
-    for (i, a) in lp.machine.axes().iter().enumerate() {
-        assert!((a.position - held[i]).abs() <= 0.01, "axis {i} drifted");
-        assert!(lp.state.following_error[i].abs() <= 0.01);
-    }
-    assert_ne!(lp.state.status & st::SETTLED, 0);
+        assert!(
+            lp.state.cmd_velocity[0] > 10.0,
+            "moving at {}",
+            lp.state.cmd_velocity[0]
+        );
+        let mut max_fe = [0.0f64; 3];
+        for _ in 0..2000 {
+            let s = lp.step();
+            for (m, e) in max_fe.iter_mut().zip(&s.following_error) {
+                *m = m.max(e.abs());
+            }
+        }
+        let s = lp.state;
+        assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
+        assert_ne!(s.status & st::ENABLED, 0);
+        assert_ne!(s.status & st::SETPOINT_STALE, 0);
+        assert!(lp.codes().contains(&code::SETPOINT_STALE));
+        for (i, fe) in max_fe.iter().enumerate() {
+            assert!(*fe < 0.5, "axis {i}: following error {fe}");
+            assert_eq!(s.cmd_velocity[i], 0.0);
+        }
+        // At rest, and no drift: another 5 s change nothing beyond the in-position band.
+        let held = lp
+            .machine
+            .axes()
+            .iter()
+            .map(|a| a.position)
+            .collect::<Vec<_>>();
+        for _ in 0..5000 {
+            lp.step();
+        }
+        for (i, a) in lp.machine.axes().iter().enumerate() {
+            assert!((a.position - held[i]).abs() <= 0.01, "axis {i} drifted");
+            assert!(lp.state.following_error[i].abs() <= 0.01);
+        }
+        assert_ne!(lp.state.status & st::SETTLED, 0);
+    });
 }
 
 #[test]
 fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
-    // trajgen silent for 30 ms in the middle of an acceleration and for 40 ms later (host
-    // stalls of its CPU, below the 50 ms setpoint timeout): the next setpoint differs from
-    // servo's extrapolation; the command must not step.
-    let cfg = crate::closed_loop::at_rate(250);
-    let cell = cfg.to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
-    let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
-    let mut prev = lp.state;
-    for k in 0..8000u64 {
-        let silent = (1000..1120).contains(&k) || (3000..3160).contains(&k);
-        let sp = (k % tg == 0 && !silent).then(|| g.step(lp.now + 100_000, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
-        if k > 10 {
-            for i in 0..3 {
-                max_dp[i] = max_dp[i].max((s.cmd_position[i] - prev.cmd_position[i]).abs());
-                max_dv[i] = max_dv[i].max((s.cmd_velocity[i] - prev.cmd_velocity[i]).abs());
+    integration_tests::attributable(|| {
+        // trajgen silent for 30 ms in the middle of an acceleration and for 40 ms later (host
+        // stalls of its CPU, below the 50 ms setpoint timeout): the next setpoint differs from
+        // servo's extrapolation; the command must not step.
+        let cfg = crate::closed_loop::at_rate(250);
+        let cell = cfg.to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
+        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
+        let mut prev = lp.state;
+        for k in 0..8000u64 {
+            let silent = (1000..1120).contains(&k) || (3000..3160).contains(&k);
+            let sp = (k % tg == 0 && !silent).then(|| g.step(lp.now + 100_000, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
+            if k > 10 {
+                for i in 0..3 {
+                    max_dp[i] = max_dp[i].max((s.cmd_position[i] - prev.cmd_position[i]).abs());
+                    max_dv[i] = max_dv[i].max((s.cmd_velocity[i] - prev.cmd_velocity[i]).abs());
+                }
             }
+            prev = s;
         }
-        prev = s;
-    }
-    for (i, a) in cell.axes().iter().enumerate() {
-        assert!(
-            max_dp[i] <= a.position_step_limit,
-            "axis {i}: step {}",
-            max_dp[i]
-        );
-        assert!(
-            max_dv[i] <= a.velocity_step_limit,
-            "axis {i}: velocity step {}",
-            max_dv[i]
-        );
-    }
+        for (i, a) in cell.axes().iter().enumerate() {
+            assert!(
+                max_dp[i] <= a.position_step_limit,
+                "axis {i}: step {}",
+                max_dp[i]
+            );
+            assert!(
+                max_dv[i] <= a.velocity_step_limit,
+                "axis {i}: velocity step {}",
+                max_dv[i]
+            );
+        }
+    });
 }
 
 #[test]
 fn a_late_servo_cycle_is_not_a_step() {
-    // Servo itself stalls 3 ms (12 periods at 4 kHz) with the axes at full speed: the command
-    // moves 48 µm in one cycle, which the real elapsed time explains; nothing is refused.
-    let cell = crate::closed_loop::at_rate(250).to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
-    for k in 0..6000u64 {
-        if k == 4000 {
-            assert!(lp.state.cmd_velocity[0] > 15.0);
-            lp.servo_stalls(12);
+    integration_tests::attributable(|| {
+        // Servo itself stalls 3 ms (12 periods at 4 kHz) with the axes at full speed: the command
+        // moves 48 µm in one cycle, which the real elapsed time explains; nothing is refused.
+        let cell = crate::closed_loop::at_rate(250).to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
+        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        for k in 0..6000u64 {
+            if k == 4000 {
+                assert!(lp.state.cmd_velocity[0] > 15.0);
+                lp.servo_stalls(12);
+            }
+            let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
         }
-        let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
-    }
+    });
 }
 
 #[test]
 fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let step = |lp: &mut Loop, seq: u64, value: f64| {
-        let r = shm_schema::ServoRequestV1 {
-            seq,
-            kind: RequestKind::Step as u32,
-            axis: 0,
-            value,
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let step = |lp: &mut Loop, seq: u64, value: f64| {
+            let r = shm_schema::ServoRequestV1 {
+                seq,
+                kind: RequestKind::Step as u32,
+                axis: 0,
+                value,
+            };
+            let fb = lp.fb;
+            let mut q = shm_schema::EventQueue::default();
+            let s = lp
+                .servo
+                .cycle(lp.now + 300_000, Some(&r), None, fb.as_ref(), &mut q)
+                .1;
+            lp.events.extend_from_slice(q.as_slice());
+            s
         };
-        let fb = lp.fb;
-        let mut q = shm_schema::EventQueue::default();
-        let s = lp
-            .servo
-            .cycle(lp.now + 300_000, Some(&r), None, fb.as_ref(), &mut q)
-            .1;
-        lp.events.extend_from_slice(q.as_slice());
-        s
-    };
-    // Too large: refused, nothing moves.
-    let s = step(&mut lp, 100, 0.6);
-    assert_eq!(s.cmd_position[0], 40.0);
-    assert!(
-        lp.events.iter().any(|e| e.code == code::REQUEST_REFUSED
-            && e.text().contains("half the following-error limit"))
-    );
-    // Within the limit: the command steps at once, with no fault, and the axis follows.
-    let s = step(&mut lp, 101, 0.4);
-    assert!(
-        (s.cmd_position[0] - 40.4).abs() < 1e-12,
-        "{}",
-        s.cmd_position[0]
-    );
-    assert_eq!(s.status & st::FAULT_LATCHED, 0);
-    let s = lp.until(None, 2000, |s| s.status & st::SETTLED != 0);
-    assert!((s.act_position[0] - 40.4).abs() <= 0.01);
-    assert!(lp.codes().contains(&code::TUNE_STEP));
+        // Too large: refused, nothing moves.
+        let s = step(&mut lp, 100, 0.6);
+        assert_eq!(s.cmd_position[0], 40.0);
+        assert!(lp.events.iter().any(|e| e.code == code::REQUEST_REFUSED
+            && e.text().contains("half the following-error limit")));
+        // Within the limit: the command steps at once, with no fault, and the axis follows.
+        let s = step(&mut lp, 101, 0.4);
+        assert!(
+            (s.cmd_position[0] - 40.4).abs() < 1e-12,
+            "{}",
+            s.cmd_position[0]
+        );
+        assert_eq!(s.status & st::FAULT_LATCHED, 0);
+        let s = lp.until(None, 2000, |s| s.status & st::SETTLED != 0);
+        assert!((s.act_position[0] - 40.4).abs() <= 0.01);
+        assert!(lp.codes().contains(&code::TUNE_STEP));
+    });
 }
 
 #[test]
 fn a_reset_never_cancels_a_quick_stop_under_way() {
-    // A following error at speed cuts power; a reset sent at once waits until every drive
-    // has stopped (the quick-stop ramp ran its course) and is without power.
-    let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
-    let cell = cfg.to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-    let mut k = 0u64;
-    loop {
-        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        if s.status & st::FAULT_LATCHED != 0 {
-            break;
+    integration_tests::attributable(|| {
+        // A following error at speed cuts power; a reset sent at once waits until every drive
+        // has stopped (the quick-stop ramp ran its course) and is without power.
+        let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
+        let cell = cfg.to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+        let mut k = 0u64;
+        loop {
+            let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            if s.status & st::FAULT_LATCHED != 0 {
+                break;
+            }
+            k += 1;
+            assert!(k < 20_000, "no fault");
         }
-        k += 1;
-        assert!(k < 20_000, "no fault");
-    }
-    assert!(
-        lp.machine.axes()[0].velocity.abs() > 1.0,
-        "moving when power was cut"
-    );
-    let s = lp.step_with(Some(RequestKind::Reset), None, None);
-    assert_ne!(
-        s.status & st::FAULT_LATCHED,
-        0,
-        "not cleared while x still ramps down"
-    );
-    let s = lp.until(None, 2000, |s| s.status & st::FAULT_LATCHED == 0);
-    assert!(lp.machine.axes().iter().all(|a| a.velocity == 0.0));
-    assert!(
-        (0..3).all(|i| {
+        assert!(
+            lp.machine.axes()[0].velocity.abs() > 1.0,
+            "moving when power was cut"
+        );
+        let s = lp.step_with(Some(RequestKind::Reset), None, None);
+        assert_ne!(
+            s.status & st::FAULT_LATCHED,
+            0,
+            "not cleared while x still ramps down"
+        );
+        let s = lp.until(None, 2000, |s| s.status & st::FAULT_LATCHED == 0);
+        assert!(lp.machine.axes().iter().all(|a| a.velocity == 0.0));
+        assert!((0..3).all(|i| {
             State::from_statusword(s.statusword[i]).is_some_and(|s| !s.power_stage_on())
-        })
-    );
-    // The ramp ran: x went through Quick stop active (11), then Switch on disabled (12).
-    let x: Vec<f64> = lp
-        .events
-        .iter()
-        .filter(|e| e.code == code::DRIVE_TRANSITION && e.axis == 0)
-        .map(|e| e.value)
-        .collect();
-    assert!(x.ends_with(&[11.0, 12.0]), "{x:?}");
+        }));
+        // The ramp ran: x went through Quick stop active (11), then Switch on disabled (12).
+        let x: Vec<f64> = lp
+            .events
+            .iter()
+            .filter(|e| e.code == code::DRIVE_TRANSITION && e.axis == 0)
+            .map(|e| e.value)
+            .collect();
+        assert!(x.ends_with(&[11.0, 12.0]), "{x:?}");
+    });
 }
 
 #[test]
 fn feedback_that_is_not_the_cells_latches() {
-    // A drives' process for another machine (2 axes for a 3-axis cell) is refused at once.
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut fb = lp.fb.expect("feedback");
-    fb.axes = 2;
-    fb.seq += 1;
-    let mut q = shm_schema::EventQueue::default();
-    let s = lp
-        .servo
-        .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
-        .1;
-    assert_eq!(
-        (s.fault_code, s.fault_value, s.fault_limit),
-        (code::FEEDBACK_MISMATCH, 2.0, 3.0)
-    );
-    // A drive that runs another mode than configured (CSP for a CST axis) while enabled.
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut fb = lp.fb.expect("feedback");
-    fb.mode_display[1] = cia402::Mode::Csp as i8;
-    fb.seq += 1;
-    let s = lp
-        .servo
-        .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
-        .1;
-    assert_eq!((s.fault_code, s.fault_axis), (code::FEEDBACK_MISMATCH, 1));
-    assert_eq!((s.fault_value, s.fault_limit), (8.0, 10.0));
+    integration_tests::attributable(|| {
+        // A drives' process for another machine (2 axes for a 3-axis cell) is refused at once.
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut fb = lp.fb.expect("feedback");
+        fb.axes = 2;
+        fb.seq += 1;
+        let mut q = shm_schema::EventQueue::default();
+        let s = lp
+            .servo
+            .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
+            .1;
+        assert_eq!(
+            (s.fault_code, s.fault_value, s.fault_limit),
+            (code::FEEDBACK_MISMATCH, 2.0, 3.0)
+        );
+        // A drive that runs another mode than configured (CSP for a CST axis) while enabled.
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut fb = lp.fb.expect("feedback");
+        fb.mode_display[1] = cia402::Mode::Csp as i8;
+        fb.seq += 1;
+        let s = lp
+            .servo
+            .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
+            .1;
+        assert_eq!((s.fault_code, s.fault_axis), (code::FEEDBACK_MISMATCH, 1));
+        assert_eq!((s.fault_value, s.fault_limit), (8.0, 10.0));
+    });
 }
 
 #[test]
 fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-    for k in 0..2000u64 {
-        let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
-        lp.step_with(None, sp.as_ref(), None);
-    }
-    let v0 = lp.state.cmd_velocity[0];
-    assert!(v0 > 10.0, "moving at {v0}");
-    let s = lp.step_with(Some(RequestKind::Disable), None, None);
-    assert_eq!(s.power, Power::Disabling as u8);
-    assert!(
-        s.controlword[..3]
-            .iter()
-            .all(|w| *w == cw::ENABLE_OPERATION_CMD)
-    );
-    // Power stays on while the reference decelerates; Shutdown only at rest.
-    let mut cycles = 0u64;
-    let mut max_fe = 0.0f64;
-    loop {
-        let s = lp.step();
-        max_fe = max_fe.max(s.following_error[0].abs());
-        if s.controlword[0] == cw::SHUTDOWN {
-            assert!(lp.machine.axes()[0].velocity.abs() <= 0.1, "still moving");
-            break;
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
+        for k in 0..2000u64 {
+            let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
+            lp.step_with(None, sp.as_ref(), None);
         }
-        cycles += 1;
-        assert!(cycles < 5000, "never powered down");
-    }
-    // From v0 at vmax / t_acc: about t_acc.
-    let ramp_s = cycles as f64 * 1e-3;
-    assert!(ramp_s > 0.8 * v0 / (16.0 / 0.525), "{ramp_s} s");
-    assert!(max_fe < 0.5, "{max_fe}");
-    let s = lp.until(None, 100, |s| s.power == Power::Disabled as u8);
-    assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
-    assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
+        let v0 = lp.state.cmd_velocity[0];
+        assert!(v0 > 10.0, "moving at {v0}");
+        let s = lp.step_with(Some(RequestKind::Disable), None, None);
+        assert_eq!(s.power, Power::Disabling as u8);
+        assert!(
+            s.controlword[..3]
+                .iter()
+                .all(|w| *w == cw::ENABLE_OPERATION_CMD)
+        );
+        // Power stays on while the reference decelerates; Shutdown only at rest.
+        let mut cycles = 0u64;
+        let mut max_fe = 0.0f64;
+        loop {
+            let s = lp.step();
+            max_fe = max_fe.max(s.following_error[0].abs());
+            if s.controlword[0] == cw::SHUTDOWN {
+                assert!(lp.machine.axes()[0].velocity.abs() <= 0.1, "still moving");
+                break;
+            }
+            cycles += 1;
+            assert!(cycles < 5000, "never powered down");
+        }
+        // From v0 at vmax / t_acc: about t_acc.
+        let ramp_s = cycles as f64 * 1e-3;
+        assert!(ramp_s > 0.8 * v0 / (16.0 / 0.525), "{ramp_s} s");
+        assert!(max_fe < 0.5, "{max_fe}");
+        let s = lp.until(None, 100, |s| s.power == Power::Disabled as u8);
+        assert_eq!(s.status & st::FAULT_LATCHED, 0, "{:?}", lp.codes());
+        assert!(states(&lp).iter().all(|s| *s == State::ReadyToSwitchOn));
+    });
 }
 
 #[test]
 fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
-    // Servo takes its time when it wakes; a host stall before it reads the setpoint lets
-    // trajgen publish one stamped 6 ms later. At 16 mm/s, taking it at its stamp would step
-    // the command 0.1 mm in one cycle (found at 4 kHz on this VM); servo evaluates it back at
-    // its own time instead.
-    let cell = crate::closed_loop::at_rate(250).to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
-    for k in 0..12_000u64 {
-        // One setpoint from the future of servo's cycle, at full speed.
-        let ahead = if k == 10_000 { 6_000_000 } else { 0 };
-        let sp = (k % tg == 0 || k == 10_000).then(|| g.step(lp.now + 100_000 + ahead, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
-    }
+    integration_tests::attributable(|| {
+        // Servo takes its time when it wakes; a host stall before it reads the setpoint lets
+        // trajgen publish one stamped 6 ms later. At 16 mm/s, taking it at its stamp would step
+        // the command 0.1 mm in one cycle (found at 4 kHz on this VM); servo evaluates it back at
+        // its own time instead.
+        let cell = crate::closed_loop::at_rate(250).to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        for k in 0..12_000u64 {
+            // One setpoint from the future of servo's cycle, at full speed.
+            let ahead = if k == 10_000 { 6_000_000 } else { 0 };
+            let sp = (k % tg == 0 || k == 10_000).then(|| g.step(lp.now + 100_000 + ahead, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
+        }
+    });
 }
 
 #[test]
 fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
-    let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
-    let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-    // A reader that sees every state finds exactly servo's latched figure.
-    let mut seen = [0.0f64; 3];
-    let mut last = None;
-    for k in 0..12_000u64 {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        for (m, e) in seen.iter_mut().zip(&s.following_error[..3]) {
-            *m = m.max(e.abs());
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let mut lp = Loop::new(&cell);
+        lp.enable();
+        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+        // A reader that sees every state finds exactly servo's latched figure.
+        let mut seen = [0.0f64; 3];
+        let mut last = None;
+        for k in 0..12_000u64 {
+            let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            for (m, e) in seen.iter_mut().zip(&s.following_error[..3]) {
+                *m = m.max(e.abs());
+            }
+            last = Some(s);
         }
-        last = Some(s);
-    }
-    let s = last.expect("states");
-    assert_eq!(s.peak_program, 1);
-    assert!(seen[0] > 1e-4, "x moved: {seen:?}");
-    assert_eq!(&s.peak_following_error[..3], &seen[..]);
-    // The next program's first setpoint starts a new figure.
-    for c in crate::gantry_commands("MOVE(141,40,0)\nEND", 2) {
-        g.push_command(&c);
-    }
-    let mut first = None;
-    for k in 0..4_000u64 {
-        let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
-        let s = lp.step_with(None, sp.as_ref(), None);
-        if s.peak_program == 2 && first.is_none() {
-            first = Some(s);
+        let s = last.expect("states");
+        assert_eq!(s.peak_program, 1);
+        assert!(seen[0] > 1e-4, "x moved: {seen:?}");
+        assert_eq!(&s.peak_following_error[..3], &seen[..]);
+        // The next program's first setpoint starts a new figure.
+        for c in crate::gantry_commands("MOVE(141,40,0)\nEND", 2) {
+            g.push_command(&c);
         }
-    }
-    let first = first.expect("program 2 followed");
-    for i in 0..3 {
-        assert_eq!(
-            first.peak_following_error[i],
-            first.following_error[i].abs()
-        );
-    }
+        let mut first = None;
+        for k in 0..4_000u64 {
+            let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
+            let s = lp.step_with(None, sp.as_ref(), None);
+            if s.peak_program == 2 && first.is_none() {
+                first = Some(s);
+            }
+        }
+        let first = first.expect("program 2 followed");
+        for i in 0..3 {
+            assert_eq!(
+                first.peak_following_error[i],
+                first.following_error[i].abs()
+            );
+        }
+    });
 }

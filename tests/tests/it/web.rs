@@ -103,174 +103,176 @@ fn serve(inst: &str) -> (Web, String) {
 
 #[test]
 fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the_cell() {
-    let test = "web";
-    let cfg = cell(test, &[]);
-    let up = Up::start(test, &cfg);
-    let inst = up.inst.clone();
-    let (mut web, url) = serve(&inst);
-    let (mut page, ready) = Browser::open(&url);
-    assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
-    // A program: x from 40 to 140 mm and back; the drawn tool follows the measured position.
-    let short = scratch(
-        test,
-        "short.prog",
-        "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
-    );
-    up.ok(&["exec", short.to_str().expect("utf-8")]);
-    up.until("moving", |s| {
-        s["supervisor"]["job"]["motion_time_s"]
-            .as_f64()
-            .is_some_and(|t| t > 1.0)
-    });
-    let a = page.ask("sample 3");
-    let samples: Vec<&Value> = a["samples"]
-        .as_array()
-        .expect("samples")
-        .iter()
-        .filter(|s| s["state"] == 1)
-        .collect();
-    assert!(samples.len() >= 5, "too few samples while moving: {a}");
-    let xs: Vec<f64> = samples
-        .iter()
-        .map(|s| s["drawn"][0].as_f64().expect("drawn x"))
-        .collect();
-    for s in &samples {
-        // Gantry: the tool is drawn at the measured joints (x, y).
-        let (d, j) = (&s["drawn"], &s["joints"]);
-        assert_eq!(d[0], j[0], "{s}");
-        assert_eq!(d[1], j[1], "{s}");
-    }
-    for w in xs.windows(2) {
-        assert!(w[1] >= w[0] - 1e-9, "x goes out to 140 mm: {xs:?}");
-    }
-    let moved = xs[xs.len() - 1] - xs[0];
-    println!("drawn x moved {moved:.2} mm in {} samples", xs.len());
-    assert!(
-        moved > 1.0,
-        "the drawn tool did not follow the program: {xs:?}"
-    );
-    // The path plot: the commanded tool (trajgen's own) along y = 40 mm from x = 40 to 140
-    // (the program moves x only), the measured one within the following-error limit of
-    // this cell (5 mm, room for the host's stalls: beyond it the cell faults) of that
-    // segment; both drawn.
-    let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
-    assert!(a["held"].is_string(), "{a}");
-    // Measured and commanded are the same motion, not two drawings: they go as far, once
-    // the measured tool had time to get where the command was (a host stall can hold servo
-    // back while trajgen runs on the other CPU: waited for, up to the driver's 60 s).
-    let a = page.ask(
-        "until (() => { const r = (p) => Math.max(...p.map(q => q[0])); \
+    integration_tests::attributable(|| {
+        let test = "web";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        let inst = up.inst.clone();
+        let (mut web, url) = serve(&inst);
+        let (mut page, ready) = Browser::open(&url);
+        assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+        // A program: x from 40 to 140 mm and back; the drawn tool follows the measured position.
+        let short = scratch(
+            test,
+            "short.prog",
+            "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
+        );
+        up.ok(&["exec", short.to_str().expect("utf-8")]);
+        up.until("moving", |s| {
+            s["supervisor"]["job"]["motion_time_s"]
+                .as_f64()
+                .is_some_and(|t| t > 1.0)
+        });
+        let a = page.ask("sample 3");
+        let samples: Vec<&Value> = a["samples"]
+            .as_array()
+            .expect("samples")
+            .iter()
+            .filter(|s| s["state"] == 1)
+            .collect();
+        assert!(samples.len() >= 5, "too few samples while moving: {a}");
+        let xs: Vec<f64> = samples
+            .iter()
+            .map(|s| s["drawn"][0].as_f64().expect("drawn x"))
+            .collect();
+        for s in &samples {
+            // Gantry: the tool is drawn at the measured joints (x, y).
+            let (d, j) = (&s["drawn"], &s["joints"]);
+            assert_eq!(d[0], j[0], "{s}");
+            assert_eq!(d[1], j[1], "{s}");
+        }
+        for w in xs.windows(2) {
+            assert!(w[1] >= w[0] - 1e-9, "x goes out to 140 mm: {xs:?}");
+        }
+        let moved = xs[xs.len() - 1] - xs[0];
+        println!("drawn x moved {moved:.2} mm in {} samples", xs.len());
+        assert!(
+            moved > 1.0,
+            "the drawn tool did not follow the program: {xs:?}"
+        );
+        // The path plot: the commanded tool (trajgen's own) along y = 40 mm from x = 40 to 140
+        // (the program moves x only), the measured one within the following-error limit of
+        // this cell (5 mm, room for the host's stalls: beyond it the cell faults) of that
+        // segment; both drawn.
+        let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
+        assert!(a["held"].is_string(), "{a}");
+        // Measured and commanded are the same motion, not two drawings: they go as far, once
+        // the measured tool had time to get where the command was (a host stall can hold servo
+        // back while trajgen runs on the other CPU: waited for, up to the driver's 60 s).
+        let a = page.ask(
+            "until (() => { const r = (p) => Math.max(...p.map(q => q[0])); \
          return Math.abs(r(rtc.path.measured) - r(rtc.path.commanded)) < 5; })()",
-    );
-    assert!(a["held"].is_string(), "{a}");
-    let v =
+        );
+        assert!(a["held"].is_string(), "{a}");
+        let v =
         page.ask("eval ({path: rtc.path, latency: rtc.latency, plotted: rtc.plotted})")["value"]
             .clone();
-    let points = |k: &str| -> Vec<(f64, f64)> {
-        v["path"][k]
-            .as_array()
-            .expect("points")
-            .iter()
-            .map(|p| (p[0].as_f64().expect("x"), p[1].as_f64().expect("y")))
-            .collect()
-    };
-    let (commanded, measured) = (points("commanded"), points("measured"));
-    assert!(commanded.len() > 10 && measured.len() > 10, "{v}");
-    for c in &commanded {
-        assert!(
-            (c.1 - 40.0).abs() < 1e-9 && (40.0..=140.0).contains(&c.0),
-            "commanded {c:?}"
+        let points = |k: &str| -> Vec<(f64, f64)> {
+            v["path"][k]
+                .as_array()
+                .expect("points")
+                .iter()
+                .map(|p| (p[0].as_f64().expect("x"), p[1].as_f64().expect("y")))
+                .collect()
+        };
+        let (commanded, measured) = (points("commanded"), points("measured"));
+        assert!(commanded.len() > 10 && measured.len() > 10, "{v}");
+        for c in &commanded {
+            assert!(
+                (c.1 - 40.0).abs() < 1e-9 && (40.0..=140.0).contains(&c.0),
+                "commanded {c:?}"
+            );
+        }
+        for m in &measured {
+            assert!(
+                (m.1 - 40.0).abs() < 5.0 && (35.0..=145.0).contains(&m.0),
+                "measured {m:?}"
+            );
+        }
+        let reach = |p: &[(f64, f64)]| p.iter().map(|p| p.0).fold(f64::MIN, f64::max);
+        println!(
+            "path plot: {} points, x {:.1} .. {:.1} mm; reach: measured {:.2}, commanded {:.2} mm",
+            commanded.len(),
+            commanded.first().expect("a point").0,
+            commanded.last().expect("a point").0,
+            reach(&measured),
+            reach(&commanded)
         );
-    }
-    for m in &measured {
-        assert!(
-            (m.1 - 40.0).abs() < 5.0 && (35.0..=145.0).contains(&m.0),
-            "measured {m:?}"
+        // The latency histograms: one per process of the cell, each with its samples.
+        let status = up.status();
+        let names: Vec<&String> = status["processes"]
+            .as_object()
+            .expect("processes")
+            .keys()
+            .collect();
+        assert!(names.len() >= 4, "{status}");
+        let hists = v["latency"].as_array().expect("latency histograms");
+        for name in &names {
+            let h = hists
+                .iter()
+                .find(|h| h["name"].as_str() == Some(name.as_str()))
+                .unwrap_or_else(|| panic!("no histogram of {name}: {v}"));
+            let in_bins: u64 = h["bins"]
+                .as_array()
+                .expect("bins")
+                .iter()
+                .map(|b| b[2].as_u64().expect("count"))
+                .sum();
+            // Every sample in a bin, or beyond the histogram's range (counted apart).
+            let samples = h["samples"].as_u64().expect("samples");
+            let beyond = h["overflows"].as_u64().expect("overflows");
+            assert!(in_bins > 0 && in_bins + beyond == samples, "{name}: {h}");
+        }
+        assert_eq!(
+            v["plotted"]["hist"].as_u64(),
+            Some(hists.len() as u64),
+            "{v}"
         );
-    }
-    let reach = |p: &[(f64, f64)]| p.iter().map(|p| p.0).fold(f64::MIN, f64::max);
-    println!(
-        "path plot: {} points, x {:.1} .. {:.1} mm; reach: measured {:.2}, commanded {:.2} mm",
-        commanded.len(),
-        commanded.first().expect("a point").0,
-        commanded.last().expect("a point").0,
-        reach(&measured),
-        reach(&commanded)
-    );
-    // The latency histograms: one per process of the cell, each with its samples.
-    let status = up.status();
-    let names: Vec<&String> = status["processes"]
-        .as_object()
-        .expect("processes")
-        .keys()
-        .collect();
-    assert!(names.len() >= 4, "{status}");
-    let hists = v["latency"].as_array().expect("latency histograms");
-    for name in &names {
-        let h = hists
-            .iter()
-            .find(|h| h["name"].as_str() == Some(name.as_str()))
-            .unwrap_or_else(|| panic!("no histogram of {name}: {v}"));
-        let in_bins: u64 = h["bins"]
-            .as_array()
-            .expect("bins")
-            .iter()
-            .map(|b| b[2].as_u64().expect("count"))
-            .sum();
-        // Every sample in a bin, or beyond the histogram's range (counted apart).
-        let samples = h["samples"].as_u64().expect("samples");
-        let beyond = h["overflows"].as_u64().expect("overflows");
-        assert!(in_bins > 0 && in_bins + beyond == samples, "{name}: {h}");
-    }
-    assert_eq!(
-        v["plotted"]["hist"].as_u64(),
-        Some(hists.len() as u64),
-        "{v}"
-    );
-    let shot = scratch(test, "web.png", "");
-    page.ask(&format!("shot {}", shot.display()));
-    assert!(
-        std::fs::metadata(&shot).is_ok_and(|m| m.len() > 10_000),
-        "screenshot"
-    );
-    println!("screenshot: {}", shot.display());
-    // The e-stop button stops the cell, through the CLI's path.
-    page.ask("click estop");
-    let a = page.ask("until rtc.estop");
-    assert!(a["banner"].as_str().unwrap_or("").contains("E-STOP"), "{a}");
-    let s = up.until("e-stop latched", |s| !s["supervisor"]["estop"].is_null());
-    let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-    assert!(reason.contains("web view"), "{s}");
-    up.until("the job ended", |s| s["supervisor"]["job"].is_null());
-    // Reset and start from the page.
-    page.ask("click reset");
-    page.ask("until !rtc.estop");
-    page.ask("click start");
-    page.ask("until rtc.last && rtc.last.enabled === true");
-    // The cell goes down: the page says so; the web server lets go of the instance.
-    up.ok(&["down"]);
-    drop(up);
-    page.ask("until !rtc.up");
-    let start = Instant::now();
-    while !leftovers(&inst).is_empty() {
-        assert!(start.elapsed() < WATCHDOG, "left: {:?}", leftovers(&inst));
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    // It comes up again: the same page draws it again.
-    let up = Up::start(test, &cfg);
-    let frames = page.ask("until rtc.up && rtc.last && rtc.last.joints")["held"].clone();
-    assert!(frames.is_string());
-    let bye = page.ask("quit");
-    assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
-    drop(page);
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(web.0.id() as i32),
-        nix::sys::signal::Signal::SIGTERM,
-    )
-    .expect("kill");
-    let status = web.0.wait().expect("web");
-    assert!(status.success(), "web exited with {status}");
-    up.down();
+        let shot = scratch(test, "web.png", "");
+        page.ask(&format!("shot {}", shot.display()));
+        assert!(
+            std::fs::metadata(&shot).is_ok_and(|m| m.len() > 10_000),
+            "screenshot"
+        );
+        println!("screenshot: {}", shot.display());
+        // The e-stop button stops the cell, through the CLI's path.
+        page.ask("click estop");
+        let a = page.ask("until rtc.estop");
+        assert!(a["banner"].as_str().unwrap_or("").contains("E-STOP"), "{a}");
+        let s = up.until("e-stop latched", |s| !s["supervisor"]["estop"].is_null());
+        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
+        assert!(reason.contains("web view"), "{s}");
+        up.until("the job ended", |s| s["supervisor"]["job"].is_null());
+        // Reset and start from the page.
+        page.ask("click reset");
+        page.ask("until !rtc.estop");
+        page.ask("click start");
+        page.ask("until rtc.last && rtc.last.enabled === true");
+        // The cell goes down: the page says so; the web server lets go of the instance.
+        up.ok(&["down"]);
+        drop(up);
+        page.ask("until !rtc.up");
+        let start = Instant::now();
+        while !leftovers(&inst).is_empty() {
+            assert!(start.elapsed() < WATCHDOG, "left: {:?}", leftovers(&inst));
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        // It comes up again: the same page draws it again.
+        let up = Up::start(test, &cfg);
+        let frames = page.ask("until rtc.up && rtc.last && rtc.last.joints")["held"].clone();
+        assert!(frames.is_string());
+        let bye = page.ask("quit");
+        assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
+        drop(page);
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(web.0.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        )
+        .expect("kill");
+        let status = web.0.wait().expect("web");
+        assert!(status.success(), "web exited with {status}");
+        up.down();
+    });
 }
 
 /// Seed 004's five-bar (examples/five-bar.toml) in the page: its builder draws it without an
@@ -279,89 +281,94 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
 /// program's triangle.
 #[test]
 fn the_page_draws_the_five_bar_through_its_kinematics() {
-    let test = "web-fivebar";
-    let src = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
-        .expect("examples/five-bar.toml");
-    let cfg = scratch(test, "cell.toml", &integration_tests::with_stall_room(&src));
-    // The five-bar's parameters as the file gives them (`[kinematics]`: key = number).
-    let params: Vec<(String, f64)> = src
-        .lines()
-        .skip_while(|l| l.trim() != "[kinematics]")
-        .skip(1)
-        .take_while(|l| !l.starts_with('['))
-        .filter_map(|l| {
-            let (k, v) = l.split_once('=')?;
-            let v = v.split('#').next()?.trim().parse::<f64>().ok()?;
-            Some((k.trim().to_string(), v))
-        })
-        .collect();
-    let params: Vec<(&str, f64)> = params.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-    assert_eq!(params.len(), 6, "{params:?}");
-    let kin = kinematics::build("five-bar", &kinematics::Params(&params)).expect("the five-bar");
-    let up = Up::start(test, &cfg);
-    let (web, url) = serve(&up.inst);
-    let (mut page, ready) = Browser::open(&url);
-    assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
-    let hello = page.ask("eval rtc.hello.kinematics")["value"].clone();
-    assert_eq!(hello, "five-bar");
-    let prog = integration_tests::examples().join("five-bar.prog");
-    up.ok(&["exec", prog.to_str().expect("utf-8")]);
-    up.until("moving", |s| {
-        s["supervisor"]["job"]["motion_time_s"]
-            .as_f64()
-            .is_some_and(|t| t > 1.0)
-    });
-    let a = page.ask("sample 2");
-    let samples: Vec<&Value> = a["samples"]
-        .as_array()
-        .expect("samples")
-        .iter()
-        .filter(|s| s["state"] == 1)
-        .collect();
-    assert!(samples.len() >= 5, "too few samples while moving: {a}");
-    for s in &samples {
-        let q: Vec<f64> = s["joints"]
-            .as_array()
-            .expect("joints")
-            .iter()
-            .map(|v| v.as_f64().expect("joint"))
+    integration_tests::attributable(|| {
+        let test = "web-fivebar";
+        let src = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
+            .expect("examples/five-bar.toml");
+        let cfg = scratch(test, "cell.toml", &integration_tests::with_stall_room(&src));
+        // The five-bar's parameters as the file gives them (`[kinematics]`: key = number).
+        let params: Vec<(String, f64)> = src
+            .lines()
+            .skip_while(|l| l.trim() != "[kinematics]")
+            .skip(1)
+            .take_while(|l| !l.starts_with('['))
+            .filter_map(|l| {
+                let (k, v) = l.split_once('=')?;
+                let v = v.split('#').next()?.trim().parse::<f64>().ok()?;
+                Some((k.trim().to_string(), v))
+            })
             .collect();
-        let mut joints = [0.0; kinematics::MAX_JOINTS];
-        joints[..q.len()].copy_from_slice(&q);
-        let p = kin.axes_to_cartesian(&joints).expect("forward");
-        for k in 0..2 {
-            let drawn = s["drawn"][k].as_f64().expect("drawn");
-            assert!((drawn - p[k]).abs() < 1e-6, "{s}: forward {p:?}");
+        let params: Vec<(&str, f64)> = params.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+        assert_eq!(params.len(), 6, "{params:?}");
+        let kin =
+            kinematics::build("five-bar", &kinematics::Params(&params)).expect("the five-bar");
+        let up = Up::start(test, &cfg);
+        let (web, url) = serve(&up.inst);
+        let (mut page, ready) = Browser::open(&url);
+        assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+        let hello = page.ask("eval rtc.hello.kinematics")["value"].clone();
+        assert_eq!(hello, "five-bar");
+        let prog = integration_tests::examples().join("five-bar.prog");
+        up.ok(&["exec", prog.to_str().expect("utf-8")]);
+        up.until("moving", |s| {
+            s["supervisor"]["job"]["motion_time_s"]
+                .as_f64()
+                .is_some_and(|t| t > 1.0)
+        });
+        let a = page.ask("sample 2");
+        let samples: Vec<&Value> = a["samples"]
+            .as_array()
+            .expect("samples")
+            .iter()
+            .filter(|s| s["state"] == 1)
+            .collect();
+        assert!(samples.len() >= 5, "too few samples while moving: {a}");
+        for s in &samples {
+            let q: Vec<f64> = s["joints"]
+                .as_array()
+                .expect("joints")
+                .iter()
+                .map(|v| v.as_f64().expect("joint"))
+                .collect();
+            let mut joints = [0.0; kinematics::MAX_JOINTS];
+            joints[..q.len()].copy_from_slice(&q);
+            let p = kin.axes_to_cartesian(&joints).expect("forward");
+            for k in 0..2 {
+                let drawn = s["drawn"][k].as_f64().expect("drawn");
+                assert!((drawn - p[k]).abs() < 1e-6, "{s}: forward {p:?}");
+            }
         }
-    }
-    let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
-    assert!(a["held"].is_string(), "{a}");
-    let path = page.ask("eval rtc.path.commanded")["value"].clone();
-    for p in path.as_array().expect("points") {
-        let (x, y) = (p[0].as_f64().expect("x"), p[1].as_f64().expect("y"));
-        // Start (-200, -150) and the corners P1..P3: the blend stays within their hull's box.
-        assert!(
-            (-236.0..=-159.0).contains(&x) && (-191.0..=-109.0).contains(&y),
-            "({x}, {y})"
-        );
-    }
-    let shot = scratch(test, "five-bar.png", "");
-    page.ask(&format!("shot {}", shot.display()));
-    println!("screenshot: {}", shot.display());
-    let bye = page.ask("quit");
-    assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
-    drop(page);
-    // The observer leaves first: `down` checks that nothing of the instance is left.
-    drop(web);
-    up.down();
+        let a = page.ask("until rtc.path.commanded.length > 10 && rtc.plotted.path > 0");
+        assert!(a["held"].is_string(), "{a}");
+        let path = page.ask("eval rtc.path.commanded")["value"].clone();
+        for p in path.as_array().expect("points") {
+            let (x, y) = (p[0].as_f64().expect("x"), p[1].as_f64().expect("y"));
+            // Start (-200, -150) and the corners P1..P3: the blend stays within their hull's box.
+            assert!(
+                (-236.0..=-159.0).contains(&x) && (-191.0..=-109.0).contains(&y),
+                "({x}, {y})"
+            );
+        }
+        let shot = scratch(test, "five-bar.png", "");
+        page.ask(&format!("shot {}", shot.display()));
+        println!("screenshot: {}", shot.display());
+        let bye = page.ask("quit");
+        assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
+        drop(page);
+        // The observer leaves first: `down` checks that nothing of the instance is left.
+        drop(web);
+        up.down();
+    });
 }
 
 #[test]
 fn web_refuses_a_network_address_without_a_token() {
-    let out = supervisor()
-        .args(["web", "--instance", "nobody", "--listen", "0.0.0.0:0"])
-        .output()
-        .expect("web");
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
+    integration_tests::attributable(|| {
+        let out = supervisor()
+            .args(["web", "--instance", "nobody", "--listen", "0.0.0.0:0"])
+            .output()
+            .expect("web");
+        assert_eq!(out.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
+    });
 }
