@@ -12,6 +12,10 @@ use crate::events::{self, Axes};
 use crate::launch::Children;
 use crate::run::{RunError, TICK};
 use crate::stall::StallWatch;
+
+/// A heartbeat gap this long (s) is reported, whatever room `supervisor_timeout` gives: the
+/// processes' own timing suffers from such a stall (a following error of vmax times it).
+const STALL_REPORTED_S: f64 = 0.1;
 use runtime::ipc::{self, Pub, Sub};
 use runtime::signals;
 use serde_json::{Value, json};
@@ -368,7 +372,7 @@ impl Cell {
             handover_sub,
             handover_pub,
             stalls: StallWatch::new(Duration::from_secs_f64(
-                cfg.supervisor.supervisor_timeout / 4.0,
+                (cfg.supervisor.supervisor_timeout / 4.0).min(STALL_REPORTED_S),
             )),
             status_subs,
             latency_subs,
@@ -519,8 +523,8 @@ impl Cell {
     }
 
     /// The heartbeat: the host state with the latched e-stop, every tick.
-    /// A gap since the last one of over a quarter of `supervisor_timeout` is an event that
-    /// says where the time went (see [`crate::stall`]).
+    /// A gap since the last one of over 100 ms (or a quarter of `supervisor_timeout`, if
+    /// that is shorter) is an event that says where the time went (see [`crate::stall`]).
     pub(crate) fn beat(&mut self) {
         self.host.beat += 1;
         self.host.stamp_ns = runtime::time::now_ns();

@@ -2,13 +2,14 @@
 //! time went, so that a process's `supervisor-lost` can be told apart from a bug.
 //!
 //! The supervisor runs under `SCHED_OTHER`; its heartbeat is what every process of the cell
-//! watches (`supervisor_timeout`). When two beats are further apart than a quarter of that
-//! timeout, [`StallWatch::beat`] returns a [`Stall`] that splits the gap three ways, from the
-//! kernel's own accounting:
+//! watches (`supervisor_timeout`). When two beats are further apart than the threshold the
+//! cell gives it (100 ms, or a quarter of that timeout if shorter), [`StallWatch::beat`]
+//! returns a [`Stall`] that splits the gap three ways, from the kernel's own accounting:
 //!
-//! - **waiting for a CPU**: the main thread was runnable but another task ran
-//!   (`/proc/thread-self/schedstat`, run delay): a real-time process or another load took the
-//!   CPUs;
+//! - **running**: the main thread itself was on a CPU (`/proc/thread-self/schedstat`, its
+//!   run time): the supervisor's own work held the beat back;
+//! - **waiting for a CPU**: the main thread was runnable but another task ran (its run
+//!   delay): a real-time process or another load took the CPUs;
 //! - **taken by the host**: the vCPUs were not running at all (`/proc/stat`, steal);
 //! - **blocked**: the rest, the thread slept in a call (a file, a pipe, a lock).
 
@@ -16,7 +17,8 @@ use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::time::{Duration, Instant};
 
-/// The main thread's run-queue delay and the host's steal time, read without opening a file.
+/// The main thread's run time and run-queue delay and the host's steal time, read without
+/// opening a file.
 struct Counters {
     schedstat: Option<File>,
     stat: Option<File>,
@@ -32,11 +34,12 @@ impl Counters {
         }
     }
 
-    /// Time the thread spent runnable but not running, ns.
-    fn run_delay_ns(&mut self) -> Option<u64> {
+    /// Time the thread spent on a CPU and runnable but not running, ns.
+    fn schedstat_ns(&mut self) -> Option<(u64, u64)> {
         let n = self.schedstat.as_ref()?.read_at(&mut self.buf, 0).ok()?;
         let text = std::str::from_utf8(&self.buf[..n]).ok()?;
-        text.split_ascii_whitespace().nth(1)?.parse().ok()
+        let mut fields = text.split_ascii_whitespace();
+        Some((fields.next()?.parse().ok()?, fields.next()?.parse().ok()?))
     }
 
     /// Steal time of all CPUs, ns (the first line of `/proc/stat`, its 8th number).
@@ -58,6 +61,8 @@ impl Counters {
 pub(crate) struct Stall {
     /// Time between the two beats.
     pub gap: Duration,
+    /// Of it, on a CPU (`None`: the kernel does not say).
+    pub running: Option<Duration>,
     /// Of it, runnable but not running (`None`: the kernel does not say).
     pub waiting_for_cpu: Option<Duration>,
     /// Of it, the host ran something else than this machine's vCPUs (all CPUs summed).
@@ -79,7 +84,7 @@ impl Stall {
 pub(crate) struct StallWatch {
     threshold: Duration,
     last: Instant,
-    run_delay_ns: Option<u64>,
+    schedstat_ns: Option<(u64, u64)>,
     steal_ns: Option<u64>,
     counters: Counters,
 }
@@ -91,7 +96,7 @@ impl StallWatch {
         Self {
             threshold,
             last: Instant::now(),
-            run_delay_ns: counters.run_delay_ns(),
+            schedstat_ns: counters.schedstat_ns(),
             steal_ns: counters.steal_ns(),
             counters,
         }
@@ -103,17 +108,18 @@ impl StallWatch {
         let now = Instant::now();
         let gap = now - self.last;
         self.last = now;
-        let run_delay = self.counters.run_delay_ns();
+        let schedstat = self.counters.schedstat_ns();
         let steal = self.counters.steal_ns();
         let delta = |new: Option<u64>, old: Option<u64>| {
             Some(Duration::from_nanos(new?.saturating_sub(old?)).min(gap))
         };
         let stall = (gap > self.threshold).then(|| Stall {
             gap,
-            waiting_for_cpu: delta(run_delay, self.run_delay_ns),
+            running: delta(schedstat.map(|s| s.0), self.schedstat_ns.map(|s| s.0)),
+            waiting_for_cpu: delta(schedstat.map(|s| s.1), self.schedstat_ns.map(|s| s.1)),
             host_steal: delta(steal, self.steal_ns),
         });
-        self.run_delay_ns = run_delay;
+        self.schedstat_ns = schedstat;
         self.steal_ns = steal;
         stall
     }

@@ -277,24 +277,29 @@ pub fn json_of(out: &Output) -> serde_json::Value {
 
 /// The stall of the whole machine that a run measured, from its log: the supervisor's
 /// `supervisor-stalled` line ("the supervisor's heartbeat paused N ms: M ms waiting for a
-/// CPU, S ms taken by the host, ..."), when the gap is at least `min_ms` and at least four
+/// CPU, S ms taken by the host, R ms running, ..."), when the gap is at least `min_ms` and at least four
 /// fifths of it were spent waiting for a CPU or taken by the host (not the supervisor blocked
 /// in a call of its own). Returns the line.
 pub fn measured_stall(log: &str, min_ms: f64) -> Option<&str> {
+    // The number of milliseconds just before `what` in `text`.
+    let ms_before = |text: &str, what: &str| -> Option<f64> {
+        let before = text.split(what).next().filter(|b| b.len() < text.len())?;
+        before
+            .trim_end()
+            .strip_suffix("ms")?
+            .trim_end()
+            .rsplit(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .next()?
+            .parse()
+            .ok()
+    };
     log.lines().find(|line| {
         let Some(rest) = line.split("the supervisor's heartbeat paused ").nth(1) else {
             return false;
         };
-        let ms = |text: &str| text.trim().split(" ms").next()?.trim().parse::<f64>().ok();
-        let gap = ms(rest);
-        let cpu = rest
-            .split(": ")
-            .nth(1)
-            .and_then(|r| ms(r.split(" waiting for a CPU").next()?));
-        let host = rest
-            .split(" waiting for a CPU, ")
-            .nth(1)
-            .and_then(|r| ms(r.split(" taken by the host").next()?));
+        let gap = ms_before(rest, ":");
+        let cpu = ms_before(rest, "waiting for a CPU");
+        let host = ms_before(rest, "taken by the host");
         matches!((gap, cpu, host), (Some(g), Some(c), Some(h)) if g >= min_ms && c + h >= 0.8 * g)
     })
 }
@@ -337,17 +342,18 @@ mod tests {
     #[test]
     fn a_stall_of_the_machine_is_told_from_a_supervisor_blocked_in_a_call() {
         let machine = "2026-11-25T16:46:15.962987Z  WARN the supervisor's heartbeat paused 947 ms: \
-                       936 ms waiting for a CPU, 0 ms taken by the host, the rest blocked in a call";
+                       936 ms waiting for a CPU, 0 ms taken by the host, 2 ms running, the rest \
+                       blocked in a call";
         assert!(measured_stall(machine, 250.0).is_some());
         assert!(
             measured_stall(machine, 1000.0).is_none(),
             "shorter than asked"
         );
         let blocked = "WARN the supervisor's heartbeat paused 947 ms: 10 ms waiting for a CPU, \
-                       0 ms taken by the host, the rest blocked in a call";
+                       0 ms taken by the host, 900 ms running, the rest blocked in a call";
         assert!(measured_stall(blocked, 250.0).is_none(), "its own doing");
         let host = "the supervisor's heartbeat paused 400 ms: 5 ms waiting for a CPU, 390 ms \
-                    taken by the host, the rest blocked in a call";
+                    taken by the host, 1 ms running, the rest blocked in a call";
         assert!(measured_stall(host, 250.0).is_some());
         assert!(measured_stall("no such line", 0.0).is_none());
         attributable(|| panic!("run failed:\n{machine}"));
