@@ -513,7 +513,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "supervisor-stalled",
         severity: Severity::Warning,
         unit: "s",
-        meaning: "Two of the supervisor's heartbeats were further apart than 100 ms (or a quarter of `supervisor_timeout`, if shorter); past the whole of `supervisor_timeout` every process takes the supervisor for lost and brings the axes to rest. The text splits the gap by the kernel's accounting: waiting for a CPU (a real-time process or other load held the CPUs), taken by the host (steal time of a virtual machine), and the rest blocked in a call.",
+        meaning: "Two of the supervisor's heartbeats were further apart than 100 ms (or a quarter of `supervisor_timeout`, if shorter); past the whole of `supervisor_timeout` every process takes the supervisor for lost and brings the axes to rest. The text splits the gap by the kernel's accounting: waiting for a CPU (a real-time process or other load held the CPUs), taken by the host (steal time of a virtual machine), running (the supervisor's own work), and the rest blocked in a call.",
     },
     CodeInfo {
         code: code::ESTOP_RAISED,

@@ -4,7 +4,7 @@
 //! The supervisor runs under `SCHED_OTHER`; its heartbeat is what every process of the cell
 //! watches (`supervisor_timeout`). When two beats are further apart than the threshold the
 //! cell gives it (100 ms, or a quarter of that timeout if shorter), [`StallWatch::beat`]
-//! returns a [`Stall`] that splits the gap three ways, from the kernel's own accounting:
+//! returns a [`Stall`] that splits the gap four ways, from the kernel's own accounting:
 //!
 //! - **running**: the main thread itself was on a CPU (`/proc/thread-self/schedstat`, its
 //!   run time): the supervisor's own work held the beat back;
@@ -22,6 +22,8 @@ use std::time::{Duration, Instant};
 struct Counters {
     schedstat: Option<File>,
     stat: Option<File>,
+    /// Clock ticks per second, the unit of `/proc/stat`.
+    ticks_per_s: Option<u64>,
     buf: [u8; 512],
 }
 
@@ -30,6 +32,11 @@ impl Counters {
         Self {
             schedstat: File::open("/proc/thread-self/schedstat").ok(),
             stat: File::open("/proc/stat").ok(),
+            ticks_per_s: nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
+                .ok()
+                .flatten()
+                .and_then(|hz| u64::try_from(hz).ok())
+                .filter(|&hz| hz > 0),
             buf: [0; 512],
         }
     }
@@ -48,11 +55,7 @@ impl Counters {
         let line = self.buf[..n].split(|&b| b == b'\n').next()?;
         let line = std::str::from_utf8(line).ok()?;
         let ticks: u64 = line.split_ascii_whitespace().nth(8)?.parse().ok()?;
-        let hz = nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
-            .ok()
-            .flatten()
-            .filter(|&hz| hz > 0)? as u64;
-        Some(ticks.saturating_mul(1_000_000_000) / hz)
+        Some(ticks.saturating_mul(1_000_000_000) / self.ticks_per_s?)
     }
 }
 
@@ -71,12 +74,19 @@ pub(crate) struct Stall {
 
 impl Stall {
     /// Where the time went, in words: `"412 ms waiting for a CPU, 0 ms taken by the host,
-    /// the rest blocked in a call"`.
+    /// 3 ms running, the rest blocked in a call"`.
     pub(crate) fn cause(&self) -> String {
-        let ms = |d: Duration| format!("{:.0} ms", d.as_secs_f64() * 1e3);
-        let cpu = self.waiting_for_cpu.map_or("? ms".into(), ms);
-        let steal = self.host_steal.map_or("? ms".into(), ms);
-        format!("{cpu} waiting for a CPU, {steal} taken by the host, the rest blocked in a call")
+        let ms = |d: Option<Duration>| {
+            d.map_or("? ms".into(), |d| {
+                format!("{:.0} ms", d.as_secs_f64() * 1e3)
+            })
+        };
+        format!(
+            "{} waiting for a CPU, {} taken by the host, {} running, the rest blocked in a call",
+            ms(self.waiting_for_cpu),
+            ms(self.host_steal),
+            ms(self.running)
+        )
     }
 }
 
