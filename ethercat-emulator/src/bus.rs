@@ -36,10 +36,8 @@ impl SubDevice {
         if let Some(request) = self.esc.take_mailbox() {
             let capacity = self.esc.mailbox_capacity();
             let al = self.esc.al_state();
-            self.outbox.extend(self.terminal.emergencies(true));
-            if let Some(reply) = self.terminal.mailbox(&request, capacity, al) {
-                self.outbox.push_back(reply);
-            }
+            let answer = self.terminal.mailbox(&request, capacity, al);
+            self.outbox.extend(answer);
         }
         self.post();
     }
@@ -47,7 +45,7 @@ impl SubDevice {
     /// The device's emergencies into the outbox, and the oldest mailbox out into SM1 if it is
     /// free. (A real drive's mailbox holds a few; this one holds 16, the oldest dropped.)
     fn post(&mut self) {
-        self.outbox.extend(self.terminal.emergencies(false));
+        self.outbox.extend(self.terminal.emergencies());
         while self.outbox.len() > 16 {
             self.outbox.pop_front();
         }

@@ -159,17 +159,7 @@ impl Dictionary {
 /// mailbox of `capacity` bytes; `None` for a mailbox that is not a CoE SDO request one can
 /// answer (malformed, another protocol, another CoE service).
 pub fn answer(dictionary: &mut Dictionary, request: &[u8], capacity: usize) -> Option<Vec<u8>> {
-    let length = usize::from(u16::from_le_bytes([*request.first()?, *request.get(1)?]));
-    let kind = *request.get(5)?;
-    if kind & 0x0F != MAILBOX_COE || length < 2 + 8 {
-        return None;
-    }
-    let body = request.get(MAILBOX_HEADER..MAILBOX_HEADER + length)?;
-    let service = body[1] >> 4;
-    if service != SDO_REQUEST {
-        return None;
-    }
-    let sdo = &body[2..];
+    let (kind, sdo) = sdo_request(request)?;
     let command = sdo[0];
     let index = u16::from_le_bytes([sdo[1], sdo[2]]);
     let sub = sdo[3];
@@ -202,77 +192,89 @@ pub fn answer(dictionary: &mut Dictionary, request: &[u8], capacity: usize) -> O
                 Err(code) => abort_sdo(index, sub, code),
             },
             // Download (write).
-            1 => {
-                let data = download_target(request).map(|(_, _, d)| d);
-                match data.map(|d| dictionary.download(index, sub, &d)) {
-                    Some(Ok(())) => {
-                        let mut r = vec![0x60];
-                        r.extend_from_slice(&index.to_le_bytes());
-                        r.push(sub);
-                        r.extend_from_slice(&[0; 4]);
-                        r
-                    }
-                    Some(Err(code)) => abort_sdo(index, sub, code),
-                    None => abort_sdo(index, sub, abort::LENGTH),
+            1 => match download_data(sdo).map(|d| dictionary.download(index, sub, d)) {
+                Some(Ok(())) => {
+                    let mut r = vec![0x60];
+                    r.extend_from_slice(&index.to_le_bytes());
+                    r.push(sub);
+                    r.extend_from_slice(&[0; 4]);
+                    r
                 }
-            }
+                Some(Err(code)) => abort_sdo(index, sub, code),
+                None => abort_sdo(index, sub, abort::LENGTH),
+            },
             _ => abort_sdo(index, sub, abort::COMMAND),
         }
     };
     Some(sdo_response(kind, &reply_sdo))
 }
 
-/// A mailbox with the SDO response `sdo`, answering a request whose type byte was `kind`.
-fn sdo_response(kind: u8, sdo: &[u8]) -> Vec<u8> {
-    let mut reply = Vec::with_capacity(MAILBOX_HEADER + 2 + sdo.len());
-    reply.extend_from_slice(&((2 + sdo.len()) as u16).to_le_bytes());
-    reply.extend_from_slice(&[0, 0]); // address
-    reply.push(0); // channel, priority
-    reply.push(MAILBOX_COE | (kind & 0x70)); // the request's counter
-    reply.extend_from_slice(&(u16::from(SDO_RESPONSE) << 12).to_le_bytes());
-    reply.extend_from_slice(sdo);
-    reply
-}
-
-/// A CoE emergency mailbox (ETG.1000.6 5.6.4): error code, error register, five bytes of
-/// the manufacturer's; `counter` 1..=7 (the mailbox counter).
-pub fn emergency(code: u16, register: u8, data: [u8; 5], counter: u8) -> Vec<u8> {
-    let mut m = Vec::with_capacity(MAILBOX_HEADER + 10);
-    m.extend_from_slice(&10u16.to_le_bytes());
-    m.extend_from_slice(&[0, 0, 0]);
-    m.push(MAILBOX_COE | ((counter & 0x07) << 4));
-    m.extend_from_slice(&(u16::from(EMERGENCY) << 12).to_le_bytes());
-    m.extend_from_slice(&code.to_le_bytes());
-    m.push(register);
-    m.extend_from_slice(&data);
-    m
-}
-
-/// What an SDO download `request` would write: index, subindex and data (`None` for
-/// anything else, or a malformed request).
-pub fn download_target(request: &[u8]) -> Option<(u16, u8, Vec<u8>)> {
+/// The type byte (with its counter) and the SDO part of a CoE SDO request mailbox; `None`
+/// for anything else, or one that does not add up.
+fn sdo_request(request: &[u8]) -> Option<(u8, &[u8])> {
     let length = usize::from(u16::from_le_bytes([*request.first()?, *request.get(1)?]));
-    if *request.get(5)? & 0x0F != MAILBOX_COE || length < 2 + 8 {
+    let kind = *request.get(5)?;
+    if kind & 0x0F != MAILBOX_COE || length < 2 + 8 {
         return None;
     }
     let body = request.get(MAILBOX_HEADER..MAILBOX_HEADER + length)?;
-    let sdo = &body[2..];
-    if body[1] >> 4 != SDO_REQUEST || sdo[0] >> 5 != 1 || sdo[0] & 0x10 != 0 {
-        return None;
-    }
-    let index = u16::from_le_bytes([sdo[1], sdo[2]]);
-    let data = if sdo[0] & 0x02 != 0 {
+    (body[1] >> 4 == SDO_REQUEST).then(|| (kind, &body[2..]))
+}
+
+/// The data of an SDO download request's SDO part (expedited or normal).
+fn download_data(sdo: &[u8]) -> Option<&[u8]> {
+    if sdo[0] & 0x02 != 0 {
         let size = if sdo[0] & 0x01 != 0 {
             4 - usize::from((sdo[0] >> 2) & 0x03)
         } else {
             4
         };
-        sdo.get(4..4 + size)?
+        sdo.get(4..4 + size)
     } else {
         let size = u32::from_le_bytes(sdo.get(4..8)?.try_into().ok()?) as usize;
-        sdo.get(8..8usize.checked_add(size)?)?
-    };
-    Some((index, sdo[3], data.to_vec()))
+        sdo.get(8..8usize.checked_add(size)?)
+    }
+}
+
+/// A CoE mailbox of `service` carrying `data`, its type byte's counter bits `counter`.
+fn coe_mailbox(service: u8, counter: u8, data: &[u8]) -> Vec<u8> {
+    let mut m = Vec::with_capacity(MAILBOX_HEADER + 2 + data.len());
+    m.extend_from_slice(&((2 + data.len()) as u16).to_le_bytes());
+    m.extend_from_slice(&[0, 0]); // address
+    m.push(0); // channel, priority
+    m.push(MAILBOX_COE | (counter & 0x70));
+    m.extend_from_slice(&(u16::from(service) << 12).to_le_bytes());
+    m.extend_from_slice(data);
+    m
+}
+
+/// A mailbox with the SDO response `sdo`, answering a request whose type byte was `kind`
+/// (its counter kept).
+fn sdo_response(kind: u8, sdo: &[u8]) -> Vec<u8> {
+    coe_mailbox(SDO_RESPONSE, kind, sdo)
+}
+
+/// A CoE emergency mailbox (ETG.1000.6 5.6.4): error code, error register, five bytes of
+/// the manufacturer's; `counter` 1..=7 (the mailbox counter).
+pub fn emergency(code: u16, register: u8, data: [u8; 5], counter: u8) -> Vec<u8> {
+    let mut body = code.to_le_bytes().to_vec();
+    body.push(register);
+    body.extend_from_slice(&data);
+    coe_mailbox(EMERGENCY, (counter & 0x07) << 4, &body)
+}
+
+/// What an SDO download `request` would write: index, subindex and data (`None` for
+/// anything else, or a malformed request).
+pub fn download_target(request: &[u8]) -> Option<(u16, u8, &[u8])> {
+    let (_, sdo) = sdo_request(request)?;
+    if sdo[0] >> 5 != 1 || sdo[0] & 0x10 != 0 {
+        return None;
+    }
+    Some((
+        u16::from_le_bytes([sdo[1], sdo[2]]),
+        sdo[3],
+        download_data(sdo)?,
+    ))
 }
 
 /// The abort `code` of `index`:`sub` as the answer to `request` (its counter kept).

@@ -9,9 +9,9 @@
 //!
 //! The drive runs its model over real elapsed time whenever it is stepped ([`Drive::step`],
 //! from every frame and from the emulator's idle ticks). A frame that writes its outputs
-//! (SM2) is a new command; without one for [`Drive::watchdog`] while the power stage is on,
-//! the drive faults as `machine-sim`'s command watchdog does (0xFF01) and ramps the axis
-//! down: what the SyncManager watchdog of a real drive does when its master dies.
+//! (SM2) in OP is a new command. Taken out of OP (by its MainDevice, or by its ESC's process
+//! data watchdog) it quick-stops; behind that, without a new command for its command
+//! watchdog while the power stage is on, it faults as `machine-sim`'s drives do (0xFF01).
 
 use crate::coe::{self, Dictionary};
 use crate::esc::{AlState, Esc};
@@ -119,24 +119,22 @@ pub const TX_DEFAULT: [(u16, u8); 7] = [
     (obj::FOLLOWING_ERROR, 32),
 ];
 
-/// The objects that may be mapped: index, bits, CoE data type, and whether they go out
-/// (RxPDO) or in (TxPDO).
-const MAPPABLE: [(u16, u8, u8, bool); 14] = [
-    (obj::CONTROLWORD, 16, 6, true),
-    (obj::MODE, 8, 2, true),
-    (obj::TARGET_POSITION, 32, 4, true),
-    (obj::TARGET_VELOCITY, 32, 4, true),
-    (obj::TARGET_TORQUE, 16, 3, true),
-    (obj::VELOCITY_OFFSET, 32, 4, true),
-    (obj::TORQUE_OFFSET, 16, 3, true),
-    (obj::STATUSWORD, 16, 6, false),
-    (obj::MODE_DISPLAY, 8, 2, false),
-    (obj::ERROR_CODE, 16, 6, false),
-    (obj::POSITION_ACTUAL, 32, 4, false),
-    (obj::VELOCITY_ACTUAL, 32, 4, false),
-    (obj::TORQUE_ACTUAL, 16, 3, false),
-    (obj::FOLLOWING_ERROR, 32, 4, false),
-];
+/// The objects one way may map: those of its default mapping (an RxPDO the outputs', a
+/// TxPDO the inputs'), each with its size in bits.
+fn mappable(rxpdo: bool) -> &'static [(u16, u8)] {
+    if rxpdo { &RX_DEFAULT } else { &TX_DEFAULT }
+}
+
+/// The CoE data type of a mappable object: UNSIGNED16 for the control, status and error
+/// words, else INTEGER8, INTEGER16 or INTEGER32 by its size.
+fn data_type(index: u16, bits: u8) -> u8 {
+    match (index, bits) {
+        (obj::CONTROLWORD | obj::STATUSWORD | obj::ERROR_CODE, _) => 6,
+        (_, 8) => 2,
+        (_, 16) => 3,
+        _ => 4,
+    }
+}
 
 /// The drive's units against the axis': counts per axis unit (position and velocity) and the
 /// rated torque in the axis' effort unit (1000 ‰).
@@ -219,8 +217,6 @@ pub struct Drive {
     machine: Machine,
     command: DriveCommandV2,
     events: EventQueue,
-    /// Frames that wrote the outputs.
-    outputs_taken: u64,
     /// The error code last reported (0x603F), for an emergency when it changes.
     reported_error: u16,
     /// Emergencies not yet handed to the ESC.
@@ -272,7 +268,7 @@ impl Drive {
                 0,
                 &(scaling.counts(axis.quick_stop_deceleration).max(0) as u32).to_le_bytes(),
             );
-        for &(index, bits, _, _) in &MAPPABLE {
+        for &(index, bits) in RX_DEFAULT.iter().chain(&TX_DEFAULT) {
             d.variable(index, 0, &vec![0u8; usize::from(bits / 8)]);
         }
         d.set(obj::MODE, 0, &[8]); // CSP until told otherwise
@@ -300,7 +296,6 @@ impl Drive {
                 ..Default::default()
             },
             events: EventQueue::default(),
-            outputs_taken: 0,
             reported_error: 0,
             emergencies: Vec::new(),
             emergency_on_request: None,
@@ -336,11 +331,6 @@ impl Drive {
         &self.machine
     }
 
-    /// Frames that wrote its outputs so far.
-    pub fn outputs_taken(&self) -> u64 {
-        self.outputs_taken
-    }
-
     /// Answers the next mailbox request with an emergency of `code` first (the answer
     /// follows once it is read): what a drive does when it faults while the MainDevice waits
     /// for an SDO.
@@ -349,12 +339,8 @@ impl Drive {
     }
 
     /// The emergencies to send: one per change of its error code to a fault (code, error
-    /// register 0x01 generic error, no manufacturer data), and the one it was told to send on
-    /// a request when `request`.
-    pub fn emergencies(&mut self, request: bool) -> Vec<Vec<u8>> {
-        if request && let Some(code) = self.emergency_on_request.take() {
-            self.push_emergency(code);
-        }
+    /// register 0x01 generic error, no manufacturer data).
+    pub fn emergencies(&mut self) -> Vec<Vec<u8>> {
         std::mem::take(&mut self.emergencies)
     }
 
@@ -376,7 +362,7 @@ impl Drive {
                     index,
                     subindex: 0,
                     bits,
-                    data_type: MAPPABLE.iter().find(|m| m.0 == index).map_or(0, |m| m.2),
+                    data_type: data_type(index, bits),
                 })
                 .collect(),
         };
@@ -419,17 +405,26 @@ impl Drive {
         Esc::new(sii, 3, 8, true)
     }
 
-    /// The answer to a CoE mailbox request. The PDO assignment and mapping may be written in
-    /// PRE-OP only (abort 0x0800_0022 otherwise), and only with objects that can be mapped in
-    /// that direction (abort 0x0604_0041).
+    /// The mailboxes that answer a CoE mailbox request, in order: the emergency it was told
+    /// to send first (if any), then the answer (none for a request it ignores). The PDO
+    /// assignment and mapping may be written in PRE-OP only (abort 0x0800_0022 otherwise),
+    /// and only with objects that can be mapped that way (abort 0x0604_0041).
     pub fn mailbox(
         &mut self,
         request: &[u8],
         capacity: usize,
         al: Option<AlState>,
-    ) -> Option<Vec<u8>> {
-        let target = coe::download_target(request);
-        if let Some((index, sub, data)) = target {
+    ) -> Vec<Vec<u8>> {
+        if let Some(code) = self.emergency_on_request.take() {
+            self.push_emergency(code);
+        }
+        let mut out = self.emergencies();
+        out.extend(self.answer(request, capacity, al));
+        out
+    }
+
+    fn answer(&mut self, request: &[u8], capacity: usize, al: Option<AlState>) -> Option<Vec<u8>> {
+        if let Some((index, sub, data)) = coe::download_target(request) {
             let mapping_object = matches!(
                 index,
                 obj::RXPDO | obj::TXPDO | obj::SM2_ASSIGN | obj::SM3_ASSIGN
@@ -437,7 +432,7 @@ impl Drive {
             if mapping_object && al != Some(AlState::PreOp) {
                 return coe::abort_reply(request, index, sub, coe::abort::STATE);
             }
-            if let Some(code) = self.refuse_mapping(index, sub, &data) {
+            if let Some(code) = self.refuse_mapping(index, sub, data) {
                 return coe::abort_reply(request, index, sub, code);
             }
         }
@@ -461,21 +456,21 @@ impl Drive {
                     return None;
                 }
                 let (i, s, bits) = ((e >> 16) as u16, (e >> 8) as u8, e as u8);
-                let out = index == obj::RXPDO;
-                let ok = MAPPABLE
-                    .iter()
-                    .any(|&(m, b, _, o)| m == i && s == 0 && b == bits && o == out);
+                let ok = s == 0 && mappable(index == obj::RXPDO).contains(&(i, bits));
                 (!ok).then_some(coe::abort::NOT_MAPPABLE)
             }
             (obj::SM2_ASSIGN | obj::SM3_ASSIGN, 0) => {
                 (byte(data)? > 1).then_some(coe::abort::MAPPING_LENGTH)
             }
-            (obj::SM2_ASSIGN, 1) => (u16::from_le_bytes([*data.first()?, *data.get(1)?])
-                != obj::RXPDO)
-                .then_some(coe::abort::NOT_MAPPABLE),
-            (obj::SM3_ASSIGN, 1) => (u16::from_le_bytes([*data.first()?, *data.get(1)?])
-                != obj::TXPDO)
-                .then_some(coe::abort::NOT_MAPPABLE),
+            (obj::SM2_ASSIGN | obj::SM3_ASSIGN, 1) => {
+                let pdo = if index == obj::SM2_ASSIGN {
+                    obj::RXPDO
+                } else {
+                    obj::TXPDO
+                };
+                (u16::from_le_bytes([*data.first()?, *data.get(1)?]) != pdo)
+                    .then_some(coe::abort::NOT_MAPPABLE)
+            }
             _ => None,
         }
     }
@@ -502,15 +497,6 @@ impl Drive {
             .collect()
     }
 
-    /// Bytes of the process data each way, as mapped now: (outputs, inputs).
-    pub fn pdo_sizes(&self) -> (usize, usize) {
-        let bytes = |m: Vec<(u16, u8)>| m.iter().map(|&(_, b)| usize::from(b)).sum::<usize>() / 8;
-        (
-            bytes(self.mapped(obj::SM2_ASSIGN, obj::RXPDO)),
-            bytes(self.mapped(obj::SM3_ASSIGN, obj::TXPDO)),
-        )
-    }
-
     /// Before a frame: the inputs (TxPDO) packed into SM3's buffer.
     pub fn inputs(&mut self, esc: &mut Esc) {
         let (start, len, _, on) = esc.sm(3);
@@ -527,8 +513,8 @@ impl Drive {
         esc.set_memory(INPUTS, &buf);
     }
 
-    /// After a frame: in SAFE-OP and OP the outputs (RxPDO) from SM2's buffer, if the frame
-    /// wrote them (`written`), become the drive's new command; then the model steps.
+    /// After a frame: in OP the outputs (RxPDO) from SM2's buffer, if the frame wrote them
+    /// (`written`), become the drive's new command; then the model steps.
     pub fn outputs(&mut self, esc: &Esc, written: bool, now_ns: u64) {
         let op = esc.al_state() == Some(AlState::Op);
         let (start, len, _, on) = esc.sm(2);
@@ -543,7 +529,6 @@ impl Drive {
                 at += n;
             }
             self.take_command();
-            self.outputs_taken += 1;
         }
         self.step(now_ns, op);
     }

@@ -415,6 +415,8 @@ impl Esc {
             (u64::from(logical) + data.len() as u64) * 8,
         );
         let (mut read_hit, mut write_hit) = (false, false);
+        // The process RAM this access wrote, first and last byte.
+        let mut written: Option<(usize, usize)> = None;
         for n in 0..usize::from(self.fmmus) {
             let b = usize::from(reg::FMMU) + 16 * n;
             let f = &self.mem[b..b + 16];
@@ -449,7 +451,7 @@ impl Esc {
                 if writes {
                     let v = (frame_in[db] >> di) & 1;
                     self.mem[pb] = (self.mem[pb] & !(1 << pi)) | (v << pi);
-                    self.outputs_written = true;
+                    written = Some(written.map_or((pb, pb), |(lo, hi)| (lo.min(pb), hi.max(pb))));
                 }
                 if reads {
                     let v = (self.mem[pb] >> pi) & 1;
@@ -459,8 +461,11 @@ impl Esc {
             read_hit |= reads;
             write_hit |= writes;
         }
-        if write_hit && self.writes_trigger_watchdog(&frame_in, logical) {
-            self.watchdog_trigger_ns = Some(crate::now_ns());
+        if let Some((lo, hi)) = written {
+            self.outputs_written = true;
+            if self.triggers_watchdog(lo, hi) {
+                self.watchdog_trigger_ns = Some(crate::now_ns());
+            }
         }
         // LRD and LWR count 1 per SubDevice served; LRW 1 for its read, 2 for its write.
         if read && write {
@@ -470,26 +475,13 @@ impl Esc {
         }
     }
 
-    /// Whether a logical write at `logical` of `data`'s length reached the buffer of an enabled
+    /// Whether the process RAM from `lo` to `hi` (bytes) overlaps the buffer of an enabled
     /// SyncManager whose watchdog trigger is on.
-    fn writes_trigger_watchdog(&self, data: &[u8], logical: u32) -> bool {
-        let (d0, d1) = (u64::from(logical), u64::from(logical) + data.len() as u64);
-        (0..usize::from(self.fmmus)).any(|n| {
-            let b = usize::from(reg::FMMU) + 16 * n;
-            let f = &self.mem[b..b + 16];
-            let log = u64::from(u32::from_le_bytes([f[0], f[1], f[2], f[3]]));
-            let len = u64::from(u16::from_le_bytes([f[4], f[5]]));
-            let phys = u16::from_le_bytes([f[8], f[9]]);
-            let writes = f[12] & 1 != 0 && f[11] & 2 != 0;
-            writes
-                && log < d1
-                && d0 < log + len
-                && (0..usize::from(self.sms)).any(|k| {
-                    let (start, length, control, on) = self.sm(k);
-                    on && control & 0x40 != 0
-                        && phys < start.saturating_add(length)
-                        && start < phys.saturating_add(len as u16)
-                })
+    fn triggers_watchdog(&self, lo: usize, hi: usize) -> bool {
+        (0..usize::from(self.sms)).any(|k| {
+            let (start, length, control, on) = self.sm(k);
+            let (start, end) = (usize::from(start), usize::from(start) + usize::from(length));
+            on && control & 0x40 != 0 && lo < end && start <= hi
         })
     }
 

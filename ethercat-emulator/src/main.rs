@@ -89,8 +89,8 @@ fn main() -> ExitCode {
     let args = Args::parse();
     let mut line = Vec::new();
     let mut drives = 0;
+    let watchdog_ns = (u64::from(args.pd_watchdog_ms) * 1_000_000).max(DRIVE_WATCHDOG_MIN_NS);
     for (k, name) in args.line.iter().enumerate() {
-        let watchdog_ns = (u64::from(args.pd_watchdog_ms) * 1_000_000).max(DRIVE_WATCHDOG_MIN_NS);
         match terminal(name, &mut drives, watchdog_ns) {
             Some(t) => line.push(t),
             None => {
@@ -126,8 +126,10 @@ fn main() -> ExitCode {
     let mut bus = Bus::new(line);
     for d in &mut bus.devices {
         // Increments of 100 µs (the default divider).
-        d.esc
-            .write(0x0420, &(args.pd_watchdog_ms * 10).to_le_bytes());
+        d.esc.write(
+            ethercat_emulator::esc::reg::WATCHDOG_TIME_PD,
+            &(args.pd_watchdog_ms * 10).to_le_bytes(),
+        );
     }
     tracing::info!(
         "answering on {}: {} SubDevice(s): {}",

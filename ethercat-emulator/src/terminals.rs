@@ -134,25 +134,24 @@ impl Terminal {
         Esc::new(sii, 8, 8, false)
     }
 
-    /// The device's answer to a mailbox request in AL state `al` (only a drive has a
-    /// mailbox).
+    /// The device's mailboxes in answer to a mailbox request in AL state `al`, in order
+    /// (only a drive has a mailbox).
     pub fn mailbox(
         &mut self,
         request: &[u8],
         capacity: usize,
         al: Option<AlState>,
-    ) -> Option<Vec<u8>> {
+    ) -> Vec<Vec<u8>> {
         match self {
             Self::Drive(d) => d.mailbox(request, capacity, al),
-            _ => None,
+            _ => Vec::new(),
         }
     }
 
-    /// The CoE emergencies the device has to send (a drive's; `request`: a mailbox request
-    /// just arrived, when one told to answer the next request with an emergency does).
-    pub fn emergencies(&mut self, request: bool) -> Vec<Vec<u8>> {
+    /// The CoE emergencies the device has to send (a drive's).
+    pub fn emergencies(&mut self) -> Vec<Vec<u8>> {
         match self {
-            Self::Drive(d) => d.emergencies(request),
+            Self::Drive(d) => d.emergencies(),
             _ => Vec::new(),
         }
     }
