@@ -52,6 +52,7 @@ mod device;
 pub mod error_code;
 mod master;
 mod mode;
+pub mod pdo;
 mod state;
 
 pub use command::{Command, decode};

@@ -42,82 +42,7 @@ const INPUTS: u16 = 0x1180;
 /// Entries a PDO mapping object holds.
 const MAX_ENTRIES: u8 = 16;
 
-/// CiA 402 objects, and the ones the communication profile adds.
-pub mod obj {
-    /// Device type: 0x0192 (drive profile 402), servo (0x0002 in the high word).
-    pub const DEVICE_TYPE: u16 = 0x1000;
-    /// Device name.
-    pub const NAME: u16 = 0x1008;
-    /// Identity.
-    pub const IDENTITY: u16 = 0x1018;
-    /// The first RxPDO mapping (outputs).
-    pub const RXPDO: u16 = 0x1600;
-    /// The first TxPDO mapping (inputs).
-    pub const TXPDO: u16 = 0x1A00;
-    /// Each SyncManager's communication type (1, 2 mailbox; 3 outputs; 4 inputs).
-    pub const SM_TYPES: u16 = 0x1C00;
-    /// SM2's PDO assignment.
-    pub const SM2_ASSIGN: u16 = 0x1C12;
-    /// SM3's PDO assignment.
-    pub const SM3_ASSIGN: u16 = 0x1C13;
-    /// Error code.
-    pub const ERROR_CODE: u16 = 0x603F;
-    /// Controlword.
-    pub const CONTROLWORD: u16 = 0x6040;
-    /// Statusword.
-    pub const STATUSWORD: u16 = 0x6041;
-    /// Quick stop option code.
-    pub const QUICK_STOP_OPTION: u16 = 0x605A;
-    /// Modes of operation.
-    pub const MODE: u16 = 0x6060;
-    /// Modes of operation display.
-    pub const MODE_DISPLAY: u16 = 0x6061;
-    /// Position actual value (counts).
-    pub const POSITION_ACTUAL: u16 = 0x6064;
-    /// Velocity actual value (counts/s).
-    pub const VELOCITY_ACTUAL: u16 = 0x606C;
-    /// Target torque (‰ of the rated torque).
-    pub const TARGET_TORQUE: u16 = 0x6071;
-    /// Rated torque (mN·m: the axis' effort unit times 1000).
-    pub const RATED_TORQUE: u16 = 0x6076;
-    /// Torque actual value (‰).
-    pub const TORQUE_ACTUAL: u16 = 0x6077;
-    /// Target position (counts).
-    pub const TARGET_POSITION: u16 = 0x607A;
-    /// Quick stop deceleration (counts/s²).
-    pub const QUICK_STOP_DECELERATION: u16 = 0x6085;
-    /// Velocity offset (counts/s).
-    pub const VELOCITY_OFFSET: u16 = 0x60B1;
-    /// Torque offset (‰).
-    pub const TORQUE_OFFSET: u16 = 0x60B2;
-    /// Following error actual value (counts).
-    pub const FOLLOWING_ERROR: u16 = 0x60F4;
-    /// Target velocity (counts/s).
-    pub const TARGET_VELOCITY: u16 = 0x60FF;
-    /// Supported drive modes: CSP (bit 7), CSV (bit 8), CST (bit 9).
-    pub const SUPPORTED_MODES: u16 = 0x6502;
-}
-
-/// The default RxPDO (outputs): what the cell's bus process writes, in this order.
-pub const RX_DEFAULT: [(u16, u8); 7] = [
-    (obj::CONTROLWORD, 16),
-    (obj::MODE, 8),
-    (obj::TARGET_POSITION, 32),
-    (obj::TARGET_VELOCITY, 32),
-    (obj::TARGET_TORQUE, 16),
-    (obj::VELOCITY_OFFSET, 32),
-    (obj::TORQUE_OFFSET, 16),
-];
-/// The default TxPDO (inputs).
-pub const TX_DEFAULT: [(u16, u8); 7] = [
-    (obj::STATUSWORD, 16),
-    (obj::MODE_DISPLAY, 8),
-    (obj::ERROR_CODE, 16),
-    (obj::POSITION_ACTUAL, 32),
-    (obj::VELOCITY_ACTUAL, 32),
-    (obj::TORQUE_ACTUAL, 16),
-    (obj::FOLLOWING_ERROR, 32),
-];
+pub use cia402::pdo::{RX_DEFAULT, Scaling, TX_DEFAULT, mapping, obj};
 
 /// The objects one way may map: those of its default mapping (an RxPDO the outputs', a
 /// TxPDO the inputs'), each with its size in bits.
@@ -133,52 +58,6 @@ fn data_type(index: u16, bits: u8) -> u8 {
         (_, 8) => 2,
         (_, 16) => 3,
         _ => 4,
-    }
-}
-
-/// The drive's units against the axis': counts per axis unit (position and velocity) and the
-/// rated torque in the axis' effort unit (1000 ‰).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Scaling {
-    /// Encoder counts per axis unit.
-    pub counts_per_unit: f64,
-    /// The rated torque, in the axis' effort unit.
-    pub rated_effort: f64,
-}
-
-impl Scaling {
-    /// A count value of `units`, rounded and saturated to i32 (a non-finite value is 0).
-    pub fn counts(&self, units: f64) -> i32 {
-        saturate_i32(units * self.counts_per_unit)
-    }
-
-    /// Axis units of `counts`.
-    pub fn units(&self, counts: i32) -> f64 {
-        f64::from(counts) / self.counts_per_unit
-    }
-
-    /// Thousandths of the rated torque of `effort`, rounded and saturated to i16.
-    pub fn permille(&self, effort: f64) -> i16 {
-        let v = (effort / self.rated_effort * 1000.0).round();
-        if v.is_nan() {
-            0
-        } else {
-            v.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
-        }
-    }
-
-    /// The effort of `permille`.
-    pub fn effort(&self, permille: i16) -> f64 {
-        f64::from(permille) * self.rated_effort / 1000.0
-    }
-}
-
-fn saturate_i32(v: f64) -> i32 {
-    let v = v.round();
-    if v.is_nan() {
-        0
-    } else {
-        v.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
     }
 }
 
@@ -601,9 +480,4 @@ impl Drive {
             }
         }
     }
-}
-
-/// A PDO mapping entry: index, subindex, bits.
-pub fn mapping(index: u16, sub: u8, bits: u8) -> u32 {
-    (u32::from(index) << 16) | (u32::from(sub) << 8) | u32::from(bits)
 }

@@ -7,7 +7,7 @@
 //! are, and a frame that does not add up is refused whole with what is wrong in it.
 
 /// The EtherType of EtherCAT.
-pub const ETHERTYPE: u16 = 0x88A4;
+pub use ethercat_wire::ETHERTYPE;
 /// Ethernet header: destination, source, EtherType.
 pub const ETHERNET_HEADER: usize = 14;
 /// EtherCAT header: 11 bits of length, a reserved bit, 4 bits of type.

@@ -19,13 +19,14 @@
 //! the faults it can be told to make.
 
 pub mod bus;
+pub mod cell;
 pub mod coe;
 pub mod drive;
 pub mod esc;
 pub mod frame;
 pub mod sii;
 pub mod terminals;
-pub mod wire;
+pub use ethercat_wire as wire;
 
 /// Nanoseconds on the emulator's clock (`CLOCK_MONOTONIC`), for the DC registers.
 pub fn now_ns() -> u64 {

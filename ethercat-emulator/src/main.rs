@@ -78,6 +78,11 @@ fn loop_back(bus: &mut Bus) {
 }
 
 fn main() -> ExitCode {
+    // In a cell (started by the supervisor with --instance) everything comes from the cell's
+    // configuration.
+    if std::env::args().any(|a| a == "--instance" || a.starts_with("--instance=")) {
+        return ethercat_emulator::cell::main();
+    }
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))

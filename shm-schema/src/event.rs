@@ -258,6 +258,18 @@ pub mod code {
     /// A process that is not critical failed (lost, stalled, or a health detector expired;
     /// the text says which): a warning, never an e-stop; it restarts per its policy.
     pub const NOT_CRITICAL_FAILED: u32 = 804;
+
+    /// The EtherCAT bus is in OP and exchanging process data; value: SubDevices on it.
+    pub const BUS_OP: u32 = 901;
+    /// Frames of the EtherCAT bus came back late or not at all; value: frames lost in a row,
+    /// limit: the frames that make the bus lost.
+    pub const BUS_FRAMES_LOST: u32 = 902;
+    /// The EtherCAT working counter differed from the expected one (a SubDevice did not take
+    /// its process data); value: the working counter, limit: the expected one.
+    pub const BUS_WKC_MISMATCH: u32 = 903;
+    /// No frame came back for the SubDevices' process data watchdog: the bus is lost (a cable,
+    /// a SubDevice powered off); value: frames lost in a row, limit: the frames allowed.
+    pub const BUS_LOST: u32 = 904;
 }
 
 /// What a code means, for documents and reports.
@@ -598,6 +610,34 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Warning,
         unit: "",
         meaning: "A process with `critical = false` failed: it was lost or it stalled (the supervisor restarts it by its `restart` policy), or one of its health detectors expired (the process starts its detectors afresh); the text says which, value and limit as in `process-lost` or `health-expired`. No e-stop follows and no program ends.",
+    },
+    CodeInfo {
+        code: code::BUS_OP,
+        name: "bus-op",
+        severity: Severity::Info,
+        unit: "SubDevices",
+        meaning: "The EtherCAT bus process found every SubDevice of `[[ethercat.subdevice]]` at its place, mapped the drives, and brought the bus to OP; its cycle exchanges the process data from now on (the text names the interface and the working counter it expects).",
+    },
+    CodeInfo {
+        code: code::BUS_FRAMES_LOST,
+        name: "bus-frames-lost",
+        severity: Severity::Warning,
+        unit: "frames",
+        meaning: "A bus cycle's frame did not come back within half a period (the first of a run of them, then at most one a second): that cycle publishes no drive feedback (never a last good value), and servo judges the gap by its `feedback_timeout`. A lost frame now and then is the host's (a VM's stall); many in a row are `bus-lost`.",
+    },
+    CodeInfo {
+        code: code::BUS_WKC_MISMATCH,
+        name: "bus-wkc-mismatch",
+        severity: Severity::Error,
+        unit: "working counter",
+        meaning: "The frame came back but a SubDevice did not read or write its process data (it left OP, its watchdog expired, it was replaced): the feedback of that cycle has every position NaN, which servo takes as a lost encoder and cuts power. The first of a run of them, then at most one a second.",
+    },
+    CodeInfo {
+        code: code::BUS_LOST,
+        name: "bus-lost",
+        severity: Severity::Error,
+        unit: "frames",
+        meaning: "No frame came back for as long as the SubDevices' process data watchdog (`[ethercat] pd_watchdog`, 100 ms if 0): the SubDevices have taken their outputs safe by themselves. The bus process raises the e-stop; after the cause is fixed, `supervisor reset` and `start` (the bus process then reports `bus-op` again).",
     },
 ];
 

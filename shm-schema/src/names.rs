@@ -177,6 +177,9 @@ pub enum ServiceId {
     /// `<i>/cell/config`: [`crate::CellConfigV6`], published once by the supervisor with
     /// history 1, so a process that starts later still receives it.
     CellConfig,
+    /// `<i>/ethercat/config`: [`crate::EthercatConfigV1`], published once by the supervisor
+    /// (history 1) when the cell has an EtherCAT bus.
+    EthercatConfig,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV2`], a client (the supervisor) to trajgen.
     MotionCommand,
     /// `<i>/trajgen/control`: [`crate::MotionControlV2`], a client to trajgen: pause, resume,
@@ -270,6 +273,7 @@ impl ServiceId {
     fn fixed_suffix(self) -> &'static str {
         match self {
             Self::CellConfig => "cell/config",
+            Self::EthercatConfig => "ethercat/config",
             Self::MotionCommand => "trajgen/command",
             Self::MotionControl => "trajgen/control",
             Self::TrajgenHandover => "trajgen/handover",
@@ -306,7 +310,7 @@ impl ServiceId {
             max_nodes: 40,
         };
         match self {
-            Self::CellConfig => Qos {
+            Self::CellConfig | Self::EthercatConfig => Qos {
                 history: 1,
                 max_publishers: 1,
                 max_subscribers: 24,

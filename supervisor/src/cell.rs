@@ -258,6 +258,8 @@ pub(crate) struct Cell {
     event_seq: u64,
     // Field order is drop order: ports before the node.
     config_pub: Pub<CellConfigV6>,
+    /// `[ethercat]`, for the bus process (history 1), when the cell has a bus.
+    ethercat_pub: Option<Pub<shm_schema::EthercatConfigV1>>,
     pub(crate) command_pub: Pub<MotionCommandV2>,
     control_pub: Pub<MotionControlV2>,
     request_pub: Pub<ServoRequestV1>,
@@ -314,6 +316,14 @@ impl Cell {
         }
         let cell = cfg.to_shm();
         config_pub.send(&cell);
+        let ethercat_pub = match &cfg.ethercat {
+            Some(bus) => {
+                let p = Pub::new(&node, i, ServiceId::EthercatConfig).map_err(f)?;
+                p.send(&bus.to_shm(&cfg.axis));
+                Some(p)
+            }
+            None => None,
+        };
         let host = HostStateV1 {
             stamp_ns: runtime::time::now_ns(),
             pid: std::process::id(),
@@ -357,6 +367,7 @@ impl Cell {
             control_seq: 0,
             event_seq: 0,
             config_pub,
+            ethercat_pub,
             command_pub,
             control_pub,
             request_pub,
@@ -519,6 +530,9 @@ impl Cell {
     pub(crate) fn keep_alive(&mut self) {
         self.beat();
         self.config_pub.update_connections();
+        if let Some(p) = &self.ethercat_pub {
+            p.update_connections();
+        }
         self.host_pub.update_connections();
     }
 
@@ -662,6 +676,9 @@ impl Cell {
             );
         }
         self.config_pub.update_connections();
+        if let Some(p) = &self.ethercat_pub {
+            p.update_connections();
+        }
         self.host_pub.update_connections();
         self.handover_pub.update_connections();
         self.take_events();

@@ -12,6 +12,7 @@ use shm_schema::{
 use std::fmt;
 use std::ops::Range;
 
+pub mod ethercat;
 pub mod io;
 pub mod kinematics;
 pub mod modbus;
@@ -653,6 +654,9 @@ pub struct Config {
     /// `[modbus]`: the Modbus TCP server's settings (served by the `modbus` process).
     #[serde(default)]
     pub modbus: modbus::ModbusSettings,
+    /// `[ethercat]`: the cell's EtherCAT bus, when its drives are real (or emulated) ones.
+    #[serde(default)]
+    pub ethercat: Option<ethercat::EthercatSettings>,
 }
 
 /// One step of a key path, to find where a value is written.
@@ -808,6 +812,11 @@ impl Config {
             return Err(e);
         }
         if let Some(e) = modbus::validate(&self.modbus) {
+            return Err(e);
+        }
+        if let Some(bus) = &self.ethercat
+            && let Some(e) = ethercat::validate(bus, &self.axis).into_iter().next()
+        {
             return Err(e);
         }
         if let Some(e) = self.validate_processes() {

@@ -1,11 +1,13 @@
-//! The emulator on a network interface: a raw packet socket (`AF_PACKET`) bound to one
-//! interface and to EtherType 0x88A4; each frame a MainDevice sends comes in, passes the
-//! emulated line and goes back out of the same interface as its reply.
+//! EtherCAT on a network interface: a raw packet socket (`AF_PACKET`) bound to one
+//! interface and to EtherType 0x88A4. The bus process sends its frames and takes their
+//! replies through it; the emulator takes a MainDevice's frames and sends them back changed.
+//! Frames this host sent itself are never handed back (`PACKET_OUTGOING`).
 //!
-//! Meant for one end of a veth pair whose other end a MainDevice owns (tests make the pair in
-//! a network namespace of their own); never for a host's real interface.
+//! Opening needs root or `CAP_NET_RAW`. `send` and `receive` are one system call each and
+//! allocate nothing: they are the bus process' IPC inside its cycle.
 
-use crate::frame::ETHERTYPE;
+/// The EtherType of EtherCAT.
+pub const ETHERTYPE: u16 = 0x88A4;
 use nix::sys::socket::{
     AddressFamily, LinkAddr, MsgFlags, SockFlag, SockProtocol, SockType, SockaddrLike, bind,
     recvfrom, send, setsockopt, socket, sockopt,
@@ -26,15 +28,15 @@ pub struct Wire {
 /// What one wait for a frame brought.
 #[derive(Debug)]
 pub enum Received {
-    /// A frame of `n` bytes from the MainDevice.
+    /// A frame of `n` bytes from the other end.
     Frame(usize),
     /// Nothing within the poll interval (or a frame that is not for us).
     Nothing,
 }
 
 impl Wire {
-    /// Opens the socket on `interface`, waiting at most `poll` for each frame (so a stop
-    /// request is seen).
+    /// Opens the socket on `interface`; [`Wire::receive`] waits at most `poll` for a frame
+    /// (so a stop request is seen, a lost frame noticed).
     pub fn open(interface: &str, poll: Duration) -> Result<Self, String> {
         let at = |what: &str, e: nix::Error| format!("interface {interface:?}: {what}: {e}");
         let index =
@@ -67,17 +69,34 @@ impl Wire {
         })
     }
 
-    /// Waits for the next frame from the MainDevice into `buf`.
+    /// Sets how long [`Wire::receive`] waits.
+    pub fn set_timeout(&self, poll: Duration) -> Result<(), String> {
+        let timeout =
+            nix::sys::time::TimeVal::new(poll.as_secs() as i64, i64::from(poll.subsec_micros()));
+        setsockopt(&self.fd, sockopt::ReceiveTimeout, &timeout)
+            .map_err(|e| format!("interface {:?}: receive timeout: {e}", self.interface))
+    }
+
+    /// Waits for the next frame from the other end into `buf`.
+    ///
+    /// # Real-time
+    /// One `recvfrom`; no allocation but the error's text.
     pub fn receive(&self, buf: &mut [u8]) -> Result<Received, String> {
         match recvfrom::<LinkAddr>(self.fd.as_raw_fd(), buf) {
             Ok((n, Some(from))) if from.pkttype() != PACKET_OUTGOING => Ok(Received::Frame(n)),
             Ok(_) => Ok(Received::Nothing),
-            Err(nix::Error::EAGAIN | nix::Error::EINTR) => Ok(Received::Nothing),
+            // ENETDOWN: the link went down (a cable pulled): the socket reports it once.
+            Err(nix::Error::EAGAIN | nix::Error::EINTR | nix::Error::ENETDOWN) => {
+                Ok(Received::Nothing)
+            }
             Err(e) => Err(format!("interface {:?}: receive: {e}", self.interface)),
         }
     }
 
     /// Sends `frame` out of the interface.
+    ///
+    /// # Real-time
+    /// One `send`; no allocation but the error's text.
     pub fn send(&self, frame: &[u8]) -> Result<(), String> {
         send(self.fd.as_raw_fd(), frame, MsgFlags::empty())
             .map(|_| ())

@@ -1,0 +1,102 @@
+//! The cell's EtherCAT bus (`[ethercat]`, `docs/ethercat.md`): the interface the bus process
+//! owns, the SubDevices it must find on the wire in order, and how each drive's objects map to
+//! an axis of the cell. Published once by the supervisor on `<i>/ethercat/config` (history 1)
+//! when the cell has a bus; the bus process (and the emulator of a test cell) read it.
+
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// Capacity of [`EthercatConfigV1::subdevice`].
+pub const MAX_SUBDEVICES: usize = 32;
+
+/// Bytes of [`EthercatConfigV1::interface`] (a Linux interface name has at most 15).
+pub const INTERFACE_LEN: usize = 16;
+
+/// Bits of [`EthercatSubDeviceV1::flags`].
+pub mod subdevice_flags {
+    /// The revision found must equal [`super::EthercatSubDeviceV1::revision`] (else any).
+    pub const CHECK_REVISION: u32 = 1;
+}
+
+/// One SubDevice the bus must have at its place on the line.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::EthercatSubDeviceV1")]
+pub struct EthercatSubDeviceV1 {
+    /// Its name in the configuration (shown in events and errors), NUL-padded.
+    pub name: [u8; 16],
+    /// Vendor ID (0x1018:1, the SII's identity).
+    pub vendor: u32,
+    /// Product code (0x1018:2).
+    pub product: u32,
+    /// Revision number (0x1018:3); checked only with [`subdevice_flags::CHECK_REVISION`].
+    pub revision: u32,
+    /// [`subdevice_flags`].
+    pub flags: u32,
+    /// The axis this CiA 402 drive moves (an index into the cell's axes), -1 for a SubDevice
+    /// that is no drive (a coupler, an IO terminal).
+    pub axis: i32,
+    /// Reserved, 0.
+    pub reserved: u32,
+    /// A drive's position unit: counts (0x6064, 0x607A) per axis unit; velocities (0x606C,
+    /// 0x60FF, 0x60B1) are counts/s per unit/s.
+    pub counts_per_unit: f64,
+    /// A drive's rated torque (0x6076) in the axis' effort unit (N, N·m): torques (0x6071,
+    /// 0x6077, 0x60B2) are thousandths of it.
+    pub rated_effort: f64,
+}
+
+/// The cell's bus, `<i>/ethercat/config`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("rtc::EthercatConfigV1")]
+pub struct EthercatConfigV1 {
+    /// The network interface the bus process owns, NUL-padded.
+    pub interface: [u8; INTERFACE_LEN],
+    /// SubDevices in use, in wire order.
+    pub count: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
+    /// The process data watchdog the bus process sets in every SubDevice (ns, a multiple of
+    /// 100 µs; 0 leaves the SubDevice's own): when frames stop (the process died, the cable
+    /// came out) the outputs go safe by themselves after this long.
+    pub pd_watchdog_ns: u64,
+    /// The SubDevices, first `count` used, position 0 nearest the MainDevice.
+    pub subdevice: [EthercatSubDeviceV1; MAX_SUBDEVICES],
+}
+
+impl Default for EthercatConfigV1 {
+    fn default() -> Self {
+        Self {
+            interface: [0; INTERFACE_LEN],
+            count: 0,
+            reserved: 0,
+            pd_watchdog_ns: 0,
+            subdevice: [EthercatSubDeviceV1::default(); MAX_SUBDEVICES],
+        }
+    }
+}
+
+impl EthercatConfigV1 {
+    /// The SubDevices in use.
+    pub fn subdevices(&self) -> &[EthercatSubDeviceV1] {
+        &self.subdevice[..(self.count as usize).min(MAX_SUBDEVICES)]
+    }
+
+    /// The interface's name.
+    pub fn interface(&self) -> &str {
+        crate::str_of(&self.interface)
+    }
+}
+
+impl EthercatSubDeviceV1 {
+    /// The axis this drive moves, if it is one.
+    pub fn axis(&self) -> Option<usize> {
+        usize::try_from(self.axis).ok()
+    }
+
+    /// Its name.
+    pub fn name(&self) -> &str {
+        crate::str_of(&self.name)
+    }
+}
