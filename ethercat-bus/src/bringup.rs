@@ -145,11 +145,20 @@ pub fn bring_up(
         })
         .collect();
     for (k, w) in want.iter().enumerate() {
-        let expected = format!(
-            "{} ({})",
-            w.name(),
-            identity(w.vendor, w.product, w.revision)
-        );
+        let expected = if w.flags & subdevice_flags::CHECK_REVISION != 0 {
+            format!(
+                "{} ({})",
+                w.name(),
+                identity(w.vendor, w.product, w.revision)
+            )
+        } else {
+            format!(
+                "{} (vendor {:#010x}, product {:#010x}, any revision)",
+                w.name(),
+                w.vendor,
+                w.product
+            )
+        };
         let Some((id, name, _)) = found.get(k) else {
             return Err(format!(
                 "the bus on {} has {} SubDevice(s): position {k} should be {expected}, and nothing answers there",

@@ -21,6 +21,9 @@ const REPEAT_NS: u64 = 1_000_000_000;
 
 struct Bus {
     wire: Wire,
+    interface: String,
+    /// The first cycle announces the bus in OP.
+    announced: bool,
     frame: CyclicFrame,
     drives: Drives,
     /// Frames lost in a row, and since when.
@@ -83,6 +86,17 @@ impl Task for Bus {
     /// arithmetic, copies and a histogram record; nothing else.
     fn cycle(&mut self, cx: &mut Cycle<'_>) {
         let now = cx.now_ns();
+        if !self.announced {
+            self.announced = true;
+            cx.events.push(EventV1::new(
+                now,
+                code::BUS_OP,
+                -1,
+                self.frame.layout().count as f64,
+                f64::from(self.frame.layout().expected_wkc),
+                &["in OP on ", &self.interface],
+            ));
+        }
         // The newest command, or the last one while servo's next has not come (the drives
         // hold it, as their outputs do between frames).
         if let Some(c) = self.commands.latest() {
@@ -247,6 +261,8 @@ fn main() -> ExitCode {
             );
             Ok::<_, SetupError>(Bus {
                 wire,
+                interface: bus.interface().to_string(),
+                announced: false,
                 frame,
                 drives: Drives::new(&bus, ctx.cell.axes as usize, &modes),
                 lost: 0,

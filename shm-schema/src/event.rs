@@ -259,7 +259,8 @@ pub mod code {
     /// the text says which): a warning, never an e-stop; it restarts per its policy.
     pub const NOT_CRITICAL_FAILED: u32 = 804;
 
-    /// The EtherCAT bus is in OP and exchanging process data; value: SubDevices on it.
+    /// The EtherCAT bus is in OP and exchanging process data; value: SubDevices on it, limit:
+    /// the working counter expected.
     pub const BUS_OP: u32 = 901;
     /// Frames of the EtherCAT bus came back late or not at all; value: frames lost in a row,
     /// limit: the frames that make the bus lost.
@@ -616,7 +617,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "bus-op",
         severity: Severity::Info,
         unit: "SubDevices",
-        meaning: "The EtherCAT bus process found every SubDevice of `[[ethercat.subdevice]]` at its place, mapped the drives, and brought the bus to OP; its cycle exchanges the process data from now on (the text names the interface and the working counter it expects).",
+        meaning: "The EtherCAT bus process found every SubDevice of `[[ethercat.subdevice]]` at its place, mapped the drives, and brought the bus to OP; its cycle exchanges the process data from now on. Limit: the working counter it expects of every frame; the text names the interface.",
     },
     CodeInfo {
         code: code::BUS_FRAMES_LOST,

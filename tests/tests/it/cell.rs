@@ -32,7 +32,7 @@ fn config_with(test: &str, from: &str, to: &str) -> PathBuf {
 }
 
 /// Checks a successful `--json` run: on time, on target, every process reported.
-fn check_run(j: &serde_json::Value, target: [f64; 3]) {
+pub(crate) fn check_run(j: &serde_json::Value, target: [f64; 3]) {
     let f = |k: &str| {
         j[k].as_f64()
             .unwrap_or_else(|| panic!("{k} missing in {j}"))

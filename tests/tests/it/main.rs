@@ -8,6 +8,7 @@ mod cell;
 mod closed_loop;
 mod drives;
 mod estop;
+mod ethercat;
 mod faults;
 mod fieldbus;
 mod latency;

@@ -1,0 +1,165 @@
+//! The cell on EtherCAT: the drives' process is `ethercat-bus` (ethercrab brings the bus up,
+//! one frame a cycle), its SubDevices the emulator's. Each test runs in a network namespace of
+//! its own (root, iproute2), so its veth pair and its Modbus port meet nothing else; the
+//! namespace goes with the test.
+
+use integration_tests::{
+    assert_clean, bin, examples, instance, json_of, run_with_watchdog, scratch,
+};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+const WATCHDOG: Duration = Duration::from_secs(180);
+
+/// A network namespace of the test's own, removed when dropped (with whatever is in it).
+struct Netns(String);
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("these tests need iproute2's `ip`: {e}"));
+    assert!(
+        out.status.success(),
+        "ip {args:?} (these tests make network namespaces: they need root): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+impl Netns {
+    fn new(test: &str) -> Self {
+        let name = format!("rtc-{}-{test}", std::process::id());
+        ip(&["netns", "add", &name]);
+        ip(&["-n", &name, "link", "set", "lo", "up"]);
+        Self(name)
+    }
+
+    /// `program` run inside the namespace.
+    fn command(&self, program: &str) -> Command {
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", &self.0]).arg(bin(program));
+        c
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        let _ = Command::new("ip").args(["netns", "del", &self.0]).status();
+    }
+}
+
+/// The example EtherCAT cell, with room for the host's stalls.
+fn ethercat_cell() -> String {
+    let src = std::fs::read_to_string(examples().join("gantry-ethercat.toml"))
+        .expect("examples/gantry-ethercat.toml");
+    integration_tests::with_stall_room(&src)
+}
+
+#[test]
+fn the_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
+    integration_tests::attributable(|| {
+        let inst = instance("ecat-triangle");
+        let ns = Netns::new("ecat-tri");
+        let cfg = scratch("ecat-triangle", "cell.toml", &ethercat_cell());
+        let out = run_with_watchdog(
+            ns.command("supervisor")
+                .args(["run", "--json", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{err}");
+        let j = json_of(&out);
+        crate::cell::check_run(&j, [40.0, 40.0, 0.0]);
+        // The drives were the bus': its start-up announced, the emulator answered.
+        let op = crate::drives::events_named(&j, "bus-op");
+        assert_eq!(op.len(), 1, "{err}");
+        assert_eq!(
+            op[0]["value"].as_f64(),
+            Some(4.0),
+            "EK1100 and three drives: {err}"
+        );
+        assert!(
+            j["processes"]["emulator"]["cycles"]
+                .as_u64()
+                .is_some_and(|c| c > 0),
+            "{j}"
+        );
+        assert!(
+            crate::drives::events_named(&j, "bus-wkc-mismatch").is_empty(),
+            "{err}"
+        );
+        assert_clean(&inst);
+    });
+}
+
+/// The emulator alone on `s0` of a veth pair in `ns`, the bus' end `m0`.
+fn standalone_line(ns: &Netns, line: &str) -> Child {
+    ip(&[
+        "-n", &ns.0, "link", "add", "m0", "type", "veth", "peer", "name", "s0",
+    ]);
+    ip(&["-n", &ns.0, "link", "set", "s0", "up"]);
+    ip(&["-n", &ns.0, "link", "set", "m0", "up"]);
+    ns.command("ethercat-emulator")
+        .args(["--interface", "s0", "--line", line])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("the emulator")
+}
+
+/// The example cell on the test's own line: no emulator process, the bus on `m0`.
+fn cell_on_m0() -> String {
+    let src = ethercat_cell();
+    let at = src
+        .find("[[process]]\nname = \"emulator\"")
+        .expect("the emulator's entry");
+    let end = at + src[at..].find("\n\n").expect("its end");
+    src[..at].to_string()
+        + &src[end + 2..].replace("interface = \"rtc-ecat0\"", "interface = \"m0\"")
+}
+
+#[test]
+fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and_identities() {
+    integration_tests::attributable(|| {
+        for (test, line, want) in [
+            (
+                "ecat-missing",
+                "ek1100,drive,drive",
+                "the bus on m0 has 3 SubDevice(s): position 3 should be theta (vendor 0xe1a00001, product 0x00000402, any revision), and nothing answers there",
+            ),
+            (
+                "ecat-other",
+                "ek1100,drive,el2008,drive",
+                "position 2 of the bus on m0 should be y (vendor 0xe1a00001, product 0x00000402, any revision), and EL2008 (vendor 0x00000002, product 0x07d83052, revision 0x00100000) is there",
+            ),
+            (
+                "ecat-extra",
+                "ek1100,drive,drive,drive,el1008",
+                "the bus on m0 has 5 SubDevice(s) where the configuration names 4: position 4 is EL1008 (vendor 0x00000002, product 0x03f03052, revision 0x00100000), which it does not name",
+            ),
+        ] {
+            let inst = instance(test);
+            let ns = Netns::new(test);
+            let mut emulator = standalone_line(&ns, line);
+            let cfg = scratch(test, "cell.toml", &cell_on_m0());
+            let out = run_with_watchdog(
+                ns.command("supervisor")
+                    .args(["run", "--instance", &inst, "--config"])
+                    .arg(&cfg)
+                    .arg(examples().join("triangle.prog")),
+                WATCHDOG,
+            );
+            let _ = emulator.kill();
+            let _ = emulator.wait();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{line}: {err}");
+            assert!(err.contains(want), "{line}: want {want:?} in\n{err}");
+            // Nothing was enabled: the bus never reached its cycle.
+            assert!(!err.contains("enabling"), "{line}: {err}");
+            assert!(!err.contains("bus-op"), "{line}: {err}");
+            assert_clean(&inst);
+        }
+    });
+}
