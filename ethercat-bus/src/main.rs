@@ -7,6 +7,7 @@ use ethercat_wire::{Received, Wire};
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
+use shm_schema::ethercat::MAX_SUBDEVICES;
 use shm_schema::event::code;
 use shm_schema::{
     DriveCommandV2, DriveFeedbackV2, EstopOrigin, EthercatConfigV1, EventQueue, EventV1,
@@ -14,6 +15,12 @@ use shm_schema::{
 };
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
+
+/// A SubDevice's position as text, for events written in the cycle (no formatting there).
+const POSITIONS: [&str; MAX_SUBDEVICES] = [
+    "0", "1", "2", "3", "4", "5", "6", "7", "8", "9", "10", "11", "12", "13", "14", "15", "16",
+    "17", "18", "19", "20", "21", "22", "23", "24", "25", "26", "27", "28", "29", "30", "31",
+];
 
 /// Events of a run of lost frames or working-counter mismatches: the first, then at most one
 /// this often.
@@ -24,6 +31,10 @@ struct Bus {
     interface: String,
     /// The first cycle announces the bus in OP.
     announced: bool,
+    /// Each SubDevice's name, as the configuration gives it.
+    names: [[u8; 16]; MAX_SUBDEVICES],
+    /// Whether each SubDevice was in OP in the last reply.
+    in_op: [bool; MAX_SUBDEVICES],
     frame: CyclicFrame,
     drives: Drives,
     /// Frames lost in a row, and since when.
@@ -144,12 +155,46 @@ impl Task for Bus {
                 ));
                 cx.raise_estop(EstopOrigin::Device, code::BUS_LOST, &["EtherCAT bus lost"]);
             }
+            if self.lost > self.lost_limit {
+                // The bus is lost (its e-stop went out the cycle before): the drives cannot
+                // be vouched for at all. Every position NaN and no state (statusword 0), so
+                // servo cuts power at once rather than ramping against the last position it
+                // saw.
+                self.seq += 1;
+                let fb = self
+                    .drives
+                    .read(now, self.seq, false, &self.frame, cx.events);
+                self.feedback.send(&fb);
+            }
             cx.set_safe(!self.drives.powered() || self.lost >= self.lost_limit);
             return;
         };
         self.lost = 0;
         if !cx.estop.latched {
             self.bus_lost_raised = false;
+        }
+        // Each SubDevice's AL state, read in the same frame: one leaving OP is named.
+        for k in 0..self.frame.layout().count {
+            let (status, code) = self.frame.al_status(k);
+            let op = status & 0x0F == 0x08;
+            if self.in_op[k] && !op {
+                let name = &self.names[k];
+                cx.events.push(EventV1::new(
+                    now,
+                    code::SUBDEVICE_LEFT_OP,
+                    -1,
+                    f64::from(status),
+                    f64::from(code),
+                    &[
+                        "position ",
+                        POSITIONS.get(k).copied().unwrap_or("?"),
+                        " (",
+                        shm_schema::str_of(name),
+                        ") left OP",
+                    ],
+                ));
+            }
+            self.in_op[k] = op;
         }
         let expected = self.frame.layout().expected_wkc;
         let valid = wkc == expected;
@@ -263,6 +308,14 @@ fn main() -> ExitCode {
                 wire,
                 interface: bus.interface().to_string(),
                 announced: false,
+                names: {
+                    let mut n = [[0u8; 16]; MAX_SUBDEVICES];
+                    for (slot, s) in n.iter_mut().zip(bus.subdevices()) {
+                        *slot = s.name;
+                    }
+                    n
+                },
+                in_op: [true; MAX_SUBDEVICES],
                 frame,
                 drives: Drives::new(&bus, ctx.cell.axes as usize, &modes),
                 lost: 0,

@@ -271,6 +271,9 @@ pub mod code {
     /// No frame came back for the SubDevices' process data watchdog: the bus is lost (a cable,
     /// a SubDevice powered off); value: frames lost in a row, limit: the frames allowed.
     pub const BUS_LOST: u32 = 904;
+    /// A SubDevice of the EtherCAT bus is no longer in OP; value: its AL status (state and
+    /// error bit), limit: its AL status code; the text names it (position and name).
+    pub const SUBDEVICE_LEFT_OP: u32 = 905;
 }
 
 /// What a code means, for documents and reports.
@@ -638,7 +641,14 @@ pub const CODES: &[CodeInfo] = &[
         name: "bus-lost",
         severity: Severity::Error,
         unit: "frames",
-        meaning: "No frame came back for as long as the SubDevices' process data watchdog (`[ethercat] pd_watchdog`, 100 ms if 0): the SubDevices have taken their outputs safe by themselves. The bus process raises the e-stop; after the cause is fixed, `supervisor reset` and `start` (the bus process then reports `bus-op` again).",
+        meaning: "No frame came back for as long as the SubDevices' process data watchdog (`[ethercat] pd_watchdog`, 100 ms if 0): the SubDevices have taken their outputs safe by themselves. The bus process raises the e-stop. It does not yet take the SubDevices back to OP by itself: once the cause is fixed, `supervisor restart machine` brings the bus up again (`bus-op`), then `supervisor reset` and `start`.",
+    },
+    CodeInfo {
+        code: code::SUBDEVICE_LEFT_OP,
+        name: "subdevice-left-op",
+        severity: Severity::Error,
+        unit: "AL status (limit: AL status code)",
+        meaning: "A SubDevice of the bus left OP (its AL status, read in every frame, says another state; 0x14 is SAFE-OP with the error bit): its watchdog expired (AL status code 0x001B), it lost its mailbox or sync configuration, or it was switched off and on. The text names its position and name. Its process data is not taken while it is out of OP (`bus-wkc-mismatch`), so servo cuts power.",
     },
 ];
 

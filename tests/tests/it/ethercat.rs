@@ -163,3 +163,43 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
         }
     });
 }
+
+#[test]
+fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
+    integration_tests::attributable(|| {
+        let inst = instance("ecat-cable");
+        let ns = Netns::new("ecat-cable");
+        let cfg = scratch("ecat-cable", "cell.toml", &ethercat_cell());
+        // Three seconds into the triangle (start-up takes well under one), the cable goes.
+        let pull = {
+            let ns = ns.0.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_secs(3));
+                ip(&["-n", &ns, "link", "set", "rtc-ecat0", "down"]);
+            })
+        };
+        let out = run_with_watchdog(
+            ns.command("supervisor")
+                .args(["run", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
+        );
+        pull.join().expect("the cable pulled");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        // The frames lost, then the bus: 100 of them at 1 kHz (its 100 ms watchdog).
+        assert!(err.contains("bus-frames-lost: 1 (limit 100)"), "{err}");
+        assert!(err.contains("bus-lost: 100 (limit 100)"), "{err}");
+        // Its e-stop (which the supervisor may latch after servo's: both come within a
+        // millisecond).
+        assert!(
+            err.contains("machine   estop-raised: 1 (limit 904) — EtherCAT bus lost"),
+            "{err}"
+        );
+        // Servo took the e-stop; the bus' feedback NaN from the next cycle on, it cuts power.
+        assert!(err.contains("servo     disabling — e-stop"), "{err}");
+        assert!(err.contains("servo     power-cut"), "{err}");
+        assert_clean(&inst);
+    });
+}
