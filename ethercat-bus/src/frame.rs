@@ -80,6 +80,8 @@ pub struct CyclicFrame {
     /// Inputs and the AL statuses as the last reply had them.
     reply: [u8; MAX_FRAME],
     index: u8,
+    /// Bytes of the datagrams (the EtherCAT header's length).
+    datagrams: usize,
 }
 
 impl CyclicFrame {
@@ -125,6 +127,7 @@ impl CyclicFrame {
             len: len.max(60),
             reply: [0; MAX_FRAME],
             index: 0,
+            datagrams,
         })
     }
 
@@ -195,7 +198,7 @@ impl CyclicFrame {
     /// # Real-time
     /// Copies only.
     pub fn take_reply(&mut self, frame: &[u8]) -> Reply {
-        let end = ETH + ECAT + self.datagrams_len();
+        let end = ETH + ECAT + self.datagrams;
         if frame.len() < end
             || frame[12..14] != ethercat_wire::ETHERTYPE.to_be_bytes()
             || frame[6] & 0x02 == 0
@@ -217,12 +220,5 @@ impl CyclicFrame {
             at = w + WKC;
         }
         Reply::Ours { wkc, al_read }
-    }
-
-    fn datagrams_len(&self) -> usize {
-        DGRAM
-            + usize::from(self.layout.len)
-            + WKC
-            + self.layout.count.min(MAX_SUBDEVICES) * (DGRAM + AL_BYTES + WKC)
     }
 }

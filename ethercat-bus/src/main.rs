@@ -37,7 +37,7 @@ struct Bus {
     in_op: [bool; MAX_SUBDEVICES],
     frame: CyclicFrame,
     drives: Drives,
-    /// Frames lost in a row, and since when.
+    /// Frames lost in a row.
     lost: u64,
     /// Frames lost in a row that make the bus lost (its SubDevices' watchdog).
     lost_limit: u64,
@@ -234,24 +234,13 @@ impl Task for Bus {
 
 /// The bus' configuration, published by the supervisor.
 fn bus_config(ctx: &Context) -> Result<EthercatConfigV1, SetupError> {
-    let sub = Sub::<EthercatConfigV1>::new(&ctx.node, &ctx.instance, ServiceId::EthercatConfig, 1)?;
-    let start = Instant::now();
-    loop {
-        if let Some(c) = sub.latest() {
-            return Ok(c);
-        }
-        if runtime::signals::stop_requested() {
-            return Err("stopped before the bus configuration arrived".into());
-        }
-        if start.elapsed() > process::CONFIG_TIMEOUT {
-            return Err(format!(
-                "no bus configuration on {}: the cell has no [ethercat] section",
-                ctx.instance.service(ServiceId::EthercatConfig)
-            )
-            .into());
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    process::wait_for(
+        &ctx.node,
+        &ctx.instance,
+        ServiceId::EthercatConfig,
+        "the cell has no [ethercat] section",
+    )?
+    .ok_or_else(|| "stopped before the bus configuration arrived".into())
 }
 
 /// Opens the bus' interface once its link is up (a cable plugged, a veth's peer up), for at

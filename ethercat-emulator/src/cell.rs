@@ -11,7 +11,6 @@ use crate::bus::Bus;
 use crate::drive::{self, Drive, Scaling};
 use crate::terminals::{BECKHOFF, Terminal};
 use crate::wire::{Received, Wire};
-use runtime::ipc::Sub;
 use runtime::process::{self, Context, Cycle, SetupError, Task};
 use runtime::rt::{self, RtRequest};
 use shm_schema::{EthercatConfigV1, ServiceId};
@@ -19,7 +18,7 @@ use std::process::{Command, ExitCode};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The emulator's end of the pair: the bus' interface with this suffix.
 pub const PEER_SUFFIX: &str = "-sd";
@@ -139,21 +138,14 @@ pub fn main() -> ExitCode {
         "emulator",
         "emulated EtherCAT SubDevices for a cell without hardware",
         |ctx: &Context| {
-            let sub = Sub::<EthercatConfigV1>::new(
+            let Some(bus) = process::wait_for::<EthercatConfigV1>(
                 &ctx.node,
                 &ctx.instance,
                 ServiceId::EthercatConfig,
-                1,
-            )?;
-            let start = Instant::now();
-            let bus = loop {
-                if let Some(b) = sub.latest() {
-                    break b;
-                }
-                if start.elapsed() > process::CONFIG_TIMEOUT || runtime::signals::stop_requested() {
-                    return Err("no bus configuration: the cell has no [ethercat] section".into());
-                }
-                std::thread::sleep(Duration::from_millis(2));
+                "the cell has no [ethercat] section",
+            )?
+            else {
+                return Err("stopped before the bus configuration arrived".into());
             };
             let terminals = line(&bus, ctx)?;
             let interface = bus.interface().to_string();

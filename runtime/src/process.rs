@@ -524,20 +524,41 @@ fn wait_for_cell_config(
     node: &Node<Ipc>,
     instance: &InstanceName,
 ) -> Result<Option<CellConfigV6>, SetupError> {
-    let sub = Sub::<CellConfigV6>::new(node, instance, ServiceId::CellConfig, 1)?;
+    let Some(cell) = wait_for::<CellConfigV6>(
+        node,
+        instance,
+        ServiceId::CellConfig,
+        &format!("is `supervisor up --instance {instance}` running?"),
+    )?
+    else {
+        return Ok(None);
+    };
+    validate_cell(&cell)?;
+    Ok(Some(cell))
+}
+
+/// The sample a service keeps for late joiners (a configuration the supervisor published
+/// with history 1), waited for at most [`CONFIG_TIMEOUT`]; `None` when a stop was requested
+/// meanwhile. Set-up only. `missing` ends the error when nothing came.
+pub fn wait_for<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+    missing: &str,
+) -> Result<Option<T>, SetupError> {
+    let sub = Sub::<T>::new(node, instance, id, 1)?;
     let start = Instant::now();
     loop {
-        if let Some(cell) = sub.latest() {
-            validate_cell(&cell)?;
-            return Ok(Some(cell));
+        if let Some(sample) = sub.latest() {
+            return Ok(Some(sample));
         }
         if signals::stop_requested() {
             return Ok(None);
         }
         if start.elapsed() > CONFIG_TIMEOUT {
             return Err(format!(
-                "no cell configuration on {} after {} s: is `supervisor up --instance {instance}` running?",
-                instance.service(ServiceId::CellConfig),
+                "nothing on {} after {} s: {missing}",
+                instance.service(id),
                 CONFIG_TIMEOUT.as_secs()
             )
             .into());
