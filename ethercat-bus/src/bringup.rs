@@ -30,18 +30,23 @@ const MAX_PDI: usize = 1100;
 static PDU_STORAGE: PduStorage<MAX_FRAMES, MAX_PDU_DATA> = PduStorage::new();
 
 /// ethercrab's frames through the cell's wire.
-struct Pump<'w> {
+struct Pump {
     tx: PduTx<'static>,
     rx: PduRx<'static>,
-    wire: &'w Wire,
     buf: Vec<u8>,
+    /// Each SubDevice's send mailbox (SM1): station address and physical address.
+    mailboxes: Vec<(u16, u16)>,
+    /// CoE emergencies taken out of replies before ethercrab saw them: station, code,
+    /// error register.
+    caught: Vec<(u16, u16, u8)>,
 }
 
-impl Pump<'_> {
-    /// Drives `fut` to its end, sending what it queues and handing it what comes back, for at
-    /// most `limit` (or until `stop` says so).
+impl Pump {
+    /// Drives `fut` to its end, sending what it queues on `wire` and handing it what comes
+    /// back, for at most `limit` (or until `stop` says so).
     fn run<F: Future>(
         &mut self,
+        wire: &Wire,
         fut: F,
         limit: Duration,
         stop: &dyn Fn() -> bool,
@@ -54,7 +59,6 @@ impl Pump<'_> {
                 return Ok(v);
             }
             while let Some(frame) = self.tx.next_sendable_frame() {
-                let wire = self.wire;
                 frame
                     .send_blocking(|bytes| {
                         wire.send(bytes)
@@ -63,7 +67,8 @@ impl Pump<'_> {
                     })
                     .map_err(|e| format!("sending a frame: {e}"))?;
             }
-            if let Received::Frame(n) = self.wire.receive(&mut self.buf)? {
+            if let Received::Frame(n) = wire.receive(&mut self.buf)? {
+                self.guard(n);
                 // Anything that is not a reply of ours is ignored by ethercrab itself.
                 let _ = self.rx.receive_frame(&self.buf[..n]);
             }
@@ -77,6 +82,173 @@ impl Pump<'_> {
     }
 }
 
+impl Pump {
+    /// Takes every CoE emergency out of the frame of `n` bytes in `buf` before ethercrab
+    /// reads it: a read of a SubDevice's send mailbox that brought one back gets working
+    /// counter 0, and the emergency is kept in `caught`. ethercrab 0.7.1 would throw it away
+    /// (clearing a full mailbox before an SDO) or, meeting it as an SDO's answer, fail the
+    /// SDO or **panic** (`assert_ne!(service, Emergency)`, `mailbox/coe/mod.rs`, whichever
+    /// code the emergency carries; `tests/emergency.rs` of the emulator pins it). With working
+    /// counter 0 its clearing read goes on (it ignores the counter) and an SDO fails
+    /// with a working-counter error, which [`Pump::sdo`] tries once more.
+    fn guard(&mut self, n: usize) {
+        let frame = &mut self.buf[..n];
+        if frame.len() < 16 || frame[12..14] != ethercat_wire::ETHERTYPE.to_be_bytes() {
+            return;
+        }
+        let mut at = 16;
+        while at + 12 <= frame.len() {
+            let cmd = frame[at];
+            let station = u16::from_le_bytes([frame[at + 2], frame[at + 3]]);
+            let address = u16::from_le_bytes([frame[at + 4], frame[at + 5]]);
+            let flags = u16::from_le_bytes([frame[at + 6], frame[at + 7]]);
+            let len = usize::from(flags & 0x07FF);
+            let wkc_at = at + 10 + len;
+            if wkc_at + 2 > frame.len() {
+                return;
+            }
+            let wkc = u16::from_le_bytes([frame[wkc_at], frame[wkc_at + 1]]);
+            if cmd == crate::frame::FPRD
+                && wkc > 0
+                && self.mailboxes.contains(&(station, address))
+                && let Some((code, register)) = crate::frame::coe_emergency(&frame[at + 10..wkc_at])
+            {
+                self.caught.push((station, code, register));
+                frame[wkc_at..wkc_at + 2].copy_from_slice(&0u16.to_le_bytes());
+            }
+            if flags & 0x8000 == 0 {
+                return;
+            }
+            at = wkc_at + 2;
+        }
+    }
+
+    /// An SDO transfer `make` makes, once more if an emergency came in its place.
+    fn sdo<T, F: Future<Output = Result<T, ethercrab::error::Error>>>(
+        &mut self,
+        wire: &Wire,
+        make: impl Fn() -> F,
+        limit: Duration,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Result<T, ethercrab::error::Error>, String> {
+        let before = self.caught.len();
+        let first = self.run(wire, make(), limit, stop)?;
+        if first.is_err() && self.caught.len() > before {
+            return self.run(wire, make(), limit, stop);
+        }
+        Ok(first)
+    }
+}
+
+/// The bus' MainDevice: ethercrab, whose frames go through the cell's [`Wire`]. One per
+/// process (its frame storage is static); it brings the bus up as often as asked, from the
+/// scan (a bus lost and back, [`Master::bring_up`] again).
+pub struct Master {
+    md: MainDevice<'static>,
+    pump: Pump,
+}
+
+impl std::fmt::Debug for Master {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Master")
+    }
+}
+
+impl Master {
+    /// The process' MainDevice; an error the second time.
+    pub fn new() -> Result<Self, String> {
+        let (tx, rx, pdu_loop) = PDU_STORAGE
+            .try_split()
+            .map_err(|()| "the bus' MainDevice exists once per process".to_string())?;
+        // Timeouts with room for a loaded machine; the cycle does not use them.
+        let md = MainDevice::new(
+            pdu_loop,
+            Timeouts {
+                pdu: Duration::from_millis(200),
+                eeprom: Duration::from_millis(200),
+                state_transition: Duration::from_secs(10),
+                mailbox_response: Duration::from_secs(2),
+                ..Timeouts::default()
+            },
+            MainDeviceConfig {
+                dc_static_sync_iterations: 0,
+                ..MainDeviceConfig::default()
+            },
+        );
+        Ok(Self {
+            md,
+            pump: Pump {
+                tx,
+                rx,
+                buf: vec![0; 9216],
+                mailboxes: Vec::new(),
+                caught: Vec::new(),
+            },
+        })
+    }
+
+    /// Brings the bus of `cfg` on `wire` to OP, the drives mapped for `axes`; see the module
+    /// documentation. Errors name the SubDevice (position and name) and what is wrong.
+    pub fn bring_up(
+        &mut self,
+        cfg: &EthercatConfigV1,
+        axes: &[AxisConfigV2],
+        wire: &Wire,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Up, BringUpError> {
+        self.pump.caught.clear();
+        let mut up = bring_up(&self.md, &mut self.pump, cfg, axes, wire, stop);
+        if up.is_err() && !self.pump.caught.is_empty() {
+            // An emergency in place of an answer ethercrab waited for (its own SDO reads
+            // in SAFE-OP's configuration): once more, the emergency read.
+            let caught = std::mem::take(&mut self.pump.caught);
+            up = bring_up(&self.md, &mut self.pump, cfg, axes, wire, stop);
+            self.pump.caught.splice(0..0, caught);
+        }
+        let mut up = up?;
+        let stations: Vec<u16> = up.layout.slots[..up.layout.count]
+            .iter()
+            .map(|s| s.station)
+            .collect();
+        up.emergencies = self
+            .pump
+            .caught
+            .drain(..)
+            .filter_map(|(station, code, register)| {
+                Some((stations.iter().position(|s| *s == station)?, code, register))
+            })
+            .collect();
+        Ok(up)
+    }
+}
+
+/// Why the bus did not come up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BringUpError {
+    /// What is on the wire is not what the configuration says (a SubDevice missing, one
+    /// more, another identity at a position, a drive without the axis' mode): the
+    /// configuration is refused.
+    Refused(String),
+    /// Anything else: no link, no answer, a SubDevice that refused a state or an SDO.
+    Failed(String),
+}
+
+impl From<String> for BringUpError {
+    fn from(s: String) -> Self {
+        Self::Failed(s)
+    }
+}
+
+impl std::fmt::Display for BringUpError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Refused(m) | Self::Failed(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for BringUpError {}
+
 /// A SubDevice's identity for messages.
 fn identity(vendor: u32, product: u32, revision: u32) -> String {
     format!("vendor {vendor:#010x}, product {product:#010x}, revision {revision:#010x}")
@@ -89,43 +261,22 @@ pub struct Up {
     pub layout: Layout,
     /// Each SubDevice's name as its EEPROM gives it.
     pub names: Vec<String>,
+    /// CoE emergencies sent during start-up: position, code, error register.
+    pub emergencies: Vec<(usize, u16, u8)>,
 }
 
-/// Brings the bus of `cfg` on `wire` to OP, the drives mapped for `axes`; see the module
-/// documentation. Errors name the SubDevice (position and name) and what is wrong.
-pub fn bring_up(
+fn bring_up(
+    md: &MainDevice<'static>,
+    pump: &mut Pump,
     cfg: &EthercatConfigV1,
     axes: &[AxisConfigV2],
     wire: &Wire,
     stop: &dyn Fn() -> bool,
-) -> Result<Up, String> {
-    let (tx, rx, pdu_loop) = PDU_STORAGE
-        .try_split()
-        .map_err(|()| "the bus can be brought up once per process".to_string())?;
-    let mut pump = Pump {
-        tx,
-        rx,
-        wire,
-        buf: vec![0; 9216],
-    };
-    // Timeouts with room for a loaded machine; the cycle does not use them.
-    let md = MainDevice::new(
-        pdu_loop,
-        Timeouts {
-            pdu: Duration::from_millis(200),
-            eeprom: Duration::from_millis(200),
-            state_transition: Duration::from_secs(10),
-            mailbox_response: Duration::from_secs(2),
-            ..Timeouts::default()
-        },
-        MainDeviceConfig {
-            dc_static_sync_iterations: 0,
-            ..MainDeviceConfig::default()
-        },
-    );
+) -> Result<Up, BringUpError> {
     let long = Duration::from_secs(30);
     let group = pump
         .run(
+            wire,
             md.init_single_group::<MAX_SUBDEVICES, MAX_PDI>(ethercrab::std::ethercat_now),
             long,
             stop,
@@ -135,7 +286,7 @@ pub fn bring_up(
     // The line against the configuration, before anything else is written.
     let want = cfg.subdevices();
     let found: Vec<_> = group
-        .iter(&md)
+        .iter(md)
         .map(|sd| {
             (
                 sd.identity(),
@@ -160,35 +311,57 @@ pub fn bring_up(
             )
         };
         let Some((id, name, _)) = found.get(k) else {
-            return Err(format!(
+            return Err(BringUpError::Refused(format!(
                 "the bus on {} has {} SubDevice(s): position {k} should be {expected}, and nothing answers there",
                 cfg.interface(),
                 found.len()
-            ));
+            )));
         };
         let revision_ok =
             w.flags & subdevice_flags::CHECK_REVISION == 0 || id.revision == w.revision;
         if id.vendor_id != w.vendor || id.product_id != w.product || !revision_ok {
-            return Err(format!(
+            return Err(BringUpError::Refused(format!(
                 "position {k} of the bus on {} should be {expected}, and {name} ({}) is there",
                 cfg.interface(),
                 identity(id.vendor_id, id.product_id, id.revision)
-            ));
+            )));
         }
     }
     if let Some((id, name, _)) = found.get(want.len()) {
-        return Err(format!(
+        return Err(BringUpError::Refused(format!(
             "the bus on {} has {} SubDevice(s) where the configuration names {}: position {} is {name} ({}), which it does not name",
             cfg.interface(),
             found.len(),
             want.len(),
             want.len(),
             identity(id.vendor_id, id.product_id, id.revision)
-        ));
+        )));
+    }
+
+    // Each SubDevice's send mailbox (SM1 in mailbox mode, written by the SubDevice): its
+    // emergencies are taken out of ethercrab's way from here on (`Pump::guard`), and the
+    // cycle reads them in OP.
+    let mut mailboxes = vec![(0u16, 0u16); found.len()];
+    pump.mailboxes.clear();
+    for (k, sd) in group.iter(md).enumerate() {
+        let control: u8 = pump
+            .run(wire, sd.register_read(0x080Cu16), long, stop)?
+            .map_err(|e| format!("position {k}: SM1: {e}"))?;
+        if control & 0x0F != 0x02 {
+            continue; // not a mailbox the SubDevice writes
+        }
+        let start: u16 = pump
+            .run(wire, sd.register_read(0x0808u16), long, stop)?
+            .map_err(|e| format!("position {k}: SM1: {e}"))?;
+        let len: u16 = pump
+            .run(wire, sd.register_read(0x080Au16), long, stop)?
+            .map_err(|e| format!("position {k}: SM1: {e}"))?;
+        mailboxes[k] = (start, len);
+        pump.mailboxes.push((sd.configured_address(), start));
     }
 
     // PRE-OP: each drive's mapping, modes and quick stop; every SubDevice's watchdog.
-    for (k, (sd, w)) in group.iter(&md).zip(want).enumerate() {
+    for (k, (sd, w)) in group.iter(md).zip(want).enumerate() {
         let at = |what: &str, e: ethercrab::error::Error| {
             format!("position {k} ({}): {what}: {e}", w.name())
         };
@@ -197,41 +370,47 @@ pub fn bring_up(
                 format!("position {k} ({}): axis {a} is not in the cell", w.name())
             })?;
             let modes: u32 = pump
-                .run(sd.sdo_read(obj::SUPPORTED_MODES, 0), long, stop)?
+                .sdo(wire, || sd.sdo_read(obj::SUPPORTED_MODES, 0), long, stop)?
                 .map_err(|e| at("reading 0x6502", e))?;
             let bit = u32::try_from(axis.mode - 1)
                 .ok()
                 .filter(|b| *b < 32)
                 .map_or(0, |b| 1u32 << b);
             if modes & bit == 0 {
-                return Err(format!(
+                return Err(BringUpError::Refused(format!(
                     "position {k} ({}): the drive does not support mode {} (0x6502 = {modes:#010x})",
                     w.name(),
                     axis.mode
-                ));
+                )));
             }
             for (assign, pdo, entries) in [
                 (obj::SM2_ASSIGN, obj::RXPDO, &RX_DEFAULT),
                 (obj::SM3_ASSIGN, obj::TXPDO, &TX_DEFAULT),
             ] {
                 let what = format!("mapping {pdo:#06x}");
-                pump.run(sd.sdo_write(assign, 0, 0u8), long, stop)?
+                pump.sdo(wire, || sd.sdo_write(assign, 0, 0u8), long, stop)?
                     .map_err(|e| at(&what, e))?;
-                pump.run(sd.sdo_write(pdo, 0, 0u8), long, stop)?
+                pump.sdo(wire, || sd.sdo_write(pdo, 0, 0u8), long, stop)?
                     .map_err(|e| at(&what, e))?;
                 for (n, &(index, bits)) in entries.iter().enumerate() {
-                    pump.run(
-                        sd.sdo_write(pdo, n as u8 + 1, mapping(index, 0, bits)),
+                    pump.sdo(
+                        wire,
+                        || sd.sdo_write(pdo, n as u8 + 1, mapping(index, 0, bits)),
                         long,
                         stop,
                     )?
                     .map_err(|e| at(&what, e))?;
                 }
-                pump.run(sd.sdo_write(pdo, 0, entries.len() as u8), long, stop)?
+                pump.sdo(
+                    wire,
+                    || sd.sdo_write(pdo, 0, entries.len() as u8),
+                    long,
+                    stop,
+                )?
+                .map_err(|e| at(&what, e))?;
+                pump.sdo(wire, || sd.sdo_write(assign, 1, pdo), long, stop)?
                     .map_err(|e| at(&what, e))?;
-                pump.run(sd.sdo_write(assign, 1, pdo), long, stop)?
-                    .map_err(|e| at(&what, e))?;
-                pump.run(sd.sdo_write(assign, 0, 1u8), long, stop)?
+                pump.sdo(wire, || sd.sdo_write(assign, 0, 1u8), long, stop)?
                     .map_err(|e| at(&what, e))?;
             }
             let decel = (axis.quick_stop_deceleration * w.counts_per_unit).round();
@@ -240,14 +419,16 @@ pub fn bring_up(
             } else {
                 0
             };
-            pump.run(
-                sd.sdo_write(obj::QUICK_STOP_DECELERATION, 0, decel),
+            pump.sdo(
+                wire,
+                || sd.sdo_write(obj::QUICK_STOP_DECELERATION, 0, decel),
                 long,
                 stop,
             )?
             .map_err(|e| at("writing 0x6085", e))?;
-            pump.run(
-                sd.sdo_write(obj::QUICK_STOP_OPTION, 0, axis.quick_stop_option as i16),
+            pump.sdo(
+                wire,
+                || sd.sdo_write(obj::QUICK_STOP_OPTION, 0, axis.quick_stop_option as i16),
                 long,
                 stop,
             )?
@@ -256,77 +437,82 @@ pub fn bring_up(
         if cfg.pd_watchdog_ns > 0 {
             // Increments of 100 µs: (divider + 2) × 40 ns.
             let time = u16::try_from(cfg.pd_watchdog_ns / 100_000).unwrap_or(u16::MAX);
-            pump.run(sd.register_write(0x0400u16, 2498u16), long, stop)?
+            pump.run(wire, sd.register_write(0x0400u16, 2498u16), long, stop)?
                 .map_err(|e| at("watchdog divider", e))?;
-            pump.run(sd.register_write(0x0420u16, time), long, stop)?
+            pump.run(wire, sd.register_write(0x0420u16, time), long, stop)?
                 .map_err(|e| at("watchdog time", e))?;
         }
     }
 
     // SAFE-OP, then OP with the process data running (a drive may wait for valid outputs).
     let group = pump
-        .run(group.into_safe_op(&md), long, stop)?
+        .run(wire, group.into_safe_op(md), long, stop)?
         .map_err(|e| format!("bringing the bus on {} to SAFE-OP: {e}", cfg.interface()))?;
     let group = pump
-        .run(group.request_into_op(&md), long, stop)?
+        .run(wire, group.request_into_op(md), long, stop)?
         .map_err(|e| format!("bringing the bus on {} to OP: {e}", cfg.interface()))?;
     let end = Instant::now() + long;
     let wkc = loop {
         let r = pump
-            .run(group.tx_rx(&md), long, stop)?
+            .run(wire, group.tx_rx(md), long, stop)?
             .map_err(|e| format!("exchanging process data on {}: {e}", cfg.interface()))?;
         if r.all_op() {
             break r.working_counter;
         }
         if Instant::now() > end {
             let states: Vec<_> = r.subdevice_states.iter().map(|s| format!("{s}")).collect();
-            return Err(format!(
+            return Err(BringUpError::Failed(format!(
                 "the bus on {} did not reach OP within {} s: states {}",
                 cfg.interface(),
                 long.as_secs(),
                 states.join(", ")
-            ));
+            )));
         }
         std::thread::sleep(Duration::from_millis(1));
     };
 
     // Where ethercrab put each SubDevice's data: its FMMUs, read back.
     let mut fmmus = Vec::new();
-    for (k, sd) in group.iter(&md).enumerate() {
+    for (k, sd) in group.iter(md).enumerate() {
         let count: u8 = pump
-            .run(sd.register_read(0x0004u16), long, stop)?
+            .run(wire, sd.register_read(0x0004u16), long, stop)?
             .map_err(|e| format!("position {k}: FMMU count: {e}"))?;
         for f in 0..u16::from(count).min(16) {
             let base = 0x0600 + 16 * f;
             let active: u8 = pump
-                .run(sd.register_read(base + 0x0C), long, stop)?
+                .run(wire, sd.register_read(base + 0x0C), long, stop)?
                 .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
             if active & 1 == 0 {
                 continue;
             }
             let logical: u32 = pump
-                .run(sd.register_read(base), long, stop)?
+                .run(wire, sd.register_read(base), long, stop)?
                 .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
             let len: u16 = pump
-                .run(sd.register_read(base + 4), long, stop)?
+                .run(wire, sd.register_read(base + 4), long, stop)?
                 .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
             let kind: u8 = pump
-                .run(sd.register_read(base + 0x0B), long, stop)?
+                .run(wire, sd.register_read(base + 0x0B), long, stop)?
                 .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
             fmmus.push((k, logical, len, kind));
         }
     }
     let layout = layout_of(&found.iter().map(|f| f.2).collect::<Vec<_>>(), &fmmus)?;
     if layout.expected_wkc != wkc {
-        return Err(format!(
+        return Err(BringUpError::Failed(format!(
             "the bus on {} answers with working counter {wkc} where its FMMUs make {}",
             cfg.interface(),
             layout.expected_wkc
-        ));
+        )));
+    }
+    let mut layout = layout;
+    for (slot, mailbox) in layout.slots.iter_mut().zip(&mailboxes) {
+        slot.mailbox_in = *mailbox;
     }
     Ok(Up {
         layout,
         names: found.into_iter().map(|f| f.1).collect(),
+        emergencies: Vec::new(),
     })
 }
 

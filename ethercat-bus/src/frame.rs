@@ -1,8 +1,10 @@
 //! The cycle's one frame: an LRW datagram over the whole process image (every SubDevice's
 //! outputs written, its inputs read, through the FMMUs ethercrab configured), followed by an
 //! FPRD of each SubDevice's AL status and status code, so that every cycle knows which
-//! SubDevice is in which state. Built once at start-up; a cycle writes the outputs in place,
-//! sends, and takes the reply: no allocation, constant time.
+//! SubDevice is in which state, and an FPRD of the status of each send mailbox (SM1), so that
+//! a CoE emergency waiting there is seen; the frame after one is seen carries a read of that
+//! mailbox (one per frame). Built once at start-up; a cycle writes the outputs in place,
+//! sends, and takes the reply: no allocation, bounded time.
 //!
 //! Layout (ETG.1000.4): Ethernet header (broadcast destination, EtherType 0x88A4), EtherCAT
 //! header (length of the datagrams, type 1), then datagrams of a 10-byte header (command,
@@ -14,7 +16,12 @@ use shm_schema::ethercat::MAX_SUBDEVICES;
 /// Logical read-write.
 const LRW: u8 = 12;
 /// Configured-address physical read.
-const FPRD: u8 = 4;
+pub const FPRD: u8 = 4;
+/// SM1's status register (bit 3: the mailbox is full).
+const SM1_STATUS: u16 = 0x080D;
+/// Bytes of a mailbox read at most (a drive's SM1 is 128 bytes or less; the frame keeps room
+/// for the largest).
+pub const MAX_MAILBOX: usize = 512;
 /// The AL status register (0x0130), its status code at 0x0134.
 const AL_STATUS: u16 = 0x0130;
 /// Bytes read from [`AL_STATUS`]: status, reserved, status code.
@@ -38,6 +45,26 @@ pub struct Slot {
     pub outputs: (u16, u16),
     /// Offset and length of its inputs in the image.
     pub inputs: (u16, u16),
+    /// Physical address and length of its send mailbox (SM1); length 0: none.
+    pub mailbox_in: (u16, u16),
+}
+
+/// The CoE emergency a mailbox carries (ETG.1000.6 5.6.4): its error code and error register,
+/// or `None` for anything else.
+///
+/// # Real-time
+/// Reads only.
+pub fn coe_emergency(mailbox: &[u8]) -> Option<(u16, u8)> {
+    // Mailbox header: length, address, channel and priority, type (low 4 bits; 3: CoE) and
+    // counter; then the CoE header, its service in the top 4 bits (1: emergency).
+    let len = usize::from(u16::from_le_bytes([*mailbox.first()?, *mailbox.get(1)?]));
+    if mailbox.len() < 11 || len < 5 || mailbox[5] & 0x0F != 3 {
+        return None;
+    }
+    if u16::from_le_bytes([mailbox[6], mailbox[7]]) >> 12 != 1 {
+        return None;
+    }
+    Some((u16::from_le_bytes([mailbox[8], mailbox[9]]), mailbox[10]))
 }
 
 /// The process image of the bus: its logical address range and each SubDevice's place.
@@ -80,19 +107,52 @@ pub struct CyclicFrame {
     /// Inputs and the AL statuses as the last reply had them.
     reply: [u8; MAX_FRAME],
     index: u8,
-    /// Bytes of the datagrams (the EtherCAT header's length).
+    /// Bytes of the datagrams without a mailbox read (the EtherCAT header's length).
     datagrams: usize,
+    /// The SubDevices with a send mailbox, in the order of their status reads.
+    mailboxes: [u8; MAX_SUBDEVICES],
+    /// How many.
+    mailbox_count: usize,
+    /// The SubDevice whose mailbox the next frame reads.
+    read_next: Option<usize>,
+    /// The SubDevice whose mailbox the frame sent last reads.
+    read_sent: Option<usize>,
 }
 
 impl CyclicFrame {
     /// The frame for `layout`, or why it does not fit in one Ethernet frame.
     pub fn new(layout: Layout) -> Result<Self, String> {
         let n = layout.count.min(MAX_SUBDEVICES);
-        let datagrams = DGRAM + usize::from(layout.len) + WKC + n * (DGRAM + AL_BYTES + WKC);
-        let len = ETH + ECAT + datagrams;
-        if len > MAX_FRAME || usize::from(layout.len) > 0x7FF {
+        let mut mailboxes = [0u8; MAX_SUBDEVICES];
+        let mut mailbox_count = 0;
+        let mut largest = 0;
+        for (k, s) in layout.slots[..n].iter().enumerate() {
+            if s.mailbox_in.1 > 0 {
+                mailboxes[mailbox_count] = k as u8;
+                mailbox_count += 1;
+                largest = largest.max(usize::from(s.mailbox_in.1));
+            }
+        }
+        if largest > MAX_MAILBOX {
             return Err(format!(
-                "the process image ({} bytes) and {n} AL status reads do not fit one frame ({len} of {MAX_FRAME} bytes)",
+                "a send mailbox of {largest} bytes is more than the cycle reads ({MAX_MAILBOX})"
+            ));
+        }
+        let datagrams = DGRAM
+            + usize::from(layout.len)
+            + WKC
+            + n * (DGRAM + AL_BYTES + WKC)
+            + mailbox_count * (DGRAM + 1 + WKC);
+        let len = ETH + ECAT + datagrams;
+        let longest = len
+            + if largest > 0 {
+                DGRAM + largest + WKC
+            } else {
+                0
+            };
+        if longest > MAX_FRAME || usize::from(layout.len) > 0x7FF {
+            return Err(format!(
+                "the process image ({} bytes), {n} AL status reads and {mailbox_count} mailboxes do not fit one frame ({longest} of {MAX_FRAME} bytes)",
                 layout.len
             ));
         }
@@ -102,6 +162,7 @@ impl CyclicFrame {
         buf[12..14].copy_from_slice(&ethercat_wire::ETHERTYPE.to_be_bytes());
         buf[14..16].copy_from_slice(&((datagrams as u16) | (1 << 12)).to_le_bytes());
         let mut at = ETH + ECAT;
+        let reads = n + mailbox_count;
         let mut datagram =
             |buf: &mut [u8; MAX_FRAME], cmd: u8, address: u32, len: usize, more: bool| {
                 buf[at] = cmd;
@@ -115,11 +176,16 @@ impl CyclicFrame {
             LRW,
             layout.logical_start,
             usize::from(layout.len),
-            n > 0,
+            reads > 0,
         );
         for (k, s) in layout.slots[..n].iter().enumerate() {
             let address = u32::from(s.station) | (u32::from(AL_STATUS) << 16);
-            datagram(&mut buf, FPRD, address, AL_BYTES, k + 1 < n);
+            datagram(&mut buf, FPRD, address, AL_BYTES, k + 1 < reads);
+        }
+        for (j, &k) in mailboxes[..mailbox_count].iter().enumerate() {
+            let s = &layout.slots[usize::from(k)];
+            let address = u32::from(s.station) | (u32::from(SM1_STATUS) << 16);
+            datagram(&mut buf, FPRD, address, 1, n + j + 1 < reads);
         }
         Ok(Self {
             layout,
@@ -128,6 +194,10 @@ impl CyclicFrame {
             reply: [0; MAX_FRAME],
             index: 0,
             datagrams,
+            mailboxes,
+            mailbox_count,
+            read_next: None,
+            read_sent: None,
         })
     }
 
@@ -169,7 +239,52 @@ impl CyclicFrame {
         )
     }
 
-    /// The next frame to send: a new index, working counters 0.
+    /// Where the status read of the `j`-th send mailbox starts.
+    fn mailbox_status_at(&self, j: usize) -> usize {
+        Self::image_at()
+            + usize::from(self.layout.len)
+            + WKC
+            + self.layout.count.min(MAX_SUBDEVICES) * (DGRAM + AL_BYTES + WKC)
+            + j * (DGRAM + 1 + WKC)
+    }
+
+    /// The SubDevices whose send mailbox the last reply found full, in status order.
+    ///
+    /// # Real-time
+    /// Reads only.
+    pub fn full_mailboxes(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.mailbox_count).filter_map(|j| {
+            let at = self.mailbox_status_at(j);
+            let read = u16::from_le_bytes([self.reply[at + DGRAM + 1], self.reply[at + DGRAM + 2]]);
+            (read == 1 && self.reply[at + DGRAM] & 0x08 != 0)
+                .then_some(usize::from(self.mailboxes[j]))
+        })
+    }
+
+    /// Makes the next frame read SubDevice `k`'s send mailbox (whole, which empties it).
+    pub fn read_mailbox(&mut self, k: usize) {
+        if self.layout.slots.get(k).is_some_and(|s| s.mailbox_in.1 > 0) {
+            self.read_next = Some(k);
+        }
+    }
+
+    /// The SubDevice whose mailbox the frame sent last reads.
+    pub fn mailbox_read(&self) -> Option<usize> {
+        self.read_sent
+    }
+
+    /// The mailbox the last reply read, and whose it was; `None` if it read none, or its
+    /// SubDevice did not answer.
+    pub fn mailbox(&self) -> Option<(usize, &[u8])> {
+        let k = self.read_sent?;
+        let len = usize::from(self.layout.slots[k].mailbox_in.1);
+        let at = ETH + ECAT + self.datagrams + DGRAM;
+        let wkc = u16::from_le_bytes([self.reply[at + len], self.reply[at + len + 1]]);
+        (wkc == 1).then(|| (k, &self.reply[at..at + len]))
+    }
+
+    /// The next frame to send: a new index, working counters 0, and the mailbox read asked
+    /// for by [`CyclicFrame::read_mailbox`], if any.
     ///
     /// # Real-time
     /// Copies only.
@@ -177,20 +292,47 @@ impl CyclicFrame {
         self.index = self.index.wrapping_add(1);
         let mut at = ETH + ECAT;
         let n = self.layout.count.min(MAX_SUBDEVICES);
-        for k in 0..=n {
+        let mut last = at;
+        for k in 0..=n + self.mailbox_count {
             let len = if k == 0 {
                 usize::from(self.layout.len)
-            } else {
+            } else if k <= n {
                 AL_BYTES
+            } else {
+                1
             };
             self.buf[at + 1] = self.index;
             if k > 0 {
                 self.buf[at + DGRAM..at + DGRAM + len].fill(0);
             }
             self.buf[at + DGRAM + len..at + DGRAM + len + WKC].fill(0);
+            last = at;
             at += DGRAM + len + WKC;
         }
-        &self.buf[..self.len]
+        self.read_sent = self.read_next.take();
+        let mut datagrams = self.datagrams;
+        if let Some(k) = self.read_sent {
+            let s = self.layout.slots[k];
+            let len = usize::from(s.mailbox_in.1);
+            self.buf[last + 7] |= 0x80; // more follows
+            self.buf[at] = FPRD;
+            self.buf[at + 1] = self.index;
+            self.buf[at + 2..at + 4].copy_from_slice(&s.station.to_le_bytes());
+            self.buf[at + 4..at + 6].copy_from_slice(&s.mailbox_in.0.to_le_bytes());
+            self.buf[at + 6..at + 8].copy_from_slice(&(len as u16).to_le_bytes());
+            self.buf[at + 8..at + DGRAM + len + WKC].fill(0);
+            datagrams += DGRAM + len + WKC;
+        } else {
+            self.buf[last + 7] &= 0x7F;
+        }
+        self.buf[14..16].copy_from_slice(&((datagrams as u16) | (1 << 12)).to_le_bytes());
+        let len = (ETH + ECAT + datagrams).max(60);
+        if len > self.len {
+            // Padding a shorter frame left behind.
+            self.buf[ETH + ECAT + datagrams..len].fill(0);
+        }
+        self.len = len;
+        &self.buf[..len]
     }
 
     /// Takes `frame` if it is the reply to the frame sent last.
@@ -198,7 +340,12 @@ impl CyclicFrame {
     /// # Real-time
     /// Copies only.
     pub fn take_reply(&mut self, frame: &[u8]) -> Reply {
-        let end = ETH + ECAT + self.datagrams;
+        let end = ETH
+            + ECAT
+            + self.datagrams
+            + self.read_sent.map_or(0, |k| {
+                DGRAM + usize::from(self.layout.slots[k].mailbox_in.1) + WKC
+            });
         if frame.len() < end
             || frame[12..14] != ethercat_wire::ETHERTYPE.to_be_bytes()
             || frame[6] & 0x02 == 0

@@ -206,6 +206,15 @@ impl Drives {
         fb
     }
 
+    /// Forgets what the drives said (the bus was brought up again): the next read tells each
+    /// drive's state and fault afresh.
+    pub fn forget(&mut self) {
+        for d in self.drives[..self.count].iter_mut().flatten() {
+            d.state = None;
+            d.error_code = 0;
+        }
+    }
+
     /// Whether any drive's power stage may be on (its last state says so, or is unknown).
     pub fn powered(&self) -> bool {
         self.drives[..self.count].iter().flatten().any(|d| {

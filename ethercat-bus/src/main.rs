@@ -1,8 +1,8 @@
 //! `ethercat-bus`: the drives' process of a cell on EtherCAT. See the crate documentation.
 
 use ethercat_bus::Drives;
-use ethercat_bus::bringup;
-use ethercat_bus::frame::{CyclicFrame, Reply};
+use ethercat_bus::bringup::{BringUpError, Master, Up};
+use ethercat_bus::frame::{CyclicFrame, Layout, Reply, coe_emergency};
 use ethercat_wire::{Received, Wire};
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
@@ -14,6 +14,9 @@ use shm_schema::{
     LatencyHistogramV1, ServiceId,
 };
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 /// A SubDevice's position as text, for events written in the cycle (no formatting there).
@@ -26,11 +29,42 @@ const POSITIONS: [&str; MAX_SUBDEVICES] = [
 /// this often.
 const REPEAT_NS: u64 = 1_000_000_000;
 
+/// Who has the bus' wire (`Bus::wire_owner`): the cycle, or the recovery thread bringing the
+/// bus up again. The cycle hands it over (`RECOVERING`) and the thread hands it back (`BACK`)
+/// with the bus in OP; neither touches the socket while the other has it.
+mod owner {
+    pub const CYCLE: u8 = 0;
+    pub const RECOVERING: u8 = 1;
+    pub const BACK: u8 = 2;
+}
+
+/// At most this many emergencies of the start-up are told as events in the first cycle.
+const STARTUP_EMERGENCIES: usize = 8;
+
 struct Bus {
-    wire: Wire,
+    wire: Arc<Wire>,
     interface: String,
-    /// The first cycle announces the bus in OP.
-    announced: bool,
+    /// The next cycle announces the bus in OP ("in OP", "back in OP").
+    announce: Option<&'static str>,
+    /// Emergencies sent during start-up (position, code, register), told in the first cycle.
+    startup_emergencies: [(usize, u16, u8); STARTUP_EMERGENCIES],
+    startup_emergency_count: usize,
+    /// See [`owner`].
+    wire_owner: Arc<AtomicU8>,
+    /// Ends the recovery thread.
+    quit: Arc<AtomicBool>,
+    recovery: Option<JoinHandle<()>>,
+    /// Times the bus was handed to the recovery thread.
+    recoveries: u64,
+    /// Since when the bus has been degraded (a SubDevice out of OP, or a wrong working
+    /// counter) with the e-stop latched.
+    degraded_since_ns: Option<u64>,
+    /// How long the e-stop must have been latched on a degraded bus before it is brought up
+    /// again: the cell's `estop_stop_time` (every drive has ramped down by then).
+    degraded_wait_ns: u64,
+    /// The e-stop was seen latched while the bus was out of the cycle's hands: a reset then
+    /// raises it again.
+    latched_while_recovering: bool,
     /// Each SubDevice's name, as the configuration gives it.
     names: [[u8; 16]; MAX_SUBDEVICES],
     /// Whether each SubDevice was in OP in the last reply.
@@ -64,6 +98,101 @@ struct Bus {
 }
 
 impl Bus {
+    /// Publishes feedback with every position NaN and no state: the drives cannot be vouched
+    /// for (the bus is lost, or being brought up again).
+    ///
+    /// # Real-time
+    /// Copies and an IPC call.
+    fn publish_unknown(&mut self, now: u64, cx: &mut Cycle<'_>) {
+        self.seq += 1;
+        let fb = self
+            .drives
+            .read(now, self.seq, false, &self.frame, cx.events);
+        self.feedback.send(&fb);
+    }
+
+    /// Gives the wire to the recovery thread, which brings the bus up again from the scan.
+    ///
+    /// # Real-time
+    /// An atomic store and an event.
+    fn hand_over(&mut self, now: u64, cx: &mut Cycle<'_>) {
+        self.recoveries += 1;
+        self.latched_while_recovering = cx.estop.latched;
+        cx.events.push(EventV1::new(
+            now,
+            code::BUS_RECOVERING,
+            -1,
+            self.recoveries as f64,
+            0.0,
+            &[
+                "bringing the bus on ",
+                &self.interface,
+                " up again from the scan",
+            ],
+        ));
+        self.wire_owner.store(owner::RECOVERING, Ordering::Release);
+    }
+
+    /// The cycle while the recovery thread has the wire: feedback without positions, the
+    /// e-stop raised again if someone resets it, and the bus taken back once it is in OP.
+    /// True while the thread still has it.
+    ///
+    /// # Real-time
+    /// Atomic loads and stores, copies and IPC calls.
+    fn recovering(&mut self, now: u64, cx: &mut Cycle<'_>) -> bool {
+        match self.wire_owner.load(Ordering::Acquire) {
+            owner::RECOVERING => {
+                if cx.estop.latched {
+                    self.latched_while_recovering = true;
+                } else if self.latched_while_recovering {
+                    // A reset while the bus is not back: nothing may be enabled on it.
+                    self.latched_while_recovering = false;
+                    cx.raise_estop(
+                        EstopOrigin::Device,
+                        code::BUS_LOST,
+                        &["EtherCAT bus not back in OP yet"],
+                    );
+                }
+                self.publish_unknown(now, cx);
+                cx.set_safe(true);
+                true
+            }
+            owner::BACK => {
+                // The same line in the same layout (the thread checked it): the cycle goes on
+                // with its frame, the drives' states read afresh.
+                self.lost = 0;
+                self.in_op = [true; MAX_SUBDEVICES];
+                self.degraded_since_ns = None;
+                self.drives.forget();
+                self.announce = Some("back in OP on ");
+                self.wire_owner.store(owner::CYCLE, Ordering::Release);
+                false
+            }
+            _ => false,
+        }
+    }
+
+    /// Tells SubDevice `k`'s CoE emergency.
+    ///
+    /// # Real-time
+    /// Copies only.
+    fn emergency(&self, now: u64, k: usize, code: u16, register: u8, cx: &mut Cycle<'_>) {
+        cx.events.push(EventV1::new(
+            now,
+            code::SUBDEVICE_EMERGENCY,
+            -1,
+            f64::from(code),
+            f64::from(register),
+            &[
+                "position ",
+                POSITIONS.get(k).copied().unwrap_or("?"),
+                " (",
+                shm_schema::str_of(&self.names[k.min(MAX_SUBDEVICES - 1)]),
+                ") sent an emergency",
+            ],
+        ));
+    }
+
     fn publish_latency(&mut self, now_ns: u64) {
         self.sense_to_command.stamp_ns = now_ns;
         self.sense_to_command_pub.send(&self.sense_to_command);
@@ -97,16 +226,23 @@ impl Task for Bus {
     /// arithmetic, copies and a histogram record; nothing else.
     fn cycle(&mut self, cx: &mut Cycle<'_>) {
         let now = cx.now_ns();
-        if !self.announced {
-            self.announced = true;
+        if self.recovering(now, cx) {
+            return;
+        }
+        if let Some(what) = self.announce.take() {
             cx.events.push(EventV1::new(
                 now,
                 code::BUS_OP,
                 -1,
                 self.frame.layout().count as f64,
                 f64::from(self.frame.layout().expected_wkc),
-                &["in OP on ", &self.interface],
+                &[what, &self.interface],
             ));
+            for &(k, code, register) in
+                &self.startup_emergencies[..std::mem::take(&mut self.startup_emergency_count)]
+            {
+                self.emergency(now, k, code, register, cx);
+            }
         }
         // The newest command, or the last one while servo's next has not come (the drives
         // hold it, as their outputs do between frames).
@@ -159,12 +295,9 @@ impl Task for Bus {
                 // The bus is lost (its e-stop went out the cycle before): the drives cannot
                 // be vouched for at all. Every position NaN and no state (statusword 0), so
                 // servo cuts power at once rather than ramping against the last position it
-                // saw.
-                self.seq += 1;
-                let fb = self
-                    .drives
-                    .read(now, self.seq, false, &self.frame, cx.events);
-                self.feedback.send(&fb);
+                // saw; and the recovery thread brings the bus up again once it answers.
+                self.publish_unknown(now, cx);
+                self.hand_over(now, cx);
             }
             cx.set_safe(!self.drives.powered() || self.lost >= self.lost_limit);
             return;
@@ -196,8 +329,34 @@ impl Task for Bus {
             }
             self.in_op[k] = op;
         }
+        // A CoE emergency in the mailbox this frame read; the next frame reads the next full
+        // one (not the one just read: its status was read before it was emptied).
+        let just_read = self.frame.mailbox_read();
+        if let Some((k, mailbox)) = self.frame.mailbox()
+            && let Some((code, register)) = coe_emergency(mailbox)
+        {
+            self.emergency(now, k, code, register, cx);
+        }
+        let full = self.frame.full_mailboxes().find(|&k| Some(k) != just_read);
+        if let Some(k) = full {
+            self.frame.read_mailbox(k);
+        }
         let expected = self.frame.layout().expected_wkc;
         let valid = wkc == expected;
+        // A bus degraded while the e-stop is latched: once every drive has ramped down, the
+        // bus is brought up again.
+        let degraded = !valid || self.in_op[..self.frame.layout().count].contains(&false);
+        if degraded && cx.estop.latched {
+            let since = *self.degraded_since_ns.get_or_insert(now);
+            if now.saturating_sub(since) >= self.degraded_wait_ns {
+                self.publish_unknown(now, cx);
+                self.hand_over(now, cx);
+                cx.set_safe(true);
+                return;
+            }
+        } else {
+            self.degraded_since_ns = None;
+        }
         if !valid && now.saturating_sub(self.last_wkc_event_ns) >= REPEAT_NS {
             self.last_wkc_event_ns = now;
             cx.events.push(EventV1::new(
@@ -229,6 +388,10 @@ impl Task for Bus {
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
         self.publish_latency(now_ns);
+        self.quit.store(true, Ordering::Release);
+        if let Some(t) = self.recovery.take() {
+            let _ = t.join();
+        }
     }
 }
 
@@ -266,16 +429,102 @@ fn open_wire(interface: &str) -> Result<Wire, SetupError> {
     }
 }
 
+/// The recovery thread: while the cycle has handed it the wire ([`owner::RECOVERING`]),
+/// brings the bus up again from the scan, once a second until it answers as the configuration
+/// says and in the layout the cycle's frame was built for, then hands the wire back
+/// ([`owner::BACK`]). Not real-time (the process' ordinary priority); it logs why an attempt
+/// failed when the reason changes.
+struct Recovery {
+    master: Master,
+    wire: Arc<Wire>,
+    bus: EthercatConfigV1,
+    axes: Vec<shm_schema::AxisConfigV2>,
+    layout: Layout,
+    owner: Arc<AtomicU8>,
+    quit: Arc<AtomicBool>,
+}
+
+impl Recovery {
+    fn run(mut self) {
+        let quit = self.quit.clone();
+        let owner = self.owner.clone();
+        let give_up = move || {
+            quit.load(Ordering::Acquire)
+                || runtime::signals::stop_requested()
+                || owner.load(Ordering::Acquire) != owner::RECOVERING
+        };
+        let mut last_failure = String::new();
+        while !self.quit.load(Ordering::Acquire) && !runtime::signals::stop_requested() {
+            if self.owner.load(Ordering::Acquire) != owner::RECOVERING {
+                std::thread::sleep(Duration::from_millis(20));
+                continue;
+            }
+            let attempt = Instant::now();
+            let failure = match self
+                .master
+                .bring_up(&self.bus, &self.axes, &self.wire, &give_up)
+            {
+                Ok(up) if up.layout == self.layout => {
+                    tell_emergencies(&up);
+                    tracing::info!(
+                        "bus on {} back in OP: {}",
+                        self.bus.interface(),
+                        up.names.join(", ")
+                    );
+                    last_failure.clear();
+                    self.owner.store(owner::BACK, Ordering::Release);
+                    continue;
+                }
+                Ok(up) => format!(
+                    "the bus on {} came back with another process image ({:?}, where the cycle has {:?}): `supervisor restart drives`",
+                    self.bus.interface(),
+                    up.layout,
+                    self.layout
+                ),
+                Err(e) => e.to_string(),
+            };
+            if failure != last_failure {
+                tracing::warn!("the bus is not back: {failure} (trying again every second)");
+                last_failure = failure;
+            }
+            let rest = Duration::from_secs(1).saturating_sub(attempt.elapsed());
+            let until = Instant::now() + rest;
+            while Instant::now() < until && !give_up() {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+}
+
+/// Logs the emergencies a bring-up read.
+fn tell_emergencies(up: &Up) {
+    for &(k, code, register) in &up.emergencies {
+        tracing::warn!(
+            "position {k} ({}) sent emergency {code:#06x} (error register {register:#04x}) during start-up",
+            up.names.get(k).map_or("?", String::as_str)
+        );
+    }
+}
+
 fn main() -> ExitCode {
     process::run(
-        "machine",
+        "drives",
         "the cell's EtherCAT MainDevice: CiA 402 drives on a bus",
         |ctx: &Context| {
             let i = &ctx.instance;
             let bus = bus_config(ctx)?;
-            let wire = open_wire(bus.interface())?;
+            let wire = Arc::new(open_wire(bus.interface())?);
             let axes = &ctx.cell.axis[..ctx.cell.axes as usize];
-            let up = bringup::bring_up(&bus, axes, &wire, &runtime::signals::stop_requested)?;
+            let mut master = Master::new()?;
+            let up = master
+                .bring_up(&bus, axes, &wire, &runtime::signals::stop_requested)
+                .map_err(|e| -> SetupError {
+                    match e {
+                        BringUpError::Refused(m) => Box::new(process::Refused(m)),
+                        BringUpError::Failed(m) => m.into(),
+                    }
+                })?;
+            tell_emergencies(&up);
             let frame = CyclicFrame::new(up.layout)?;
             // The cycle waits for its reply at most half a period.
             wire.set_timeout(
@@ -293,10 +542,41 @@ fn main() -> ExitCode {
                 up.names.join(", "),
                 up.layout.expected_wkc
             );
+            let wire_owner = Arc::new(AtomicU8::new(owner::CYCLE));
+            let quit = Arc::new(AtomicBool::new(false));
+            // Spawned before the process takes its real-time priority: the thread keeps the
+            // ordinary one.
+            let recovery = std::thread::Builder::new()
+                .name("bus-recovery".into())
+                .spawn({
+                    let r = Recovery {
+                        master,
+                        wire: wire.clone(),
+                        bus,
+                        axes: axes.to_vec(),
+                        layout: up.layout,
+                        owner: wire_owner.clone(),
+                        quit: quit.clone(),
+                    };
+                    move || r.run()
+                })?;
+            let mut startup_emergencies = [(0, 0, 0); STARTUP_EMERGENCIES];
+            for (slot, e) in startup_emergencies.iter_mut().zip(&up.emergencies) {
+                *slot = *e;
+            }
             Ok::<_, SetupError>(Bus {
                 wire,
                 interface: bus.interface().to_string(),
-                announced: false,
+                announce: Some("in OP on "),
+                startup_emergencies,
+                startup_emergency_count: up.emergencies.len().min(STARTUP_EMERGENCIES),
+                wire_owner,
+                quit,
+                recovery: Some(recovery),
+                recoveries: 0,
+                degraded_since_ns: None,
+                degraded_wait_ns: ctx.cell.estop_stop_time_ns,
+                latched_while_recovering: false,
                 names: {
                     let mut n = [[0u8; 16]; MAX_SUBDEVICES];
                     for (slot, s) in n.iter_mut().zip(bus.subdevices()) {

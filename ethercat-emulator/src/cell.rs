@@ -11,29 +11,115 @@ use crate::bus::Bus;
 use crate::drive::{self, Drive, Scaling};
 use crate::terminals::{BECKHOFF, Terminal};
 use crate::wire::{Received, Wire};
+use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, SetupError, Task};
 use runtime::rt::{self, RtRequest};
-use shm_schema::{EthercatConfigV1, ServiceId};
+use shm_schema::ethercat::emulator_fault as kind;
+use shm_schema::event::code;
+use shm_schema::{
+    EmulatorFaultV1, EthercatConfigV1, EventV1, FaultInjectionV1, InstanceName, ServiceId,
+};
 use std::process::{Command, ExitCode};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 /// The emulator's end of the pair: the bus' interface with this suffix.
 pub const PEER_SUFFIX: &str = "-sd";
 
+/// What the frames thread is told to do.
+#[derive(Clone, Copy, Debug)]
+enum Order {
+    /// A fault of the bus (`<i>/ethercat/emulator/fault`).
+    Fault(EmulatorFaultV1),
+    /// A fault condition of the drive at `position` (`<i>/drives/inject`).
+    Inject {
+        position: usize,
+        injection: FaultInjectionV1,
+    },
+}
+
 struct Emulator {
     stop: Arc<AtomicBool>,
     answered: Arc<AtomicU64>,
     thread: Option<JoinHandle<()>>,
     interface: String,
+    faults: Sub<EmulatorFaultV1>,
+    injections: Sub<FaultInjectionV1>,
+    orders: SyncSender<Order>,
+    /// The position of each cell axis' drive on the line.
+    drive_of_axis: [Option<usize>; shm_schema::MAX_AXES],
+}
+
+impl Emulator {
+    /// Hands `order` to the frames thread and tells it was taken (`fault-injected`).
+    fn order(&self, order: Order, cx: &mut Cycle<'_>) {
+        let (axis, value, limit, text) = match order {
+            Order::Fault(f) => (
+                -1,
+                f64::from(f.code),
+                f64::from(f.kind),
+                match f.kind {
+                    kind::CABLE_PULLED => "bus: the cable pulled",
+                    kind::CABLE_BACK => "bus: the cable back",
+                    kind::LEAVE_OP => "bus: a SubDevice leaves OP",
+                    kind::EMERGENCY => "bus: a drive sends an emergency",
+                    kind::IDENTITY => "bus: another product code at a position",
+                    _ => "bus: an unknown fault, ignored",
+                },
+            ),
+            Order::Inject { injection, .. } => (
+                injection.axis as i32,
+                if injection.active != 0 {
+                    f64::from(injection.code)
+                } else {
+                    0.0
+                },
+                0.0,
+                "the emulated drive: a fault condition",
+            ),
+        };
+        let taken = match self.orders.try_send(order) {
+            Ok(()) => "",
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => " (not taken: busy)",
+        };
+        cx.events.push(EventV1::new(
+            cx.now_ns(),
+            code::FAULT_INJECTED,
+            axis,
+            value,
+            limit,
+            &[text, taken],
+        ));
+    }
 }
 
 impl Task for Emulator {
-    /// # Real-time
-    /// Nothing: the frames are answered by the emulator's own thread.
-    fn cycle(&mut self, _cx: &mut Cycle<'_>) {}
+    /// Hands the faults it is told to make to the frames thread (a test device: the frames
+    /// are answered by that thread).
+    fn cycle(&mut self, cx: &mut Cycle<'_>) {
+        while let Some(f) = self.faults.next() {
+            self.order(Order::Fault(f), cx);
+        }
+        while let Some(injection) = self.injections.next() {
+            if let Some(position) = self
+                .drive_of_axis
+                .get(injection.axis as usize)
+                .copied()
+                .flatten()
+            {
+                self.order(
+                    Order::Inject {
+                        position,
+                        injection,
+                    },
+                    cx,
+                );
+            }
+        }
+    }
 
     fn stop(&mut self, _now_ns: u64, _events: &mut shm_schema::EventQueue) {
         self.stop.store(true, Ordering::SeqCst);
@@ -112,11 +198,64 @@ fn line(bus: &EthercatConfigV1, ctx: &Context) -> Result<Vec<Terminal>, String> 
         .collect()
 }
 
-/// Answers frames on `wire` until `stop`; between frames the drives' models run on.
-fn answer(wire: &Wire, mut bus: Bus, stop: &AtomicBool, answered: &AtomicU64) {
+/// Carries out a fault it was told to make; false: the cable is pulled from now on.
+fn carry_out(bus: &mut Bus, order: Order, cable: &mut bool) {
+    fn device(bus: &mut Bus, k: u32) -> Option<&mut crate::bus::SubDevice> {
+        bus.devices.get_mut(k as usize)
+    }
+    match order {
+        Order::Fault(f) => match f.kind {
+            kind::CABLE_PULLED => *cable = false,
+            kind::CABLE_BACK => *cable = true,
+            kind::LEAVE_OP => {
+                if let Some(d) = device(bus, f.position) {
+                    d.esc.leave_op(f.code as u16);
+                }
+            }
+            kind::EMERGENCY => {
+                if let Some(d) = device(bus, f.position)
+                    && let Terminal::Drive(drive) = &mut d.terminal
+                {
+                    drive.send_emergency(f.code as u16);
+                }
+            }
+            kind::IDENTITY => {
+                if let Some(d) = device(bus, f.position) {
+                    d.esc.set_product(f.code);
+                }
+            }
+            _ => {}
+        },
+        Order::Inject {
+            position,
+            injection,
+        } => {
+            if let Some(d) = bus.devices.get_mut(position)
+                && let Terminal::Drive(drive) = &mut d.terminal
+            {
+                drive.inject(injection.code, injection.active != 0, injection.seq);
+            }
+        }
+    }
+}
+
+/// Answers frames on `wire` until `stop`; between frames the drives' models run on. With
+/// the cable pulled (told so) frames are taken and not answered.
+fn answer(
+    wire: &Wire,
+    mut bus: Bus,
+    stop: &AtomicBool,
+    answered: &AtomicU64,
+    orders: &Receiver<Order>,
+) {
     let mut buf = vec![0u8; 9216];
+    let mut cable = true;
     while !stop.load(Ordering::Relaxed) {
+        while let Ok(order) = orders.try_recv() {
+            carry_out(&mut bus, order, &mut cable);
+        }
         match wire.receive(&mut buf) {
+            Ok(Received::Frame(_)) if !cable => bus.idle(),
             Ok(Received::Frame(n)) => {
                 let frame = &mut buf[..n];
                 if bus.handle(frame).is_ok() && wire.send(frame).is_ok() {
@@ -138,7 +277,7 @@ pub fn main() -> ExitCode {
         "emulator",
         "emulated EtherCAT SubDevices for a cell without hardware",
         |ctx: &Context| {
-            let Some(bus) = process::wait_for::<EthercatConfigV1>(
+            let Some(bus_config) = process::wait_for::<EthercatConfigV1>(
                 &ctx.node,
                 &ctx.instance,
                 ServiceId::EthercatConfig,
@@ -147,8 +286,8 @@ pub fn main() -> ExitCode {
             else {
                 return Err("stopped before the bus configuration arrived".into());
             };
-            let terminals = line(&bus, ctx)?;
-            let interface = bus.interface().to_string();
+            let terminals = line(&bus_config, ctx)?;
+            let interface = bus_config.interface().to_string();
             let peer = format!("{interface}{PEER_SUFFIX}");
             if peer.len() > 15 {
                 return Err(format!(
@@ -182,6 +321,13 @@ pub fn main() -> ExitCode {
             ip(&["link", "set", &interface, "up"])?;
             let stop = Arc::new(AtomicBool::new(false));
             let answered = Arc::new(AtomicU64::new(0));
+            let (orders, orders_rx) = std::sync::mpsc::sync_channel(32);
+            let mut drive_of_axis = [None; shm_schema::MAX_AXES];
+            for (k, s) in bus_config.subdevices().iter().enumerate() {
+                if let Some(slot) = s.axis().and_then(|a| drive_of_axis.get_mut(a)) {
+                    *slot = Some(k);
+                }
+            }
             let priority = ctx.own.priority;
             let thread = {
                 let (stop, answered) = (stop.clone(), answered.clone());
@@ -193,7 +339,7 @@ pub fn main() -> ExitCode {
                             priority,
                             cpu: None,
                         });
-                        answer(&wire, bus, &stop, &answered);
+                        answer(&wire, bus, &stop, &answered, &orders_rx);
                     })?
             };
             tracing::info!("answering on {peer} for the bus on {interface}");
@@ -202,7 +348,142 @@ pub fn main() -> ExitCode {
                 answered,
                 thread: Some(thread),
                 interface,
+                faults: Sub::new(&ctx.node, &ctx.instance, ServiceId::EmulatorFault, 32)?,
+                injections: Sub::new(&ctx.node, &ctx.instance, ServiceId::FaultInjection, 32)?,
+                orders,
+                drive_of_axis,
             })
         },
     )
+}
+
+/// `ethercat-emulator fault --instance NAME KIND [POSITION] [CODE]`: tells the emulator of a
+/// running test cell to make a fault, and waits until it says it took it.
+#[derive(clap::Parser, Debug)]
+#[command(name = "ethercat-emulator fault")]
+struct FaultArgs {
+    /// The cell's instance.
+    #[arg(long)]
+    instance: String,
+    /// cable-pulled, cable-back, leave-op, emergency, identity.
+    kind: String,
+    /// The SubDevice's position on the line (leave-op, emergency, identity).
+    position: Option<u32>,
+    /// The AL status code (leave-op, default 0x001B), the emergency's error code, or the
+    /// product code (identity); decimal or 0x hexadecimal.
+    code: Option<String>,
+}
+
+fn number(text: &str) -> Result<u32, String> {
+    let t = text.trim();
+    match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16),
+        None => t.parse(),
+    }
+    .map_err(|_| format!("{text:?} is not a number (decimal, or hexadecimal with 0x)"))
+}
+
+fn fault_of(a: &FaultArgs) -> Result<EmulatorFaultV1, String> {
+    let position = || {
+        a.position
+            .ok_or_else(|| format!("{} needs the SubDevice's position", a.kind))
+    };
+    let code = |default: Option<u32>| match (&a.code, default) {
+        (Some(c), _) => number(c),
+        (None, Some(d)) => Ok(d),
+        (None, None) => Err(format!("{} needs a code", a.kind)),
+    };
+    let (kind, position, code) = match a.kind.as_str() {
+        "cable-pulled" => (kind::CABLE_PULLED, 0, 0),
+        "cable-back" => (kind::CABLE_BACK, 0, 0),
+        "leave-op" => (kind::LEAVE_OP, position()?, code(Some(0x001B))?),
+        "emergency" => (kind::EMERGENCY, position()?, code(None)?),
+        "identity" => (kind::IDENTITY, position()?, code(None)?),
+        other => {
+            return Err(format!(
+                "{other:?} is not a fault the emulator makes (cable-pulled, cable-back, leave-op, emergency, identity)"
+            ));
+        }
+    };
+    if matches!(kind, kind::LEAVE_OP | kind::EMERGENCY) && code > u32::from(u16::MAX) {
+        return Err(format!("code {code:#x} is over 16 bits"));
+    }
+    Ok(EmulatorFaultV1 {
+        seq: runtime::time::now_ns(),
+        kind,
+        position,
+        code,
+        reserved: 0,
+    })
+}
+
+/// `main` of `ethercat-emulator fault`. Exit 0 when the emulator took the fault, 2 on bad
+/// arguments, 1 when no emulator answered.
+pub fn fault_main(args: impl Iterator<Item = String>) -> ExitCode {
+    use clap::Parser;
+    runtime::process::init_logging();
+    let a = match FaultArgs::try_parse_from(args) {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(2);
+        }
+    };
+    let (fault, instance) = match fault_of(&a).and_then(|f| {
+        InstanceName::new(&a.instance)
+            .map(|i| (f, i))
+            .map_err(|e| format!("--instance: {e}"))
+    }) {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match send_fault(&instance, fault) {
+        Ok(()) => {
+            println!("the emulator of {instance} took {}", a.kind);
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Sends `fault` until the emulator's `fault-injected` for it arrives (a sample sent before
+/// its subscriber saw this publisher is lost), for at most 10 s.
+fn send_fault(instance: &InstanceName, fault: EmulatorFaultV1) -> Result<(), String> {
+    let node = runtime::ipc::node(instance, "emulator-fault").map_err(|e| e.to_string())?;
+    let port = Pub::<EmulatorFaultV1>::new(&node, instance, ServiceId::EmulatorFault)
+        .map_err(|e| e.to_string())?;
+    let acks =
+        Sub::<EventV1>::new(&node, instance, ServiceId::Events, 256).map_err(|e| e.to_string())?;
+    let start = std::time::Instant::now();
+    let mut sent = false;
+    while start.elapsed() < Duration::from_secs(10) {
+        if !sent {
+            port.update_connections();
+            port.send(&fault);
+        }
+        let round = std::time::Instant::now();
+        while round.elapsed() < Duration::from_millis(200) {
+            while let Some(e) = acks.next() {
+                if e.code == code::FAULT_INJECTED
+                    && e.axis == -1
+                    && e.limit == f64::from(fault.kind)
+                    && e.value == f64::from(fault.code)
+                    && e.stamp_ns >= fault.seq
+                {
+                    return Ok(());
+                }
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        sent = false;
+    }
+    Err(format!(
+        "no emulator of instance {instance} took the fault within 10 s (is it a test cell with an `ethercat-emulator` process?)"
+    ))
 }

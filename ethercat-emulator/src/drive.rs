@@ -19,7 +19,7 @@ use crate::sii::{Identity, Mailbox, Pdo, PdoEntry, Sii, Sm, SmKind};
 use cia402::{State, cw};
 use machine_sim::Machine;
 use shm_schema::event::EventQueue;
-use shm_schema::{AxisConfigV2, CellConfigV6, DriveCommandV2};
+use shm_schema::{AxisConfigV2, CellConfigV6, DriveCommandV2, FaultInjectionV1};
 
 /// The emulator's vendor id: not one ETG assigned to a manufacturer, so that no tool takes
 /// an emulated drive for a real one.
@@ -105,6 +105,8 @@ pub struct Drive {
     emergency_on_request: Option<u16>,
     /// The mailbox counter of the next emergency (1..=7).
     counter: u8,
+    /// A fault injection for the model's next cycle (`<i>/drives/inject` in a test cell).
+    injection: Option<FaultInjectionV1>,
 }
 
 impl Drive {
@@ -179,6 +181,7 @@ impl Drive {
             emergencies: Vec::new(),
             emergency_on_request: None,
             counter: 1,
+            injection: None,
         };
         // Its first command is its dictionary's: Disable voltage, CSP.
         drive.take_command();
@@ -215,6 +218,22 @@ impl Drive {
     /// for an SDO.
     pub fn emergency_on_next_request(&mut self, code: u16) {
         self.emergency_on_request = Some(code);
+    }
+
+    /// Sends a CoE emergency of `code` (a fault it can be told to make, whatever its state).
+    pub fn send_emergency(&mut self, code: u16) {
+        self.push_emergency(code);
+    }
+
+    /// Makes its model see fault condition `code` (one of `shm_schema::drive::injected`)
+    /// from its next cycle, or clears it (`active` false): `machine-sim`'s injection.
+    pub fn inject(&mut self, code: u16, active: bool, seq: u64) {
+        self.injection = Some(FaultInjectionV1 {
+            seq,
+            axis: 0,
+            code,
+            active: u16::from(active),
+        });
     }
 
     /// The emergencies to send: one per change of its error code to a fault (code, error
@@ -443,9 +462,12 @@ impl Drive {
                 self.command.seq += 1;
             }
         }
-        let fb = self
-            .machine
-            .cycle(now_ns, Some(&self.command), None, &mut self.events);
+        let fb = self.machine.cycle(
+            now_ns,
+            Some(&self.command),
+            self.injection.take().as_ref(),
+            &mut self.events,
+        );
         self.events.clear();
         let s = self.scaling;
         let d = &mut self.dictionary;

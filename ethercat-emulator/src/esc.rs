@@ -210,6 +210,25 @@ impl Esc {
         increment * u64::from(self.get16(reg::WATCHDOG_TIME_PD))
     }
 
+    /// Drops from OP to SAFE-OP with the error flag and AL status code `code`, as a
+    /// SubDevice's own fault would (the MainDevice acknowledges the error to go on); false if
+    /// it was not in OP.
+    pub fn leave_op(&mut self, code: u16) -> bool {
+        if self.al_state() != Some(AlState::Op) {
+            return false;
+        }
+        self.put16(reg::AL_STATUS, AlState::SafeOp as u16 | 0x10);
+        self.put16(reg::AL_STATUS_CODE, code);
+        true
+    }
+
+    /// Another product code in its EEPROM (another device in its place): a MainDevice sees
+    /// it at its next scan.
+    pub fn set_product(&mut self, product: u32) {
+        self.sii.identity.product = product;
+        self.eeprom = self.sii.words();
+    }
+
     /// The process data watchdog at `now_ns` (ETG.1000.4 6.3): armed by a write into a
     /// SyncManager buffer whose watchdog trigger is on (control bit 6), it expires when no
     /// such write came for its time. Expired in OP, the digital outputs (0x0F00) go to 0 and

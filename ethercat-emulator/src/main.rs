@@ -80,6 +80,9 @@ fn loop_back(bus: &mut Bus) {
 fn main() -> ExitCode {
     // In a cell (started by the supervisor with --instance) everything comes from the cell's
     // configuration.
+    if std::env::args().nth(1).as_deref() == Some("fault") {
+        return ethercat_emulator::cell::fault_main(std::env::args().skip(1));
+    }
     if std::env::args().any(|a| a == "--instance" || a.starts_with("--instance=")) {
         return ethercat_emulator::cell::main();
     }

@@ -76,7 +76,7 @@ impl Task for Sim {
 
 fn main() -> ExitCode {
     process::run(
-        "machine",
+        "drives",
         "simulated CiA 402 drives and mechanics",
         |ctx: &Context| {
             let i = &ctx.instance;

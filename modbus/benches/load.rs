@@ -24,7 +24,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-const PROCESSES: [&str; 4] = ["machine", "servo", "trajgen", "iobridge"];
+const PROCESSES: [&str; 4] = ["drives", "servo", "trajgen", "iobridge"];
 
 struct Args {
     rounds: usize,

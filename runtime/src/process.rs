@@ -139,7 +139,8 @@ pub type SetupError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Runs a real-time process; see the module documentation. `default_name` is its name in the
 /// process table unless `--name` says otherwise. Exit code 0 after a requested stop, 1 after a
-/// set-up failure or when the supervisor was lost, 2 on bad arguments.
+/// set-up failure or when the supervisor was lost, 2 on bad arguments or a [`Refused`]
+/// configuration.
 pub fn run<T: Task>(
     default_name: &str,
     about: &str,
@@ -167,10 +168,28 @@ pub fn run<T: Task>(
         }
         Err(e) => {
             tracing::error!("{name} ({instance}): {e}");
-            ExitCode::FAILURE
+            if e.downcast_ref::<Refused>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }
+
+/// A set-up error that refuses the configuration against what the process found (the bus'
+/// line differs from `[[ethercat.subdevice]]`): the process exits with code 2, which the
+/// supervisor reports as the user's input, as a refused configuration.
+#[derive(Debug)]
+pub struct Refused(pub String);
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Refused {}
 
 /// Logging to stderr, filtered by `RTC_LOG` (default `info`), blocking: for the commands of a
 /// terminal (`supervisor status`).

@@ -39,7 +39,7 @@ impl Servo {
                     .unwrap_or(4 * ctx.own.period_ns),
             ),
             feedback_fresh: Freshness::new(
-                ctx.cell.period_of("machine").unwrap_or(ctx.own.period_ns),
+                ctx.cell.period_of("drives").unwrap_or(ctx.own.period_ns),
             ),
             raised: false,
             requests: Sub::new(&ctx.node, i, ServiceId::ServoRequest, 16)?,

@@ -46,7 +46,7 @@ pub struct DriveCommandV2 {
     pub torque_offset: [f64; MAX_AXES],
 }
 
-/// What the drives measure, `<i>/machine/feedback`, every drive cycle.
+/// What the drives measure, `<i>/drives/feedback`, every drive cycle.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("rtc::DriveFeedbackV2")]
@@ -263,7 +263,7 @@ pub mod injected {
     pub const FOLLOWING_ERROR: u16 = 0x8611;
 }
 
-/// A commanded fault injection, `<i>/machine/inject`: the simulated drive of `axis` sees the
+/// A commanded fault injection, `<i>/drives/inject`: the simulated drive of `axis` sees the
 /// fault condition `code` from the next drive cycle until a later injection on the same axis
 /// clears it (`active` 0).
 #[repr(C)]

@@ -100,3 +100,37 @@ impl EthercatSubDeviceV1 {
         crate::str_of(&self.name)
     }
 }
+
+/// What [`EmulatorFaultV1::kind`] tells the emulator of a test cell to do.
+pub mod emulator_fault {
+    /// The cable pulled: no frame is answered (the SubDevices' watchdogs run on).
+    pub const CABLE_PULLED: u32 = 1;
+    /// The cable back: frames are answered again.
+    pub const CABLE_BACK: u32 = 2;
+    /// SubDevice `position` drops from OP to SAFE-OP with the error flag and AL status code
+    /// `code` (as its own fault would take it).
+    pub const LEAVE_OP: u32 = 3;
+    /// SubDevice `position` (a drive) sends a CoE emergency of error code `code`.
+    pub const EMERGENCY: u32 = 4;
+    /// SubDevice `position` has product code `code` from now on (another device in its
+    /// place; a MainDevice sees it at its next scan).
+    pub const IDENTITY: u32 = 5;
+}
+
+/// A fault the emulated bus of a test cell is told to make, `<i>/ethercat/emulator/fault`
+/// (`ethercat-emulator fault`); the emulator tells it was done by event `fault-injected`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("rtc::EmulatorFaultV1")]
+pub struct EmulatorFaultV1 {
+    /// Increasing per sender.
+    pub seq: u64,
+    /// One of [`emulator_fault`].
+    pub kind: u32,
+    /// The SubDevice's position on the line (where the kind has one).
+    pub position: u32,
+    /// The AL status code, emergency code or product code (where the kind has one).
+    pub code: u32,
+    /// Zero.
+    pub reserved: u32,
+}

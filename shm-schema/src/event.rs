@@ -274,6 +274,13 @@ pub mod code {
     /// A SubDevice of the EtherCAT bus is no longer in OP; value: its AL status (state and
     /// error bit), limit: its AL status code; the text names it (position and name).
     pub const SUBDEVICE_LEFT_OP: u32 = 905;
+    /// A SubDevice sent a CoE emergency; value: its error code, limit: its error register;
+    /// the text names it (position and name).
+    pub const SUBDEVICE_EMERGENCY: u32 = 906;
+    /// The EtherCAT bus process is bringing the bus up again from the scan (after
+    /// `bus-lost`, or a SubDevice out of OP with the e-stop latched); value: how many times
+    /// this process has done so, limit: 0.
+    pub const BUS_RECOVERING: u32 = 907;
 }
 
 /// What a code means, for documents and reports.
@@ -641,14 +648,28 @@ pub const CODES: &[CodeInfo] = &[
         name: "bus-lost",
         severity: Severity::Error,
         unit: "frames",
-        meaning: "No frame came back for as long as the SubDevices' process data watchdog (`[ethercat] pd_watchdog`, 100 ms if 0): the SubDevices have taken their outputs safe by themselves. The bus process raises the e-stop. It does not yet take the SubDevices back to OP by itself: once the cause is fixed, `supervisor restart machine` brings the bus up again (`bus-op`), then `supervisor reset` and `start`.",
+        meaning: "No frame came back for as long as the SubDevices' process data watchdog (`[ethercat] pd_watchdog`, 100 ms if 0): the SubDevices have taken their outputs safe by themselves. The bus process raises the e-stop, publishes feedback with every position NaN and no state (servo cuts power at once), and from then on brings the bus up again from the scan (`bus-recovering`), about once a second, until it answers as the configuration says (`bus-op`), the drives left without power. A `reset` before that raises the e-stop again; after it, `reset` and `start` go on.",
     },
     CodeInfo {
         code: code::SUBDEVICE_LEFT_OP,
         name: "subdevice-left-op",
         severity: Severity::Error,
         unit: "AL status (limit: AL status code)",
-        meaning: "A SubDevice of the bus left OP (its AL status, read in every frame, says another state; 0x14 is SAFE-OP with the error bit): its watchdog expired (AL status code 0x001B), it lost its mailbox or sync configuration, or it was switched off and on. The text names its position and name. Its process data is not taken while it is out of OP (`bus-wkc-mismatch`), so servo cuts power.",
+        meaning: "A SubDevice of the bus left OP (its AL status, read in every frame, says another state; 0x14 is SAFE-OP with the error bit): its watchdog expired (AL status code 0x001B), it lost its mailbox or sync configuration, or it was switched off and on. The text names its position and name. Its process data is not taken while it is out of OP (`bus-wkc-mismatch`), so servo cuts power; once the e-stop has been latched for `estop_stop_time`, the bus process brings the bus up again (`bus-recovering`, `bus-op`), then `reset` and `start` go on.",
+    },
+    CodeInfo {
+        code: code::SUBDEVICE_EMERGENCY,
+        name: "subdevice-emergency",
+        severity: Severity::Warning,
+        unit: "error code (limit: error register)",
+        meaning: "A SubDevice sent a CoE emergency message (ETG.1000.6): the bus reads every send mailbox found full, in OP one per cycle, at start-up before ethercrab can see it. Value: the emergency's error code (CiA 402's 0x603F codes for a drive: 0x2310 over-current, 0x7320 position sensor, 0x8611 following error, 0xFF01 the drive's command watchdog), limit: its error register; the text names the SubDevice (position and name). A drive's fault itself reaches servo through the statusword and 0x603F (`drive-fault`); the emergency says what the drive said when it happened.",
+    },
+    CodeInfo {
+        code: code::BUS_RECOVERING,
+        name: "bus-recovering",
+        severity: Severity::Info,
+        unit: "recoveries",
+        meaning: "The bus process brings the EtherCAT bus up again from the scan, as at start-up (the line compared with `[[ethercat.subdevice]]`, the drives mapped, SAFE-OP, OP), because it was lost (`bus-lost`), or a SubDevice stayed out of OP or did not take its data while the e-stop was latched for `estop_stop_time` (every drive has ramped down by then). Until it is back (`bus-op`, \"back in OP\") the feedback has every position NaN and no state, and a `reset` raises the e-stop again. An attempt that fails is tried again a second later, without end; the process' log says why each failed (a cable still out, another identity at a position).",
     },
 ];
 

@@ -180,6 +180,9 @@ pub enum ServiceId {
     /// `<i>/ethercat/config`: [`crate::EthercatConfigV1`], published once by the supervisor
     /// (history 1) when the cell has an EtherCAT bus.
     EthercatConfig,
+    /// `<i>/ethercat/emulator/fault`: [`crate::EmulatorFaultV1`], a client to the emulated
+    /// bus of a test cell.
+    EmulatorFault,
     /// `<i>/trajgen/command`: [`crate::MotionCommandV2`], a client (the supervisor) to trajgen.
     MotionCommand,
     /// `<i>/trajgen/control`: [`crate::MotionControlV2`], a client to trajgen: pause, resume,
@@ -197,11 +200,11 @@ pub enum ServiceId {
     ServoRequest,
     /// `<i>/servo/drive_command`: [`crate::DriveCommandV2`], servo to the drives.
     DriveCommand,
-    /// `<i>/machine/feedback`: [`crate::DriveFeedbackV2`], the drives to servo.
+    /// `<i>/drives/feedback`: [`crate::DriveFeedbackV2`], the drives to servo.
     DriveFeedback,
-    /// `<i>/machine/inject`: [`crate::FaultInjectionV1`], a client to the simulated drives.
+    /// `<i>/drives/inject`: [`crate::FaultInjectionV1`], a client to the simulated drives.
     FaultInjection,
-    /// `<i>/machine/sense_to_command`: [`crate::LatencyHistogramV1`] of the sense-to-command
+    /// `<i>/drives/sense_to_command`: [`crate::LatencyHistogramV1`] of the sense-to-command
     /// latency the drives measure (sampling the encoders to applying the command computed
     /// from that sample), about every 100 ms and once more on stopping.
     SenseToCommand,
@@ -274,6 +277,7 @@ impl ServiceId {
         match self {
             Self::CellConfig => "cell/config",
             Self::EthercatConfig => "ethercat/config",
+            Self::EmulatorFault => "ethercat/emulator/fault",
             Self::MotionCommand => "trajgen/command",
             Self::MotionControl => "trajgen/control",
             Self::TrajgenHandover => "trajgen/handover",
@@ -281,9 +285,9 @@ impl ServiceId {
             Self::ServoState => "servo/state",
             Self::ServoRequest => "servo/request",
             Self::DriveCommand => "servo/drive_command",
-            Self::DriveFeedback => "machine/feedback",
-            Self::FaultInjection => "machine/inject",
-            Self::SenseToCommand => "machine/sense_to_command",
+            Self::DriveFeedback => "drives/feedback",
+            Self::FaultInjection => "drives/inject",
+            Self::SenseToCommand => "drives/sense_to_command",
             Self::Events => "events",
             Self::FieldbusOutput => "iobridge/output",
             Self::Estop => "estop",
@@ -325,6 +329,7 @@ impl ServiceId {
             },
             Self::ServoRequest
             | Self::FaultInjection
+            | Self::EmulatorFault
             | Self::MotionControl
             | Self::IoRequest
             | Self::FieldInputs => Qos {
@@ -399,7 +404,7 @@ mod tests {
         let long = InstanceName::new(&"z".repeat(MAX_INSTANCE_LEN)).expect("valid");
         for id in [
             ServiceId::DriveCommand,
-            ServiceId::Status(ProcessName::new("machine").expect("valid")),
+            ServiceId::Status(ProcessName::new("drives").expect("valid")),
             ServiceId::Latency(ProcessName::new("abcdefghijklmno").expect("valid")),
         ] {
             assert!(long.service(id).as_str().ends_with(id.suffix().as_str()));

@@ -63,6 +63,13 @@ fn layouts() -> Vec<Layout> {
             pd_watchdog_ns: "uint64_t" = 8,
             subdevice: "EthercatSubDeviceV1[32]" = 32 * size_of::<EthercatSubDeviceV1>(),
         }),
+        layout!(EmulatorFaultV1 {
+            seq: "uint64_t" = 8,
+            kind: "uint32_t" = 4,
+            position: "uint32_t" = 4,
+            code: "uint32_t" = 4,
+            reserved: "uint32_t" = 4,
+        }),
         layout!(EthercatSubDeviceV1 {
             name: "char[16]" = 16,
             vendor: "uint32_t" = 4,

@@ -15,7 +15,7 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-const PROCESSES: [&str; 4] = ["machine", "servo", "trajgen", "iobridge"];
+const PROCESSES: [&str; 4] = ["drives", "servo", "trajgen", "iobridge"];
 const AXES: [&str; 3] = ["x", "y", "theta"];
 
 fn root() -> PathBuf {

@@ -50,6 +50,9 @@ pub enum Incident {
         pid: u32,
         /// Its exit status, in words.
         status: String,
+        /// It exited with code 2: it refused its arguments or what it found against the
+        /// configuration (the bus' line), and said why in its log.
+        refused: bool,
     },
     /// Its cycle count stopped advancing for `heartbeat_timeout`.
     Stalled {
@@ -67,12 +70,34 @@ pub enum Incident {
     },
 }
 
+impl Incident {
+    /// The error that ends a job: a refused configuration is the user's input (exit 2).
+    pub(crate) fn error(&self) -> RunError {
+        match self {
+            Incident::Exited { refused: true, .. } => RunError::Input(self.to_string()),
+            _ => RunError::failed(self.to_string()),
+        }
+    }
+}
+
 impl std::fmt::Display for Incident {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Incident::Exited { name, pid, status } => {
-                write!(f, "{name} (pid {pid}) exited unexpectedly: {status}")
-            }
+            Incident::Exited {
+                name,
+                pid,
+                status,
+                refused: false,
+            } => write!(f, "{name} (pid {pid}) exited unexpectedly: {status}"),
+            Incident::Exited {
+                name,
+                pid,
+                refused: true,
+                ..
+            } => write!(
+                f,
+                "{name} (pid {pid}) refused the configuration (exit code 2; its log above says why)"
+            ),
             Incident::Stalled { name, for_s } => write!(
                 f,
                 "{name} stopped cycling: its status has not advanced for {for_s:.2} s"
@@ -661,6 +686,7 @@ impl Cell {
                     name: p.name.clone(),
                     pid: p.pid(),
                     status: text.clone(),
+                    refused: status.code() == Some(2),
                 });
             }
             if self.host.handover & (1 << k) != 0 && self.children.get(k).is_some() {

@@ -342,7 +342,7 @@ pub fn mode_of(name: &str) -> Option<cia402::Mode> {
 
 /// The processes the cell needs by name: their services carry the cell's data (the others
 /// of a table are the user's own).
-pub const REQUIRED_PROCESSES: [&str; 3] = ["machine", "servo", "trajgen"];
+pub const REQUIRED_PROCESSES: [&str; 3] = ["drives", "servo", "trajgen"];
 
 /// What the supervisor does when a process dies (`restart`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -382,7 +382,7 @@ pub struct Process {
     pub network_estop_config: String,
     /// Whether the cell's safety depends on it (default true). `false`: its loss, stall or
     /// health detectors are warnings and restarts, never an e-stop (a fieldbus server for an
-    /// HMI, a logger). machine, servo and trajgen are always critical.
+    /// HMI, a logger). drives, servo and trajgen are always critical.
     #[serde(default = "default_critical")]
     pub critical: bool,
 }
@@ -852,7 +852,7 @@ impl Config {
                 "substeps must be 1..=1000".into(),
             );
         }
-        let machine_period_s = self.period_s("machine");
+        let machine_period_s = self.period_s("drives");
         for (k, v, min) in [
             (
                 "feedback_timeout",
@@ -1104,7 +1104,7 @@ impl Config {
                     ),
                 );
             }
-            let machine_step_s = self.period_s("machine") / self.drives.substeps.max(1) as f64;
+            let machine_step_s = self.period_s("drives") / self.drives.substeps.max(1) as f64;
             if let Err(why) = stability::check(a, mode, servo_period_s, machine_step_s) {
                 return bad(vec![K("axis"), Idx(i), K("sim"), K("inertia")], why);
             }
@@ -1238,6 +1238,13 @@ impl Config {
                     ),
                 ));
             }
+        }
+        if let Some(k) = self.process.iter().position(|p| p.name == "machine") {
+            return Some((
+                vec![K("process"), Idx(k), K("name")],
+                "the drives' process is called \"drives\" (it was \"machine\"): rename this entry"
+                    .to_string(),
+            ));
         }
         for required in REQUIRED_PROCESSES {
             if self.process_named(required).is_none() {

@@ -326,7 +326,7 @@ impl Job {
             ));
         }
         if let Some(i) = incidents.first() {
-            return Err(RunError::failed(i.to_string()));
+            return Err(i.error());
         }
         // An e-stop ends the job once it stops the motion: servo or trajgen reacts to it
         // (servo's own fault is reported below with its cause, unless its state does not

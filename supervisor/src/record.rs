@@ -581,7 +581,7 @@ fn topics(
             node,
             instance,
             ServiceId::DriveFeedback,
-            "/machine/feedback".into(),
+            "/drives/feedback".into(),
             big,
         ),
         chan::<FieldbusImageV1>(
@@ -619,7 +619,7 @@ fn topics(
             node,
             instance,
             ServiceId::SenseToCommand,
-            "/machine/sense_to_command".into(),
+            "/drives/sense_to_command".into(),
             2,
         ),
     ] {

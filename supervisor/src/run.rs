@@ -264,7 +264,7 @@ impl Cell {
             return Err(RunError::Interrupted);
         }
         if let Some(i) = self.tick(cfg).first() {
-            return Err(RunError::failed(i.to_string()));
+            return Err(i.error());
         }
         if self.estop.is_some() && !self.reactions_pending() {
             return Err(RunError::failed(

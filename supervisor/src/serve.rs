@@ -181,7 +181,7 @@ impl Loop<'_> {
         }
         if let Some((en, waiters)) = &mut self.enabling {
             let outcome = if run && let Some(i) = incidents.first() {
-                Some(Err(RunError::failed(i.to_string())))
+                Some(Err(i.error()))
             } else {
                 en.step(self.cell)
             };
@@ -822,7 +822,7 @@ impl Loop<'_> {
                 return Reply::Refused(format!("--command: {e}; nothing was changed"));
             }
         }
-        let motion = matches!(process, "trajgen" | "servo" | "machine");
+        let motion = matches!(process, "trajgen" | "servo" | "drives");
         if process == "trajgen"
             && let Some(r) = &mut self.running
         {

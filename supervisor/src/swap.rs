@@ -39,7 +39,7 @@ pub(crate) fn replace(
     if swap {
         cell.set_command(k, command);
     }
-    let motion = matches!(name.as_str(), "trajgen" | "servo" | "machine");
+    let motion = matches!(name.as_str(), "trajgen" | "servo" | "drives");
     let start = Instant::now();
     if motion
         && cell

@@ -54,7 +54,7 @@ pub(crate) fn check_run(j: &serde_json::Value, target: [f64; 3]) {
         let fe = j["max_following_error"][axis].as_f64().expect("fe");
         assert!(fe < 1.0 && (*axis != "x" || fe > 0.0), "{axis}: {fe}");
     }
-    for p in ["trajgen", "servo", "iobridge", "machine"] {
+    for p in ["trajgen", "servo", "iobridge", "drives"] {
         let proc_ = &j["processes"][p];
         assert!(
             proc_["cycles"].as_u64().expect("cycles") > 0,

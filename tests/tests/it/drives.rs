@@ -128,7 +128,7 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         assert!(
             fault.iter().any(|e| e["axis"] == "y"
                 && e["value"].as_f64() == Some(0x2310 as f64)
-                && e["source"] == "machine"),
+                && e["source"] == "drives"),
             "{j}"
         );
         let cut = events_named(&j, "power-cut");

@@ -66,7 +66,7 @@ fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_driv
         // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
         // and the drives disabled, after the e-stop was raised.
         let safe = events_named(&j, "estop-safe");
-        for p in ["servo", "trajgen", "iobridge", "machine"] {
+        for p in ["servo", "trajgen", "iobridge", "drives"] {
             assert!(safe.iter().any(|e| e["source"] == p), "{p}: {safe:?}");
         }
         let servo = safe

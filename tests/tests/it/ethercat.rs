@@ -3,6 +3,7 @@
 //! its own (root, iproute2), so its veth pair and its Modbus port meet nothing else; the
 //! namespace goes with the test.
 
+use crate::up::Up;
 use integration_tests::{
     assert_clean, bin, examples, instance, json_of, run_with_watchdog, scratch,
 };
@@ -154,8 +155,10 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
             let _ = emulator.kill();
             let _ = emulator.wait();
             let err = String::from_utf8_lossy(&out.stderr);
-            assert_eq!(out.status.code(), Some(1), "{line}: {err}");
+            // Refused as a configuration is (exit 2), the bus process' reason in the log.
+            assert_eq!(out.status.code(), Some(2), "{line}: {err}");
             assert!(err.contains(want), "{line}: want {want:?} in\n{err}");
+            assert!(err.contains("refused the configuration"), "{line}: {err}");
             // Nothing was enabled: the bus never reached its cycle.
             assert!(!err.contains("enabling"), "{line}: {err}");
             assert!(!err.contains("bus-op"), "{line}: {err}");
@@ -194,12 +197,165 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
         // Its e-stop (which the supervisor may latch after servo's: both come within a
         // millisecond).
         assert!(
-            err.contains("machine   estop-raised: 1 (limit 904) — EtherCAT bus lost"),
+            err.contains("drives    estop-raised: 1 (limit 904) — EtherCAT bus lost"),
             "{err}"
         );
         // Servo took the e-stop; the bus' feedback NaN from the next cycle on, it cuts power.
         assert!(err.contains("servo     disabling — e-stop"), "{err}");
         assert!(err.contains("servo     power-cut"), "{err}");
         assert_clean(&inst);
+    });
+}
+
+/// Polls the log of `up` until it has `needle`, under the watchdog.
+fn until_logged(up: &Up, needle: &str) {
+    let start = std::time::Instant::now();
+    while !up.log().contains(needle) {
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "{needle:?} never logged:\n{}",
+            up.log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The triangle on the cell, which must run to its end on time and on target.
+fn triangle_runs(up: &Up) {
+    let out = up.ok(&[
+        "exec",
+        "--wait",
+        "--json",
+        examples().join("triangle.prog").to_str().expect("path"),
+    ]);
+    let j: serde_json::Value = serde_json::from_str(out.trim()).expect("the run's JSON");
+    crate::cell::check_run(&j, [40.0, 40.0, 0.0]);
+}
+
+#[test]
+fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_next_program() {
+    integration_tests::attributable(|| {
+        let ns = Netns::new("ecat-back");
+        let cfg = scratch("ecat-back", "cell.toml", &ethercat_cell());
+        let up = Up::start_in("ecat-back", &cfg, Some(&ns.0));
+        let run = up.exec_in_background(examples().join("triangle.prog"));
+        // Mid-motion (the triangle takes 19 s), the cable goes.
+        std::thread::sleep(Duration::from_secs(3));
+        ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "down"]);
+        let out = run.wait_with_output().expect("exec");
+        assert_eq!(out.status.code(), Some(1), "the run ended by the lost bus");
+        until_logged(&up, "bus-lost");
+        until_logged(&up, "bus-recovering");
+        // Latched (by the bus, or by servo's own fault on the feedback it lost first).
+        up.until("the e-stop latched", |s| {
+            s["supervisor"]["estop"]["code"].is_u64()
+        });
+        // A reset before the bus is back: the e-stop comes back at once, nothing enabled.
+        let early = up.ctl(&["reset"]);
+        assert_eq!(
+            early.status.code(),
+            Some(1),
+            "{}",
+            String::from_utf8_lossy(&early.stdout)
+        );
+        assert!(
+            String::from_utf8_lossy(&early.stderr).contains("EtherCAT bus not back in OP yet"),
+            "{}",
+            String::from_utf8_lossy(&early.stderr)
+        );
+        assert!(!up.ctl(&["start"]).status.success(), "start on a lost bus");
+        // The cable back: the bus process brings the bus up again by itself.
+        ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "up"]);
+        until_logged(&up, "back in OP on rtc-ecat0");
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        triangle_runs(&up);
+        let log = up.down();
+        assert!(!log.contains("bus-wkc-mismatch"), "{log}");
+    });
+}
+
+#[test]
+fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
+    integration_tests::attributable(|| {
+        let ns = Netns::new("ecat-safeop");
+        let cfg = scratch("ecat-safeop", "cell.toml", &ethercat_cell());
+        let up = Up::start_in("ecat-safeop", &cfg, Some(&ns.0));
+        let fault = |args: &[&str]| {
+            let out = run_with_watchdog(
+                ns.command("ethercat-emulator")
+                    .args(["fault", "--instance", &up.inst])
+                    .args(args),
+                WATCHDOG,
+            );
+            assert!(
+                out.status.success(),
+                "fault {args:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        };
+        // A drive's emergency, read from its mailbox in OP: named, and nothing else happens.
+        fault(&["emergency", "2", "0x8611"]);
+        until_logged(&up, "subdevice-emergency");
+        let log = up.log();
+        assert!(
+            log.contains("position 2 (y) sent an emergency"),
+            "the emergency names its SubDevice:\n{log}"
+        );
+        assert!(
+            log.contains("subdevice-emergency: 0x8611"),
+            "its code:\n{log}"
+        );
+        assert!(!log.contains("estop-raised"), "{log}");
+        // A drive's own fault (the encoder lost: `supervisor inject` on the emulated drive):
+        // its emergency and servo's power cut.
+        up.ok(&["inject", "--axis", "x", "encoder-loss"]);
+        until_logged(&up, "position 1 (x) sent an emergency");
+        up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
+        // The x drive's SubDevice drops to SAFE-OP (its own fault, AL status code 0x001A).
+        fault(&["leave-op", "1", "0x001A"]);
+        until_logged(&up, "position 1 (x) left OP");
+        // The e-stop latched, the bus is brought up again once the drives have ramped down.
+        until_logged(&up, "bus-recovering");
+        until_logged(&up, "back in OP on rtc-ecat0");
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        triangle_runs(&up);
+        up.down();
+    });
+}
+
+#[test]
+fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
+    integration_tests::attributable(|| {
+        let ns = Netns::new("ecat-kill");
+        let cfg = scratch("ecat-kill", "cell.toml", &ethercat_cell());
+        let up = Up::start_in("ecat-kill", &cfg, Some(&ns.0));
+        let bus = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
+        assert_eq!(bus.len(), 1, "one bus process: {bus:?}");
+        // SIGKILL: no goodbye; the drives' SyncManager watchdogs take their outputs down.
+        unsafe { libc::kill(bus[0], libc::SIGKILL) };
+        until_logged(&up, "drives lost (exited: signal: 9 (SIGKILL))");
+        // Restarted by its policy: it brings the bus up from the scan.
+        up.until("the bus process back", |s| {
+            s["supervisor"]["processes"]
+                .as_array()
+                .and_then(|a| a.iter().find(|p| p["name"] == "drives"))
+                .is_some_and(|p| {
+                    p["restarts"].as_u64().is_some_and(|r| r >= 1) && p["life"] == "running"
+                })
+        });
+        let again = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
+        assert!(again.len() == 1 && again[0] != bus[0], "{again:?}");
+        until_logged(&up, "in OP on rtc-ecat0");
+        up.until("the new bus process cyclic", |s| {
+            s["processes"]["drives"]["cycles"]
+                .as_u64()
+                .is_some_and(|c| c > 100)
+        });
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        triangle_runs(&up);
+        up.down();
     });
 }

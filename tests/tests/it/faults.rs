@@ -191,7 +191,7 @@ fn down_after_the_drives_process_restarted_stops_in_the_graph_order() {
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
         for how in ["restart", "swap"] {
-            let out = up.ok(&[how, "machine"]);
+            let out = up.ok(&[how, "drives"]);
             assert!(out.contains("re-enabling"), "{how}: {out}");
             up.until("re-enabled", |s| {
                 s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false

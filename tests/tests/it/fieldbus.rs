@@ -370,7 +370,7 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
             process_in(s, "modbus")["restarts"] == 1 && process_in(s, "modbus")["life"] == "running"
         });
         assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
-        for p in ["machine", "servo", "trajgen", "iobridge"] {
+        for p in ["drives", "servo", "trajgen", "iobridge"] {
             assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
         }
         assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
@@ -478,7 +478,7 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
         assert_eq!(report["ok"], true, "{report}");
         let s = up.status();
         assert!(s["supervisor"]["estop"].is_null(), "{s}");
-        for p in ["machine", "servo", "trajgen", "iobridge", "modbus"] {
+        for p in ["drives", "servo", "trajgen", "iobridge", "modbus"] {
             assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
         }
         up.down();

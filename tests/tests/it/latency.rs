@@ -220,7 +220,7 @@ fn status_reports_the_running_cell_and_its_latency() {
             );
             if out.status.success() {
                 let j = json_of(&out);
-                let ready = ["machine", "servo", "trajgen", "iobridge"].iter().all(|p| {
+                let ready = ["drives", "servo", "trajgen", "iobridge"].iter().all(|p| {
                     j["processes"][p]["state"] == "cyclic"
                         && j["processes"][p]["wakeup_latency_us"]["samples"].as_u64() > Some(0)
                 });
@@ -230,7 +230,7 @@ fn status_reports_the_running_cell_and_its_latency() {
             }
             std::thread::sleep(Duration::from_millis(200));
         };
-        for p in ["machine", "servo", "trajgen", "iobridge"] {
+        for p in ["drives", "servo", "trajgen", "iobridge"] {
             let proc_ = &j["processes"][p];
             assert_eq!(proc_["policy"], "SCHED_FIFO", "{p}: {proc_}");
             assert!(proc_["cycles"].as_u64() > Some(0), "{p}: {proc_}");

@@ -32,7 +32,7 @@ pub struct Loop {
 impl Loop {
     pub fn new(cell: &CellConfigV6) -> Self {
         let proc = |name: &str| *cell.process_named(name).expect("in the table").1;
-        let (machine, servo) = (proc("machine"), proc("servo"));
+        let (machine, servo) = (proc("drives"), proc("servo"));
         Self {
             machine: Machine::new(cell, machine.period_ns),
             servo: Controller::new(ServoParams::from_cell(cell, servo.period_ns)),

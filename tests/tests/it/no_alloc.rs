@@ -18,7 +18,7 @@ use supervisor::config::Config;
 fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
     integration_tests::attributable(|| {
         let cell = Config::default_cell().to_shm();
-        let mut machine = Machine::new(&cell, cell.period_of("machine").expect("machine"));
+        let mut machine = Machine::new(&cell, cell.period_of("drives").expect("machine"));
         let mut servo = Controller::new(ServoParams::from_cell(
             &cell,
             cell.period_of("servo").expect("servo"),

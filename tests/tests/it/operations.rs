@@ -81,7 +81,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         let diff = r["difference_s"].as_f64().expect("difference");
         println!("exec --wait: measured - theoretical = {:.3} ms", diff * 1e3);
         assert!(diff >= 0.0, "{r}");
-        for p in ["machine", "servo", "trajgen", "iobridge"] {
+        for p in ["drives", "servo", "trajgen", "iobridge"] {
             assert!(r["processes"][p]["cycles"].as_u64().unwrap_or(0) > 0, "{p}");
         }
         // Pause: the axes come to rest on the path and hold; resume goes on; abort drops it.
@@ -210,7 +210,7 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
             ("trajgen", "trajgen"),
             ("servo", "servo"),
             ("iobridge", "iobridge"),
-            ("machine", "machine-sim"),
+            ("drives", "machine-sim"),
         ] {
             up.ok(&["exec", &long]);
             up.until("moving", moving);

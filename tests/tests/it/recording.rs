@@ -62,7 +62,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
         for t in [
             "/trajgen/setpoint",
             "/servo/state",
-            "/machine/feedback",
+            "/drives/feedback",
             "/servo/drive_command",
             "/iobridge/output",
             "/io/state",

@@ -7,7 +7,7 @@ use integration_tests::{
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 /// `supervisor up` in the background, its log in a file; SIGTERM and wait on drop, so a
@@ -16,35 +16,72 @@ pub(crate) struct Up {
     pub(crate) inst: String,
     pub(crate) child: Option<Child>,
     log: PathBuf,
+    /// The network namespace the cell and every command run in (an EtherCAT cell's), if any.
+    netns: Option<String>,
+}
+
+/// `supervisor`, in network namespace `netns` if there is one.
+fn supervisor_in(netns: Option<&str>) -> Command {
+    match netns {
+        Some(ns) => {
+            let mut c = Command::new("ip");
+            c.args(["netns", "exec", ns])
+                .arg(integration_tests::bin("supervisor"));
+            c
+        }
+        None => supervisor(),
+    }
 }
 
 impl Up {
     pub(crate) fn start(test: &str, cfg: &Path) -> Self {
+        Self::start_in(test, cfg, None)
+    }
+
+    /// [`Up::start`] in network namespace `netns` (every command of the test then runs
+    /// there too).
+    pub(crate) fn start_in(test: &str, cfg: &Path, netns: Option<&str>) -> Self {
         let inst = instance(test);
         let log = scratch(test, "up.log", "");
-        let child = supervisor()
+        let child = supervisor_in(netns)
             .args(["up", "--instance", &inst, "--config"])
             .arg(cfg)
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(&log).expect("log"))
             .spawn()
             .expect("supervisor up");
-        Self::adopt(inst, child, log)
+        let mut up = Self {
+            inst,
+            child: Some(child),
+            log,
+            netns: netns.map(str::to_string),
+        };
+        up.wait_enabled();
+        up
+    }
+
+    fn command(&self) -> Command {
+        supervisor_in(self.netns.as_deref())
     }
 
     /// A `supervisor up` of `inst` started by the caller (its stderr into `log`), once the
     /// drives are enabled.
     pub(crate) fn adopt(inst: String, child: Child, log: PathBuf) -> Self {
-        let up = Self {
+        let mut up = Self {
             inst,
             child: Some(child),
             log,
+            netns: None,
         };
-        // Up once the drives are enabled and holding.
-        up.until("the drives enabled", |s| {
+        up.wait_enabled();
+        up
+    }
+
+    /// Up once the drives are enabled and holding.
+    fn wait_enabled(&mut self) {
+        self.until("the drives enabled", |s| {
             s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
         });
-        up
     }
 
     pub(crate) fn log(&self) -> String {
@@ -53,7 +90,7 @@ impl Up {
 
     /// `supervisor <args> --instance <inst>`, under the watchdog.
     pub(crate) fn ctl(&self, args: &[&str]) -> Output {
-        let mut cmd = supervisor();
+        let mut cmd = self.command();
         cmd.args(args).args(["--instance", &self.inst]);
         run_with_watchdog(&mut cmd, WATCHDOG)
     }
@@ -88,7 +125,7 @@ impl Up {
     pub(crate) fn until(&self, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
         let start = Instant::now();
         loop {
-            let mut cmd = supervisor();
+            let mut cmd = self.command();
             cmd.args(["status", "--json", "--instance", &self.inst]);
             let out = run_with_watchdog(&mut cmd, WATCHDOG);
             if out.status.success()
@@ -110,7 +147,7 @@ impl Up {
 
     /// `exec --wait --json PROGRAM` in the background, its output piped.
     pub(crate) fn exec_in_background(&self, program: impl AsRef<std::ffi::OsStr>) -> Child {
-        supervisor()
+        self.command()
             .args(["exec", "--wait", "--json", "--instance", &self.inst])
             .arg(program)
             .stdout(Stdio::piped())
