@@ -149,7 +149,7 @@ impl Bus {
                     self.latched_while_recovering = false;
                     cx.raise_estop(
                         EstopOrigin::Device,
-                        code::BUS_LOST,
+                        code::BUS_RECOVERING,
                         &["EtherCAT bus not back in OP yet"],
                     );
                 }
@@ -311,6 +311,13 @@ impl Task for Bus {
             let (status, code) = self.frame.al_status(k);
             let op = status & 0x0F == 0x08;
             if self.in_op[k] && !op {
+                // Nothing on the bus may run on without it: its process data is not taken
+                // (an input terminal in SAFE-OP would not even change the working counter).
+                cx.raise_estop(
+                    EstopOrigin::Device,
+                    code::SUBDEVICE_LEFT_OP,
+                    &["an EtherCAT SubDevice left OP"],
+                );
                 let name = &self.names[k];
                 cx.events.push(EventV1::new(
                     now,

@@ -49,13 +49,16 @@ struct Emulator {
     faults: Sub<EmulatorFaultV1>,
     injections: Sub<FaultInjectionV1>,
     orders: SyncSender<Order>,
+    /// The newest fault taken (`EmulatorFaultV1::seq`).
+    last_fault_seq: u64,
     /// The position of each cell axis' drive on the line.
     drive_of_axis: [Option<usize>; shm_schema::MAX_AXES],
 }
 
 impl Emulator {
-    /// Hands `order` to the frames thread and tells it was taken (`fault-injected`).
-    fn order(&self, order: Order, cx: &mut Cycle<'_>) {
+    /// Hands `order` to the frames thread (unless `apply` is false: a repeat) and tells it
+    /// was taken (`fault-injected`).
+    fn order(&self, order: Order, apply: bool, cx: &mut Cycle<'_>) {
         let (axis, value, limit, text) = match order {
             Order::Fault(f) => (
                 -1,
@@ -81,9 +84,18 @@ impl Emulator {
                 "the emulated drive: a fault condition",
             ),
         };
-        let taken = match self.orders.try_send(order) {
-            Ok(()) => "",
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => " (not taken: busy)",
+        // Not taken (the frames thread busy or gone): told with limit -1, which no sender
+        // takes for its acknowledgement.
+        let sent = if apply {
+            self.orders.try_send(order)
+        } else {
+            Ok(())
+        };
+        let (limit, taken) = match sent {
+            Ok(()) => (limit, ""),
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                (-1.0, " (not taken: busy)")
+            }
         };
         cx.events.push(EventV1::new(
             cx.now_ns(),
@@ -101,7 +113,14 @@ impl Task for Emulator {
     /// are answered by that thread).
     fn cycle(&mut self, cx: &mut Cycle<'_>) {
         while let Some(f) = self.faults.next() {
-            self.order(Order::Fault(f), cx);
+            // A sender repeats its fault until it hears it was taken: each is made once.
+            if f.seq > self.last_fault_seq {
+                self.last_fault_seq = f.seq;
+                self.order(Order::Fault(f), true, cx);
+            } else if f.seq == self.last_fault_seq {
+                // Its acknowledgement was missed: told again, made once.
+                self.order(Order::Fault(f), false, cx);
+            }
         }
         while let Some(injection) = self.injections.next() {
             if let Some(position) = self
@@ -115,6 +134,7 @@ impl Task for Emulator {
                         position,
                         injection,
                     },
+                    true,
                     cx,
                 );
             }
@@ -351,6 +371,7 @@ pub fn main() -> ExitCode {
                 faults: Sub::new(&ctx.node, &ctx.instance, ServiceId::EmulatorFault, 32)?,
                 injections: Sub::new(&ctx.node, &ctx.instance, ServiceId::FaultInjection, 32)?,
                 orders,
+                last_fault_seq: 0,
                 drive_of_axis,
             })
         },

@@ -655,7 +655,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "subdevice-left-op",
         severity: Severity::Error,
         unit: "AL status (limit: AL status code)",
-        meaning: "A SubDevice of the bus left OP (its AL status, read in every frame, says another state; 0x14 is SAFE-OP with the error bit): its watchdog expired (AL status code 0x001B), it lost its mailbox or sync configuration, or it was switched off and on. The text names its position and name. Its process data is not taken while it is out of OP (`bus-wkc-mismatch`), so servo cuts power; once the e-stop has been latched for `estop_stop_time`, the bus process brings the bus up again (`bus-recovering`, `bus-op`), then `reset` and `start` go on.",
+        meaning: "A SubDevice of the bus left OP (its AL status, read in every frame, says another state; 0x14 is SAFE-OP with the error bit): its watchdog expired (AL status code 0x001B), it lost its mailbox or sync configuration, or it was switched off and on. The text names its position and name. The bus process raises the e-stop (nothing on the bus runs on without one of its SubDevices); its process data is not taken while it is out of OP (`bus-wkc-mismatch`, and servo cuts power); once the e-stop has been latched for `estop_stop_time`, the bus process brings the bus up again (`bus-recovering`, `bus-op`), then `reset` and `start` go on.",
     },
     CodeInfo {
         code: code::SUBDEVICE_EMERGENCY,

@@ -9,7 +9,7 @@
 //!   it), the new trajgen goes on from that record, the program's commands after the
 //!   segment's are sent again, resume. No e-stop, the drives stay enabled; the motion time
 //!   grows by the pause and the swap.
-//! - servo, the drives' process (machine), and trajgen with no program: **with the brakes
+//! - servo, the drives' process (drives), and trajgen with no program: **with the brakes
 //!   on**: the drives are disabled first, the process is replaced, and the caller re-enables
 //!   the drives bumplessly (holding where the axes stand).
 //!
