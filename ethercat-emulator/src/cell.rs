@@ -337,6 +337,14 @@ pub fn main() -> ExitCode {
             // The ESCs start with an ET1100's 100 ms process data watchdog; the bus process
             // writes its own.
             let bus = Bus::new(terminals);
+            // An EtherCAT link carries nothing else: no IPv6 neighbour or router discovery
+            // (what a real bus' interface should be set to as well, docs/ethercat.md).
+            for end in [&interface, &peer] {
+                let knob = format!("/proc/sys/net/ipv6/conf/{end}/disable_ipv6");
+                if std::path::Path::new(&knob).exists() {
+                    std::fs::write(&knob, "1").map_err(|e| format!("{knob}: {e}"))?;
+                }
+            }
             ip(&["link", "set", &peer, "up"])?;
             ip(&["link", "set", &interface, "up"])?;
             let stop = Arc::new(AtomicBool::new(false));
