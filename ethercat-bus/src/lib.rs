@@ -21,7 +21,8 @@ use cia402::{State, error_code};
 use frame::CyclicFrame;
 use shm_schema::event::code;
 use shm_schema::{
-    DriveCommandV2, DriveFeedbackV2, EthercatConfigV1, EventQueue, EventV1, MAX_AXES,
+    DriveCommandV2, DriveFeedbackV2, EthercatConfigV1, EventQueue, EventV1, IoDirection, MAX_AXES,
+    MAX_IO,
 };
 
 /// The controlword the bus sends by itself when servo has gone silent: Quick stop (bits 1 set,
@@ -226,5 +227,110 @@ impl Drives {
                 )
             })
         })
+    }
+}
+
+/// The cell's `[[io]]` entries that are bits of IO terminals on the bus: the inputs read from
+/// the terminals' inputs and reported to iobridge as a field device does, the outputs written
+/// from iobridge's IO image. iobridge keeps owning the named IO (its safe values, the e-stop
+/// circuit); the bus carries the bits.
+#[derive(Clone, Copy, Debug)]
+pub struct BusIo {
+    /// (entry, position, bit) per input entry, then per output entry.
+    inputs: [(u8, u8, u16); MAX_IO],
+    input_count: usize,
+    outputs: [(u8, u8, u16); MAX_IO],
+    output_count: usize,
+    /// Bits of the input entries.
+    mask: u64,
+}
+
+impl BusIo {
+    /// The entries of `bus` against the cell's IO table `io` and the process image `layout`:
+    /// each bit must lie in its SubDevice's inputs (an input entry) or outputs (an output
+    /// entry), else the configuration is refused with the entry, the SubDevice and its size.
+    pub fn new(
+        bus: &EthercatConfigV1,
+        io: &[shm_schema::IoConfigV1],
+        layout: &frame::Layout,
+    ) -> Result<Self, String> {
+        let mut m = Self {
+            inputs: [(0, 0, 0); MAX_IO],
+            input_count: 0,
+            outputs: [(0, 0, 0); MAX_IO],
+            output_count: 0,
+            mask: 0,
+        };
+        for e in bus.ios() {
+            let entry = usize::from(e.entry);
+            let position = usize::from(e.position);
+            let Some(cfg) = io.get(entry) else {
+                return Err(format!("io entry {entry} is not in the cell's IO table"));
+            };
+            let name = shm_schema::str_of(&cfg.name);
+            let sd = bus.subdevices().get(position).map_or("?", |s| s.name());
+            let input = IoDirection::from_u32(cfg.direction) == Some(IoDirection::Input);
+            let slot = layout
+                .slots
+                .get(position)
+                .filter(|_| position < layout.count);
+            let bytes = slot.map_or(0, |s| if input { s.inputs.1 } else { s.outputs.1 });
+            if usize::from(e.bit) >= 8 * usize::from(bytes) {
+                return Err(format!(
+                    "io {name:?}: bit {} of position {position} ({sd}) does not exist: its {} are {} bits",
+                    e.bit,
+                    if input { "inputs" } else { "outputs" },
+                    8 * bytes
+                ));
+            }
+            let at = (entry as u8, position as u8, e.bit);
+            if input {
+                m.inputs[m.input_count] = at;
+                m.input_count += 1;
+                m.mask |= 1 << entry;
+            } else {
+                m.outputs[m.output_count] = at;
+                m.output_count += 1;
+            }
+        }
+        Ok(m)
+    }
+
+    /// True when the bus carries no IO.
+    pub fn is_empty(&self) -> bool {
+        self.input_count + self.output_count == 0
+    }
+
+    /// The bits of the input entries and their values in `frame`'s last reply.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn read(&self, frame: &CyclicFrame) -> (u64, u64) {
+        let mut values = 0;
+        for &(entry, position, bit) in &self.inputs[..self.input_count] {
+            let bytes = frame.inputs(usize::from(position));
+            let byte = bytes.get(usize::from(bit / 8)).copied().unwrap_or(0);
+            if byte & (1 << (bit % 8)) != 0 {
+                values |= 1 << entry;
+            }
+        }
+        (self.mask, values)
+    }
+
+    /// Writes the output entries of `values` (bit `k`: entry `k`) into `frame`.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn write(&self, values: u64, frame: &mut CyclicFrame) {
+        for &(entry, position, bit) in &self.outputs[..self.output_count] {
+            let bytes = frame.outputs_mut(usize::from(position));
+            if let Some(byte) = bytes.get_mut(usize::from(bit / 8)) {
+                if values & (1 << entry) != 0 {
+                    *byte |= 1 << (bit % 8);
+                } else {
+                    *byte &= !(1 << (bit % 8));
+                }
+            }
+        }
     }
 }

@@ -1,8 +1,8 @@
 //! `ethercat-bus`: the drives' process of a cell on EtherCAT. See the crate documentation.
 
-use ethercat_bus::Drives;
 use ethercat_bus::bringup::{BringUpError, Master, Up};
 use ethercat_bus::frame::{CyclicFrame, Layout, Reply, coe_emergency};
+use ethercat_bus::{BusIo, Drives};
 use ethercat_wire::{Received, Wire};
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
@@ -10,8 +10,8 @@ use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupE
 use shm_schema::ethercat::MAX_SUBDEVICES;
 use shm_schema::event::code;
 use shm_schema::{
-    DriveCommandV2, DriveFeedbackV2, EstopOrigin, EthercatConfigV1, EventQueue, EventV1,
-    LatencyHistogramV1, ServiceId,
+    DigitalIoV1, DriveCommandV2, DriveFeedbackV2, EstopOrigin, EthercatConfigV1, EventQueue,
+    EventV1, IoWriteV1, LatencyHistogramV1, ServiceId,
 };
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -37,6 +37,11 @@ mod owner {
     pub const RECOVERING: u8 = 1;
     pub const BACK: u8 = 2;
 }
+
+/// The inputs on the bus are reported again at least this often (ns), so a restarted
+/// iobridge learns them; iobridge's IO image older than this, and the outputs on the bus go
+/// to 0 (as a terminal's own watchdog takes them).
+const IO_REFRESH_NS: u64 = 100_000_000;
 
 /// At most this many emergencies of the start-up are told as events in the first cycle.
 const STARTUP_EMERGENCIES: usize = 8;
@@ -92,6 +97,16 @@ struct Bus {
     last_applied_seq: u64,
     sense_to_command: Box<LatencyHistogramV1>,
     last_published_ns: u64,
+    /// The `[[io]]` entries on the bus.
+    io: BusIo,
+    /// iobridge's newest IO image: its values and when it was written.
+    io_image: Option<(u64, u64)>,
+    /// The inputs last reported, and when.
+    io_reported: Option<(u64, u64)>,
+    /// This process' index in the table (the source of its input reports).
+    source: u32,
+    io_state: Sub<DigitalIoV1>,
+    field_inputs: Pub<IoWriteV1>,
     commands: Sub<DriveCommandV2>,
     feedback: Pub<DriveFeedbackV2>,
     sense_to_command_pub: Pub<LatencyHistogramV1>,
@@ -257,6 +272,16 @@ impl Task for Bus {
             .is_some_and(|t| now.saturating_sub(t) > self.command_timeout_ns);
         let command = self.command;
         self.drives.write(command.as_ref(), silent, &mut self.frame);
+        if !self.io.is_empty() {
+            if let Some(s) = self.io_state.latest() {
+                self.io_image = Some((s.values, s.stamp_ns));
+            }
+            let outputs = self
+                .io_image
+                .filter(|&(_, t)| now.saturating_sub(t) <= IO_REFRESH_NS)
+                .map_or(0, |(v, _)| v);
+            self.io.write(outputs, &mut self.frame);
+        }
         let sent_ns = runtime::time::now_ns();
         let sent = self.wire.send(self.frame.next_frame()).is_ok();
         let reply = if sent {
@@ -374,6 +399,22 @@ impl Task for Bus {
                 f64::from(expected),
                 &["a SubDevice did not take its process data"],
             ));
+        }
+        if valid && !self.io.is_empty() {
+            let (mask, values) = self.io.read(&self.frame);
+            let due = self
+                .io_reported
+                .is_none_or(|(v, t)| v != values || now.saturating_sub(t) >= IO_REFRESH_NS);
+            if due {
+                self.io_reported = Some((values, now));
+                self.field_inputs.send(&IoWriteV1 {
+                    stamp_ns: sent_ns,
+                    mask,
+                    values,
+                    source: self.source,
+                    line: 0,
+                });
+            }
         }
         self.seq += 1;
         let mut fb = self
@@ -533,6 +574,8 @@ fn main() -> ExitCode {
                 })?;
             tell_emergencies(&up);
             let frame = CyclicFrame::new(up.layout)?;
+            let io = BusIo::new(&bus, ctx.cell.io(), &up.layout)
+                .map_err(|m| -> SetupError { Box::new(process::Refused(m)) })?;
             // The cycle waits for its reply at most half a period.
             wire.set_timeout(
                 Duration::from_nanos(ctx.own.period_ns / 4).max(Duration::from_micros(50)),
@@ -611,6 +654,12 @@ fn main() -> ExitCode {
                 last_applied_seq: 0,
                 sense_to_command: Box::default(),
                 last_published_ns: 0,
+                io,
+                io_image: None,
+                io_reported: None,
+                source: ctx.index as u32,
+                io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
+                field_inputs: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
                 sense_to_command_pub: Pub::new(&ctx.node, i, ServiceId::SenseToCommand)?,

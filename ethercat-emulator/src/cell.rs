@@ -70,6 +70,7 @@ impl Emulator {
                     kind::LEAVE_OP => "bus: a SubDevice leaves OP",
                     kind::EMERGENCY => "bus: a drive sends an emergency",
                     kind::IDENTITY => "bus: another product code at a position",
+                    kind::INPUT => "bus: an input forced",
                     _ => "bus: an unknown fault, ignored",
                 },
             ),
@@ -218,8 +219,85 @@ fn line(bus: &EthercatConfigV1, ctx: &Context) -> Result<Vec<Terminal>, String> 
         .collect()
 }
 
+/// The field wired to the IO terminals: the cell's `[[io]]` entries on the bus, the simulated
+/// devices behind them (`machine_sim::field`: an input that `follows` an output, one model
+/// with `machine-sim`'s), the other inputs at their `sim` value, and inputs forced by a fault.
+struct Wiring {
+    field: machine_sim::field::Field,
+    /// (entry, position, bit, input) per `[[io]]` entry on the bus.
+    map: Vec<(usize, usize, u16, bool)>,
+    /// The inputs' values as the field and the `sim` values give them (bit `k`: entry `k`).
+    inputs: u64,
+    /// Inputs a fault forced: (position, bit, value).
+    forced: Vec<(usize, u16, bool)>,
+}
+
+impl Wiring {
+    fn new(bus: &EthercatConfigV1, cell: &shm_schema::CellConfigV6, source: u32) -> Self {
+        let io = cell.io();
+        let mut inputs = 0;
+        let map = bus
+            .ios()
+            .iter()
+            .filter_map(|m| {
+                let e = io.get(usize::from(m.entry))?;
+                let input = shm_schema::IoDirection::from_u32(e.direction)
+                    == Some(shm_schema::IoDirection::Input);
+                if input && e.sim != 0 {
+                    inputs |= 1 << m.entry;
+                }
+                Some((usize::from(m.entry), usize::from(m.position), m.bit, input))
+            })
+            .collect();
+        Self {
+            field: machine_sim::field::Field::new(cell, source),
+            map,
+            inputs,
+            forced: Vec::new(),
+        }
+    }
+
+    /// The outputs the MainDevice wrote move the devices; their sensors (and the forced
+    /// inputs) go into the input terminals.
+    fn step(&mut self, bus: &mut Bus, now_ns: u64) {
+        if self.map.is_empty() {
+            return;
+        }
+        let mut outputs = 0u64;
+        for &(entry, position, bit, input) in &self.map {
+            if let (false, Some(Terminal::El2008 { outputs: o })) =
+                (input, bus.devices.get(position).map(|d| &d.terminal))
+                && o & (1 << (bit % 8)) != 0
+            {
+                outputs |= 1 << entry;
+            }
+        }
+        if let Some(w) = self.field.step(now_ns, Some(outputs)) {
+            self.inputs = (self.inputs & !w.mask) | (w.values & w.mask);
+        }
+        for &(entry, position, bit, input) in &self.map {
+            let forced = self
+                .forced
+                .iter()
+                .find(|f| f.0 == position && f.1 == bit)
+                .map(|f| f.2);
+            let on = forced.unwrap_or(self.inputs & (1 << entry) != 0);
+            if let (true, Some(Terminal::El1008 { inputs })) = (
+                input,
+                bus.devices.get_mut(position).map(|d| &mut d.terminal),
+            ) {
+                if on {
+                    *inputs |= 1 << (bit % 8);
+                } else {
+                    *inputs &= !(1 << (bit % 8));
+                }
+            }
+        }
+    }
+}
+
 /// Carries out a fault it was told to make; false: the cable is pulled from now on.
-fn carry_out(bus: &mut Bus, order: Order, cable: &mut bool) {
+fn carry_out(bus: &mut Bus, wiring: &mut Wiring, order: Order, cable: &mut bool) {
     fn device(bus: &mut Bus, k: u32) -> Option<&mut crate::bus::SubDevice> {
         bus.devices.get_mut(k as usize)
     }
@@ -244,6 +322,20 @@ fn carry_out(bus: &mut Bus, order: Order, cable: &mut bool) {
                     d.esc.set_product(f.code);
                 }
             }
+            kind::INPUT => {
+                let at = (f.position as usize, f.bit as u16);
+                wiring.forced.retain(|x| (x.0, x.1) != at);
+                wiring.forced.push((at.0, at.1, f.code != 0));
+                if let Some(d) = device(bus, f.position)
+                    && let Terminal::El1008 { inputs } = &mut d.terminal
+                {
+                    if f.code != 0 {
+                        *inputs |= 1 << (f.bit % 8);
+                    } else {
+                        *inputs &= !(1 << (f.bit % 8));
+                    }
+                }
+            }
             _ => {}
         },
         Order::Inject {
@@ -264,6 +356,7 @@ fn carry_out(bus: &mut Bus, order: Order, cable: &mut bool) {
 fn answer(
     wire: &Wire,
     mut bus: Bus,
+    mut wiring: Wiring,
     stop: &AtomicBool,
     answered: &AtomicU64,
     orders: &Receiver<Order>,
@@ -272,8 +365,9 @@ fn answer(
     let mut cable = true;
     while !stop.load(Ordering::Relaxed) {
         while let Ok(order) = orders.try_recv() {
-            carry_out(&mut bus, order, &mut cable);
+            carry_out(&mut bus, &mut wiring, order, &mut cable);
         }
+        wiring.step(&mut bus, crate::now_ns());
         match wire.receive(&mut buf) {
             Ok(Received::Frame(_)) if !cable => bus.idle(),
             Ok(Received::Frame(n)) => {
@@ -350,6 +444,7 @@ pub fn main() -> ExitCode {
             let stop = Arc::new(AtomicBool::new(false));
             let answered = Arc::new(AtomicU64::new(0));
             let (orders, orders_rx) = std::sync::mpsc::sync_channel(32);
+            let wiring = Wiring::new(&bus_config, &ctx.cell, ctx.index as u32);
             let mut drive_of_axis = [None; shm_schema::MAX_AXES];
             for (k, s) in bus_config.subdevices().iter().enumerate() {
                 if let Some(slot) = s.axis().and_then(|a| drive_of_axis.get_mut(a)) {
@@ -367,7 +462,7 @@ pub fn main() -> ExitCode {
                             priority,
                             cpu: None,
                         });
-                        answer(&wire, bus, &stop, &answered, &orders_rx);
+                        answer(&wire, bus, wiring, &stop, &answered, &orders_rx);
                     })?
             };
             tracing::info!("answering on {peer} for the bus on {interface}");
@@ -394,13 +489,17 @@ struct FaultArgs {
     /// The cell's instance.
     #[arg(long)]
     instance: String,
-    /// cable-pulled, cable-back, leave-op, emergency, identity.
+    /// cable-pulled, cable-back, leave-op, emergency, identity, input.
     kind: String,
     /// The SubDevice's position on the line (leave-op, emergency, identity).
     position: Option<u32>,
-    /// The AL status code (leave-op, default 0x001B), the emergency's error code, or the
-    /// product code (identity); decimal or 0x hexadecimal.
+    /// The AL status code (leave-op, default 0x001B), the emergency's error code, the
+    /// product code (identity), or the input's value (input: 0 or 1); decimal or 0x
+    /// hexadecimal.
     code: Option<String>,
+    /// The input bit of the terminal at POSITION (input).
+    #[arg(long)]
+    bit: Option<u32>,
 }
 
 fn number(text: &str) -> Result<u32, String> {
@@ -428,21 +527,31 @@ fn fault_of(a: &FaultArgs) -> Result<EmulatorFaultV1, String> {
         "leave-op" => (kind::LEAVE_OP, position()?, code(Some(0x001B))?),
         "emergency" => (kind::EMERGENCY, position()?, code(None)?),
         "identity" => (kind::IDENTITY, position()?, code(None)?),
+        "input" => (kind::INPUT, position()?, code(None)?),
         other => {
             return Err(format!(
-                "{other:?} is not a fault the emulator makes (cable-pulled, cable-back, leave-op, emergency, identity)"
+                "{other:?} is not a fault the emulator makes (cable-pulled, cable-back, leave-op, emergency, identity, input)"
             ));
         }
     };
     if matches!(kind, kind::LEAVE_OP | kind::EMERGENCY) && code > u32::from(u16::MAX) {
         return Err(format!("code {code:#x} is over 16 bits"));
     }
+    if kind == kind::INPUT && code > 1 {
+        return Err(format!("input {code} must be 0 or 1"));
+    }
+    let bit = match (kind, a.bit) {
+        (kind::INPUT, Some(b)) => b,
+        (kind::INPUT, None) => return Err("input needs --bit".into()),
+        (_, Some(_)) => return Err(format!("--bit is for input, not {}", a.kind)),
+        (_, None) => 0,
+    };
     Ok(EmulatorFaultV1 {
         seq: runtime::time::now_ns(),
         kind,
         position,
         code,
-        reserved: 0,
+        bit,
     })
 }
 

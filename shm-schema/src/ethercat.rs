@@ -55,14 +55,33 @@ pub struct EthercatConfigV1 {
     pub interface: [u8; INTERFACE_LEN],
     /// SubDevices in use, in wire order.
     pub count: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// Entries of `io` in use.
+    pub io_count: u32,
     /// The process data watchdog the bus process sets in every SubDevice (ns, a multiple of
     /// 100 µs; 0 leaves the SubDevice's own): when frames stop (the process died, the cable
     /// came out) the outputs go safe by themselves after this long.
     pub pd_watchdog_ns: u64,
     /// The SubDevices, first `count` used, position 0 nearest the MainDevice.
     pub subdevice: [EthercatSubDeviceV1; MAX_SUBDEVICES],
+    /// The cell's `[[io]]` entries that are bits of IO terminals on the bus, first
+    /// `io_count` used.
+    pub io: [EthercatIoV1; crate::MAX_IO],
+}
+
+/// An `[[io]]` entry carried by the bus: a bit of a SubDevice's inputs (an input entry) or
+/// outputs (an output entry) in its process image.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("rtc::EthercatIoV1")]
+pub struct EthercatIoV1 {
+    /// The entry's index in the cell's IO table (`CellConfigV6::io`).
+    pub entry: u16,
+    /// The SubDevice's position on the line.
+    pub position: u16,
+    /// The bit of its inputs or outputs, bit 0 the lowest of its first byte.
+    pub bit: u16,
+    /// Zero.
+    pub reserved: u16,
 }
 
 impl Default for EthercatConfigV1 {
@@ -70,9 +89,10 @@ impl Default for EthercatConfigV1 {
         Self {
             interface: [0; INTERFACE_LEN],
             count: 0,
-            reserved: 0,
+            io_count: 0,
             pd_watchdog_ns: 0,
             subdevice: [EthercatSubDeviceV1::default(); MAX_SUBDEVICES],
+            io: [EthercatIoV1::default(); crate::MAX_IO],
         }
     }
 }
@@ -81,6 +101,11 @@ impl EthercatConfigV1 {
     /// The SubDevices in use.
     pub fn subdevices(&self) -> &[EthercatSubDeviceV1] {
         &self.subdevice[..(self.count as usize).min(MAX_SUBDEVICES)]
+    }
+
+    /// The IO entries on the bus.
+    pub fn ios(&self) -> &[EthercatIoV1] {
+        &self.io[..(self.io_count as usize).min(crate::MAX_IO)]
     }
 
     /// The interface's name.
@@ -115,6 +140,9 @@ pub mod emulator_fault {
     /// SubDevice `position` has product code `code` from now on (another device in its
     /// place; a MainDevice sees it at its next scan).
     pub const IDENTITY: u32 = 5;
+    /// Input `bit` of SubDevice `position` (an input terminal) reads `code` (0 or 1) from now
+    /// on, whatever the emulated field says: a button pressed, a sensor stuck.
+    pub const INPUT: u32 = 6;
 }
 
 /// A fault the emulated bus of a test cell is told to make, `<i>/ethercat/emulator/fault`
@@ -129,8 +157,9 @@ pub struct EmulatorFaultV1 {
     pub kind: u32,
     /// The SubDevice's position on the line (where the kind has one).
     pub position: u32,
-    /// The AL status code, emergency code or product code (where the kind has one).
+    /// The AL status code, emergency code, product code or input value (where the kind has
+    /// one).
     pub code: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// The input bit ([`emulator_fault::INPUT`]), else 0.
+    pub bit: u32,
 }

@@ -35,7 +35,7 @@ pub use drive::{
     ServoRequestV1, ServoStateV3,
 };
 pub use estop::{EstopKind, EstopOrigin, EstopV1};
-pub use ethercat::{EmulatorFaultV1, EthercatConfigV1, EthercatSubDeviceV1};
+pub use ethercat::{EmulatorFaultV1, EthercatConfigV1, EthercatIoV1, EthercatSubDeviceV1};
 pub use event::{EventQueue, EventV1, Severity};
 pub use io::{DigitalIoV1, IoConfigV1, IoDirection, IoWriteV1, MAX_IO, SafeValue};
 pub use latency::LatencyHistogramV1;

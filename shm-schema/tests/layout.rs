@@ -59,16 +59,23 @@ fn layouts() -> Vec<Layout> {
         layout!(EthercatConfigV1 {
             interface: "char[16]" = 16,
             count: "uint32_t" = 4,
-            reserved: "uint32_t" = 4,
+            io_count: "uint32_t" = 4,
             pd_watchdog_ns: "uint64_t" = 8,
             subdevice: "EthercatSubDeviceV1[32]" = 32 * size_of::<EthercatSubDeviceV1>(),
+            io: "EthercatIoV1[64]" = 64 * size_of::<EthercatIoV1>(),
+        }),
+        layout!(EthercatIoV1 {
+            entry: "uint16_t" = 2,
+            position: "uint16_t" = 2,
+            bit: "uint16_t" = 2,
+            reserved: "uint16_t" = 2,
         }),
         layout!(EmulatorFaultV1 {
             seq: "uint64_t" = 8,
             kind: "uint32_t" = 4,
             position: "uint32_t" = 4,
             code: "uint32_t" = 4,
-            reserved: "uint32_t" = 4,
+            bit: "uint32_t" = 4,
         }),
         layout!(EthercatSubDeviceV1 {
             name: "char[16]" = 16,

@@ -344,7 +344,7 @@ impl Cell {
         let ethercat_pub = match &cfg.ethercat {
             Some(bus) => {
                 let p = Pub::new(&node, i, ServiceId::EthercatConfig).map_err(f)?;
-                p.send(&bus.to_shm(&cfg.axis));
+                p.send(&bus.to_shm(&cfg.axis, &cfg.io));
                 Some(p)
             }
             None => None,

@@ -814,10 +814,20 @@ impl Config {
         if let Some(e) = modbus::validate(&self.modbus) {
             return Err(e);
         }
-        if let Some(bus) = &self.ethercat
-            && let Some(e) = ethercat::validate(bus, &self.axis).into_iter().next()
-        {
-            return Err(e);
+        match &self.ethercat {
+            Some(bus) => {
+                if let Some(e) = ethercat::validate(bus, &self.axis, &self.io)
+                    .into_iter()
+                    .next()
+                {
+                    return Err(e);
+                }
+            }
+            None => {
+                if let Some(e) = ethercat::io_without_bus(&self.io) {
+                    return Err(e);
+                }
+            }
         }
         if let Some(e) = self.validate_processes() {
             return Err(e);
@@ -1423,6 +1433,76 @@ mod tests {
         let modbus = shm.process_named("modbus").expect("in the default cell").1;
         assert!(!modbus.critical() && shm.process_named("servo").expect("servo").1.critical());
         assert_eq!(shm_schema::str_of(&shm.modbus.listen), "127.0.0.1:1502");
+    }
+
+    #[test]
+    fn io_on_the_bus_and_the_drives_entry_are_checked_where_they_are_written() {
+        let bus = include_str!("../../examples/gantry-ethercat.toml");
+        let parse = |from: &str, to: &str| {
+            assert!(bus.contains(from), "{from:?} not in the EtherCAT example");
+            let src = bus.replacen(from, to, 1);
+            Config::parse(&src, "cell.toml").expect_err(to).to_string()
+        };
+        let line = |needle: &str| {
+            bus.lines()
+                .position(|l| l.contains(needle))
+                .expect("present")
+                + 1
+        };
+        let gripper = line("ethercat = { subdevice = \"do\", bit = 0 }");
+        let got = parse(
+            "ethercat = { subdevice = \"do\", bit = 0 }",
+            "ethercat = { subdevice = \"dx\", bit = 0 }",
+        );
+        assert!(
+            got.starts_with(&format!(
+                "cell.toml:{gripper}:14: io \"gripper\": subdevice \"dx\" is not in [[ethercat.subdevice]] (EK1100, x, y, theta, di, do)"
+            )),
+            "{got}"
+        );
+        let got = parse(
+            "ethercat = { subdevice = \"do\", bit = 0 }",
+            "ethercat = { subdevice = \"y\", bit = 0 }",
+        );
+        assert!(got.contains("subdevice \"y\" is a drive"), "{got}");
+        let got = parse(
+            "ethercat = { subdevice = \"do\", bit = 1 }",
+            "ethercat = { subdevice = \"do\", bit = 0 }",
+        );
+        assert!(
+            got.contains("io \"cycle_lamp\": bit 0 of \"do\" already carries io \"gripper\""),
+            "{got}"
+        );
+        // Without [ethercat], no entry may name the bus.
+        let at = bus.find("\n[ethercat]\n").expect("the section");
+        let got = Config::parse(&bus[..at], "cell.toml")
+            .expect_err("io on a bus that is not there")
+            .to_string();
+        assert!(
+            got.contains(
+                "io \"estop_ok\": ethercat names a bit of the bus, and the cell has no [ethercat]"
+            ),
+            "{got}"
+        );
+        // The drives' entry is called drives; the old name says so.
+        let got = parse("name = \"drives\"", "name = \"machine\"");
+        assert!(
+            got.contains("the drives' process is called \"drives\" (it was \"machine\")"),
+            "{got}"
+        );
+        // The bus' IO as the bus process reads it.
+        let c = Config::parse(bus, "cell.toml").expect("the example");
+        let shm = c
+            .ethercat
+            .as_ref()
+            .expect("[ethercat]")
+            .to_shm(&c.axis, &c.io);
+        let ios: Vec<_> = shm
+            .ios()
+            .iter()
+            .map(|m| (m.entry, m.position, m.bit))
+            .collect();
+        assert_eq!(ios, [(0, 4, 0), (1, 5, 0), (2, 4, 1), (3, 4, 2), (4, 5, 1)]);
     }
 
     #[test]

@@ -3,10 +3,11 @@
 //! `[[ethercat.subdevice]]` in that order on the wire before anything is enabled, and moves
 //! each axis through the drive that names it.
 
+use super::io::Io;
 use super::{Axis, Seg};
 use serde::Deserialize;
 use shm_schema::ethercat::{INTERFACE_LEN, MAX_SUBDEVICES, subdevice_flags};
-use shm_schema::{EthercatConfigV1, EthercatSubDeviceV1, fixed_str};
+use shm_schema::{EthercatConfigV1, EthercatIoV1, EthercatSubDeviceV1, MAX_IO, fixed_str};
 
 /// `[ethercat]`.
 #[derive(Clone, Debug, Deserialize)]
@@ -48,8 +49,9 @@ pub struct SubDevice {
 }
 
 impl EthercatSettings {
-    /// As the bus process reads it (`axes` resolves each drive's axis to its index).
-    pub fn to_shm(&self, axes: &[Axis]) -> EthercatConfigV1 {
+    /// As the bus process reads it (`axes` resolves each drive's axis to its index, `io` the
+    /// entries the bus carries).
+    pub fn to_shm(&self, axes: &[Axis], io: &[Io]) -> EthercatConfigV1 {
         let mut c = EthercatConfigV1 {
             interface: fixed_str(&self.interface),
             count: self.subdevice.len().min(MAX_SUBDEVICES) as u32,
@@ -77,12 +79,40 @@ impl EthercatSettings {
                 rated_effort: s.rated_torque.unwrap_or(0.0),
             };
         }
+        let on_bus = io.iter().enumerate().take(MAX_IO).filter_map(|(k, e)| {
+            let b = e.ethercat.as_ref()?;
+            let position = self.subdevice.iter().position(|s| s.name == b.subdevice)?;
+            Some(EthercatIoV1 {
+                entry: k as u16,
+                position: position as u16,
+                bit: b.bit,
+                reserved: 0,
+            })
+        });
+        for (slot, m) in c.io.iter_mut().zip(on_bus) {
+            *slot = m;
+            c.io_count += 1;
+        }
         c
     }
 }
 
-/// Everything wrong in `[ethercat]`, each with where it is written.
-pub(super) fn validate(e: &EthercatSettings, axes: &[Axis]) -> Vec<(Vec<Seg>, String)> {
+/// The `[[io]]` entries that name a bit of the bus, in a cell without `[ethercat]`.
+pub(super) fn io_without_bus(io: &[Io]) -> Option<(Vec<Seg>, String)> {
+    use Seg::{Index as I, Key as K};
+    let (k, e) = io.iter().enumerate().find(|(_, e)| e.ethercat.is_some())?;
+    Some((
+        vec![K("io"), I(k), K("ethercat")],
+        format!(
+            "io {:?}: ethercat names a bit of the bus, and the cell has no [ethercat]",
+            e.name
+        ),
+    ))
+}
+
+/// Everything wrong in `[ethercat]` and in the `[[io]]` entries it carries, each with where
+/// it is written.
+pub(super) fn validate(e: &EthercatSettings, axes: &[Axis], io: &[Io]) -> Vec<(Vec<Seg>, String)> {
     use Seg::{Index as I, Key as K};
     let mut out = Vec::new();
     let ok_name = |s: &str| {
@@ -177,6 +207,56 @@ pub(super) fn validate(e: &EthercatSettings, axes: &[Axis]) -> Vec<(Vec<Seg>, St
                 }
                 Some(_) => {}
             }
+        }
+    }
+    let mut bits = std::collections::HashMap::new();
+    for (k, entry) in io.iter().enumerate() {
+        let Some(b) = &entry.ethercat else { continue };
+        let at = |key: &'static str| vec![K("io"), I(k), K("ethercat"), K(key)];
+        let what = format!("io {:?}", entry.name);
+        match e.subdevice.iter().position(|s| s.name == b.subdevice) {
+            None => out.push((
+                at("subdevice"),
+                format!(
+                    "{what}: subdevice {:?} is not in [[ethercat.subdevice]] ({})",
+                    b.subdevice,
+                    e.subdevice
+                        .iter()
+                        .map(|s| s.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )),
+            Some(p) if e.subdevice[p].axis.is_some() => out.push((
+                at("subdevice"),
+                format!(
+                    "{what}: subdevice {:?} is a drive (it moves an axis); IO entries sit on IO terminals",
+                    b.subdevice
+                ),
+            )),
+            Some(p) => {
+                // The bit's range is the SubDevice's process data, known once the bus is up:
+                // the bus process checks it before anything is enabled.
+                let key = (p, b.bit, std::mem::discriminant(&entry.direction));
+                if let Some(first) = bits.insert(key, k) {
+                    out.push((
+                        at("bit"),
+                        format!(
+                            "{what}: bit {} of {:?} already carries io {:?}",
+                            b.bit, b.subdevice, io[first].name
+                        ),
+                    ));
+                }
+            }
+        }
+        if b.bit >= 2048 {
+            out.push((
+                at("bit"),
+                format!(
+                    "{what}: bit {} is beyond any SubDevice's process data",
+                    b.bit
+                ),
+            ));
         }
     }
     if !e.subdevice.is_empty() {

@@ -51,6 +51,21 @@ pub struct Io {
     /// Inputs that follow an output: the simulated device's switching time (s), 0..=10.
     #[serde(default)]
     pub switch_time: Option<f64>,
+    /// The bit of an IO terminal on the EtherCAT bus that carries it (`[ethercat]`); left out,
+    /// the entry is the simulated field's or another field device's.
+    #[serde(default)]
+    pub ethercat: Option<OnBus>,
+}
+
+/// Where an `[[io]]` entry sits on the bus: `ethercat = { subdevice = "di", bit = 0 }`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OnBus {
+    /// The `[[ethercat.subdevice]]` (by name) whose inputs (an input entry) or outputs (an
+    /// output entry) hold the bit.
+    pub subdevice: String,
+    /// The bit of its process data, 0 the lowest of its first byte.
+    pub bit: u16,
 }
 
 impl Io {

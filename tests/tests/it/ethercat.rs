@@ -78,8 +78,8 @@ fn the_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
         assert_eq!(op.len(), 1, "{err}");
         assert_eq!(
             op[0]["value"].as_f64(),
-            Some(4.0),
-            "EK1100 and three drives: {err}"
+            Some(6.0),
+            "EK1100, three drives, EL1008 and EL2008: {err}"
         );
         assert!(
             j["processes"]["emulator"]["cycles"]
@@ -137,8 +137,8 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
             ),
             (
                 "ecat-extra",
-                "ek1100,drive,drive,drive,el1008",
-                "the bus on m0 has 5 SubDevice(s) where the configuration names 4: position 4 is EL1008 (vendor 0x00000002, product 0x03f03052, revision 0x00100000), which it does not name",
+                "ek1100,drive,drive,drive,el1008,el2008,el1008",
+                "the bus on m0 has 7 SubDevice(s) where the configuration names 6: position 6 is EL1008 (vendor 0x00000002, product 0x03f03052, revision 0x00100000), which it does not name",
             ),
         ] {
             let inst = instance(test);
@@ -445,21 +445,21 @@ fn wiresharks_dissector_decodes_a_triangles_bus_traffic_with_no_malformed_frame(
         assert!(n > 30_000, "{n} frames captured");
         assert_eq!(n_ecat, n, "frames that are not EtherCAT");
         assert!(bad.is_empty(), "malformed or in error:\n{bad}");
-        // The cycle's frames as the dissector reads them: an LRW (0x0c) and seven FPRDs (4 AL
+        // The cycle's frames as the dissector reads them: an LRW (0x0c) and nine FPRDs (6 AL
         // statuses, 3 send mailboxes' status), and every reply with the LRW's working counter
-        // 9 (the EK1100 has no data; three drives, each read and written: 3 × 3) and 1 for
-        // each FPRD.
+        // 12 (the EK1100 has no data; three drives, each read and written: 3 × 3; the EL1008
+        // read, 1; the EL2008 written, 2) and 1 for each FPRD.
         let cmds = tshark(&[
             "-r", file, "-T", "fields", "-e", "ecat.cmd", "-e", "ecat.cnt",
         ]);
-        let cyclic = "0x0c,0x04,0x04,0x04,0x04,0x04,0x04,0x04";
+        let cyclic = "0x0c,0x04,0x04,0x04,0x04,0x04,0x04,0x04,0x04,0x04";
         let (mut sent, mut replies) = (0, 0);
         for line in cmds.lines().filter(|l| l.starts_with(cyclic)) {
             let wkc = line.split('\t').nth(1).unwrap_or_default();
-            if wkc == "0,0,0,0,0,0,0,0" {
+            if wkc == "0,0,0,0,0,0,0,0,0,0" {
                 sent += 1;
             } else {
-                assert_eq!(wkc, "9,1,1,1,1,1,1,1", "a cyclic reply: {line}");
+                assert_eq!(wkc, "12,1,1,1,1,1,1,1,1,1", "a cyclic reply: {line}");
                 replies += 1;
             }
         }
@@ -477,11 +477,71 @@ fn wiresharks_dissector_decodes_a_triangles_bus_traffic_with_no_malformed_frame(
             &kept,
             format!(
                 "{n} frames, {n_ecat} EtherCAT, 0 malformed; cyclic: {sent} sent, {replies} replies, \
-                 every reply with working counters 9,1,1,1,1,1,1,1\n\n{summary}"
+                 every reply with working counters 12,1,1,1,1,1,1,1,1,1\n\n{summary}"
             ),
         )
         .expect("the summary");
         eprintln!("capture summary ({}):\n{summary}", kept.display());
         let _ = std::fs::remove_file(&capture);
+    });
+}
+
+/// The value of IO entry `name` in a status.
+fn io_value(s: &serde_json::Value, name: &str) -> Option<u64> {
+    s["io"]["entries"]
+        .as_array()?
+        .iter()
+        .find(|e| e["name"] == name)?["value"]
+        .as_u64()
+}
+
+#[test]
+fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() {
+    integration_tests::attributable(|| {
+        let ns = Netns::new("ecat-io");
+        let cfg = scratch("ecat-io", "cell.toml", &ethercat_cell());
+        let up = Up::start_in("ecat-io", &cfg, Some(&ns.0));
+        // The inputs as the terminal reads them: the e-stop circuit closed (its sim value).
+        let s = up.until("the inputs from the bus", |s| {
+            io_value(s, "estop_ok") == Some(1)
+        });
+        assert_eq!(io_value(&s, "gripper_closed"), Some(0), "{s}");
+        // The gripper's output through the EL2008, the emulated solenoid, its sensor back
+        // through the EL1008 80 ms later.
+        up.ok(&["io", "gripper", "1"]);
+        up.until("the gripper's sensor closed", |s| {
+            io_value(s, "gripper_closed") == Some(1)
+        });
+        up.ok(&["io", "gripper", "0"]);
+        up.until("the gripper's sensor open", |s| {
+            io_value(s, "gripper_closed") == Some(0)
+        });
+        // The e-stop button on the bus pressed (the EL1008's bit 0 at position 4 opens):
+        // iobridge raises the e-stop from it.
+        let fault = |args: &[&str]| {
+            let out = run_with_watchdog(
+                ns.command("ethercat-emulator")
+                    .args(["fault", "--instance", &up.inst])
+                    .args(args),
+                WATCHDOG,
+            );
+            assert!(
+                out.status.success(),
+                "fault {args:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        };
+        fault(&["input", "4", "0", "--bit", "0"]);
+        let s = up.until("the e-stop latched by its circuit", |s| {
+            s["supervisor"]["estop"]["code"].is_u64()
+        });
+        assert_eq!(io_value(&s, "estop_ok"), Some(0), "{s}");
+        // Released: reset and start, and the triangle runs.
+        fault(&["input", "4", "1", "--bit", "0"]);
+        up.until("the circuit closed", |s| io_value(s, "estop_ok") == Some(1));
+        up.ok(&["reset"]);
+        up.ok(&["start"]);
+        triangle_runs(&up);
+        up.down();
     });
 }
