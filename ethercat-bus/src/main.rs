@@ -96,6 +96,9 @@ struct Bus {
     command: Option<DriveCommandV2>,
     last_applied_seq: u64,
     sense_to_command: Box<LatencyHistogramV1>,
+    /// From sending the cycle's frame to taking its reply, every cycle that had one; told in
+    /// the log when the process stops.
+    round_trip: Box<LatencyHistogramV1>,
     last_published_ns: u64,
     /// The `[[io]]` entries on the bus.
     io: BusIo,
@@ -289,6 +292,10 @@ impl Task for Bus {
         } else {
             None
         };
+        if reply.is_some() {
+            self.round_trip
+                .record(runtime::time::now_ns().saturating_sub(sent_ns));
+        }
         let Some((wkc, _al_read)) = reply else {
             // No reply: no feedback this cycle (never a last good value); servo judges the
             // gap by its feedback timeout.
@@ -436,6 +443,18 @@ impl Task for Bus {
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
         self.publish_latency(now_ns);
+        let us = |q: u64| {
+            self.round_trip
+                .percentile(q, 1000)
+                .map_or(f64::NAN, |v| v as f64 / 1e3)
+        };
+        tracing::info!(
+            "frame round trip over {} frames: p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs",
+            self.round_trip.count,
+            us(500),
+            us(990),
+            self.round_trip.max_ns as f64 / 1e3
+        );
         self.quit.store(true, Ordering::Release);
         if let Some(t) = self.recovery.take() {
             let _ = t.join();
@@ -653,6 +672,7 @@ fn main() -> ExitCode {
                 command: None,
                 last_applied_seq: 0,
                 sense_to_command: Box::default(),
+                round_trip: Box::default(),
                 last_published_ns: 0,
                 io,
                 io_image: None,

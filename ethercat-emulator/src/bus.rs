@@ -153,7 +153,7 @@ impl Bus {
         let now = crate::now_ns();
         for d in &mut self.devices {
             d.esc.check_watchdog(now);
-            d.terminal.inputs(&mut d.esc);
+            d.terminal.inputs(&mut d.esc, now);
         }
         let devices = &mut self.devices;
         let n = walk(frame, |dg| {

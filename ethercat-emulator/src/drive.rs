@@ -395,8 +395,11 @@ impl Drive {
             .collect()
     }
 
-    /// Before a frame: the inputs (TxPDO) packed into SM3's buffer.
-    pub fn inputs(&mut self, esc: &mut Esc) {
+    /// Before a frame at `now_ns`: the model run up to then, and its inputs (TxPDO) packed
+    /// into SM3's buffer: what the frame reads is where the axis is as the frame passes, as a
+    /// drive latches its inputs (not where it was at the previous frame, a period late).
+    pub fn inputs(&mut self, esc: &mut Esc, now_ns: u64) {
+        self.step(now_ns, esc.al_state() == Some(AlState::Op));
         let (start, len, _, on) = esc.sm(3);
         if !on || start != INPUTS {
             return;

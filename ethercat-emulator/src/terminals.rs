@@ -156,11 +156,12 @@ impl Terminal {
         }
     }
 
-    /// Before a frame: the device's inputs into its ESC.
-    pub fn inputs(&mut self, esc: &mut Esc) {
+    /// Before a frame at `now_ns`: the device's inputs into its ESC (a drive's as its model
+    /// stands at `now_ns`).
+    pub fn inputs(&mut self, esc: &mut Esc, now_ns: u64) {
         match self {
             Self::El1008 { inputs } => esc.set_memory(EL1008_INPUTS, &[*inputs]),
-            Self::Drive(d) => d.inputs(esc),
+            Self::Drive(d) => d.inputs(esc, now_ns),
             _ => {}
         }
     }

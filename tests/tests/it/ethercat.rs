@@ -207,6 +207,21 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
     });
 }
 
+/// `ethercat-emulator fault --instance <up's> ARGS` in `ns`, which must succeed.
+fn emulator_fault(ns: &Netns, up: &Up, args: &[&str]) {
+    let out = run_with_watchdog(
+        ns.command("ethercat-emulator")
+            .args(["fault", "--instance", &up.inst])
+            .args(args),
+        WATCHDOG,
+    );
+    assert!(
+        out.status.success(),
+        "fault {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// Polls the log of `up` until it has `needle`, under the watchdog.
 fn until_logged(up: &Up, needle: &str) {
     let start = std::time::Instant::now();
@@ -281,19 +296,7 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
         let ns = Netns::new("ecat-safeop");
         let cfg = scratch("ecat-safeop", "cell.toml", &ethercat_cell());
         let up = Up::start_in("ecat-safeop", &cfg, Some(&ns.0));
-        let fault = |args: &[&str]| {
-            let out = run_with_watchdog(
-                ns.command("ethercat-emulator")
-                    .args(["fault", "--instance", &up.inst])
-                    .args(args),
-                WATCHDOG,
-            );
-            assert!(
-                out.status.success(),
-                "fault {args:?}: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        };
+        let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
         // A drive's emergency, read from its mailbox in OP: named, and nothing else happens.
         fault(&["emergency", "2", "0x8611"]);
         until_logged(&up, "subdevice-emergency");
@@ -518,19 +521,7 @@ fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() 
         });
         // The e-stop button on the bus pressed (the EL1008's bit 0 at position 4 opens):
         // iobridge raises the e-stop from it.
-        let fault = |args: &[&str]| {
-            let out = run_with_watchdog(
-                ns.command("ethercat-emulator")
-                    .args(["fault", "--instance", &up.inst])
-                    .args(args),
-                WATCHDOG,
-            );
-            assert!(
-                out.status.success(),
-                "fault {args:?}: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        };
+        let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
         fault(&["input", "4", "0", "--bit", "0"]);
         let s = up.until("the e-stop latched by its circuit", |s| {
             s["supervisor"]["estop"]["code"].is_u64()
