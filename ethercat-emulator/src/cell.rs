@@ -541,7 +541,9 @@ fn fault_of(a: &FaultArgs) -> Result<EmulatorFaultV1, String> {
         return Err(format!("input {code} must be 0 or 1"));
     }
     let bit = match (kind, a.bit) {
-        (kind::INPUT, Some(b)) => b,
+        // The emulator's input terminal, the EL1008, has 8.
+        (kind::INPUT, Some(b)) if b < 8 => b,
+        (kind::INPUT, Some(b)) => return Err(format!("--bit {b}: an EL1008 has inputs 0 to 7")),
         (kind::INPUT, None) => return Err("input needs --bit".into()),
         (_, Some(_)) => return Err(format!("--bit is for input, not {}", a.kind)),
         (_, None) => 0,

@@ -36,9 +36,22 @@ pub fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
 }
 
-/// The default cell's configuration (`examples/gantry-uba.toml`) as text.
+/// The default cell's configuration (`examples/gantry-uba.toml`) as text, its Modbus server
+/// on any free port (the tests run side by side; only the test of the embedded default itself
+/// listens on its 1502).
 pub fn default_cell() -> String {
-    std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("the default cell")
+    let src =
+        std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("the default cell");
+    assert!(
+        src.contains("listen = \"127.0.0.1:1502\""),
+        "the default cell's Modbus address"
+    );
+    src.replace("listen = \"127.0.0.1:1502\"", "listen = \"127.0.0.1:0\"")
+}
+
+/// [`default_cell`] written into a scratch file of `test`.
+pub fn default_cell_file(test: &str) -> PathBuf {
+    scratch(test, "default-cell.toml", &default_cell())
 }
 
 /// `src` (a cell configuration) with room for the host's stalls where a test checks something

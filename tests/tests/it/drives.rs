@@ -61,9 +61,12 @@ pub(crate) fn triangle_in_background_as(
     } else {
         cmd.stdout(Stdio::null());
     }
-    if let Some(c) = cfg {
-        cmd.arg("--config").arg(c);
-    }
+    match cfg {
+        Some(c) => cmd.arg("--config").arg(c),
+        None => cmd
+            .arg("--config")
+            .arg(integration_tests::default_cell_file(inst)),
+    };
     cmd.arg(examples().join("triangle.prog"))
         .stderr(Stdio::piped())
         .spawn()
