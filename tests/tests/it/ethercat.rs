@@ -173,12 +173,26 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
         let inst = instance("ecat-cable");
         let ns = Netns::new("ecat-cable");
         let cfg = scratch("ecat-cable", "cell.toml", &ethercat_cell());
-        // Three seconds into the triangle (start-up takes well under one), the cable goes.
+        // Three seconds after the bus' interface exists (start-up takes well under one on an
+        // idle machine; the tests run side by side), the cable goes.
         let pull = {
             let ns = ns.0.clone();
             std::thread::spawn(move || {
+                let start = std::time::Instant::now();
+                while !Command::new("ip")
+                    .args(["-n", &ns, "link", "show", "rtc-ecat0"])
+                    .output()
+                    .is_ok_and(|o| o.status.success())
+                {
+                    if start.elapsed() > WATCHDOG {
+                        return;
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
                 std::thread::sleep(Duration::from_secs(3));
-                ip(&["-n", &ns, "link", "set", "rtc-ecat0", "down"]);
+                let _ = Command::new("ip")
+                    .args(["-n", &ns, "link", "set", "rtc-ecat0", "down"])
+                    .status();
             })
         };
         let out = run_with_watchdog(
@@ -534,5 +548,49 @@ fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() 
         up.ok(&["start"]);
         triangle_runs(&up);
         up.down();
+    });
+}
+
+#[test]
+fn an_io_bit_beyond_its_terminal_is_refused_before_anything_is_enabled() {
+    integration_tests::attributable(|| {
+        let inst = instance("ecat-iobit");
+        let ns = Netns::new("ecat-iobit");
+        // Valid on paper (the bit's range is the terminal's process data, known on the bus).
+        let src = ethercat_cell().replacen(
+            "ethercat = { subdevice = \"di\", bit = 2 }",
+            "ethercat = { subdevice = \"di\", bit = 9 }",
+            1,
+        );
+        let cfg = scratch("ecat-iobit", "cell.toml", &src);
+        let check = run_with_watchdog(
+            integration_tests::supervisor()
+                .arg("check-config")
+                .arg(&cfg),
+            WATCHDOG,
+        );
+        assert!(
+            check.status.success(),
+            "{}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let out = run_with_watchdog(
+            ns.command("supervisor")
+                .args(["run", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains(
+                "io \"part_present\": bit 9 of position 4 (di) does not exist: its inputs are 8 bits"
+            ),
+            "{err}"
+        );
+        assert!(err.contains("refused the configuration"), "{err}");
+        assert!(!err.contains("enabling"), "{err}");
+        assert_clean(&inst);
     });
 }
