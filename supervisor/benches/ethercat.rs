@@ -12,6 +12,7 @@
 //!
 //! Run it with `bash bench/ethercat.sh [--rounds N]` (root: network namespaces, `SCHED_FIFO`).
 
+use integration_tests::median;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -46,26 +47,11 @@ struct Run {
 }
 
 /// The example cell at `period_us` (the drives and servo; their phases scaled as
-/// `integration_tests::cell_at_rate` does), on the bus or with `machine-sim` in its place.
+/// `integration_tests::at_rate` does), on the bus or with `machine-sim` in its place.
 fn cell(period_us: u64, bus: bool) -> String {
     let src = std::fs::read_to_string(root().join("examples/gantry-ethercat.toml"))
         .expect("examples/gantry-ethercat.toml");
-    let mut src = src
-        .replace(
-            "thread_offset_variance_percent = 50.0",
-            &format!(
-                "thread_offset_variance_percent = {:.1}",
-                50.0 * 1000.0 / period_us as f64
-            ),
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 100",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 400",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
-        )
+    let mut src = integration_tests::at_rate(&src, period_us)
         .replace("listen = \"127.0.0.1:1503\"", "listen = \"127.0.0.1:0\"");
     if !bus {
         // The same cell in shared memory: machine-sim as the drives, no emulator, no bus.
@@ -163,20 +149,6 @@ fn one(config: &Path, instance: &str) -> Result<Run, String> {
         fe: std::array::from_fn(|a| f(&j["max_following_error"][AXES[a]])),
         diff_ms: f(&j["difference_s"]) * 1e3,
     })
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
 }
 
 fn median_run(runs: &[Run]) -> Run {

@@ -11,6 +11,7 @@
 //! Run it with `bash bench/rates.sh [--rounds N]` (it builds the supervisor first; root for
 //! `SCHED_FIFO`).
 
+use integration_tests::median;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -77,20 +78,6 @@ fn one(config: &Path, instance: &str) -> Result<Run, String> {
         s2c: [f(&s["p50_us"]), f(&s["p99_us"]), f(&s["max_us"])],
         diff_ms: f(&j["difference_s"]) * 1e3,
     })
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
 }
 
 fn show(label: &str, r: &Run) {

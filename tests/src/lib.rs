@@ -102,22 +102,42 @@ pub fn with_stall_room(src: &str) -> String {
 /// detector's share of the period scaled so that it counts the same wake-up latency (the
 /// host's stalls do not shrink with the period).
 pub fn cell_at_rate(period_us: u64) -> String {
-    default_cell()
-        .replace(
-            "thread_offset_variance_percent = 50.0",
-            &format!(
-                "thread_offset_variance_percent = {:.1}",
-                50.0 * 1000.0 / period_us as f64
-            ),
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 100",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
-        )
-        .replace(
-            "period_us = 1000\nphase_us = 400",
-            &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
-        )
+    at_rate(&default_cell(), period_us)
+}
+
+/// `src` (a cell of the default's shape) with the drives and servo at `period_us`, as
+/// [`cell_at_rate`] does.
+pub fn at_rate(src: &str, period_us: u64) -> String {
+    src.replace(
+        "thread_offset_variance_percent = 50.0",
+        &format!(
+            "thread_offset_variance_percent = {:.1}",
+            50.0 * 1000.0 / period_us as f64
+        ),
+    )
+    .replace(
+        "period_us = 1000\nphase_us = 100",
+        &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
+    )
+    .replace(
+        "period_us = 1000\nphase_us = 400",
+        &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
+    )
+}
+
+/// The median of the finite values of `v` (NaN when there are none): the benches' summary.
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
 }
 
 /// The default cell with every axis in CSP: the drives close the loop with their own gains.

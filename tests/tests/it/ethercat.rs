@@ -249,6 +249,21 @@ fn until_logged(up: &Up, needle: &str) {
     }
 }
 
+/// The example cell, with room for the host's stalls, up in `ns` (every command of the test
+/// runs there), its drives enabled.
+fn cell_up(ns: &Netns, test: &str) -> Up {
+    let cfg = scratch(test, "cell.toml", &ethercat_cell());
+    Up::start_in(test, &cfg, Some(&ns.0))
+}
+
+/// `reset`, `start`, the triangle to its end on time and on target, then `down`; its log.
+fn reset_start_and_run(up: Up) -> String {
+    up.ok(&["reset"]);
+    up.ok(&["start"]);
+    triangle_runs(&up);
+    up.down()
+}
+
 /// The triangle on the cell, which must run to its end on time and on target.
 fn triangle_runs(up: &Up) {
     let out = up.ok(&[
@@ -265,8 +280,7 @@ fn triangle_runs(up: &Up) {
 fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_next_program() {
     integration_tests::attributable(|| {
         let ns = Netns::new("ecat-back");
-        let cfg = scratch("ecat-back", "cell.toml", &ethercat_cell());
-        let up = Up::start_in("ecat-back", &cfg, Some(&ns.0));
+        let up = cell_up(&ns, "ecat-back");
         let run = up.exec_in_background(examples().join("triangle.prog"));
         // Mid-motion (the triangle takes 19 s), the cable goes.
         std::thread::sleep(Duration::from_secs(3));
@@ -296,10 +310,7 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
         // The cable back: the bus process brings the bus up again by itself.
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "up"]);
         until_logged(&up, "back in OP on rtc-ecat0");
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
-        triangle_runs(&up);
-        let log = up.down();
+        let log = reset_start_and_run(up);
         assert!(!log.contains("bus-wkc-mismatch"), "{log}");
     });
 }
@@ -308,8 +319,7 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
 fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
     integration_tests::attributable(|| {
         let ns = Netns::new("ecat-safeop");
-        let cfg = scratch("ecat-safeop", "cell.toml", &ethercat_cell());
-        let up = Up::start_in("ecat-safeop", &cfg, Some(&ns.0));
+        let up = cell_up(&ns, "ecat-safeop");
         let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
         // A drive's emergency, read from its mailbox in OP: named, and nothing else happens.
         fault(&["emergency", "2", "0x8611"]);
@@ -335,10 +345,7 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
         // The e-stop latched, the bus is brought up again once the drives have ramped down.
         until_logged(&up, "bus-recovering");
         until_logged(&up, "back in OP on rtc-ecat0");
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
-        triangle_runs(&up);
-        up.down();
+        reset_start_and_run(up);
     });
 }
 
@@ -346,8 +353,7 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
 fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
     integration_tests::attributable(|| {
         let ns = Netns::new("ecat-kill");
-        let cfg = scratch("ecat-kill", "cell.toml", &ethercat_cell());
-        let up = Up::start_in("ecat-kill", &cfg, Some(&ns.0));
+        let up = cell_up(&ns, "ecat-kill");
         let bus = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
         assert_eq!(bus.len(), 1, "one bus process: {bus:?}");
         // SIGKILL: no goodbye; the drives' SyncManager watchdogs take their outputs down.
@@ -370,10 +376,7 @@ fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
                 .as_u64()
                 .is_some_and(|c| c > 100)
         });
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
-        triangle_runs(&up);
-        up.down();
+        reset_start_and_run(up);
     });
 }
 
@@ -395,8 +398,7 @@ fn tshark(args: &[&str]) -> String {
 fn wiresharks_dissector_decodes_a_triangles_bus_traffic_with_no_malformed_frame() {
     integration_tests::attributable(|| {
         let ns = Netns::new("ecat-tshark");
-        let cfg = scratch("ecat-tshark", "cell.toml", &ethercat_cell());
-        let up = Up::start_in("ecat-tshark", &cfg, Some(&ns.0));
+        let up = cell_up(&ns, "ecat-tshark");
         let capture = integration_tests::scratch("ecat-tshark", "bus.pcapng", "");
         // dumpcap (tshark's capture engine) on the bus' end of the pair, ready once it says
         // which interface it captures on.
@@ -516,8 +518,7 @@ fn io_value(s: &serde_json::Value, name: &str) -> Option<u64> {
 fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() {
     integration_tests::attributable(|| {
         let ns = Netns::new("ecat-io");
-        let cfg = scratch("ecat-io", "cell.toml", &ethercat_cell());
-        let up = Up::start_in("ecat-io", &cfg, Some(&ns.0));
+        let up = cell_up(&ns, "ecat-io");
         // The inputs as the terminal reads them: the e-stop circuit closed (its sim value).
         let s = up.until("the inputs from the bus", |s| {
             io_value(s, "estop_ok") == Some(1)
@@ -544,10 +545,7 @@ fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() 
         // Released: reset and start, and the triangle runs.
         fault(&["input", "4", "1", "--bit", "0"]);
         up.until("the circuit closed", |s| io_value(s, "estop_ok") == Some(1));
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
-        triangle_runs(&up);
-        up.down();
+        reset_start_and_run(up);
     });
 }
 
