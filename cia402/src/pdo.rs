@@ -7,6 +7,30 @@
 //! the wire on both sides. Constant time, no allocation; a value that does not fit its object
 //! saturates, a value that is not finite becomes 0 (never undefined on the wire).
 
+/// Subindices of the SyncManager synchronisation objects (0x1C32, 0x1C33; ETG.1020) and the
+/// values of their sync mode.
+pub mod sync {
+    /// Sync mode (UNSIGNED16): [`FREE_RUN`], [`SM_EVENT`] or [`DC_SYNC0`].
+    pub const MODE: u8 = 0x01;
+    /// Cycle time (UNSIGNED32, ns).
+    pub const CYCLE_TIME: u8 = 0x02;
+    /// Shift time (UNSIGNED32, ns): of 0x1C33, how long after SYNC0 the inputs are latched.
+    pub const SHIFT_TIME: u8 = 0x03;
+    /// Sync modes supported (UNSIGNED16): bit 0 free run, bit 1 SM event, bits 2-3 = 01 DC
+    /// SYNC0.
+    pub const SUPPORTED: u8 = 0x04;
+    /// The shortest cycle time (UNSIGNED32, ns).
+    pub const MIN_CYCLE_TIME: u8 = 0x05;
+    /// SM events missed (UNSIGNED16): SYNC0 events in OP that found no new outputs.
+    pub const SM_EVENT_MISSED: u8 = 0x0B;
+    /// Sync mode: free run, on the device's own timer.
+    pub const FREE_RUN: u16 = 0;
+    /// Sync mode: as the frame passes (the SyncManager event).
+    pub const SM_EVENT: u16 = 1;
+    /// Sync mode: on SYNC0 of Distributed Clocks.
+    pub const DC_SYNC0: u16 = 2;
+}
+
 /// CiA 402 objects, and the ones the communication profile adds.
 pub mod obj {
     /// Device type: 0x0192 (drive profile 402), servo (0x0002 in the high word).
@@ -25,6 +49,11 @@ pub mod obj {
     pub const SM2_ASSIGN: u16 = 0x1C12;
     /// SM3's PDO assignment.
     pub const SM3_ASSIGN: u16 = 0x1C13;
+    /// SM2's (the outputs') synchronisation parameters (ETG.1020 "SM output parameter"):
+    /// subindices in [`super::sync`].
+    pub const SM2_SYNC: u16 = 0x1C32;
+    /// SM3's (the inputs') synchronisation parameters ("SM input parameter").
+    pub const SM3_SYNC: u16 = 0x1C33;
     /// Error code.
     pub const ERROR_CODE: u16 = 0x603F;
     /// Controlword.

@@ -4,15 +4,16 @@
 //! the found identity), each drive's process data is mapped by SDO in PRE-OP (the cell's
 //! [`cia402::pdo::RX_DEFAULT`] and [`cia402::pdo::TX_DEFAULT`]), its supported modes checked
 //! against the axis' mode, its quick stop written from the configuration, every SubDevice's
-//! process data watchdog set, and the bus taken through SAFE-OP to OP. Then the FMMUs ethercrab
-//! configured are read back from the SubDevices: the cycle's own frame uses them.
+//! process data watchdog set, Distributed Clocks set up for the SubDevices on SYNC0
+//! ([`Dc`]), and the bus taken through SAFE-OP to OP. Then the FMMUs ethercrab configured are
+//! read back from the SubDevices: the cycle's own frame uses them.
 //!
 //! ethercrab's futures are driven here, on this thread, by [`Pump`]: its frames go out of the
 //! cell's [`Wire`] and the replies come back into it. Nothing of ethercrab runs once the bus
 //! is in OP (its own cyclic exchange would allocate a timer per frame).
 
 use crate::frame::{Layout, Slot};
-use cia402::pdo::{RX_DEFAULT, TX_DEFAULT, mapping, obj};
+use cia402::pdo::{RX_DEFAULT, TX_DEFAULT, mapping, obj, sync};
 use ethercat_wire::{Received, Wire};
 use ethercrab::{MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, Timeouts};
 use shm_schema::ethercat::{MAX_SUBDEVICES, subdevice_flags};
@@ -171,7 +172,9 @@ impl Master {
                 ..Timeouts::default()
             },
             MainDeviceConfig {
-                dc_static_sync_iterations: 0,
+                // The FRMWs of the initial drift compensation (ETG recommends 15 000; the
+                // cycle's frame carries one every period from then on).
+                dc_static_sync_iterations: 1000,
                 ..MainDeviceConfig::default()
             },
         );
@@ -187,22 +190,31 @@ impl Master {
         })
     }
 
-    /// Brings the bus of `cfg` on `wire` to OP, the drives mapped for `axes`; see the module
-    /// documentation. Errors name the SubDevice (position and name) and what is wrong.
+    /// Brings the bus of `cfg` on `wire` to OP, the drives mapped for `axes`, SYNC0 on the
+    /// bus process' `timing`; see the module documentation. Errors name the SubDevice
+    /// (position and name) and what is wrong.
     pub fn bring_up(
         &mut self,
         cfg: &EthercatConfigV1,
         axes: &[AxisConfigV2],
+        timing: Timing,
         wire: &Wire,
         stop: &dyn Fn() -> bool,
     ) -> Result<Up, BringUpError> {
         self.pump.caught.clear();
-        let mut up = bring_up(&self.md, &mut self.pump, cfg, axes, wire, stop);
+        let line = Line {
+            cfg,
+            axes,
+            timing,
+            wire,
+            stop,
+        };
+        let mut up = bring_up(&self.md, &mut self.pump, &line);
         if up.is_err() && !self.pump.caught.is_empty() {
             // An emergency in place of an answer ethercrab waited for (its own SDO reads
             // in SAFE-OP's configuration): once more, the emergency read.
             let caught = std::mem::take(&mut self.pump.caught);
-            up = bring_up(&self.md, &mut self.pump, cfg, axes, wire, stop);
+            up = bring_up(&self.md, &mut self.pump, &line);
             self.pump.caught.splice(0..0, caught);
         }
         let mut up = up?;
@@ -263,16 +275,106 @@ pub struct Up {
     pub names: Vec<String>,
     /// CoE emergencies sent during start-up: position, code, error register.
     pub emergencies: Vec<(usize, u16, u8)>,
+    /// Distributed Clocks, when SubDevices run on SYNC0.
+    pub dc: Option<Dc>,
 }
+
+/// The bus process' cycle on the host's clock: it wakes at `k × period_ns + phase_ns` of
+/// `CLOCK_MONOTONIC` (the runtime's grid).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Timing {
+    /// The drives' period (ns).
+    pub period_ns: u64,
+    /// The bus process' phase in it (ns).
+    pub phase_ns: u64,
+}
+
+/// Distributed Clocks as the bus was brought up with them: the first SubDevice with DC is
+/// the reference clock; the cycle writes it the host's time plus `epoch_ns` every frame
+/// (so the reference, and through the FRMW every DC SubDevice, keeps the host's clock), and
+/// SYNC0 comes every period, a SubDevice's shift after each of the bus process' wake-ups.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dc {
+    /// The reference clock's position and station address.
+    pub reference: usize,
+    /// Its station address.
+    pub station: u16,
+    /// DC system time minus host time (ns, wrapping): a host time `t` is system time
+    /// `t.wrapping_add(epoch_ns)`.
+    pub epoch_ns: u64,
+    /// SYNC0's cycle (the drives' period, ns).
+    pub cycle_ns: u64,
+    /// A wake-up of the bus process in system time: SYNC0 comes at `wake_ns + shift + k ×
+    /// cycle_ns`.
+    pub wake_ns: u64,
+    /// The SYNC0 shift of the first drive on SYNC0 (else of the first SubDevice on it; ns).
+    pub shift_ns: u64,
+    /// How long after its SYNC0 that SubDevice latches its inputs (0x1C33:03; ns): the time
+    /// the feedback is stamped with.
+    pub latch_shift_ns: u64,
+    /// SubDevices on SYNC0 (bit k: position k).
+    pub on_sync0: u32,
+}
+
+impl Dc {
+    /// Where an input latch comes for SYNC0 `shift` after the wake-up: at the next wake-up,
+    /// just before the bus process sends its frame (0x1C33:03, the input shift).
+    pub fn input_shift(period_ns: u64, shift_ns: u64) -> u64 {
+        period_ns.saturating_sub(shift_ns) % period_ns.max(1)
+    }
+}
+
+impl Dc {
+    /// For a reference time `r` a frame read: the system time of the last input latch (of
+    /// the first SubDevice on SYNC0) at or before `r`, and how long before the next SYNC0 the
+    /// frame came (ns); `None` before the first latch.
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn around(&self, r: u64) -> Option<(u64, u64)> {
+        let cycle = self.cycle_ns.max(1);
+        let first = self.wake_ns.wrapping_add(self.shift_ns);
+        let into = r.checked_sub(first)? % cycle;
+        let latch_first = first.wrapping_add(self.latch_shift_ns);
+        let latch = r - r.checked_sub(latch_first)? % cycle;
+        Some((latch, cycle - into))
+    }
+
+    /// The index of the SYNC0 cycle `r` falls in (0 before the first).
+    ///
+    /// # Real-time
+    /// Arithmetic only.
+    pub fn cycle_of(&self, r: u64) -> u64 {
+        let first = self.wake_ns.wrapping_add(self.shift_ns);
+        r.checked_sub(first)
+            .map_or(0, |since| since / self.cycle_ns.max(1) + 1)
+    }
+}
+
+/// What a bring-up works with.
+struct Line<'a> {
+    cfg: &'a EthercatConfigV1,
+    axes: &'a [AxisConfigV2],
+    timing: Timing,
+    wire: &'a Wire,
+    stop: &'a dyn Fn() -> bool,
+}
+
+/// How long after the DC set-up SYNC0 starts: room for SAFE-OP's configuration.
+const SYNC0_START_DELAY_NS: u64 = 300_000_000;
 
 fn bring_up(
     md: &MainDevice<'static>,
     pump: &mut Pump,
-    cfg: &EthercatConfigV1,
-    axes: &[AxisConfigV2],
-    wire: &Wire,
-    stop: &dyn Fn() -> bool,
+    line: &Line<'_>,
 ) -> Result<Up, BringUpError> {
+    let Line {
+        cfg,
+        axes,
+        wire,
+        stop,
+        ..
+    } = *line;
     let long = Duration::from_secs(30);
     let group = pump
         .run(
@@ -444,6 +546,143 @@ fn bring_up(
         }
     }
 
+    // Distributed Clocks for the SubDevices on SYNC0 (the module documentation of `Dc`):
+    // each must have DC; the first SubDevice with DC is the reference clock; the host's
+    // clock is measured against it (the read with the shortest round trip of eight); a
+    // drive gets sync mode 2 and the cycle time in 0x1C32; each SYNC0 starts at a wake-up
+    // of the bus process 300 ms on plus its shift, every period (0x0981, 0x0990, 0x09A0:
+    // the sequence of ethercrab's `configure_dc_sync`, whose start time would not be on the
+    // bus process' grid).
+    let timing = line.timing;
+    let mut has_dc = Vec::with_capacity(found.len());
+    for (k, sd) in group.iter(md).enumerate() {
+        let features: u16 = pump
+            .run(wire, sd.register_read(0x0008u16), long, stop)?
+            .map_err(|e| format!("position {k}: ESC features: {e}"))?;
+        has_dc.push(features & 0x04 != 0);
+    }
+    let on_sync0: Vec<usize> = want
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| w.flags & subdevice_flags::SYNC0 != 0)
+        .map(|(k, _)| k)
+        .collect();
+    if let Some(&k) = on_sync0.iter().find(|&&k| !has_dc[k]) {
+        return Err(BringUpError::Refused(format!(
+            "position {k} ({}) is configured on SYNC0 (sync = \"dc\", a drive's default) and its ESC has no Distributed Clocks (register 0x0008): write sync = \"frame\" in its [[ethercat.subdevice]]",
+            want[k].name()
+        )));
+    }
+    // The feedback is stamped by the first drive on SYNC0 (else the first SubDevice on it).
+    let stamped = on_sync0
+        .iter()
+        .find(|&&k| want[k].axis().is_some())
+        .or(on_sync0.first());
+    let dc = match (stamped, has_dc.iter().position(|d| *d)) {
+        (Some(&first), Some(reference)) => {
+            let station = found[reference].2;
+            let sd_ref = group
+                .iter(md)
+                .nth(reference)
+                .ok_or_else(|| format!("position {reference}: gone"))?;
+            let mut best = (u64::MAX, 0u64);
+            for _ in 0..8 {
+                let before = runtime::time::now_ns();
+                let t: u64 = pump
+                    .run(wire, sd_ref.register_read(0x0910u16), long, stop)?
+                    .map_err(|e| format!("position {reference}: DC system time: {e}"))?;
+                let after = runtime::time::now_ns();
+                if after - before < best.0 {
+                    best = (
+                        after - before,
+                        t.wrapping_sub(before + (after - before) / 2),
+                    );
+                }
+            }
+            let epoch_ns = best.1;
+            let period = timing.period_ns.max(1);
+            let now = runtime::time::now_ns() + SYNC0_START_DELAY_NS;
+            let wake =
+                (now.saturating_sub(timing.phase_ns) / period + 1) * period + timing.phase_ns;
+            let shift_of = |k: usize| match want[k].sync0_shift_ns {
+                0 => period / 2,
+                s => u64::from(s),
+            };
+            let mut latch_shift = None;
+            for &k in &on_sync0 {
+                let w = &want[k];
+                let sd = group
+                    .iter(md)
+                    .nth(k)
+                    .ok_or_else(|| format!("position {k}: gone"))?;
+                let at = |what: &str, e: ethercrab::error::Error| {
+                    format!("position {k} ({}): {what}: {e}", w.name())
+                };
+                if w.axis().is_some() {
+                    pump.sdo(
+                        wire,
+                        || sd.sdo_write(obj::SM2_SYNC, sync::MODE, sync::DC_SYNC0),
+                        long,
+                        stop,
+                    )?
+                    .map_err(|e| at("0x1C32:01 (sync mode DC SYNC0)", e))?;
+                    pump.sdo(
+                        wire,
+                        || sd.sdo_write(obj::SM2_SYNC, sync::CYCLE_TIME, period as u32),
+                        long,
+                        stop,
+                    )?
+                    .map_err(|e| at("0x1C32:02 (cycle time)", e))?;
+                    // The inputs latched at the bus process' wake-up, just before its frame,
+                    // rather than at SYNC0 (a period before the frame's command applies).
+                    let input_shift = Dc::input_shift(period, shift_of(k));
+                    let taken = pump
+                        .sdo(
+                            wire,
+                            || sd.sdo_write(obj::SM3_SYNC, sync::SHIFT_TIME, input_shift as u32),
+                            long,
+                            stop,
+                        )?
+                        .inspect_err(|e| {
+                            tracing::warn!(
+                                "position {k} ({}): 0x1C33:03 (input shift) refused ({e}): its inputs are latched at SYNC0, a period earlier",
+                                w.name()
+                            );
+                        })
+                        .is_ok();
+                    if k == first {
+                        latch_shift = Some(if taken { input_shift } else { 0 });
+                    }
+                }
+                let start = wake.wrapping_add(epoch_ns).wrapping_add(shift_of(k));
+                pump.run(wire, sd.register_write(0x0981u16, 0u8), long, stop)?
+                    .map_err(|e| at("DC activation", e))?;
+                pump.run(wire, sd.register_write(0x0990u16, start), long, stop)?
+                    .map_err(|e| at("SYNC0 start time", e))?;
+                pump.run(
+                    wire,
+                    sd.register_write(0x09A0u16, period as u32),
+                    long,
+                    stop,
+                )?
+                .map_err(|e| at("SYNC0 cycle time", e))?;
+                pump.run(wire, sd.register_write(0x0981u16, 0x03u8), long, stop)?
+                    .map_err(|e| at("DC activation", e))?;
+            }
+            Some(Dc {
+                reference,
+                station,
+                epoch_ns,
+                cycle_ns: period,
+                wake_ns: wake.wrapping_add(epoch_ns),
+                shift_ns: shift_of(first),
+                latch_shift_ns: latch_shift.unwrap_or(0),
+                on_sync0: on_sync0.iter().fold(0, |m, &k| m | 1 << k),
+            })
+        }
+        _ => None,
+    };
+
     // SAFE-OP, then OP with the process data running (a drive may wait for valid outputs).
     let group = pump
         .run(wire, group.into_safe_op(md), long, stop)?
@@ -513,6 +752,7 @@ fn bring_up(
         layout,
         names: found.into_iter().map(|f| f.1).collect(),
         emergencies: Vec::new(),
+        dc,
     })
 }
 

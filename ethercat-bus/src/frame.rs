@@ -3,8 +3,12 @@
 //! FPRD of each SubDevice's AL status and status code, so that every cycle knows which
 //! SubDevice is in which state, and an FPRD of the status of each send mailbox (SM1), so that
 //! a CoE emergency waiting there is seen; the frame after one is seen carries a read of that
-//! mailbox (one per frame). Built once at start-up; a cycle writes the outputs in place,
-//! sends, and takes the reply: no allocation, bounded time.
+//! mailbox (one per frame). With Distributed Clocks, two datagrams follow the LRW: an FPWR of
+//! the reference clock's system time (0x0910) with the MainDevice's time, which keeps the
+//! reference on the host's clock (its drift control follows what is written), and an FRMW of
+//! it, which hands the reference's time to every other DC SubDevice and brings it back.
+//! Built once at start-up; a cycle writes the outputs in place, sends, and takes the reply:
+//! no allocation, bounded time.
 //!
 //! Layout (ETG.1000.4): Ethernet header (broadcast destination, EtherType 0x88A4), EtherCAT
 //! header (length of the datagrams, type 1), then datagrams of a 10-byte header (command,
@@ -15,6 +19,14 @@ use shm_schema::ethercat::MAX_SUBDEVICES;
 
 /// Logical read-write.
 const LRW: u8 = 12;
+/// Configured-address physical write.
+const FPWR: u8 = 5;
+/// Configured-address read, multiple write.
+const FRMW: u8 = 14;
+/// DC system time.
+const DC_SYSTEM_TIME: u16 = 0x0910;
+/// Bytes of the DC datagrams (FPWR and FRMW of the 64-bit system time).
+const DC_BYTES: usize = 2 * (DGRAM + 8 + WKC);
 /// Configured-address physical read.
 pub const FPRD: u8 = 4;
 /// SM1's status register (bit 3: the mailbox is full).
@@ -117,11 +129,14 @@ pub struct CyclicFrame {
     read_next: Option<usize>,
     /// The SubDevice whose mailbox the frame sent last reads.
     read_sent: Option<usize>,
+    /// Bytes of the DC datagrams ([`DC_BYTES`] with a reference clock, else 0).
+    dc_len: usize,
 }
 
 impl CyclicFrame {
-    /// The frame for `layout`, or why it does not fit in one Ethernet frame.
-    pub fn new(layout: Layout) -> Result<Self, String> {
+    /// The frame for `layout` (with the DC datagrams when the bus has a reference clock, at
+    /// station address `reference`), or why it does not fit in one Ethernet frame.
+    pub fn new(layout: Layout, reference: Option<u16>) -> Result<Self, String> {
         let n = layout.count.min(MAX_SUBDEVICES);
         let mut mailboxes = [0u8; MAX_SUBDEVICES];
         let mut mailbox_count = 0;
@@ -138,9 +153,11 @@ impl CyclicFrame {
                 "a send mailbox of {largest} bytes is more than the cycle reads ({MAX_MAILBOX})"
             ));
         }
+        let dc_len = if reference.is_some() { DC_BYTES } else { 0 };
         let datagrams = DGRAM
             + usize::from(layout.len)
             + WKC
+            + dc_len
             + n * (DGRAM + AL_BYTES + WKC)
             + mailbox_count * (DGRAM + 1 + WKC);
         let len = ETH + ECAT + datagrams;
@@ -176,8 +193,13 @@ impl CyclicFrame {
             LRW,
             layout.logical_start,
             usize::from(layout.len),
-            reads > 0,
+            reads > 0 || reference.is_some(),
         );
+        if let Some(station) = reference {
+            let address = u32::from(station) | (u32::from(DC_SYSTEM_TIME) << 16);
+            datagram(&mut buf, FPWR, address, 8, true);
+            datagram(&mut buf, FRMW, address, 8, reads > 0);
+        }
         for (k, s) in layout.slots[..n].iter().enumerate() {
             let address = u32::from(s.station) | (u32::from(AL_STATUS) << 16);
             datagram(&mut buf, FPRD, address, AL_BYTES, k + 1 < reads);
@@ -198,6 +220,7 @@ impl CyclicFrame {
             mailbox_count,
             read_next: None,
             read_sent: None,
+            dc_len,
         })
     }
 
@@ -224,14 +247,54 @@ impl CyclicFrame {
         &self.reply[at..at + usize::from(len)]
     }
 
+    /// Where the datagrams after the LRW start.
+    fn after_lrw(&self) -> usize {
+        Self::image_at() + usize::from(self.layout.len) + WKC
+    }
+
+    /// Where the AL status reads start.
+    fn al_reads_at(&self) -> usize {
+        self.after_lrw() + self.dc_len
+    }
+
+    /// Whether the frame carries the DC datagrams.
+    pub fn has_dc(&self) -> bool {
+        self.dc_len > 0
+    }
+
+    /// Writes `t` (ns, DC system time) as the MainDevice's time the next frame gives the
+    /// reference clock.
+    ///
+    /// # Real-time
+    /// Copies only.
+    pub fn set_master_time(&mut self, t: u64) {
+        if self.dc_len > 0 {
+            let at = self.after_lrw() + DGRAM;
+            self.buf[at..at + 8].copy_from_slice(&t.to_le_bytes());
+        }
+    }
+
+    /// The reference clock's system time as the last reply's FRMW read it, and how many DC
+    /// SubDevices took part (the FRMW's working counter); `None` without DC or when the
+    /// reference did not answer.
+    ///
+    /// # Real-time
+    /// Reads only.
+    pub fn reference_time(&self) -> Option<(u64, u16)> {
+        if self.dc_len == 0 {
+            return None;
+        }
+        let at = self.after_lrw() + DGRAM + 8 + WKC + DGRAM;
+        let r = &self.reply;
+        let wkc = u16::from_le_bytes([r[at + 8], r[at + 9]]);
+        let t = u64::from_le_bytes(r[at..at + 8].try_into().ok()?);
+        (wkc > 0).then_some((t, wkc))
+    }
+
     /// SubDevice `k`'s AL status (state and error bit) and AL status code, as the last reply
     /// brought them.
     pub fn al_status(&self, k: usize) -> (u16, u16) {
-        let at = Self::image_at()
-            + usize::from(self.layout.len)
-            + WKC
-            + k * (DGRAM + AL_BYTES + WKC)
-            + DGRAM;
+        let at = self.al_reads_at() + k * (DGRAM + AL_BYTES + WKC) + DGRAM;
         let r = &self.reply;
         (
             u16::from_le_bytes([r[at], r[at + 1]]),
@@ -241,9 +304,7 @@ impl CyclicFrame {
 
     /// Where the status read of the `j`-th send mailbox starts.
     fn mailbox_status_at(&self, j: usize) -> usize {
-        Self::image_at()
-            + usize::from(self.layout.len)
-            + WKC
+        self.al_reads_at()
             + self.layout.count.min(MAX_SUBDEVICES) * (DGRAM + AL_BYTES + WKC)
             + j * (DGRAM + 1 + WKC)
     }
@@ -290,22 +351,30 @@ impl CyclicFrame {
     /// Copies only.
     pub fn next_frame(&mut self) -> &[u8] {
         self.index = self.index.wrapping_add(1);
-        let mut at = ETH + ECAT;
         let n = self.layout.count.min(MAX_SUBDEVICES);
+        // The LRW: its index and working counter (its data are the outputs).
+        let mut at = ETH + ECAT;
+        let lrw_len = usize::from(self.layout.len);
+        self.buf[at + 1] = self.index;
+        self.buf[at + DGRAM + lrw_len..at + DGRAM + lrw_len + WKC].fill(0);
         let mut last = at;
-        for k in 0..=n + self.mailbox_count {
-            let len = if k == 0 {
-                usize::from(self.layout.len)
-            } else if k <= n {
-                AL_BYTES
-            } else {
-                1
-            };
-            self.buf[at + 1] = self.index;
-            if k > 0 {
-                self.buf[at + DGRAM..at + DGRAM + len].fill(0);
+        at += DGRAM + lrw_len + WKC;
+        if self.dc_len > 0 {
+            // The FPWR keeps the time written into it; the FRMW's data is read.
+            for read in [false, true] {
+                self.buf[at + 1] = self.index;
+                if read {
+                    self.buf[at + DGRAM..at + DGRAM + 8].fill(0);
+                }
+                self.buf[at + DGRAM + 8..at + DGRAM + 8 + WKC].fill(0);
+                last = at;
+                at += DGRAM + 8 + WKC;
             }
-            self.buf[at + DGRAM + len..at + DGRAM + len + WKC].fill(0);
+        }
+        for k in 0..n + self.mailbox_count {
+            let len = if k < n { AL_BYTES } else { 1 };
+            self.buf[at + 1] = self.index;
+            self.buf[at + DGRAM..at + DGRAM + len + WKC].fill(0);
             last = at;
             at += DGRAM + len + WKC;
         }
@@ -358,7 +427,7 @@ impl CyclicFrame {
         let wkc_at = Self::image_at() + usize::from(self.layout.len);
         let wkc = u16::from_le_bytes([frame[wkc_at], frame[wkc_at + 1]]);
         let mut al_read = 0;
-        let mut at = wkc_at + WKC;
+        let mut at = self.al_reads_at();
         for _ in 0..self.layout.count.min(MAX_SUBDEVICES) {
             let w = at + DGRAM + AL_BYTES;
             if u16::from_le_bytes([frame[w], frame[w + 1]]) == 1 {

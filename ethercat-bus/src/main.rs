@@ -1,6 +1,6 @@
 //! `ethercat-bus`: the drives' process of a cell on EtherCAT. See the crate documentation.
 
-use ethercat_bus::bringup::{BringUpError, Master, Up};
+use ethercat_bus::bringup::{BringUpError, Dc, Master, Timing, Up};
 use ethercat_bus::frame::{CyclicFrame, Layout, Reply, coe_emergency};
 use ethercat_bus::{BusIo, Drives};
 use ethercat_wire::{Received, Wire};
@@ -15,7 +15,7 @@ use shm_schema::{
 };
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -106,6 +106,19 @@ struct Bus {
     io_image: Option<(u64, u64)>,
     /// The inputs last reported, and when.
     io_reported: Option<(u64, u64)>,
+    /// Distributed Clocks, when SubDevices run on SYNC0.
+    dc: Option<Dc>,
+    /// The recovery thread's new `Dc::epoch_ns` and `Dc::wake_ns` (the bus brought up again
+    /// has new clocks), stored before it hands the wire back.
+    dc_again: Arc<[AtomicU64; 2]>,
+    /// The SYNC0 cycle the last frame came in.
+    last_sync0_cycle: Option<u64>,
+    /// SYNC0 events without a frame before them: in all, and since the last event told.
+    sync0_late: u64,
+    sync0_late_untold: u64,
+    last_sync0_event_ns: u64,
+    /// How long before the next SYNC0 each frame passed the reference clock.
+    sync0_lead: Box<LatencyHistogramV1>,
     /// This process' index in the table (the source of its input reports).
     source: u32,
     io_state: Sub<DigitalIoV1>,
@@ -177,7 +190,13 @@ impl Bus {
             }
             owner::BACK => {
                 // The same line in the same layout (the thread checked it): the cycle goes on
-                // with its frame, the drives' states read afresh.
+                // with its frame, the drives' states read afresh, and the clocks as the
+                // thread set them up.
+                if let Some(dc) = self.dc.as_mut() {
+                    dc.epoch_ns = self.dc_again[0].load(Ordering::Acquire);
+                    dc.wake_ns = self.dc_again[1].load(Ordering::Acquire);
+                }
+                self.last_sync0_cycle = None;
                 self.lost = 0;
                 self.in_op = [true; MAX_SUBDEVICES];
                 self.degraded_since_ns = None;
@@ -209,6 +228,45 @@ impl Bus {
                 ") sent an emergency",
             ],
         ));
+    }
+
+    /// With Distributed Clocks: from the reference clock's time in the reply, the host times
+    /// of the last input latch before the frame and of the SYNC0 after it, which applies
+    /// the frame's outputs (`None` before the first latch, or without DC); records
+    /// how long before the next SYNC0 the frame came, and counts the SYNC0 events no frame
+    /// came before (`sync0-late`).
+    ///
+    /// # Real-time
+    /// Arithmetic, a histogram record and an event.
+    fn sync0_check(&mut self, now: u64, cx: &mut Cycle<'_>) -> Option<(u64, u64)> {
+        let dc = self.dc?;
+        let (r, _) = self.frame.reference_time()?;
+        let (last, lead) = dc.around(r)?;
+        self.sync0_lead.record(lead);
+        let cycle = dc.cycle_of(r);
+        if let Some(before) = self.last_sync0_cycle
+            && cycle > before + 1
+        {
+            let late = cycle - before - 1;
+            self.sync0_late += late;
+            self.sync0_late_untold += late;
+        }
+        self.last_sync0_cycle = Some(cycle);
+        if self.sync0_late_untold > 0 && now.saturating_sub(self.last_sync0_event_ns) >= REPEAT_NS {
+            self.last_sync0_event_ns = now;
+            cx.events.push(EventV1::new(
+                now,
+                code::SYNC0_LATE,
+                -1,
+                std::mem::take(&mut self.sync0_late_untold) as f64,
+                0.0,
+                &["SYNC0 came with no new frame before it"],
+            ));
+        }
+        Some((
+            last.wrapping_sub(dc.epoch_ns),
+            r.wrapping_add(lead).wrapping_sub(dc.epoch_ns),
+        ))
     }
 
     fn publish_latency(&mut self, now_ns: u64) {
@@ -286,6 +344,11 @@ impl Task for Bus {
             self.io.write(outputs, &mut self.frame);
         }
         let sent_ns = runtime::time::now_ns();
+        if let Some(dc) = &self.dc {
+            // The reference clock follows the host's (its drift control, every frame).
+            self.frame
+                .set_master_time(sent_ns.wrapping_add(dc.epoch_ns));
+        }
         let sent = self.wire.send(self.frame.next_frame()).is_ok();
         let reply = if sent {
             self.await_reply(sent_ns + self.reply_wait_ns)
@@ -423,14 +486,17 @@ impl Task for Bus {
                 });
             }
         }
+        // On SYNC0 the inputs were latched before the frame (the feedback's time) and the
+        // command applies at the next SYNC0; else both as the frame passes.
+        let (latched_ns, applied_ns) = self.sync0_check(now, cx).unwrap_or((sent_ns, sent_ns));
         self.seq += 1;
         let mut fb = self
             .drives
-            .read(sent_ns, self.seq, valid, &self.frame, cx.events);
+            .read(latched_ns, self.seq, valid, &self.frame, cx.events);
         if let Some(c) = command.filter(|c| c.seq != self.last_applied_seq) {
             self.last_applied_seq = c.seq;
             if c.feedback_stamp_ns > 0 {
-                fb.sense_to_command_ns = sent_ns.saturating_sub(c.feedback_stamp_ns);
+                fb.sense_to_command_ns = applied_ns.saturating_sub(c.feedback_stamp_ns);
                 self.sense_to_command.record(fb.sense_to_command_ns);
             }
         }
@@ -443,11 +509,11 @@ impl Task for Bus {
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
         self.publish_latency(now_ns);
-        let us = |q: u64| {
-            self.round_trip
-                .percentile(q, 1000)
-                .map_or(f64::NAN, |v| v as f64 / 1e3)
+        // A percentile of a histogram, in µs.
+        let us_of = |h: &LatencyHistogramV1, q: u64| {
+            h.percentile(q, 1000).map_or(f64::NAN, |v| v as f64 / 1e3)
         };
+        let us = |q: u64| us_of(&self.round_trip, q);
         tracing::info!(
             "frame round trip over {} frames: p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs",
             self.round_trip.count,
@@ -455,6 +521,19 @@ impl Task for Bus {
             us(990),
             self.round_trip.max_ns as f64 / 1e3
         );
+        if let Some(dc) = &self.dc {
+            let lead = |q: u64| us_of(&self.sync0_lead, q);
+            tracing::info!(
+                "SYNC0 every {} µs, {} µs after the wake-up: the frame came p50 {:.1} µs, p1 {:.1} µs, least {:.1} µs before it over {} frames; {} SYNC0 events with no new frame before them",
+                dc.cycle_ns / 1000,
+                dc.shift_ns / 1000,
+                lead(500),
+                lead(10),
+                self.sync0_lead.min_ns as f64 / 1e3,
+                self.sync0_lead.count,
+                self.sync0_late
+            );
+        }
         self.quit.store(true, Ordering::Release);
         if let Some(t) = self.recovery.take() {
             let _ = t.join();
@@ -506,7 +585,12 @@ struct Recovery {
     wire: Arc<Wire>,
     bus: EthercatConfigV1,
     axes: Vec<shm_schema::AxisConfigV2>,
+    timing: Timing,
     layout: Layout,
+    /// The bus' clocks as first brought up: a bus back must have the same reference clock
+    /// and SubDevices on SYNC0; its new epoch and wake-up go to the cycle through `dc_again`.
+    dc: Option<Dc>,
+    dc_again: Arc<[AtomicU64; 2]>,
     owner: Arc<AtomicU8>,
     quit: Arc<AtomicBool>,
 }
@@ -527,12 +611,24 @@ impl Recovery {
                 continue;
             }
             let attempt = Instant::now();
-            let failure = match self
-                .master
-                .bring_up(&self.bus, &self.axes, &self.wire, &give_up)
-            {
-                Ok(up) if up.layout == self.layout => {
+            let same_clocks = |dc: Option<Dc>| {
+                dc.map(|d| (d.reference, d.station, d.cycle_ns, d.shift_ns, d.on_sync0))
+            };
+            let failure = match self.master.bring_up(
+                &self.bus,
+                &self.axes,
+                self.timing,
+                &self.wire,
+                &give_up,
+            ) {
+                Ok(up)
+                    if up.layout == self.layout && same_clocks(up.dc) == same_clocks(self.dc) =>
+                {
                     tell_emergencies(&up);
+                    if let Some(dc) = up.dc {
+                        self.dc_again[0].store(dc.epoch_ns, Ordering::Release);
+                        self.dc_again[1].store(dc.wake_ns, Ordering::Release);
+                    }
                     tracing::info!(
                         "bus on {} back in OP: {}",
                         self.bus.interface(),
@@ -542,6 +638,12 @@ impl Recovery {
                     self.owner.store(owner::BACK, Ordering::Release);
                     continue;
                 }
+                Ok(up) if up.layout == self.layout => format!(
+                    "the bus on {} came back with other clocks ({:?}, where the cycle has {:?}): `supervisor restart drives`",
+                    self.bus.interface(),
+                    up.dc,
+                    self.dc
+                ),
                 Ok(up) => format!(
                     "the bus on {} came back with another process image ({:?}, where the cycle has {:?}): `supervisor restart drives`",
                     self.bus.interface(),
@@ -583,8 +685,12 @@ fn main() -> ExitCode {
             let wire = Arc::new(open_wire(bus.interface())?);
             let axes = &ctx.cell.axis[..ctx.cell.axes as usize];
             let mut master = Master::new()?;
+            let timing = Timing {
+                period_ns: ctx.own.period_ns,
+                phase_ns: ctx.own.phase_ns,
+            };
             let up = master
-                .bring_up(&bus, axes, &wire, &runtime::signals::stop_requested)
+                .bring_up(&bus, axes, timing, &wire, &runtime::signals::stop_requested)
                 .map_err(|e| -> SetupError {
                     match e {
                         BringUpError::Refused(m) => Box::new(process::Refused(m)),
@@ -592,7 +698,22 @@ fn main() -> ExitCode {
                     }
                 })?;
             tell_emergencies(&up);
-            let frame = CyclicFrame::new(up.layout)?;
+            let frame = CyclicFrame::new(up.layout, up.dc.map(|d| d.station))?;
+            if let Some(dc) = &up.dc {
+                let positions: Vec<String> = (0..MAX_SUBDEVICES)
+                    .filter(|k| dc.on_sync0 & (1 << k) != 0)
+                    .map(|k| k.to_string())
+                    .collect();
+                tracing::info!(
+                    "Distributed Clocks: reference clock position {} ({}); SYNC0 every {} µs on position(s) {}, the first {} µs after the bus process wakes",
+                    dc.reference,
+                    up.names.get(dc.reference).map_or("?", String::as_str),
+                    dc.cycle_ns / 1000,
+                    positions.join(", "),
+                    dc.shift_ns / 1000
+                );
+            }
+            let dc_again = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
             let io = BusIo::new(&bus, ctx.cell.io(), &up.layout)
                 .map_err(|m| -> SetupError { Box::new(process::Refused(m)) })?;
             // The cycle waits for its reply at most half a period.
@@ -623,7 +744,10 @@ fn main() -> ExitCode {
                         wire: wire.clone(),
                         bus,
                         axes: axes.to_vec(),
+                        timing,
                         layout: up.layout,
+                        dc: up.dc,
+                        dc_again: dc_again.clone(),
                         owner: wire_owner.clone(),
                         quit: quit.clone(),
                     };
@@ -677,6 +801,13 @@ fn main() -> ExitCode {
                 io,
                 io_image: None,
                 io_reported: None,
+                dc: up.dc,
+                dc_again,
+                last_sync0_cycle: None,
+                sync0_late: 0,
+                sync0_late_untold: 0,
+                last_sync0_event_ns: 0,
+                sync0_lead: Box::default(),
                 source: ctx.index as u32,
                 io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
                 field_inputs: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,

@@ -141,7 +141,7 @@ fn command(seq: u64, x: f64, y: f64) -> DriveCommandV2 {
 #[test]
 fn the_cycle_converts_both_ways_sends_only_safe_words_by_itself_and_never_allocates() {
     let (cfg, layout) = bus();
-    let mut frame = CyclicFrame::new(layout).expect("fits a frame");
+    let mut frame = CyclicFrame::new(layout, None).expect("fits a frame");
     let mut drives = Drives::new(&cfg, 2, &[8, 8]);
     let mut events = EventQueue::default();
     let out = |f: &mut CyclicFrame, k: usize| {

@@ -105,7 +105,16 @@ fn an_emergency_answering_a_start_up_sdo_is_taken_out_of_ethercrabs_way_and_repo
             enter(&ns);
             let wire = Wire::open("m0", Duration::from_millis(1)).expect("m0");
             let mut master = Master::new().expect("the process' MainDevice");
-            master.bring_up(&cfg, &axes, &wire, &|| false)
+            master.bring_up(
+                &cfg,
+                &axes,
+                ethercat_bus::bringup::Timing {
+                    period_ns: 1_000_000,
+                    phase_ns: 0,
+                },
+                &wire,
+                &|| false,
+            )
         }
     })
     .join();

@@ -38,6 +38,7 @@ impl SubDevice {
             let al = self.esc.al_state();
             let answer = self.terminal.mailbox(&request, capacity, al);
             self.outbox.extend(answer);
+            self.esc.set_needs_sync0(self.terminal.on_sync0());
         }
         self.post();
     }
@@ -150,8 +151,14 @@ impl Bus {
     /// devices take their outputs. A frame that does not add up is refused (and dropped: the
     /// MainDevice sees a lost frame).
     pub fn handle(&mut self, frame: &mut [u8]) -> Result<usize, FrameError> {
-        let now = crate::now_ns();
+        self.handle_at(frame, crate::now_ns())
+    }
+
+    /// [`Bus::handle`] at host time `now` (ns, `CLOCK_MONOTONIC`): what the ESCs' clocks,
+    /// watchdogs and the devices' models take as the frame's time.
+    pub fn handle_at(&mut self, frame: &mut [u8], now: u64) -> Result<usize, FrameError> {
         for d in &mut self.devices {
+            d.esc.set_time(now);
             d.esc.check_watchdog(now);
             d.terminal.inputs(&mut d.esc, now);
         }
@@ -171,8 +178,13 @@ impl Bus {
     /// Between frames (the emulator's idle ticks): the SyncManager watchdogs count, the
     /// drives' models run on.
     pub fn idle(&mut self) {
-        let now = crate::now_ns();
+        self.idle_at(crate::now_ns());
+    }
+
+    /// [`Bus::idle`] at host time `now`.
+    pub fn idle_at(&mut self, now: u64) {
         for d in &mut self.devices {
+            d.esc.set_time(now);
             d.esc.check_watchdog(now);
             d.terminal.idle(&d.esc, now);
             d.post();

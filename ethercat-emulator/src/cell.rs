@@ -322,6 +322,11 @@ fn carry_out(bus: &mut Bus, wiring: &mut Wiring, order: Order, cable: &mut bool)
                     d.esc.set_product(f.code);
                 }
             }
+            kind::CLOCK_DRIFT => {
+                if let Some(d) = device(bus, f.position) {
+                    d.esc.set_drift(f64::from(f.code as i32));
+                }
+            }
             kind::INPUT => {
                 let at = (f.position as usize, f.bit as u16);
                 wiring.forced.retain(|x| (x.0, x.1) != at);
@@ -379,8 +384,18 @@ fn answer(
             Ok(Received::Nothing) => bus.idle(),
             Err(e) => {
                 tracing::error!("{e}");
-                return;
+                break;
             }
+        }
+    }
+    for (k, d) in bus.devices.iter().enumerate() {
+        if let Terminal::Drive(drive) = &d.terminal {
+            tracing::info!(
+                "position {k} ({}): {} SYNC0 events, {} without new outputs (0x1C32:0B)",
+                drive.name(),
+                drive.sync0_events(),
+                drive.sm_events_missed()
+            );
         }
     }
 }
@@ -489,13 +504,15 @@ struct FaultArgs {
     /// The cell's instance.
     #[arg(long)]
     instance: String,
-    /// cable-pulled, cable-back, leave-op, emergency, identity, input.
+    /// cable-pulled, cable-back, leave-op, emergency, identity, input, clock-drift.
     kind: String,
-    /// The SubDevice's position on the line (leave-op, emergency, identity).
+    /// The SubDevice's position on the line (leave-op, emergency, identity, input,
+    /// clock-drift).
     position: Option<u32>,
     /// The AL status code (leave-op, default 0x001B), the emergency's error code, the
-    /// product code (identity), or the input's value (input: 0 or 1); decimal or 0x
-    /// hexadecimal.
+    /// product code (identity), the input's value (input: 0 or 1); decimal or 0x
+    /// hexadecimal. The drift of its clock's quartz (clock-drift: ppm, -1000..=1000).
+    #[arg(allow_hyphen_values = true)]
     code: Option<String>,
     /// The input bit of the terminal at POSITION (input).
     #[arg(long)]
@@ -528,9 +545,22 @@ fn fault_of(a: &FaultArgs) -> Result<EmulatorFaultV1, String> {
         "emergency" => (kind::EMERGENCY, position()?, code(None)?),
         "identity" => (kind::IDENTITY, position()?, code(None)?),
         "input" => (kind::INPUT, position()?, code(None)?),
+        "clock-drift" => {
+            let text = a
+                .code
+                .as_deref()
+                .ok_or("clock-drift needs the drift in ppm")?;
+            let ppm: i32 = text
+                .trim()
+                .parse()
+                .ok()
+                .filter(|p: &i32| p.abs() <= 1000)
+                .ok_or_else(|| format!("clock drift {text:?} must be -1000..=1000 ppm"))?;
+            (kind::CLOCK_DRIFT, position()?, ppm as u32)
+        }
         other => {
             return Err(format!(
-                "{other:?} is not a fault the emulator makes (cable-pulled, cable-back, leave-op, emergency, identity, input)"
+                "{other:?} is not a fault the emulator makes (cable-pulled, cable-back, leave-op, emergency, identity, input, clock-drift)"
             ));
         }
     };

@@ -33,6 +33,8 @@ pub mod abort {
     pub const NOT_MAPPABLE: u32 = 0x0604_0041;
     /// The number and length of the objects to be mapped would exceed the PDO length.
     pub const MAPPING_LENGTH: u32 = 0x0604_0042;
+    /// Value range of parameter exceeded (write access).
+    pub const VALUE_RANGE: u32 = 0x0609_0030;
     /// Data cannot be transferred or stored because of the present device state.
     pub const STATE: u32 = 0x0800_0022;
 }

@@ -42,7 +42,27 @@ const INPUTS: u16 = 0x1180;
 /// Entries a PDO mapping object holds.
 const MAX_ENTRIES: u8 = 16;
 
-pub use cia402::pdo::{RX_DEFAULT, Scaling, TX_DEFAULT, mapping, obj};
+pub use cia402::pdo::{RX_DEFAULT, Scaling, TX_DEFAULT, mapping, obj, sync};
+
+/// SYNC0 events handed to the model at most per frame or idle tick: behind by more (the
+/// emulator was not scheduled), the older ones count as missed and are skipped.
+const MAX_CATCH_UP: u64 = 64;
+
+/// A drive on SYNC0 (its 0x1C32:01 is 2 and its ESC's SYNC0 active, in SAFE-OP or OP): the
+/// outputs a frame brings wait for the next SYNC0; the inputs the next frame reads are
+/// latched 0x1C33:03 (the input shift) after each SYNC0.
+#[derive(Clone, Debug, Default)]
+struct OnSync0 {
+    /// SYNC0's first event (system time) as last seen, the next SYNC0 to hand over, and the
+    /// next input latch.
+    first: u64,
+    next: u64,
+    next_latch: u64,
+    /// Outputs a frame wrote in OP since the last event.
+    pending: Option<Vec<u8>>,
+    /// The inputs the last event latched.
+    latched: Option<Vec<u8>>,
+}
 
 /// The objects one way may map: those of its default mapping (an RxPDO the outputs', a
 /// TxPDO the inputs'), each with its size in bits.
@@ -107,6 +127,10 @@ pub struct Drive {
     counter: u8,
     /// A fault injection for the model's next cycle (`<i>/drives/inject` in a test cell).
     injection: Option<FaultInjectionV1>,
+    /// While it runs on SYNC0.
+    sync0: Option<OnSync0>,
+    /// SYNC0 events it has taken.
+    sync0_events: u64,
 }
 
 impl Drive {
@@ -153,6 +177,21 @@ impl Drive {
             d.variable(index, 0, &vec![0u8; usize::from(bits / 8)]);
         }
         d.set(obj::MODE, 0, &[8]); // CSP until told otherwise
+        // Synchronisation (ETG.1020): SM-synchronous until the MainDevice asks for SYNC0;
+        // free run, SM event and DC SYNC0 supported, down to 125 µs.
+        for index in [obj::SM2_SYNC, obj::SM3_SYNC] {
+            d.constant(index, 0, &[0x20])
+                .variable(index, sync::MODE, &sync::SM_EVENT.to_le_bytes())
+                .variable(index, sync::CYCLE_TIME, &0u32.to_le_bytes())
+                .variable(index, sync::SHIFT_TIME, &0u32.to_le_bytes())
+                .constant(index, sync::SUPPORTED, &0x0007u16.to_le_bytes())
+                .constant(
+                    index,
+                    sync::MIN_CYCLE_TIME,
+                    &(crate::esc::MIN_SYNC0_CYCLE_NS as u32).to_le_bytes(),
+                )
+                .constant(index, sync::SM_EVENT_MISSED, &0u16.to_le_bytes());
+        }
         for (pdo, entries, assign) in [
             (obj::RXPDO, &RX_DEFAULT, obj::SM2_ASSIGN),
             (obj::TXPDO, &TX_DEFAULT, obj::SM3_ASSIGN),
@@ -182,6 +221,8 @@ impl Drive {
             emergency_on_request: None,
             counter: 1,
             injection: None,
+            sync0: None,
+            sync0_events: 0,
         };
         // Its first command is its dictionary's: Disable voltage, CSP.
         drive.take_command();
@@ -327,8 +368,17 @@ impl Drive {
                 index,
                 obj::RXPDO | obj::TXPDO | obj::SM2_ASSIGN | obj::SM3_ASSIGN
             );
-            if mapping_object && al != Some(AlState::PreOp) {
+            let sync_mode = matches!(index, obj::SM2_SYNC | obj::SM3_SYNC) && sub == sync::MODE;
+            if (mapping_object || sync_mode) && al != Some(AlState::PreOp) {
                 return coe::abort_reply(request, index, sub, coe::abort::STATE);
+            }
+            if sync_mode
+                && !matches!(
+                    data.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])),
+                    Some(sync::FREE_RUN | sync::SM_EVENT | sync::DC_SYNC0)
+                )
+            {
+                return coe::abort_reply(request, index, sub, coe::abort::VALUE_RANGE);
             }
             if let Some(code) = self.refuse_mapping(index, sub, data) {
                 return coe::abort_reply(request, index, sub, code);
@@ -395,15 +445,111 @@ impl Drive {
             .collect()
     }
 
-    /// Before a frame at `now_ns`: the model run up to then, and its inputs (TxPDO) packed
-    /// into SM3's buffer: what the frame reads is where the axis is as the frame passes, as a
-    /// drive latches its inputs (not where it was at the previous frame, a period late).
-    pub fn inputs(&mut self, esc: &mut Esc, now_ns: u64) {
-        self.step(now_ns, esc.al_state() == Some(AlState::Op));
-        let (start, len, _, on) = esc.sm(3);
-        if !on || start != INPUTS {
-            return;
+    /// Whether the MainDevice asked it to run on SYNC0 (0x1C32:01 = 2).
+    pub fn on_sync0(&self) -> bool {
+        self.dictionary
+            .get(obj::SM2_SYNC, sync::MODE)
+            .is_some_and(|e| e.data == sync::DC_SYNC0.to_le_bytes())
+    }
+
+    /// SYNC0 events it has taken (its outputs applied, or missed).
+    pub fn sync0_events(&self) -> u64 {
+        self.sync0_events
+    }
+
+    /// How long after SYNC0 it latches its inputs (0x1C33:03, ns).
+    pub fn input_shift_ns(&self) -> u32 {
+        self.dictionary
+            .get(obj::SM3_SYNC, sync::SHIFT_TIME)
+            .and_then(|e| e.data.get(..4))
+            .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    /// SYNC0 events in OP that found no new outputs (0x1C32:0B).
+    pub fn sm_events_missed(&self) -> u16 {
+        self.dictionary
+            .get(obj::SM2_SYNC, sync::SM_EVENT_MISSED)
+            .and_then(|e| e.data.get(..2))
+            .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]))
+    }
+
+    /// SYNC0 as it runs it: its ESC's, when it was asked for it and is in SAFE-OP or OP.
+    fn sync0_of(&self, esc: &Esc) -> Option<(u64, u64)> {
+        let state = esc.al_state();
+        let running = matches!(state, Some(AlState::SafeOp | AlState::Op));
+        if running && self.on_sync0() {
+            esc.sync0()
+        } else {
+            None
         }
+    }
+
+    /// Hands the model every SYNC0 event up to the frame's time `now_ns`: at each, the model
+    /// runs up to it, takes the outputs a frame brought since the last (in OP; none: an SM
+    /// event missed) and latches its inputs. Off SYNC0, forgets it ran on it.
+    fn catch_up(&mut self, esc: &Esc, now_ns: u64) {
+        let Some((first, cycle)) = self.sync0_of(esc) else {
+            self.sync0 = None;
+            return;
+        };
+        let shift = u64::from(self.input_shift_ns()) % cycle;
+        let mut on = match self.sync0.take() {
+            Some(s) if s.first == first => s,
+            _ => OnSync0 {
+                first,
+                next: first,
+                next_latch: first + shift,
+                ..OnSync0::default()
+            },
+        };
+        let system = esc.system_time();
+        let op = esc.al_state() == Some(AlState::Op);
+        if on.next <= system {
+            let due = (system - on.next) / cycle + 1;
+            if due > MAX_CATCH_UP {
+                let skipped = due - MAX_CATCH_UP;
+                on.next += skipped * cycle;
+                on.next_latch += skipped * cycle;
+                if op {
+                    self.count_missed(skipped);
+                }
+            }
+        }
+        // SYNC0 (the outputs) and the input latch in the order they come.
+        loop {
+            let output = on.next <= on.next_latch;
+            let t = if output { on.next } else { on.next_latch };
+            if t > system {
+                break;
+            }
+            self.step(now_ns.saturating_sub(system - t), op);
+            if output {
+                self.sync0_events += 1;
+                if op {
+                    match on.pending.take() {
+                        Some(data) => self.take_outputs(&data),
+                        None => self.count_missed(1),
+                    }
+                }
+                on.next += cycle;
+            } else {
+                on.latched = Some(self.packed_inputs(esc));
+                on.next_latch += cycle;
+            }
+        }
+        self.sync0 = Some(on);
+    }
+
+    fn count_missed(&mut self, n: u64) {
+        let missed = u64::from(self.sm_events_missed()) + n;
+        let missed = missed.min(u64::from(u16::MAX)) as u16;
+        self.dictionary
+            .set(obj::SM2_SYNC, sync::SM_EVENT_MISSED, &missed.to_le_bytes());
+    }
+
+    /// Its inputs (TxPDO) as the mapping packs them, SM3's length.
+    fn packed_inputs(&self, esc: &Esc) -> Vec<u8> {
+        let (_, len, _, _) = esc.sm(3);
         let mut buf = Vec::with_capacity(usize::from(len));
         for (index, _) in self.mapped(obj::SM3_ASSIGN, obj::TXPDO) {
             if let Some(e) = self.dictionary.get(index, 0) {
@@ -411,27 +557,60 @@ impl Drive {
             }
         }
         buf.resize(usize::from(len), 0);
+        buf
+    }
+
+    /// The outputs (RxPDO) `data` into the dictionary, and the drive's new command.
+    fn take_outputs(&mut self, data: &[u8]) {
+        let mut at = 0;
+        for (index, bits) in self.mapped(obj::SM2_ASSIGN, obj::RXPDO) {
+            let n = usize::from(bits / 8);
+            if let Some(v) = data.get(at..at + n) {
+                self.dictionary.set(index, 0, v);
+            }
+            at += n;
+        }
+        self.take_command();
+    }
+
+    /// Before a frame at `now_ns`: the model run up to then, and its inputs (TxPDO) packed
+    /// into SM3's buffer. SM-synchronous, what the frame reads is where the axis is as the
+    /// frame passes (not where it was at the previous frame, a period late); on SYNC0, what
+    /// the last SYNC0 latched.
+    pub fn inputs(&mut self, esc: &mut Esc, now_ns: u64) {
+        self.catch_up(esc, now_ns);
+        self.step(now_ns, esc.al_state() == Some(AlState::Op));
+        let (start, _, _, on) = esc.sm(3);
+        if !on || start != INPUTS {
+            return;
+        }
+        let buf = match self.sync0.as_ref().and_then(|s| s.latched.clone()) {
+            Some(latched) => latched,
+            None => self.packed_inputs(esc),
+        };
         esc.set_memory(INPUTS, &buf);
     }
 
     /// After a frame: in OP the outputs (RxPDO) from SM2's buffer, if the frame wrote them
-    /// (`written`), become the drive's new command; then the model steps.
+    /// (`written`), become the drive's new command (on SYNC0: at the next SYNC0); then the
+    /// model steps.
     pub fn outputs(&mut self, esc: &Esc, written: bool, now_ns: u64) {
         let op = esc.al_state() == Some(AlState::Op);
         let (start, len, _, on) = esc.sm(2);
         if op && written && on && start == OUTPUTS {
             let data = esc.memory(OUTPUTS, usize::from(len)).to_vec();
-            let mut at = 0;
-            for (index, bits) in self.mapped(obj::SM2_ASSIGN, obj::RXPDO) {
-                let n = usize::from(bits / 8);
-                if let Some(v) = data.get(at..at + n) {
-                    self.dictionary.set(index, 0, v);
-                }
-                at += n;
+            match self.sync0.as_mut() {
+                Some(s) => s.pending = Some(data),
+                None => self.take_outputs(&data),
             }
-            self.take_command();
         }
         self.step(now_ns, op);
+    }
+
+    /// Between frames: the SYNC0 events up to `now_ns`, and the model runs on.
+    pub fn idle(&mut self, esc: &Esc, now_ns: u64) {
+        self.catch_up(esc, now_ns);
+        self.step(now_ns, esc.al_state() == Some(AlState::Op));
     }
 
     /// The command in the dictionary, in the model's units.

@@ -70,8 +70,24 @@ pub mod reg {
     pub const SM: u16 = 0x0800;
     /// DC receive time of port 0 (a write latches every port's).
     pub const DC_RECEIVE_TIME_PORT0: u16 = 0x0900;
-    /// DC system time.
+    /// DC system time (a read: the ESC's system time now; a write: compared with it, the
+    /// difference into [`DC_TIME_DIFFERENCE`] and the drift control).
     pub const DC_SYSTEM_TIME: u16 = 0x0910;
+    /// DC local time of the receive time processing unit, latched with the ports'.
+    pub const DC_RECEIVE_TIME_UNIT: u16 = 0x0918;
+    /// DC system time offset: system time = local time + offset.
+    pub const DC_TIME_OFFSET: u16 = 0x0920;
+    /// DC system time delay (from the reference clock to this ESC).
+    pub const DC_TIME_DELAY: u16 = 0x0928;
+    /// DC system time difference of the last write of the system time: bit 31 set when the
+    /// local copy was smaller, bits 0-30 the difference (ns).
+    pub const DC_TIME_DIFFERENCE: u16 = 0x092C;
+    /// DC activation: bit 0 cyclic operation, bit 1 SYNC0, bit 2 SYNC1.
+    pub const DC_ACTIVATION: u16 = 0x0981;
+    /// DC start time of the cyclic operation (system time of the first SYNC0).
+    pub const DC_START_TIME: u16 = 0x0990;
+    /// DC SYNC0 cycle time (ns).
+    pub const DC_SYNC0_CYCLE: u16 = 0x09A0;
     /// DC registers end (exclusive).
     pub const DC_END: u16 = 0x0A00;
 }
@@ -124,6 +140,38 @@ pub mod al_code {
     pub const INVALID_OUTPUTS: u16 = 0x001D;
     /// Invalid input configuration.
     pub const INVALID_INPUTS: u16 = 0x001E;
+    /// Invalid DC SYNC configuration (the device runs on SYNC0 and it is not active).
+    pub const INVALID_DC_SYNC: u16 = 0x0030;
+    /// Invalid DC cycle time (shorter than the device can take).
+    pub const INVALID_DC_CYCLE: u16 = 0x0035;
+}
+
+/// The shortest SYNC0 cycle a device on SYNC0 takes (ns): 125 µs, 8 kHz.
+pub const MIN_SYNC0_CYCLE_NS: u64 = 125_000;
+
+/// How much the drift control moves an ESC's clock at most per write of the system time (ns).
+pub const DRIFT_STEP_NS: i64 = 1_000;
+
+/// An ESC's own clock (ET1100 datasheet, "Distributed Clocks"): a local time that runs
+/// `drift_ppm` off the host's clock, moved by the drift control, and the system time
+/// offset on top.
+#[derive(Clone, Copy, Debug, Default)]
+struct DcClock {
+    /// Host time (ns) from which the quartz' drift counts.
+    origin_ns: u64,
+    /// How far its quartz is off (parts per million; positive: fast).
+    drift_ppm: f64,
+    /// What the drift control has added (ns).
+    correction_ns: i64,
+}
+
+impl DcClock {
+    /// Its local time at host time `host_ns`.
+    fn local(&self, host_ns: u64) -> u64 {
+        let run = host_ns.saturating_sub(self.origin_ns) as f64;
+        let drift = (run * self.drift_ppm * 1e-6) as i64;
+        host_ns.wrapping_add_signed(drift.wrapping_add(self.correction_ns))
+    }
 }
 
 /// SII control bits (register 0x0502, as ethercrab's and SOEM's `SiiControl` read them).
@@ -153,6 +201,14 @@ pub struct Esc {
     outputs_written: bool,
     /// The last write into a SyncManager whose watchdog trigger is on (ns), if any.
     watchdog_trigger_ns: Option<u64>,
+    /// The host time (ns, `CLOCK_MONOTONIC`) of the frame being handled: its clock's reads.
+    now_ns: u64,
+    clock: DcClock,
+    /// The system time of the first SYNC0, once SYNC0 was activated.
+    sync0_first: Option<u64>,
+    /// The device behind it runs on SYNC0 (its 0x1C32:01 says so): SAFE-OP needs SYNC0
+    /// active.
+    needs_sync0: bool,
 }
 
 impl std::fmt::Debug for Esc {
@@ -179,7 +235,12 @@ impl Esc {
             mailbox_in: None,
             outputs_written: false,
             watchdog_trigger_ns: None,
+            now_ns: crate::now_ns(),
+            clock: DcClock::default(),
+            sync0_first: None,
+            needs_sync0: false,
         };
+        esc.clock.origin_ns = esc.now_ns;
         esc.power_on();
         esc
     }
@@ -202,6 +263,94 @@ impl Esc {
         self.put16(reg::WATCHDOG_DIVIDER, 0x09C2);
         self.put16(reg::WATCHDOG_TIME_PD, 1000);
         self.watchdog_trigger_ns = None;
+        self.sync0_first = None;
+    }
+
+    /// The host time (ns) its clock reads: the time of the frame being handled.
+    pub fn set_time(&mut self, now_ns: u64) {
+        self.now_ns = now_ns;
+    }
+
+    /// Makes its quartz run `ppm` parts per million off the host's clock from now on (a
+    /// fault it can be told to make; a real quartz is off by tens of ppm).
+    pub fn set_drift(&mut self, ppm: f64) {
+        let local = self.clock.local(self.now_ns);
+        self.clock = DcClock {
+            origin_ns: self.now_ns,
+            drift_ppm: ppm,
+            correction_ns: local.wrapping_sub(self.now_ns) as i64,
+        };
+    }
+
+    /// Whether it has Distributed Clocks.
+    pub fn has_dc(&self) -> bool {
+        self.dc
+    }
+
+    /// Its system time at the frame being handled (ns since 2000 as the MainDevice set it up:
+    /// local time plus the system time offset).
+    pub fn system_time(&self) -> u64 {
+        let offset = u64::from_le_bytes(self.bytes(reg::DC_TIME_OFFSET));
+        self.clock.local(self.now_ns).wrapping_add(offset)
+    }
+
+    /// SYNC0, when active: the system time of its first event and its cycle (ns).
+    pub fn sync0(&self) -> Option<(u64, u64)> {
+        let cycle = u64::from(u32::from_le_bytes(self.bytes(reg::DC_SYNC0_CYCLE)));
+        self.sync0_first
+            .filter(|_| self.dc && cycle > 0)
+            .map(|first| (first, cycle))
+    }
+
+    /// Tells the ESC whether its device runs on SYNC0 (SAFE-OP then needs SYNC0 active).
+    pub fn set_needs_sync0(&mut self, on: bool) {
+        self.needs_sync0 = on;
+    }
+
+    fn bytes<const N: usize>(&self, a: u16) -> [u8; N] {
+        let a = usize::from(a);
+        self.mem[a..a + N].try_into().unwrap_or([0; N])
+    }
+
+    /// A write of the system time: the difference to its own into 0x092C, and the drift
+    /// control moves its clock a quarter of the way, at most [`DRIFT_STEP_NS`] (a real ESC
+    /// changes its clock's speed, filtered; the effect is the same). `wide`: 64 bits were
+    /// written, else the low 32 are compared.
+    fn system_time_written(&mut self, wide: bool) {
+        let written = u64::from_le_bytes(self.bytes(reg::DC_SYSTEM_TIME));
+        let delay = u64::from(u32::from_le_bytes(self.bytes(reg::DC_TIME_DELAY)));
+        let received = written.wrapping_add(delay);
+        let own = self.system_time();
+        let diff = if wide {
+            own.wrapping_sub(received) as i64
+        } else {
+            i64::from((own as u32).wrapping_sub(received as u32) as i32)
+        };
+        let magnitude = diff.unsigned_abs().min(0x7FFF_FFFF) as u32;
+        let register = magnitude | if diff < 0 { 1 << 31 } else { 0 };
+        let a = usize::from(reg::DC_TIME_DIFFERENCE);
+        self.mem[a..a + 4].copy_from_slice(&register.to_le_bytes());
+        self.clock.correction_ns -= (diff / 4).clamp(-DRIFT_STEP_NS, DRIFT_STEP_NS);
+    }
+
+    /// DC activation was written: SYNC0 starts at the start time, or is off. A start time
+    /// already past waits, as an ET1100 does, until the low 32 bits of the system time meet
+    /// it again (about 4.3 s later).
+    fn activation_written(&mut self) {
+        let activation = self.mem[usize::from(reg::DC_ACTIVATION)];
+        if activation & 0x03 != 0x03 {
+            self.sync0_first = None;
+            return;
+        }
+        let start = u64::from_le_bytes(self.bytes(reg::DC_START_TIME));
+        let now = self.system_time();
+        let first = if start >= now {
+            start
+        } else {
+            let wrap = 1u64 << 32;
+            start + ((now - start) / wrap + 1) * wrap
+        };
+        self.sync0_first = Some(first);
     }
 
     /// The process data watchdog's time (ns; 0: off).
@@ -331,6 +480,11 @@ impl Esc {
             return false;
         }
         let start = usize::from(addr);
+        let system = usize::from(reg::DC_SYSTEM_TIME);
+        if self.dc && start < system + 8 && system < start + buf.len() {
+            let t = self.system_time();
+            self.mem[system..system + 8].copy_from_slice(&t.to_le_bytes());
+        }
         for (k, b) in buf.iter_mut().enumerate() {
             let v = self.mem.get(start + k).copied().unwrap_or(0);
             *b = if or { *b | v } else { v };
@@ -413,6 +567,12 @@ impl Esc {
         if self.dc && touches(reg::DC_RECEIVE_TIME_PORT0, 1) {
             self.latch_receive_times();
         }
+        if self.dc && touches(reg::DC_SYSTEM_TIME, 1) {
+            self.system_time_written(touches(reg::DC_SYSTEM_TIME + 4, 1));
+        }
+        if self.dc && touches(reg::DC_ACTIVATION, 1) {
+            self.activation_written();
+        }
         // A write that reaches the last byte of the receive mailbox (SM0) completes it.
         if let Some(last) = self.mailbox_last(0)
             && (start..end).contains(&last)
@@ -483,7 +643,7 @@ impl Esc {
         if let Some((lo, hi)) = written {
             self.outputs_written = true;
             if self.triggers_watchdog(lo, hi) {
-                self.watchdog_trigger_ns = Some(crate::now_ns());
+                self.watchdog_trigger_ns = Some(self.now_ns);
             }
         }
         // LRD and LWR count 1 per SubDevice served; LRW 1 for its read, 2 for its write.
@@ -539,15 +699,16 @@ impl Esc {
         self.mem[a..a + 2].copy_from_slice(&v.to_le_bytes());
     }
 
+    /// Every port's receive time and the processing unit's, in local time (the frame
+    /// reaches every port of the emulated line at once: no propagation delay).
     fn latch_receive_times(&mut self) {
-        let now = crate::now_ns();
+        let local = self.clock.local(self.now_ns);
         for port in 0..4u16 {
-            let t = now as u32;
             let a = usize::from(reg::DC_RECEIVE_TIME_PORT0 + 4 * port);
-            self.mem[a..a + 4].copy_from_slice(&t.to_le_bytes());
+            self.mem[a..a + 4].copy_from_slice(&(local as u32).to_le_bytes());
         }
-        let a = usize::from(reg::DC_SYSTEM_TIME);
-        self.mem[a..a + 8].copy_from_slice(&now.to_le_bytes());
+        let a = usize::from(reg::DC_RECEIVE_TIME_UNIT);
+        self.mem[a..a + 8].copy_from_slice(&local.to_le_bytes());
     }
 
     /// The SyncManagers the EEPROM names of `kind`, checked against what the MainDevice
@@ -597,6 +758,15 @@ impl Esc {
                 }
                 AlState::PreOp if !self.sms_configured(&[SmKind::Inputs]) => {
                     Err(al_code::INVALID_INPUTS)
+                }
+                AlState::PreOp if self.needs_sync0 && self.sync0().is_none() => {
+                    Err(al_code::INVALID_DC_SYNC)
+                }
+                AlState::PreOp
+                    if self.needs_sync0
+                        && self.sync0().is_some_and(|(_, c)| c < MIN_SYNC0_CYCLE_NS) =>
+                {
+                    Err(al_code::INVALID_DC_CYCLE)
                 }
                 _ => Ok(AlState::SafeOp),
             },
@@ -703,8 +873,9 @@ mod tests {
             !esc.check_watchdog(t0 + 1_000_000_000),
             "not armed before a write"
         );
-        assert_eq!(esc.logical(0x100, &mut [0x3C], false, true), 1);
         let t = crate::now_ns();
+        esc.set_time(t);
+        assert_eq!(esc.logical(0x100, &mut [0x3C], false, true), 1);
         assert!(!esc.check_watchdog(t + 90_000_000), "90 ms after the write");
         assert_eq!(esc.memory(reg::WATCHDOG_STATUS_PD, 1)[0] & 1, 1, "running");
         assert_eq!(esc.memory(0x0F00, 1)[0], 0x3C);

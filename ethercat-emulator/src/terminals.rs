@@ -131,7 +131,14 @@ impl Terminal {
             tx_pdos: tx,
             rx_pdos: rx,
         };
-        Esc::new(sii, 8, 8, false)
+        // An EK1100 has Distributed Clocks (the line's reference clock, being the first);
+        // the EL1008 and EL2008 have none.
+        Esc::new(sii, 8, 8, matches!(self, Self::Ek1100))
+    }
+
+    /// Whether the device asked to run on SYNC0 (a drive whose 0x1C32:01 says so).
+    pub fn on_sync0(&self) -> bool {
+        matches!(self, Self::Drive(d) if d.on_sync0())
     }
 
     /// The device's mailboxes in answer to a mailbox request in AL state `al`, in order
@@ -187,7 +194,7 @@ impl Terminal {
     /// Between frames: a drive's model runs on (its watchdog counts the silence).
     pub fn idle(&mut self, esc: &Esc, now_ns: u64) {
         if let Self::Drive(d) = self {
-            d.step(now_ns, esc.al_state() == Some(AlState::Op));
+            d.idle(esc, now_ns);
         }
     }
 }

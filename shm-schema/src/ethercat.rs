@@ -16,6 +16,10 @@ pub const INTERFACE_LEN: usize = 16;
 pub mod subdevice_flags {
     /// The revision found must equal [`super::EthercatSubDeviceV1::revision`] (else any).
     pub const CHECK_REVISION: u32 = 1;
+    /// The SubDevice takes its outputs and latches its inputs on SYNC0 of Distributed Clocks
+    /// (its ESC must have them), every drives' period, [`super::EthercatSubDeviceV1::sync0_shift_ns`]
+    /// after the bus process wakes; without it, as the cycle's frame passes.
+    pub const SYNC0: u32 = 2;
 }
 
 /// One SubDevice the bus must have at its place on the line.
@@ -36,8 +40,9 @@ pub struct EthercatSubDeviceV1 {
     /// The axis this CiA 402 drive moves (an index into the cell's axes), -1 for a SubDevice
     /// that is no drive (a coupler, an IO terminal).
     pub axis: i32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// With [`subdevice_flags::SYNC0`]: how long after the bus process' wake-up its SYNC0
+    /// comes (ns, less than the drives' period); 0: half the period.
+    pub sync0_shift_ns: u32,
     /// A drive's position unit: counts (0x6064, 0x607A) per axis unit; velocities (0x606C,
     /// 0x60FF, 0x60B1) are counts/s per unit/s.
     pub counts_per_unit: f64,
@@ -143,6 +148,9 @@ pub mod emulator_fault {
     /// Input `bit` of SubDevice `position` (an input terminal) reads `code` (0 or 1) from now
     /// on, whatever the emulated field says: a button pressed, a sensor stuck.
     pub const INPUT: u32 = 6;
+    /// The quartz of SubDevice `position`'s Distributed Clock runs `code` (an `i32`, parts per
+    /// million, positive fast) off from now on; a SubDevice without DC ignores it.
+    pub const CLOCK_DRIFT: u32 = 7;
 }
 
 /// A fault the emulated bus of a test cell is told to make, `<i>/ethercat/emulator/fault`
@@ -157,8 +165,8 @@ pub struct EmulatorFaultV1 {
     pub kind: u32,
     /// The SubDevice's position on the line (where the kind has one).
     pub position: u32,
-    /// The AL status code, emergency code, product code or input value (where the kind has
-    /// one).
+    /// The AL status code, emergency code, product code, input value or clock drift (where
+    /// the kind has one).
     pub code: u32,
     /// The input bit ([`emulator_fault::INPUT`]), else 0.
     pub bit: u32,

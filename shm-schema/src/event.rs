@@ -281,6 +281,9 @@ pub mod code {
     /// `bus-lost`, or a SubDevice out of OP with the e-stop latched); value: how many times
     /// this process has done so, limit: 0.
     pub const BUS_RECOVERING: u32 = 907;
+    /// SYNC0 events of the drives came without new outputs (the cycle's frame was not there
+    /// before them); value: how many since the last such event, limit: 0.
+    pub const SYNC0_LATE: u32 = 908;
 }
 
 /// What a code means, for documents and reports.
@@ -670,6 +673,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Info,
         unit: "recoveries",
         meaning: "The bus process brings the EtherCAT bus up again from the scan, as at start-up (the line compared with `[[ethercat.subdevice]]`, the drives mapped, SAFE-OP, OP), because it was lost (`bus-lost`), or a SubDevice stayed out of OP or did not take its data while the e-stop was latched for `estop_stop_time` (every drive has ramped down by then). Until it is back (`bus-op`, \"back in OP\") the feedback has every position NaN and no state, and a `reset` raises the e-stop again. An attempt that fails is tried again a second later, without end; the process' log says why each failed (a cable still out, another identity at a position).",
+    },
+    CodeInfo {
+        code: code::SYNC0_LATE,
+        name: "sync0-late",
+        severity: Severity::Warning,
+        unit: "SYNC0 events",
+        meaning: "Drives on Distributed Clocks (`sync = \"dc\"`) take their outputs at SYNC0, `sync0_shift` after the bus process wakes; this many SYNC0 events came with no new frame before them (the bus process woke late, a frame was lost, or two frames fell in one SYNC0 cycle), as the reference clock's time in the frames shows. At each, a drive keeps the previous outputs (a CSP drive holds its target for one more period: a step in the motion). The first, then at most one a second. Frequent: the wake-up latency of the bus process plus the frame's round trip is too close to `sync0_shift` (docs/ethercat.md, Distributed Clocks).",
     },
 ];
 

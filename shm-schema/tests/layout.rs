@@ -84,7 +84,7 @@ fn layouts() -> Vec<Layout> {
             revision: "uint32_t" = 4,
             flags: "uint32_t" = 4,
             axis: "int32_t" = 4,
-            reserved: "uint32_t" = 4,
+            sync0_shift_ns: "uint32_t" = 4,
             counts_per_unit: "double" = 8,
             rated_effort: "double" = 8,
         }),

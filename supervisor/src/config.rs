@@ -816,7 +816,8 @@ impl Config {
         }
         match &self.ethercat {
             Some(bus) => {
-                if let Some(e) = ethercat::validate(bus, &self.axis, &self.io)
+                let drives_period = self.process_named("drives").map(Process::period_s);
+                if let Some(e) = ethercat::validate(bus, &self.axis, &self.io, drives_period)
                     .into_iter()
                     .next()
                 {

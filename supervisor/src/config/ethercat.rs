@@ -46,6 +46,34 @@ pub struct SubDevice {
     pub counts_per_unit: Option<f64>,
     /// A drive's rated torque (0x6076) in the axis' effort unit (N, N·m).
     pub rated_torque: Option<f64>,
+    /// When it takes its outputs and latches its inputs: on SYNC0 of Distributed Clocks
+    /// (`"dc"`, a drive's default) or as the cycle's frame passes (`"frame"`, the default of
+    /// other SubDevices).
+    pub sync: Option<Sync>,
+    /// With `sync = "dc"`: how long after the bus process wakes its SYNC0 comes (s, more than
+    /// 0 and less than the drives' period). Default: half the period.
+    pub sync0_shift: Option<f64>,
+}
+
+/// `sync` of a SubDevice.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Sync {
+    /// On SYNC0 of Distributed Clocks, every drives' period.
+    Dc,
+    /// As the cycle's frame passes (SyncManager-synchronous).
+    Frame,
+}
+
+impl SubDevice {
+    /// Whether it runs on SYNC0: as configured, else if it is a drive.
+    pub fn on_sync0(&self) -> bool {
+        self.sync.unwrap_or(if self.axis.is_some() {
+            Sync::Dc
+        } else {
+            Sync::Frame
+        }) == Sync::Dc
+    }
 }
 
 impl EthercatSettings {
@@ -68,13 +96,19 @@ impl EthercatSettings {
                     subdevice_flags::CHECK_REVISION
                 } else {
                     0
+                } | if s.on_sync0() {
+                    subdevice_flags::SYNC0
+                } else {
+                    0
                 },
                 axis: s
                     .axis
                     .as_ref()
                     .and_then(|a| axes.iter().position(|x| &x.name == a))
                     .map_or(-1, |k| k as i32),
-                reserved: 0,
+                sync0_shift_ns: s.sync0_shift.map_or(0, |t| {
+                    (t * 1e9).round().clamp(1.0, f64::from(u32::MAX)) as u32
+                }),
                 counts_per_unit: s.counts_per_unit.unwrap_or(0.0),
                 rated_effort: s.rated_torque.unwrap_or(0.0),
             };
@@ -112,7 +146,12 @@ pub(super) fn io_without_bus(io: &[Io]) -> Option<(Vec<Seg>, String)> {
 
 /// Everything wrong in `[ethercat]` and in the `[[io]]` entries it carries, each with where
 /// it is written.
-pub(super) fn validate(e: &EthercatSettings, axes: &[Axis], io: &[Io]) -> Vec<(Vec<Seg>, String)> {
+pub(super) fn validate(
+    e: &EthercatSettings,
+    axes: &[Axis],
+    io: &[Io],
+    drives_period: Option<f64>,
+) -> Vec<(Vec<Seg>, String)> {
     use Seg::{Index as I, Key as K};
     let mut out = Vec::new();
     let ok_name = |s: &str| {
@@ -156,6 +195,23 @@ pub(super) fn validate(e: &EthercatSettings, axes: &[Axis], io: &[Io]) -> Vec<(V
         let what = format!("ethercat subdevice {} ({:?})", k, s.name);
         if s.name.is_empty() || s.name.len() >= 16 {
             out.push((at("name"), format!("{what}: name must be 1 to 15 bytes")));
+        }
+        if let Some(shift) = s.sync0_shift {
+            if !s.on_sync0() {
+                out.push((
+                    at("sync0_shift"),
+                    format!("{what}: sync0_shift is for a SubDevice on SYNC0 (sync = \"dc\")"),
+                ));
+            } else if let Some(period) = drives_period
+                && !(shift.is_finite() && shift > 0.0 && shift < period)
+            {
+                out.push((
+                    at("sync0_shift"),
+                    format!(
+                        "{what}: sync0_shift = {shift} s must be more than 0 and less than the drives' period ({period} s)"
+                    ),
+                ));
+            }
         }
         let Some(axis) = &s.axis else {
             for (key, v) in [

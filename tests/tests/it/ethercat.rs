@@ -66,13 +66,39 @@ fn the_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
             ns.command("supervisor")
                 .args(["run", "--json", "--instance", &inst, "--config"])
                 .arg(&cfg)
-                .arg(examples().join("triangle.prog")),
+                .arg(examples().join("triangle.prog"))
+                .env("RTC_LOG", "warn,ethercat_bus=info,ethercat_emulator=info"),
             WATCHDOG,
         );
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(0), "{err}");
         let j = json_of(&out);
         crate::cell::check_run(&j, [40.0, 40.0, 0.0]);
+        // The drives ran on Distributed Clocks (their default): the EK1100 the reference
+        // clock, SYNC0 every period in each drive through the whole triangle (19.1 s at
+        // 1 kHz), and a command applied at SYNC0, half a period after the frame that brought
+        // it: the loop from an encoder sample to its command applied is a period and a half
+        // at the least (a drive taking its data as the frame passes: one period).
+        assert!(
+            err.contains("Distributed Clocks: reference clock position 0 (EK1100); SYNC0 every 1000 µs on position(s) 1, 2, 3"),
+            "{err}"
+        );
+        for (k, name) in [(1, "x"), (2, "y"), (3, "theta")] {
+            let said = format!("position {k} ({name}): ");
+            let line = err
+                .lines()
+                .find(|l| l.contains(&said) && l.contains("SYNC0 events"))
+                .unwrap_or_else(|| panic!("the emulator tells {name}'s SYNC0 events: {err}"));
+            let events: u64 = line
+                .split(&said)
+                .nth(1)
+                .and_then(|t| t.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("a count in {line:?}"));
+            assert!(events > 19_000, "{line}");
+        }
+        let s2c = j["sense_to_command_us"]["p50_us"].as_f64();
+        assert!(s2c.is_some_and(|us| us >= 1450.0), "{s2c:?}: {j}");
         // The drives were the bus': its start-up announced, the emulator answered.
         let op = crate::drives::events_named(&j, "bus-op");
         assert_eq!(op.len(), 1, "{err}");
@@ -464,21 +490,23 @@ fn wiresharks_dissector_decodes_a_triangles_bus_traffic_with_no_malformed_frame(
         assert!(n > 30_000, "{n} frames captured");
         assert_eq!(n_ecat, n, "frames that are not EtherCAT");
         assert!(bad.is_empty(), "malformed or in error:\n{bad}");
-        // The cycle's frames as the dissector reads them: an LRW (0x0c) and nine FPRDs (6 AL
-        // statuses, 3 send mailboxes' status), and every reply with the LRW's working counter
-        // 12 (the EK1100 has no data; three drives, each read and written: 3 × 3; the EL1008
-        // read, 1; the EL2008 written, 2) and 1 for each FPRD.
+        // The cycle's frames as the dissector reads them: an LRW (0x0c), the reference
+        // clock's system time written (FPWR, 0x05) and distributed (FRMW, 0x0e), and nine
+        // FPRDs (6 AL statuses, 3 send mailboxes' status); every reply with the LRW's working
+        // counter 12 (the EK1100 has no data; three drives, each read and written: 3 × 3; the
+        // EL1008 read, 1; the EL2008 written, 2), 1 for the FPWR, 4 for the FRMW (the EK1100
+        // and the three drives have DC) and 1 for each FPRD.
         let cmds = tshark(&[
             "-r", file, "-T", "fields", "-e", "ecat.cmd", "-e", "ecat.cnt",
         ]);
-        let cyclic = "0x0c,0x04,0x04,0x04,0x04,0x04,0x04,0x04,0x04,0x04";
+        let cyclic = "0x0c,0x05,0x0e,0x04,0x04,0x04,0x04,0x04,0x04,0x04,0x04,0x04";
         let (mut sent, mut replies) = (0, 0);
         for line in cmds.lines().filter(|l| l.starts_with(cyclic)) {
             let wkc = line.split('\t').nth(1).unwrap_or_default();
-            if wkc == "0,0,0,0,0,0,0,0,0,0" {
+            if wkc == "0,0,0,0,0,0,0,0,0,0,0,0" {
                 sent += 1;
             } else {
-                assert_eq!(wkc, "12,1,1,1,1,1,1,1,1,1", "a cyclic reply: {line}");
+                assert_eq!(wkc, "12,1,4,1,1,1,1,1,1,1,1,1", "a cyclic reply: {line}");
                 replies += 1;
             }
         }
@@ -496,7 +524,7 @@ fn wiresharks_dissector_decodes_a_triangles_bus_traffic_with_no_malformed_frame(
             &kept,
             format!(
                 "{n} frames, {n_ecat} EtherCAT, 0 malformed; cyclic: {sent} sent, {replies} replies, \
-                 every reply with working counters 12,1,1,1,1,1,1,1,1,1\n\n{summary}"
+                 every reply with working counters 12,1,4,1,1,1,1,1,1,1,1,1\n\n{summary}"
             ),
         )
         .expect("the summary");
