@@ -1038,6 +1038,91 @@ mod tests {
     }
 
     #[test]
+    fn a_device_on_sync0_goes_to_safe_op_only_with_sync0_active_and_its_start_waits_for_the_wrap() {
+        // An EK1100's ESC (it has DC) standing in for a device that asked for SYNC0.
+        let mut esc = Terminal::Ek1100.esc();
+        esc.set_time(1_000_000_000);
+        esc.set_needs_sync0(true);
+        let request = |esc: &mut Esc, state: u16| {
+            esc.write(reg::AL_CONTROL, &state.to_le_bytes());
+            (esc.al_status(), esc.al_status_code())
+        };
+        assert_eq!(request(&mut esc, 2), (2, 0), "PRE-OP");
+        assert_eq!(
+            request(&mut esc, 4),
+            (0x12, al_code::INVALID_DC_SYNC),
+            "SYNC0 not active"
+        );
+        // The system time now is its local time plus the offset written.
+        esc.write(reg::DC_TIME_OFFSET, &5_000_000_000u64.to_le_bytes());
+        let now = esc.system_time();
+        assert_eq!(now, 6_000_000_000);
+        let activate = |esc: &mut Esc, start: u64, cycle: u32| {
+            esc.write(reg::DC_ACTIVATION, &[0]);
+            esc.write(reg::DC_START_TIME, &start.to_le_bytes());
+            esc.write(reg::DC_SYNC0_CYCLE, &cycle.to_le_bytes());
+            esc.write(reg::DC_ACTIVATION, &[0x03]);
+            esc.sync0()
+        };
+        assert_eq!(
+            activate(&mut esc, now + 100_000_000, 100_000),
+            Some((now + 100_000_000, 100_000))
+        );
+        assert_eq!(
+            request(&mut esc, 0x14),
+            (0x12, al_code::INVALID_DC_CYCLE),
+            "100 µs is under its 125 µs"
+        );
+        assert_eq!(
+            activate(&mut esc, now - 1, 1_000_000),
+            Some((now - 1 + (1 << 32), 1_000_000)),
+            "a start time already past waits for the low 32 bits to come round again"
+        );
+        assert_eq!(request(&mut esc, 0x14), (4, 0), "SAFE-OP with SYNC0 active");
+        esc.write(reg::DC_ACTIVATION, &[0x01]);
+        assert_eq!(esc.sync0(), None, "SYNC0 off");
+    }
+
+    #[test]
+    fn the_drift_control_moves_the_clock_toward_the_written_time_a_bounded_step_at_a_time() {
+        let mut esc = Terminal::Ek1100.esc();
+        esc.set_time(1_000_000_000);
+        let write = |esc: &mut Esc, t: u64| {
+            esc.write(reg::DC_SYSTEM_TIME, &t.to_le_bytes());
+            difference(esc)
+        };
+        // Its own time 40 µs behind the written: the difference says "smaller" (bit 31),
+        // and each write takes it a quarter of the way, at most 1 µs.
+        assert_eq!(write(&mut esc, 1_000_040_000), 40_000 | 1 << 31);
+        assert_eq!(esc.system_time(), 1_000_001_000);
+        assert_eq!(write(&mut esc, 1_000_001_002), 2 | 1 << 31, "2 ns smaller");
+        assert_eq!(esc.system_time(), 1_000_001_000, "2 / 4 rounds to nothing");
+        // A quartz 100 ppm fast: 100 ns a millisecond, caught up by one write a millisecond.
+        esc.set_drift(100.0);
+        for k in 1..=1000u64 {
+            let host = 1_000_000_000 + k * 1_000_000;
+            esc.set_time(host);
+            write(&mut esc, host + 1_000);
+        }
+        let off = esc.system_time() as i64 - (2_000_000_000 + 1_000) as i64;
+        assert!(off.abs() < 500, "{off} ns off after 1 s");
+        // A 32-bit write compares the low 32 bits only.
+        esc.set_time(5_000_000_000);
+        let own = esc.system_time();
+        esc.write(
+            reg::DC_SYSTEM_TIME,
+            &((own as u32).wrapping_sub(8)).to_le_bytes(),
+        );
+        assert_eq!(difference(&esc), 8);
+    }
+
+    /// The DC system time difference register.
+    fn difference(esc: &Esc) -> u32 {
+        let b = esc.memory(reg::DC_TIME_DIFFERENCE, 4);
+        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+    }
+
+    #[test]
     fn the_al_state_machine_refuses_what_the_standard_refuses() {
         let mut esc = Terminal::El2008 { outputs: 0 }.esc();
         let request = |esc: &mut Esc, state: u16| {

@@ -1504,6 +1504,53 @@ mod tests {
             .map(|m| (m.entry, m.position, m.bit))
             .collect();
         assert_eq!(ios, [(0, 4, 0), (1, 5, 0), (2, 4, 1), (3, 4, 2), (4, 5, 1)]);
+        // The drives on SYNC0 by default, the coupler and the terminals not; a shift in
+        // seconds, in ns for the bus process.
+        let sync0: Vec<_> = shm
+            .subdevices()
+            .iter()
+            .map(|s| {
+                (
+                    s.flags & shm_schema::ethercat::subdevice_flags::SYNC0 != 0,
+                    s.sync0_shift_ns,
+                )
+            })
+            .collect();
+        assert_eq!(
+            sync0,
+            [
+                (false, 0),
+                (true, 0),
+                (true, 0),
+                (true, 0),
+                (false, 0),
+                (false, 0)
+            ]
+        );
+        let x = "rated_torque = 100.0       # N: 1000 thousandths";
+        let src = bus.replacen(x, &format!("{x}\nsync0_shift = 0.0002"), 1);
+        let c = Config::parse(&src, "cell.toml").expect("a shift of 200 µs");
+        let shm = c
+            .ethercat
+            .as_ref()
+            .expect("[ethercat]")
+            .to_shm(&c.axis, &c.io);
+        assert_eq!(shm.subdevices()[1].sync0_shift_ns, 200_000);
+        let got = parse(x, &format!("{x}\nsync0_shift = 0.001"));
+        assert!(
+            got.contains("ethercat subdevice 1 (\"x\"): sync0_shift = 0.001 s must be more than 0 and less than the drives' period (0.001 s)"),
+            "{got}"
+        );
+        let got = parse(x, &format!("{x}\nsync = \"frame\"\nsync0_shift = 0.0002"));
+        assert!(
+            got.contains("sync0_shift is for a SubDevice on SYNC0"),
+            "{got}"
+        );
+        let got = parse(x, &format!("{x}\nsync = \"sync0\""));
+        assert!(
+            got.contains("unknown variant `sync0`, expected `dc` or `frame`"),
+            "{got}"
+        );
     }
 
     #[test]

@@ -579,16 +579,35 @@ fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() 
 
 #[test]
 fn an_io_bit_beyond_its_terminal_is_refused_before_anything_is_enabled() {
+    // Valid on paper (the bit's range is the terminal's process data, known on the bus).
+    refused_on_the_bus(
+        "ecat-iobit",
+        "ethercat = { subdevice = \"di\", bit = 2 }",
+        "ethercat = { subdevice = \"di\", bit = 9 }",
+        "io \"part_present\": bit 9 of position 4 (di) does not exist: its inputs are 8 bits",
+    );
+}
+
+#[test]
+fn a_subdevice_on_sync0_without_distributed_clocks_is_refused_before_anything_is_enabled() {
+    // Valid on paper (whether an ESC has DC is known on the bus): the EL1008 has none.
+    refused_on_the_bus(
+        "ecat-nodc",
+        "product = 0x03F03052       # EL1008: 8 digital inputs",
+        "product = 0x03F03052\nsync = \"dc\"",
+        "position 4 (di) is configured on SYNC0 (sync = \"dc\", a drive's default) and its ESC has no Distributed Clocks (register 0x0008)",
+    );
+}
+
+/// The example cell with `from` replaced by `to`, which `check-config` accepts: `run` exits 2
+/// saying `says`, before anything is enabled, and leaves nothing behind.
+fn refused_on_the_bus(test: &str, from: &str, to: &str, says: &str) {
     integration_tests::attributable(|| {
-        let inst = instance("ecat-iobit");
-        let ns = Netns::new("ecat-iobit");
-        // Valid on paper (the bit's range is the terminal's process data, known on the bus).
-        let src = ethercat_cell().replacen(
-            "ethercat = { subdevice = \"di\", bit = 2 }",
-            "ethercat = { subdevice = \"di\", bit = 9 }",
-            1,
-        );
-        let cfg = scratch("ecat-iobit", "cell.toml", &src);
+        let inst = instance(test);
+        let ns = Netns::new(test);
+        let src = ethercat_cell();
+        assert!(src.contains(from), "{from:?} not in the example");
+        let cfg = scratch(test, "cell.toml", &src.replacen(from, to, 1));
         let check = run_with_watchdog(
             integration_tests::supervisor()
                 .arg("check-config")
@@ -609,12 +628,7 @@ fn an_io_bit_beyond_its_terminal_is_refused_before_anything_is_enabled() {
         );
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{err}");
-        assert!(
-            err.contains(
-                "io \"part_present\": bit 9 of position 4 (di) does not exist: its inputs are 8 bits"
-            ),
-            "{err}"
-        );
+        assert!(err.contains(says), "{err}");
         assert!(err.contains("refused the configuration"), "{err}");
         assert!(!err.contains("enabling"), "{err}");
         assert_clean(&inst);
