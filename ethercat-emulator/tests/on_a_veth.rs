@@ -292,6 +292,13 @@ fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data(
     every_pattern_came_back("pysoem", &r);
     the_drive_answered_and_enabled("pysoem", &r);
     assert_eq!(r["drive"]["wkc"], serde_json::json!([6]), "{r}");
+    // On SYNC0 (SOEM's DC set-up and SYNC0 start), enabled through outputs taken at SYNC0;
+    // the line's DC time, which SOEM reads with every exchange, went on.
+    let dc = &r["dc"];
+    assert_eq!(dc["found"], true, "{r}");
+    assert_eq!(dc["sync_mode"], 2, "{r}");
+    let t = |k: usize| dc["time"][k].as_u64().unwrap_or(0);
+    assert!(t(0) > 0 && t(1) > t(0), "{r}");
 }
 
 #[test]

@@ -2,7 +2,8 @@
 
 The line is an EK1100, an EL1008, an EL2008 and a CiA 402 drive. Each master scans it, reads
 the drive's identity (0x1018), supported modes (0x6502), statusword (0x6041) and mode display
-(0x6061) by SDO, brings the line to OP, writes 20 patterns to the EL2008 and reads them back
+(0x6061) by SDO (pysoem also sets Distributed Clocks up and runs the drive on SYNC0; kickcat
+leaves it SM-synchronous), brings the line to OP, writes 20 patterns to the EL2008 and reads them back
 on the EL1008 (the emulator's --loopback test cable), then takes the drive through Shutdown,
 Switch on and Enable operation in CSP, holding where it stands. It prints one JSON object:
 what it found, every exchange's working counter (pysoem) and inputs, the drive's states, as
@@ -12,10 +13,13 @@ import datetime
 import json
 import struct
 import sys
+import time
 
 
 TIMEOUT_US = 100_000
 DRIVE = 3
+# pysoem runs the drive on Distributed Clocks: SYNC0 every 500 µs.
+SYNC0_NS = 500_000
 
 
 def patterns():
@@ -64,6 +68,13 @@ def with_pysoem(ifname):
         "statusword": sdo_u32(drive.sdo_read(0x6041, 0)),
         "mode_display": sdo_u32(drive.sdo_read(0x6061, 0)),
     }
+    # Distributed Clocks (SOEM's ecx_configdc: the receive times latched and read, offsets
+    # and delays written), the drive asked for SYNC0 (0x1C32:01 = 2, refused in SAFE-OP
+    # without SYNC0 active) and SYNC0 started by SOEM (ecx_dcsync0: the drive's system time
+    # read, start time, cycle, activation).
+    has_dc = bool(m.config_dc())
+    drive.sdo_write(0x1C32, 1, struct.pack("<H", 2))
+    drive.dc_sync(True, SYNC0_NS)
     iomap = m.config_map()
     # Timeouts in µs, generous: the test host is a noisy 2-vCPU VM whose stalls reach 1 s.
     safe_op = m.state_check(pysoem.SAFEOP_STATE, 5_000_000)
@@ -78,6 +89,7 @@ def with_pysoem(ifname):
             break
     m.read_state()  # refreshes every SubDevice's state
     op = [s.state for s in m.slaves]
+    dc_time = m.dc_time
     exchanges = []
     for p in patterns():
         m.slaves[2].output = bytes([p])
@@ -104,8 +116,19 @@ def with_pysoem(ifname):
         wkcs.append(wkc)
         return bytes(drive.input)
 
+    # SOEM starts SYNC0 100 ms after its set-up; outputs wait for it.
+    until = time.monotonic() + 0.3
+    while time.monotonic() < until:
+        m.send_processdata()
+        m.receive_processdata(TIMEOUT_US)
+        time.sleep(0.001)
     enabled = enable(exchange)
     enabled["wkc"] = sorted(set(wkcs))
+    dc = {
+        "found": has_dc,
+        "sync_mode": sdo_u32(drive.sdo_read(0x1C32, 1)),
+        "time": [dc_time, m.dc_time],
+    }
     m.state = pysoem.INIT_STATE
     m.write_state()
     m.close()
@@ -119,6 +142,7 @@ def with_pysoem(ifname):
         "exchanges": exchanges,
         "sdo": sdo,
         "drive": enabled,
+        "dc": dc,
     }
 
 
