@@ -4,10 +4,12 @@
 //! whether the drives are simulated or real.
 //!
 //! - [`bringup`]: before the cycle (and again when the bus came back), ethercrab scans the
-//!   bus, the line is compared with the configuration, the drives are mapped by SDO and the
-//!   bus is taken to OP, every CoE emergency kept out of ethercrab's way;
-//! - [`frame`]: the cycle's one frame (LRW over the process image, the AL status of each
-//!   SubDevice, the status of each send mailbox, and a full one's content), built once;
+//!   bus, the line is compared with the configuration, the drives are mapped by SDO,
+//!   Distributed Clocks set up for the SubDevices on SYNC0 ([`bringup::Dc`]) and the bus is
+//!   taken to OP, every CoE emergency kept out of ethercrab's way;
+//! - [`frame`]: the cycle's one frame (LRW over the process image, the reference clock's time
+//!   written and handed on, the AL status of each SubDevice, the status of each send mailbox,
+//!   and a full one's content), built once;
 //! - [`Drives`]: units both ways (counts, counts/s, thousandths of the rated torque), the
 //!   controlword and mode passed through from servo (servo is the master of the CiA 402 state
 //!   machine), and what the bus does by itself when servo goes silent: a quick stop, never a

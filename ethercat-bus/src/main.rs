@@ -361,8 +361,11 @@ impl Task for Bus {
         }
         let Some((wkc, _al_read)) = reply else {
             // No reply: no feedback this cycle (never a last good value); servo judges the
-            // gap by its feedback timeout.
+            // gap by its feedback timeout. A transport overrun (seed 002: the bus' errors).
             self.lost += 1;
+            if self.lost <= self.lost_limit {
+                cx.transport_overruns(1);
+            }
             if self.lost == 1 || now.saturating_sub(self.last_lost_event_ns) >= REPEAT_NS {
                 self.last_lost_event_ns = now;
                 cx.events.push(EventV1::new(
@@ -448,7 +451,10 @@ impl Task for Bus {
         // A bus degraded while the e-stop is latched: once every drive has ramped down, the
         // bus is brought up again.
         let degraded = !valid || self.in_op[..self.frame.layout().count].contains(&false);
-        if degraded && cx.estop.latched {
+        // Degraded with the e-stop latched: the bus is known bad and waits to be brought up
+        // again; its frames are not counted again as transport overruns.
+        let degraded_latched = degraded && cx.estop.latched;
+        if degraded_latched {
             let since = *self.degraded_since_ns.get_or_insert(now);
             if now.saturating_sub(since) >= self.degraded_wait_ns {
                 self.publish_unknown(now, cx);
@@ -458,6 +464,9 @@ impl Task for Bus {
             }
         } else {
             self.degraded_since_ns = None;
+        }
+        if !valid && !degraded_latched {
+            cx.transport_overruns(1);
         }
         if !valid && now.saturating_sub(self.last_wkc_event_ns) >= REPEAT_NS {
             self.last_wkc_event_ns = now;

@@ -4,19 +4,19 @@
 //!
 //! - [`frame`]: EtherCAT frames and datagrams, walked in place (never panics on any bytes);
 //! - [`esc`]: one SubDevice controller: registers, AL state machine, SII interface, FMMUs,
-//!   SyncManagers and their process data watchdog, DC registers;
+//!   SyncManagers and their process data watchdog, Distributed Clocks (a clock with a quartz'
+//!   drift, the drift control, SYNC0);
 //! - [`coe`]: CANopen over EtherCAT: the object dictionary, SDO upload and download, aborts;
 //! - [`sii`]: the EEPROM image (identity, strings, general, FMMU, SyncManager and PDO
 //!   categories, its checksum);
-//! - [`drive`]: a CiA 402 servo drive (its objects, the PDO mapping written in PRE-OP) moving
-//!   `machine-sim`'s drive and mechanics model;
+//! - [`drive`]: a CiA 402 servo drive (its objects, the PDO mapping written in PRE-OP, SYNC0 or
+//!   SM-synchronous) moving `machine-sim`'s drive and mechanics model;
 //! - [`terminals`]: EK1100, EL1008, EL2008, and the drive;
 //! - [`bus`]: a line of SubDevices a frame passes through;
 //! - [`wire`]: the line on a network interface (a raw packet socket), for the
 //!   `ethercat-emulator` binary.
 //!
-//! Not yet here (docs/ethercat.md says what is): DC system time control, emergencies, and
-//! the faults it can be told to make.
+//! What it does not do yet is in docs/ethercat.md ("Not yet").
 
 pub mod bus;
 pub mod cell;

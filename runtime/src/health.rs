@@ -13,7 +13,8 @@
 //!   servo; the task reports these), and each period the process itself skipped (its own
 //!   outputs missed that many syncs: a stalled iobridge is a gap in the fieldbus image);
 //! - **transport**: an IPC call that failed (a loan, a send, a receive; [`crate::ipc`] counts
-//!   every one of them);
+//!   every one of them), and what a task counts of its own transport (the EtherCAT bus
+//!   process: a frame lost, a working counter not the expected one);
 //! - **thread offset variance**: a cycle that woke later than `thread_offset_variance_percent`
 //!   % of its period after its deadline.
 

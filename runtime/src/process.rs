@@ -83,6 +83,7 @@ pub struct Cycle<'a> {
     pub handover: bool,
     raise: Option<(EstopOrigin, u32, [u8; shm_schema::estop::REASON_LEN])>,
     pending: u64,
+    transport: u64,
     safe: bool,
 }
 
@@ -106,6 +107,12 @@ impl Cycle<'_> {
     /// Counts `n` pending-sequence overruns (samples that did not arrive by this cycle).
     pub fn pending_overruns(&mut self, n: u64) {
         self.pending += n;
+    }
+
+    /// Counts `n` transport overruns of the task's own transport (a fieldbus frame lost or
+    /// not taken by every device), beside the IPC calls that failed.
+    pub fn transport_overruns(&mut self, n: u64) {
+        self.transport += n;
     }
 
     /// Whether the task's e-stop reaction is complete this cycle (default: true; servo says
@@ -370,10 +377,12 @@ fn run_inner<T: Task>(
             handover: estop.handover(),
             raise: None,
             pending: 0,
+            transport: 0,
             safe: true,
         };
         task.cycle(&mut cx);
         let (raise, mut pending, safe) = (cx.raise, cx.pending, cx.safe);
+        let own_transport = cx.transport;
         if let Some((origin, cause, reason)) = raise
             && !estop.raised()
         {
@@ -394,7 +403,12 @@ fn run_inner<T: Task>(
             pending = 0;
         }
         let t = ipc::transport_errors();
-        let expired = health.cycle(now, wake.latency_ns(), pending, t - transport);
+        let expired = health.cycle(
+            now,
+            wake.latency_ns(),
+            pending,
+            t - transport + own_transport,
+        );
         transport = t;
         if let Some(d) = expired
             && (!own.critical() || !estop.view().latched)

@@ -234,10 +234,17 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
         // The frames lost, then the bus: 100 of them at 1 kHz (its 100 ms watchdog).
         assert!(err.contains("bus-frames-lost: 1 (limit 100)"), "{err}");
         assert!(err.contains("bus-lost: 100 (limit 100)"), "{err}");
-        // Its e-stop (which the supervisor may latch after servo's: both come within a
-        // millisecond).
+        // The e-stop before that, after 50 frames: each lost frame is a transport overrun
+        // (seed 002), and the test's transport detector expires at 5 % of 1 kHz (the
+        // example's at 0.5 %: 5 frames).
         assert!(
-            err.contains("drives    estop-raised: 1 (limit 904) — EtherCAT bus lost"),
+            err.contains("drives    health-expired: 50 (limit 50) — transport_overrun expired"),
+            "{err}"
+        );
+        assert!(
+            err.contains(
+                "drives    estop-raised: 3 (limit 604) — transport_overrun expired in drives"
+            ),
             "{err}"
         );
         // Servo took the e-stop; the bus' feedback NaN from the next cycle on, it cuts power.
