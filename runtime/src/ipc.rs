@@ -114,6 +114,12 @@ pub fn config_for(instance: &InstanceName) -> Result<Config, IpcError> {
     cfg.global.set_root_path(
         &Path::new(root.as_str().as_bytes()).map_err(|e| err("iceoryx2 root path", e))?,
     );
+    // A node dropped does not clean the instance's dead nodes: iceoryx2 0.10 does it
+    // blocking, and waits on what a node killed while it attached (an observer's CLI) left
+    // half made (`remove_unfinished_shm`): every process of a cell going down waited on it,
+    // for many seconds. The supervisor cleans dead nodes itself (`remove_dead_nodes`, before
+    // its processes stop and when the instance is removed); a node created still cleans them.
+    cfg.global.node.cleanup_dead_nodes_on_destruction = false;
     Ok(cfg)
 }
 
@@ -397,6 +403,8 @@ impl Debug for Listener {
 /// the files of nodes that are not alive and that iceoryx2 cannot clean (see
 /// [`remove_orphan_node_files`]). Returns how many nodes were cleaned.
 pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
+    // First what a node killed while it attached left half made: iceoryx2 would wait on it.
+    remove_unfinished_shm(instance, std::time::Duration::from_secs(1));
     let cfg = config_for(instance)?;
     let mut dead = Vec::new();
     // The nodes whose files the orphan sweep below must leave alone.
@@ -622,6 +630,35 @@ pub fn remove_unfinished_services(
             .is_some_and(|a| a >= age);
         if unfinished && old && std::fs::remove_file(e.path()).is_ok() {
             removed.push(e.path().display().to_string());
+        }
+    }
+    removed
+}
+
+/// Removes the shared memory of `instance` that was never finished and is `age` old: a
+/// segment of size 0 (created, never sized) or one its owner cannot read (iceoryx2 makes a
+/// dynamic storage readable once it is initialized). What a process killed while it created a
+/// connection or a port leaves (an observer's CLI killed as it attached): iceoryx2 waits on such
+/// a segment before it can remove a dead node's ports, one creation timeout for each, and
+/// without end for one of size 0 (`posix_shared_memory::Builder::open_impl`, 0.10), which made
+/// a supervisor's own node, dropped as the cell went down, wait for minutes. A live creator
+/// finishes one in microseconds. Returns the paths removed.
+pub fn remove_unfinished_shm(instance: &InstanceName, age: std::time::Duration) -> Vec<String> {
+    use std::os::unix::fs::PermissionsExt;
+    let mut removed = Vec::new();
+    for path in shm_files(instance) {
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        let unfinished =
+            meta.is_file() && (meta.len() == 0 || meta.permissions().mode() & 0o400 == 0);
+        let old = meta
+            .modified()
+            .ok()
+            .and_then(|m| m.elapsed().ok())
+            .is_some_and(|a| a >= age);
+        if unfinished && old && std::fs::remove_file(&path).is_ok() {
+            removed.push(path.display().to_string());
         }
     }
     removed

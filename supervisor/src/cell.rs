@@ -421,6 +421,9 @@ impl Cell {
     /// reactions arrive after a verdict), removes the instance, and only then lets go of its
     /// lock (`server`): the next supervisor of the instance never meets this one's cleanup.
     pub(crate) fn close(mut self, server: ctl::Server) -> Closed {
+        // The dead nodes (a client killed as it attached) cleaned while the processes run, not
+        // by each of them as it goes (`ipc::config_for`).
+        let _ = ipc::remove_dead_nodes(&self.instance);
         let stopped = self.stop_children();
         self.take_events();
         let events = self

@@ -254,6 +254,33 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
     });
 }
 
+#[test]
+fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_back() {
+    integration_tests::attributable(|| {
+        let ns = Netns::new("ecat-ident");
+        let up = cell_up(&ns, "ecat-ident");
+        let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
+        // Another product at position 2 (y's drive swapped under power: it leaves OP, and its
+        // EEPROM says another identity at the next scan).
+        fault(&["identity", "2", "0x00000999"]);
+        fault(&["leave-op", "2"]);
+        until_logged(&up, "position 2 (y) left OP");
+        until_logged(&up, "bus-recovering");
+        // Every attempt to bring the bus up again is refused, saying what is where.
+        until_logged(&up, "product 0x00000999");
+        let log = up.log();
+        assert!(
+            log.contains("position 2 of the bus on rtc-ecat0 should be y (vendor 0xe1a00001, product 0x00000402"),
+            "{log}"
+        );
+        assert!(!log.contains("back in OP"), "{log}");
+        // The right drive back: the bus in OP, then reset, start and the triangle.
+        fault(&["identity", "2", "0x00000402"]);
+        until_logged(&up, "back in OP on rtc-ecat0");
+        reset_start_and_run(up);
+    });
+}
+
 /// `ethercat-emulator fault --instance <up's> ARGS` in `ns`, which must succeed.
 fn emulator_fault(ns: &Netns, up: &Up, args: &[&str]) {
     let out = run_with_watchdog(
