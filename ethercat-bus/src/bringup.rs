@@ -554,19 +554,24 @@ fn bring_up(
     // the sequence of ethercrab's `configure_dc_sync`, whose start time would not be on the
     // bus process' grid).
     let timing = line.timing;
-    let mut has_dc = Vec::with_capacity(found.len());
-    for (k, sd) in group.iter(md).enumerate() {
-        let features: u16 = pump
-            .run(wire, sd.register_read(0x0008u16), long, stop)?
-            .map_err(|e| format!("position {k}: ESC features: {e}"))?;
-        has_dc.push(features & 0x04 != 0);
-    }
     let on_sync0: Vec<usize> = want
         .iter()
         .enumerate()
         .filter(|(_, w)| w.flags & subdevice_flags::SYNC0 != 0)
         .map(|(k, _)| k)
         .collect();
+    // Which SubDevices have DC (ESC features, 0x0008 bit 2): read only when one is on SYNC0.
+    let mut has_dc = Vec::with_capacity(found.len());
+    for (k, sd) in group
+        .iter(md)
+        .enumerate()
+        .take_while(|_| !on_sync0.is_empty())
+    {
+        let features: u16 = pump
+            .run(wire, sd.register_read(0x0008u16), long, stop)?
+            .map_err(|e| format!("position {k}: ESC features: {e}"))?;
+        has_dc.push(features & 0x04 != 0);
+    }
     if let Some(&k) = on_sync0.iter().find(|&&k| !has_dc[k]) {
         return Err(BringUpError::Refused(format!(
             "position {k} ({}) is configured on SYNC0 (sync = \"dc\", a drive's default) and its ESC has no Distributed Clocks (register 0x0008): write sync = \"frame\" in its [[ethercat.subdevice]]",
