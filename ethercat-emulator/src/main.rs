@@ -78,6 +78,7 @@ fn loop_back(bus: &mut Bus) {
 }
 
 fn main() -> ExitCode {
+    runtime::abort_on_panic();
     // In a cell (started by the supervisor with --instance) everything comes from the cell's
     // configuration.
     if std::env::args().nth(1).as_deref() == Some("fault") {

@@ -25,3 +25,18 @@ pub mod process;
 pub mod rt;
 pub mod signals;
 pub mod time;
+
+/// Makes every panic of this process abort it once the panic's message is written, as
+/// `panic = "abort"` would: called first in every binary of the cell. The release profile
+/// unwinds, so that the test harnesses (which always unwind) and the binaries share one build
+/// of the dependencies; a binary must still never unwind past a panic (a real-time process
+/// with a thread gone would run on half dead, a supervisor with its control thread gone would
+/// answer nothing). An abort is what the supervisor and the other processes already meet
+/// when a process dies.
+pub fn abort_on_panic() {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report(info);
+        std::process::abort();
+    }));
+}

@@ -153,6 +153,7 @@ pub fn run<T: Task>(
     about: &str,
     build: impl FnOnce(&Context) -> Result<T, SetupError>,
 ) -> ExitCode {
+    crate::abort_on_panic();
     // A blocked stderr (a full pipe, a paused terminal) must never stall a process.
     let _log = init_logging_lossy();
     let (instance, name) = match parse_args(default_name, about) {

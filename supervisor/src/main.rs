@@ -609,6 +609,7 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
 }
 
 fn main() -> ExitCode {
+    runtime::abort_on_panic();
     let cli = Cli::parse();
     let _log = init_logging(matches!(
         cli.cmd,
