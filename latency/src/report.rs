@@ -1,30 +1,46 @@
 //! The figures of a latency run as text (cyclictest's lines, plus percentiles) and JSON.
 
 use crate::measure::{Options, Results, Running, Series, Test};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use shm_schema::LatencyHistogramV1;
 use shm_schema::status::rt_flags;
 use std::sync::atomic::Ordering;
 
-/// The figures of one histogram, in µs.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The figures of one histogram, in µs; as JSON (`status --json`, reports, `latency --json`)
+/// to the nanosecond.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
 pub struct Summary {
     /// Samples.
     pub samples: u64,
     /// Smallest.
+    #[serde(serialize_with = "ns")]
     pub min_us: f64,
     /// Mean.
+    #[serde(serialize_with = "ns")]
     pub avg_us: f64,
     /// Median.
+    #[serde(serialize_with = "ns")]
     pub p50_us: f64,
     /// 99th percentile.
+    #[serde(serialize_with = "ns")]
     pub p99_us: f64,
     /// 99.9th percentile.
+    #[serde(serialize_with = "ns")]
     pub p99_9_us: f64,
     /// 99.99th percentile.
+    #[serde(serialize_with = "ns")]
     pub p99_99_us: f64,
     /// Largest.
+    #[serde(serialize_with = "ns")]
     pub max_us: f64,
+}
+
+/// Microseconds written to the nanosecond.
+fn ns<S: serde::Serializer>(us: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(round3(*us))
 }
 
 impl Summary {
@@ -45,16 +61,7 @@ impl Summary {
 
     /// As a JSON object (`samples`, `min_us`, `avg_us`, `p50_us`, ... `max_us`).
     pub fn to_json(&self) -> Value {
-        json!({
-            "samples": self.samples,
-            "min_us": round3(self.min_us),
-            "avg_us": round3(self.avg_us),
-            "p50_us": round3(self.p50_us),
-            "p99_us": round3(self.p99_us),
-            "p99_9_us": round3(self.p99_9_us),
-            "p99_99_us": round3(self.p99_99_us),
-            "max_us": round3(self.max_us),
-        })
+        serde_json::to_value(self).unwrap_or_default()
     }
 }
 

@@ -7,18 +7,19 @@
 //! ends the cell: what a job makes of an incident is the job's business ([`crate::job`]).
 
 use crate::config::{Config, RestartPolicy};
-use crate::ctl;
 use crate::events::{self, Axes};
 use crate::launch::Children;
 use crate::run::{RunError, TICK};
 use crate::stall::StallWatch;
+use control_plane::channel as ctl;
+use control_plane::info::{self, Info};
 
 /// A heartbeat gap this long (s) is reported, whatever room `supervisor_timeout` gives: the
 /// processes' own timing suffers from such a stall (a following error of vmax times it).
 const STALL_REPORTED_S: f64 = 0.1;
 use runtime::ipc::{self, Pub, Sub};
 use runtime::signals;
-use serde_json::{Value, json};
+use serde_json::Value;
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
@@ -1003,51 +1004,54 @@ impl Cell {
     }
 
     /// The supervisor's view for `status --json`: per process its pid, life and restarts;
-    /// the arm; the e-stop.
-    pub(crate) fn info(&self) -> Value {
-        let processes: Vec<Value> = (0..self.names.len())
+    /// the arm; the e-stop. The loop adds what runs on the cell ([`crate::serve`]).
+    pub(crate) fn info(&self) -> Info {
+        let processes = (0..self.names.len())
             .map(|k| {
                 let (life, why) = match &self.life[k] {
-                    Life::Running if self.cyclic(k) => ("running", None),
-                    Life::Running => ("starting", None),
-                    Life::Restarting(_) => ("restarting", None),
-                    Life::Down(w) => ("down", Some(w.clone())),
+                    Life::Running if self.cyclic(k) => (info::Life::Running, None),
+                    Life::Running => (info::Life::Starting, None),
+                    Life::Restarting(_) => (info::Life::Restarting, None),
+                    Life::Down(w) => (info::Life::Down, Some(w.clone())),
                 };
-                json!({
-                    "name": self.names[k],
-                    "pid": self.children.get(k).map(|p| p.pid()),
-                    "life": life,
-                    "why": why,
-                    "restarts": self.restarts[k],
-                    "command": self.commands[k],
-                    "critical": self.critical[k],
-                    "listening": self.listening[k],
-                })
+                info::ProcessInfo {
+                    name: self.names[k].clone(),
+                    pid: self.children.get(k).map(|p| p.pid()),
+                    life,
+                    why,
+                    restarts: self.restarts[k],
+                    command: self.commands[k].clone(),
+                    critical: self.critical[k],
+                    listening: self.listening[k].clone(),
+                }
             })
             .collect();
-        let estop = self.estop.map(|(e, _)| {
-            json!({
-                "origin": EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name),
-                "source": self.axes.source_name(e.source),
-                "code": e.code,
-                "reason": str_of(&e.reason),
-                "text": self.estop_text(),
-            })
+        let estop = self.estop.map(|(e, _)| info::EstopInfo {
+            origin: e.origin.into(),
+            source: self.axes.source_name(e.source),
+            code: e.code,
+            reason: str_of(&e.reason).to_string(),
+            text: self.estop_text(),
         });
-        let arm = self.last_servo.map(|s| {
-            json!({
-                "enabled": s.status & st::ENABLED != 0,
-                "fault_latched": s.status & st::FAULT_LATCHED != 0,
-                "fault": (s.status & st::FAULT_LATCHED != 0).then(|| self.fault_text(&s)),
-            })
+        let arm = self.last_servo.map(|s| info::ArmInfo {
+            enabled: s.status & st::ENABLED != 0,
+            fault_latched: s.status & st::FAULT_LATCHED != 0,
+            fault: (s.status & st::FAULT_LATCHED != 0).then(|| self.fault_text(&s)),
         });
-        json!({
-            "pid": std::process::id(),
-            "mode": match self.mode { Mode::Run => "run", Mode::Up => "up" },
-            "resets": self.host.resets,
-            "estop": estop,
-            "arm": arm,
-            "processes": processes,
-        })
+        Info {
+            pid: std::process::id(),
+            mode: match self.mode {
+                Mode::Run => info::Mode::Run,
+                Mode::Up => info::Mode::Up,
+            },
+            resets: self.host.resets,
+            estop,
+            arm,
+            processes,
+            job: None,
+            last_job: None,
+            enabling: false,
+            going_down: false,
+        }
     }
 }

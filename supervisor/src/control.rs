@@ -2,6 +2,7 @@
 //! user's e-stop, and the named digital IO.
 
 use crate::config::{FAULT_NAMES, fault_code};
+use control_plane::status::{IoEntry, SafeValue};
 use iceoryx2::prelude::Node;
 use runtime::events::EventSink;
 use runtime::ipc::{self, Ipc, Pub, Sub};
@@ -338,24 +339,30 @@ fn io_table(cell: &CellConfigV6, image: Option<&DigitalIoV1>) -> String {
     if cell.io().is_empty() {
         return "the cell has no named IO (`[[io]]`)".into();
     }
-    let v = crate::status::io_json(cell, image);
+    let v = crate::status::io_status(cell, image);
     let mut out = String::from("name                     direction  value  notes\n");
-    for e in v["entries"].as_array().into_iter().flatten() {
-        let notes = match e["direction"].as_str() {
-            Some("output") => format!("safe {}", e["safe"].to_string().trim_matches('"')),
-            _ if e["estop"] == true => "e-stop circuit (1 closed)".into(),
-            _ => String::new(),
+    for e in &v.entries {
+        let (direction, notes) = match e {
+            IoEntry::Output { safe, .. } => (
+                "output",
+                match safe {
+                    SafeValue::Level(l) => format!("safe {l}"),
+                    SafeValue::Hold(_) => "safe hold".into(),
+                },
+            ),
+            IoEntry::Input { estop: true, .. } => ("input", "e-stop circuit (1 closed)".into()),
+            IoEntry::Input { .. } => ("input", String::new()),
         };
         out += &format!(
             "{:<24} {:<10} {:<6} {notes}\n",
-            e["name"].as_str().unwrap_or("?"),
-            e["direction"].as_str().unwrap_or("?"),
-            e["value"].as_u64().map_or("?".into(), |v| v.to_string()),
+            e.name(),
+            direction,
+            e.value().map_or("?".into(), |v| v.to_string()),
         );
     }
     if image.is_none() {
         out += "(iobridge published no IO image: values unknown)\n";
-    } else if v["outputs_safe"] == true {
+    } else if v.outputs_safe == Some(true) {
         out += "outputs held at their safe values: iobridge reacts to the e-stop\n";
     }
     out.trim_end().to_string()

@@ -8,10 +8,10 @@
 //! peak is lost however long the run), the histograms from the processes' own. [`Figures`]
 //! travels to an `exec` client over the control channel; the client draws it.
 
+use control_plane::figures::{Figures, PathFigure};
 use motion_core::generator::Kin;
 use plot::{Area, Bin, Figure, Histogram, Panel, PathLine};
-use serde::{Deserialize, Serialize};
-use shm_schema::{LatencyHistogramV1, MAX_AXES};
+use shm_schema::MAX_AXES;
 
 /// Buckets an [`Envelope`] keeps at most; past it, their width doubles.
 pub const ENVELOPE_BUCKETS: usize = 1024;
@@ -108,60 +108,6 @@ impl Envelope {
     }
 }
 
-/// The following error of one axis over the run, as an [`Envelope`] gives it.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct AxisEnvelope {
-    pub axis: String,
-    pub unit: String,
-    /// Servo's own latch over the run (`ServoStateV3.peak_following_error`).
-    pub peak: f64,
-    /// Per bucket: its start (s from the program's first setpoint), min, max.
-    pub buckets: Vec<(f64, f64, f64)>,
-}
-
-/// The tool's path in the plane of the cell's first two Cartesian coordinates (or, for a
-/// cell with one, that coordinate over time).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct PathFigure {
-    /// Horizontal and vertical axis labels (`x (mm)`, `y (mm)`, or `time (s)`).
-    pub labels: (String, String),
-    pub commanded: Vec<(f64, f64)>,
-    pub measured: Vec<(f64, f64)>,
-}
-
-/// One process' wake-up latency since it started (for `run`, the processes it launched: the
-/// run; for `exec` on a long-running cell, the processes' whole life so far).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ProcessLatency {
-    pub process: String,
-    /// (lowest µs, highest µs, samples), ascending, empty bins left out.
-    pub bins: Vec<(f64, f64, u64)>,
-    pub p99_us: f64,
-    pub max_us: f64,
-}
-
-impl ProcessLatency {
-    /// The figure of `process`' histogram `h`.
-    pub fn of(process: &str, h: &LatencyHistogramV1) -> Self {
-        let m = latency::report::Summary::of(h);
-        Self {
-            process: process.to_string(),
-            bins: latency_bins(h),
-            p99_us: m.p99_us,
-            max_us: m.max_us,
-        }
-    }
-}
-
-/// Everything `--plot` draws.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Figures {
-    pub title: String,
-    pub path: PathFigure,
-    pub following_error: Vec<AxisEnvelope>,
-    pub latency: Vec<ProcessLatency>,
-}
-
 /// The figure's size (pixels).
 pub const WIDTH: u32 = 1280;
 pub const HEIGHT: u32 = 960;
@@ -198,128 +144,96 @@ pub fn areas() -> (Area, Area, Area) {
 const COMMANDED_WIDTH: u32 = 5;
 const MEASURED_WIDTH: u32 = 1;
 
-impl Figures {
-    /// The figure drawn (not yet encoded); the path's scale for whoever checks it.
-    pub fn draw(&self) -> (Figure, plot::PathScale) {
-        let mut f = Figure::new(WIDTH, HEIGHT);
-        f.title(&self.title);
-        let (path_area, lat_area, fe_area) = areas();
-        let p = &self.path;
-        let scale = f.path(
-            path_area,
-            "tool path, o at the start",
-            (&p.labels.0, &p.labels.1),
-            &[
-                PathLine {
-                    label: "commanded".into(),
-                    points: p.commanded.clone(),
-                    width: COMMANDED_WIDTH,
-                },
-                PathLine {
-                    label: "measured".into(),
-                    points: p.measured.clone(),
-                    width: MEASURED_WIDTH,
-                },
-            ],
-        );
-        let hist: Vec<Histogram> = self
-            .latency
-            .iter()
-            .map(|l| Histogram {
-                label: format!(
-                    "{} p99 {:.0} \u{b5}s, max {:.0} \u{b5}s",
-                    l.process, l.p99_us, l.max_us
-                ),
-                bins: l
-                    .bins
-                    .iter()
-                    .map(|&(lo, hi, count)| Bin { lo, hi, count })
-                    .collect(),
-            })
-            .collect();
-        f.log_histogram(
-            lat_area,
-            "wake-up latency per process, since it started",
-            "wake-up latency (\u{b5}s, log)",
-            &hist,
-        );
-        // One panel per unit (mm and deg do not share a scale); each axis' envelope drawn as
-        // a band: its min and max alternate along the line.
-        let mut panels: Vec<Panel> = Vec::new();
-        for a in &self.following_error {
-            // Servo's own latch (every cycle); the envelope's when servo latched another
-            // program (a failure before this one's first state).
-            let peak = if a.peak.is_finite() {
-                a.peak
-            } else {
-                a.buckets
-                    .iter()
-                    .flat_map(|&(_, lo, hi)| [lo, hi])
-                    .fold(0.0, |p: f64, v| if v.abs() > p.abs() { v } else { p })
-            };
-            let label = format!("{} (peak {peak:.4} {})", a.axis, a.unit);
-            let band: Vec<(f64, f64)> = a
-                .buckets
+/// `figures` drawn (not yet encoded); the path's scale for whoever checks it.
+pub fn draw(figures: &Figures) -> (Figure, plot::PathScale) {
+    let mut f = Figure::new(WIDTH, HEIGHT);
+    f.title(&figures.title);
+    let (path_area, lat_area, fe_area) = areas();
+    let p = &figures.path;
+    let scale = f.path(
+        path_area,
+        "tool path, o at the start",
+        (&p.labels.0, &p.labels.1),
+        &[
+            PathLine {
+                label: "commanded".into(),
+                points: p.commanded.clone(),
+                width: COMMANDED_WIDTH,
+            },
+            PathLine {
+                label: "measured".into(),
+                points: p.measured.clone(),
+                width: MEASURED_WIDTH,
+            },
+        ],
+    );
+    let hist: Vec<Histogram> = figures
+        .latency
+        .iter()
+        .map(|l| Histogram {
+            label: format!(
+                "{} p99 {:.0} \u{b5}s, max {:.0} \u{b5}s",
+                l.process, l.p99_us, l.max_us
+            ),
+            bins: l
+                .bins
                 .iter()
-                .flat_map(|&(t, lo, hi)| [(t, lo), (t, hi)])
-                .collect();
-            let y_label = format!("following error ({})", a.unit);
-            match panels.iter_mut().find(|p| p.y_label == y_label) {
-                Some(p) => p.lines.push((label, band)),
-                None => panels.push(Panel {
-                    y_label,
-                    lines: vec![(label, band)],
-                }),
-            }
+                .map(|&(lo, hi, count)| Bin { lo, hi, count })
+                .collect(),
+        })
+        .collect();
+    f.log_histogram(
+        lat_area,
+        "wake-up latency per process, since it started",
+        "wake-up latency (\u{b5}s, log)",
+        &hist,
+    );
+    // One panel per unit (mm and deg do not share a scale); each axis' envelope drawn as
+    // a band: its min and max alternate along the line.
+    let mut panels: Vec<Panel> = Vec::new();
+    for a in &figures.following_error {
+        // Servo's own latch (every cycle); the envelope's when servo latched another
+        // program (a failure before this one's first state).
+        let peak = if a.peak.is_finite() {
+            a.peak
+        } else {
+            a.buckets
+                .iter()
+                .flat_map(|&(_, lo, hi)| [lo, hi])
+                .fold(0.0, |p: f64, v| if v.abs() > p.abs() { v } else { p })
+        };
+        let label = format!("{} (peak {peak:.4} {})", a.axis, a.unit);
+        let band: Vec<(f64, f64)> = a
+            .buckets
+            .iter()
+            .flat_map(|&(t, lo, hi)| [(t, lo), (t, hi)])
+            .collect();
+        let y_label = format!("following error ({})", a.unit);
+        match panels.iter_mut().find(|p| p.y_label == y_label) {
+            Some(p) => p.lines.push((label, band)),
+            None => panels.push(Panel {
+                y_label,
+                lines: vec![(label, band)],
+            }),
         }
-        f.series(
-            fe_area,
-            "time from the program's first setpoint (s); every servo cycle, min and max per bucket",
-            &panels,
-        );
-        (f, scale)
     }
+    f.series(
+        fe_area,
+        "time from the program's first setpoint (s); every servo cycle, min and max per bucket",
+        &panels,
+    );
+    (f, scale)
+}
 
-    /// The PNG.
-    pub fn png(&self) -> Result<Vec<u8>, String> {
-        self.draw().0.png()
-    }
+/// `figures` as a PNG.
+pub fn png(figures: &Figures) -> Result<Vec<u8>, String> {
+    draw(figures).0.png()
 }
 
 /// Draws `figures` and writes the PNG to `path`.
 pub fn write_png(figures: &Figures, path: &std::path::Path) -> Result<(), String> {
-    let png = figures
-        .png()
-        .map_err(|e| format!("--plot {}: {e}", path.display()))?;
+    let png = png(figures).map_err(|e| format!("--plot {}: {e}", path.display()))?;
     std::fs::write(path, png).map_err(|e| format!("--plot {}: {e}", path.display()))
-}
-
-/// The wake-up latency histogram `h` in bins of 1/8 octave (16 of its buckets each, all its
-/// 1-ns buckets below 256 ns in one), µs, ascending, empty bins left out.
-pub fn latency_bins(h: &LatencyHistogramV1) -> Vec<(f64, f64, u64)> {
-    use shm_schema::latency::{BUCKETS, bucket_bounds};
-    const FIRST: usize = 256;
-    const GROUP: usize = 16;
-    let groups = 1 + (BUCKETS - FIRST).div_ceil(GROUP);
-    (0..groups)
-        .filter_map(|g| {
-            let (first, last) = if g == 0 {
-                (0, FIRST - 1)
-            } else {
-                let first = FIRST + (g - 1) * GROUP;
-                (first, (first + GROUP - 1).min(BUCKETS - 1))
-            };
-            let count: u64 = h.buckets[first..=last].iter().sum();
-            (count > 0).then(|| {
-                let (mut lo, hi) = (bucket_bounds(first).0, bucket_bounds(last).1 + 1);
-                if g == 0 {
-                    // Not from 0 ns: on a log axis that would stretch it decades to the left.
-                    lo = h.min_ns.clamp(1, hi - 1);
-                }
-                (lo as f64 * 1e-3, hi as f64 * 1e-3, count)
-            })
-        })
-        .collect()
 }
 
 /// Thins a path to what a figure shows, in one pass (Reumann-Witkam): a run of points that
@@ -474,12 +388,31 @@ pub fn path_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use control_plane::figures::{AxisEnvelope, ProcessLatency};
 
     fn one(v: f64) -> [f64; MAX_AXES] {
         let mut a = [0.0; MAX_AXES];
         a[0] = v;
         a[1] = -v;
         a
+    }
+
+    /// The distance from `p` to the nearest segment of `line` (its breaks skipped).
+    fn off_line(p: (f64, f64), line: &[(f64, f64)]) -> f64 {
+        line.windows(2)
+            .filter(|w| w[0].0.is_finite() && w[1].0.is_finite())
+            .map(|w| {
+                let (a, b) = (w[0], w[1]);
+                let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+                let l2 = dx * dx + dy * dy;
+                let t = if l2 > 0.0 {
+                    (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / l2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     #[test]
@@ -520,53 +453,6 @@ mod tests {
         assert_eq!((a[0].1, a[0].2), (1.0, 1.0));
         assert_eq!((a[1].1, a[1].2), (-2.0, -2.0));
         assert!((a[1].0 - 50e-9).abs() < 1e-15);
-    }
-
-    #[test]
-    fn latency_bins_keep_every_sample_and_join_up() {
-        let mut h = LatencyHistogramV1::new();
-        let samples: Vec<u64> = (0..5000u64)
-            .map(|i| 12_000 + (i * 7919) % 40_000)
-            .chain([150, 2_500_000, 9_000_000])
-            .collect();
-        for &s in &samples {
-            h.record(s);
-        }
-        let bins = latency_bins(&h);
-        let total: u64 = bins.iter().map(|b| b.2).sum();
-        assert_eq!(total, samples.len() as u64);
-        for s in &samples {
-            let us = *s as f64 * 1e-3;
-            let n = bins.iter().filter(|b| b.0 <= us && us < b.1).count();
-            assert_eq!(n, 1, "sample {us} µs in {n} bins");
-        }
-        // Ascending, never overlapping; neighbours with samples share their bound.
-        for w in bins.windows(2) {
-            assert!(w[0].1 <= w[1].0, "{w:?}");
-        }
-        assert!(bins.windows(2).any(|w| w[0].1 == w[1].0));
-        // 1/8 of an octave: 1/8 of the octave's start wide.
-        let b = bins.iter().find(|b| b.0 > 16.0).expect("a body bin");
-        let octave_us = 2f64.powf((b.0 * 1e3).log2().floor()) * 1e-3;
-        assert!((b.1 - b.0 - octave_us / 8.0).abs() < 1e-9, "{b:?}");
-    }
-
-    /// The distance from `p` to the nearest segment of `line` (its breaks skipped).
-    fn off_line(p: (f64, f64), line: &[(f64, f64)]) -> f64 {
-        line.windows(2)
-            .filter(|w| w[0].0.is_finite() && w[1].0.is_finite())
-            .map(|w| {
-                let (a, b) = (w[0], w[1]);
-                let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-                let l2 = dx * dx + dy * dy;
-                let t = if l2 > 0.0 {
-                    (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / l2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
-            })
-            .fold(f64::INFINITY, f64::min)
     }
 
     #[test]
@@ -665,7 +551,7 @@ mod tests {
                 max_us: 12.0,
             }],
         };
-        let (f, scale) = figures.draw();
+        let (f, scale) = draw(&figures);
         // The commanded path, 5 pixels wide under the measured one, at each corner.
         let near = |(px, py): (i32, i32), c: [u8; 3]| {
             (-2..=2).any(|dx| (-2..=2).any(|dy| f.pixel(px + dx, py + dy) == c))
@@ -682,6 +568,6 @@ mod tests {
         let bytes = postcard::to_allocvec(&figures).expect("encodes");
         let back: Figures = postcard::from_bytes(&bytes).expect("decodes");
         assert_eq!(back, figures);
-        assert_eq!(&figures.png().expect("png")[1..4], b"PNG");
+        assert_eq!(&png(&figures).expect("png")[1..4], b"PNG");
     }
 }

@@ -4,10 +4,11 @@
 
 use crate::cell::{Cell, Incident};
 use crate::config::Config;
-use crate::figures::{AxisEnvelope, Envelope, Figures};
+use crate::figures::Envelope;
 use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
 use crate::run::{RunError, TICK};
+use control_plane::figures::{AxisEnvelope, Figures};
 use motion_program::Commands;
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::code;

@@ -4,7 +4,6 @@
 pub mod cell;
 pub mod config;
 pub mod control;
-pub mod ctl;
 pub mod events;
 pub mod figures;
 pub mod job;

@@ -1,11 +1,12 @@
 //! `supervisor`: launches a cell and runs programs on it.
 
 use clap::{Parser, Subcommand};
+use control_plane::channel as ctl;
+use control_plane::{Reply, Request};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use supervisor::config::{Config, DEFAULT_TOML};
-use supervisor::ctl::{self, Reply, Request};
 use supervisor::latency_cmd::{LatencyArgs, LatencyError, latency};
 use supervisor::run::{RunError, RunOptions, run};
 
@@ -434,8 +435,8 @@ fn ctl_reply(
             println!("{m}");
             ExitCode::SUCCESS
         }
-        Reply::Json(j) => {
-            println!("{j}");
+        Reply::Info(info) => {
+            println!("{}", serde_json::to_string(&info).unwrap_or_default());
             ExitCode::SUCCESS
         }
         Reply::Refused(m) => {
@@ -570,25 +571,22 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
         Ok(i) => i,
         Err(c) => return c,
     };
-    let once = || -> Result<(serde_json::Value, String), (u8, String)> {
+    let once = || -> Result<control_plane::status::Status, (u8, String)> {
         let info = match ctl::call(&instance, &Request::Info) {
-            Ok(Reply::Json(j)) => serde_json::from_str(&j).unwrap_or_default(),
+            Ok(Reply::Info(info)) => *info,
             Ok(Reply::Refused(m)) => return Err((2, m)),
             Ok(other) => return Err((1, format!("unexpected answer: {other:?}"))),
             Err(e) => return Err((2, e.to_string())),
         };
         let snap = supervisor::status::read(&instance).map_err(|e| (1, e))?;
-        let mut v = supervisor::status::to_json(&instance, &snap);
-        let text = supervisor::status::supervisor_lines(&info)
-            + &supervisor::status::human(&instance, &snap);
-        v["supervisor"] = info;
-        Ok((v, text))
+        Ok(supervisor::status::status(&instance, &snap, info))
     };
     loop {
         match once() {
-            Ok((v, text)) => {
+            Ok(status) => {
+                let text = supervisor::status::human(&status);
                 if json {
-                    println!("{v}");
+                    println!("{}", serde_json::to_string(&status).unwrap_or_default());
                 } else if watch {
                     print!("\x1b[H\x1b[2J{text}");
                     let _ = std::io::Write::flush(&mut std::io::stdout());

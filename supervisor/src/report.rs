@@ -162,7 +162,7 @@ pub struct Report {
     pub sense_to_command: Option<Summary>,
     /// What `--plot` draws (the path, the following error over the run, the latency
     /// histograms), when it was asked for: built at the program's end only then.
-    pub figures: Option<Box<crate::figures::Figures>>,
+    pub figures: Option<Box<control_plane::figures::Figures>>,
 }
 
 fn per_axis<T: Serialize>(names: &[String], values: &[T]) -> Value {

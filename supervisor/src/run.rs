@@ -51,7 +51,7 @@ pub enum RunError {
         /// The events of the run up to the failure (`docs/events.md`).
         events: Vec<serde_json::Value>,
         /// A program's figures up to the failure (`--plot`), when it had started.
-        figures: Option<Box<crate::figures::Figures>>,
+        figures: Option<Box<control_plane::figures::Figures>>,
     },
     /// Ctrl-C / SIGTERM. Exit code 130.
     Interrupted,

@@ -15,13 +15,15 @@
 
 use crate::cell::{Cell, Incident, Mode};
 use crate::config::Config;
-use crate::ctl::{ConnId, Reply, Request, Server};
 use crate::events;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
 use crate::program::Checked;
 use crate::report::{ProcessReport, Report};
 use crate::run::{RunError, TICK};
+use control_plane::channel::{ConnId, Server};
+use control_plane::info::{Info, JobInfo, LastJob};
+use control_plane::{Reply, Request};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
@@ -104,7 +106,7 @@ struct Loop<'a> {
     running: Option<Running>,
     pending: Vec<Pending>,
     /// The last program's end, for `status`.
-    last_job: Option<Value>,
+    last_job: Option<LastJob>,
     down: bool,
     stopping: Option<Stopping>,
 }
@@ -457,14 +459,14 @@ impl Loop<'_> {
             ),
             Err(e) => tracing::error!("{} failed: {e}", r.job.name),
         }
-        self.last_job = Some(json!({
-            "program": r.job.name,
-            "ok": ok,
-            "error": if ok { Value::Null } else { json!(text) },
-            "measured_s": json.get("measured_s"),
-            "theoretical_s": json.get("theoretical_s"),
-            "ran_s": r.started.elapsed().as_secs_f64(),
-        }));
+        self.last_job = Some(LastJob {
+            program: r.job.name.clone(),
+            ok,
+            error: (!ok).then(|| text.clone()),
+            measured_s: result.as_ref().ok().map(|r| r.measured_s),
+            theoretical_s: result.as_ref().ok().map(|r| r.theoretical_s),
+            ran_s: r.started.elapsed().as_secs_f64(),
+        });
         let body = json.to_string();
         for w in &r.waiters {
             let figures = match result {
@@ -503,7 +505,7 @@ impl Loop<'_> {
             return;
         }
         let reply = match req {
-            Request::Info => Some(Reply::Json(self.info().to_string())),
+            Request::Info => Some(Reply::Info(Box::new(self.info()))),
             Request::Exec {
                 name,
                 source,
@@ -539,24 +541,23 @@ impl Loop<'_> {
         }
     }
 
-    fn info(&self) -> Value {
-        let mut v = self.cell.info();
-        let job = self.running.as_ref().map(|r| {
+    fn info(&self) -> Info {
+        let mut info = self.cell.info();
+        info.job = self.running.as_ref().map(|r| {
             let sp = r.job.last;
-            json!({
-                "program": r.job.name,
-                "line": sp.map(|s| s.line),
-                "motion_time_s": sp.map(|s| s.motion_time_s),
-                "predicted_s": r.job.predicted(),
-                "path_speed": sp.map(|s| s.path_speed),
-                "paused": sp.is_some_and(|s| s.path_speed == 0.0),
-            })
+            JobInfo {
+                program: r.job.name.clone(),
+                line: sp.map(|s| s.line),
+                motion_time_s: sp.map(|s| s.motion_time_s),
+                predicted_s: r.job.predicted(),
+                path_speed: sp.map(|s| s.path_speed),
+                paused: sp.is_some_and(|s| s.path_speed == 0.0),
+            }
         });
-        v["job"] = job.unwrap_or(Value::Null);
-        v["last_job"] = self.last_job.clone().unwrap_or(Value::Null);
-        v["enabling"] = json!(self.enabling.is_some());
-        v["going_down"] = json!(self.stopping.is_some());
-        v
+        info.last_job = self.last_job.clone();
+        info.enabling = self.enabling.is_some();
+        info.going_down = self.stopping.is_some();
+        info
     }
 
     /// Why a program cannot start now, if it cannot.
@@ -900,7 +901,7 @@ impl Loop<'_> {
 }
 
 /// Per process, its wake-up latency histogram over its life, for the run's figures.
-pub(crate) fn latency_figures(cell: &Cell) -> Vec<crate::figures::ProcessLatency> {
+pub(crate) fn latency_figures(cell: &Cell) -> Vec<control_plane::figures::ProcessLatency> {
     cell.names
         .iter()
         .zip(&cell.latencies)
@@ -908,7 +909,7 @@ pub(crate) fn latency_figures(cell: &Cell) -> Vec<crate::figures::ProcessLatency
         .filter(|(k, _)| cell.children.get(*k).is_some())
         .filter_map(|(_, (name, h))| {
             let h = h.as_deref().filter(|h| h.count > 0)?;
-            Some(crate::figures::ProcessLatency::of(name, h))
+            Some(control_plane::figures::ProcessLatency::of(name, h))
         })
         .collect()
 }

@@ -3,16 +3,20 @@
 //! servo layer's state (power, settled, a latched fault, every drive's CiA 402 state) and the
 //! drives' sense-to-command latency.
 
-use latency::report::Summary;
+use control_plane::Info;
+use control_plane::status::{
+    AxisStatus, Detector, EstopSeen, EstopStatus, Health, Hold, HoldKind, HoldWord, IoEntry,
+    IoStatus, MotionState, Percentiles, Power, ProcState, ProcessStatus, ProgramStatus, SafeValue,
+    ServoFault, ServoStatus, Space, Status,
+};
+use indexmap::IndexMap;
 use runtime::ipc::{self, Sub};
 use runtime::rt::policy_name;
-use serde_json::{Map, Value, json};
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopState, HostStateV1};
 use shm_schema::{
-    CellConfigV6, DetectorV1, DigitalIoV1, EstopOrigin, InstanceName, IoDirection,
-    LatencyHistogramV1, MotionState, Power, ProcState, ProcessName, ProcessStatusV2, SafeValue,
-    ServiceId, ServoStateV3, SetpointV2, estop_seen, str_of,
+    CellConfigV6, DetectorV1, DigitalIoV1, InstanceName, IoDirection, LatencyHistogramV1,
+    ProcessName, ProcessStatusV2, ServiceId, ServoStateV3, SetpointV2, estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -180,63 +184,58 @@ pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
     })
 }
 
-/// The named digital IO: per entry its name, direction, value (null before iobridge's first
+/// The named digital IO: per entry its name, direction, value (`None` before iobridge's first
 /// image), and for an output its safe value, for an input whether it is an e-stop circuit.
-pub fn io_json(cell: &CellConfigV6, io: Option<&DigitalIoV1>) -> Value {
-    let entries: Vec<Value> = cell
+pub fn io_status(cell: &CellConfigV6, io: Option<&DigitalIoV1>) -> IoStatus {
+    let entries = cell
         .io()
         .iter()
         .enumerate()
         .map(|(k, e)| {
+            let name = str_of(&e.name).to_string();
             let value = io.map(|i| u8::from(i.values & (1 << k) != 0));
             match IoDirection::from_u32(e.direction) {
-                Some(IoDirection::Output) => json!({
-                    "name": str_of(&e.name),
-                    "direction": "output",
-                    "value": value,
-                    "safe": match SafeValue::from_u32(e.safe) {
-                        Some(SafeValue::On) => json!(1),
-                        Some(SafeValue::Hold) => json!("hold"),
-                        _ => json!(0),
+                Some(IoDirection::Output) => IoEntry::Output {
+                    name,
+                    value,
+                    safe: match shm_schema::SafeValue::from_u32(e.safe) {
+                        Some(shm_schema::SafeValue::On) => SafeValue::Level(1),
+                        Some(shm_schema::SafeValue::Hold) => SafeValue::Hold(HoldWord::Hold),
+                        _ => SafeValue::Level(0),
                     },
-                }),
-                _ => json!({
-                    "name": str_of(&e.name),
-                    "direction": "input",
-                    "value": value,
-                    "estop": e.estop != 0,
-                }),
+                },
+                _ => IoEntry::Input {
+                    name,
+                    value,
+                    estop: e.estop != 0,
+                },
             }
         })
         .collect();
-    json!({
-        "entries": entries,
-        "outputs_safe": io.map(|i| i.outputs_safe != 0),
-        "requests_taken": io.map(|i| i.taken),
-        "writes_refused": io.map(|i| i.refused),
-    })
-}
-
-fn state_name(state: u32) -> &'static str {
-    match ProcState::from_u32(state) {
-        Some(ProcState::Starting) => "starting",
-        Some(ProcState::Cyclic) => "cyclic",
-        Some(ProcState::Stopping) => "stopping",
-        Some(ProcState::Fault) => "fault",
-        None => "?",
+    IoStatus {
+        entries,
+        outputs_safe: io.map(|i| i.outputs_safe != 0),
+        requests_taken: io.map(|i| i.taken),
+        writes_refused: io.map(|i| i.refused),
     }
 }
 
-fn power_name(v: u8) -> &'static str {
-    Power::from_u8(v).map_or("?", Power::name)
+fn proc_state(state: u32) -> ProcState {
+    match shm_schema::ProcState::from_u32(state) {
+        Some(shm_schema::ProcState::Starting) => ProcState::Starting,
+        Some(shm_schema::ProcState::Cyclic) => ProcState::Cyclic,
+        Some(shm_schema::ProcState::Stopping) => ProcState::Stopping,
+        Some(shm_schema::ProcState::Fault) => ProcState::Fault,
+        None => ProcState::Unknown,
+    }
 }
 
 fn drive_state(sw: u16) -> &'static str {
     cia402::State::from_statusword(sw).map_or("?", cia402::State::name)
 }
 
-/// Servo's state as JSON: the arm and every axis.
-fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV6>) -> Value {
+/// Servo's state: the arm and every axis.
+fn servo_status(s: &ServoStateV3, cell: Option<&CellConfigV6>) -> ServoStatus {
     let n = (s.axes as usize).min(shm_schema::MAX_AXES);
     let names: Vec<String> = (0..n)
         .map(|i| match cell {
@@ -244,233 +243,200 @@ fn servo_json(s: &ServoStateV3, cell: Option<&CellConfigV6>) -> Value {
             _ => format!("axis {i}"),
         })
         .collect();
-    let mut axes = Map::new();
-    for (i, n) in names.iter().enumerate() {
-        axes.insert(
-            n.clone(),
-            json!({
-                "power": power_name(s.axis_power[i]),
-                "drive_state": drive_state(s.statusword[i]),
-                "statusword": s.statusword[i],
-                "settled": s.settled_axes & (1 << i) != 0,
-                "position": s.act_position[i],
-                "following_error": s.following_error[i],
-            }),
-        );
-    }
-    let fault = (s.status & st::FAULT_LATCHED != 0).then(|| {
-        json!({
-            "code": s.fault_code,
-            "name": shm_schema::event::info(s.fault_code).map_or("unknown", |i| i.name),
-            "axis": names.get(s.fault_axis as usize),
-            "value": s.fault_value,
-            "limit": s.fault_limit,
+    let axes: IndexMap<String, AxisStatus> = names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            (
+                name.clone(),
+                AxisStatus {
+                    power: Power::from(s.axis_power[i]),
+                    drive_state: drive_state(s.statusword[i]).into(),
+                    statusword: s.statusword[i],
+                    settled: s.settled_axes & (1 << i) != 0,
+                    position: s.act_position[i],
+                    following_error: s.following_error[i],
+                },
+            )
         })
+        .collect();
+    let fault = (s.status & st::FAULT_LATCHED != 0).then(|| ServoFault {
+        code: s.fault_code,
+        name: shm_schema::event::info(s.fault_code)
+            .map_or("unknown", |i| i.name)
+            .into(),
+        axis: usize::try_from(s.fault_axis)
+            .ok()
+            .and_then(|i| names.get(i))
+            .cloned(),
+        value: s.fault_value,
+        limit: s.fault_limit,
     });
-    json!({
-        "power": power_name(s.power),
-        "initialized": s.status & st::INITIALIZED != 0,
-        "enabled": s.status & st::ENABLED != 0,
-        "settled": s.status & st::SETTLED != 0,
-        "fault": fault,
-        "axes": axes,
-    })
+    ServoStatus {
+        power: Power::from(s.power),
+        initialized: s.status & st::INITIALIZED != 0,
+        enabled: s.status & st::ENABLED != 0,
+        settled: s.status & st::SETTLED != 0,
+        fault,
+        axes,
+    }
 }
 
 /// The cell's e-stop: latched or clear, its origin, source and reason.
-fn estop_json(snap: &Snapshot) -> Value {
-    let Some(h) = &snap.host else {
-        return Value::Null;
-    };
+fn estop_status(snap: &Snapshot) -> Option<EstopStatus> {
+    let h = snap.host.as_ref()?;
     let latched = h.estop == EstopState::Latched as u32;
     let names = snap
         .cell
         .as_deref()
         .map(crate::events::Axes::of_cell)
         .unwrap_or_default();
-    json!({
-        "latched": latched,
-        "origin": latched.then(|| EstopOrigin::from_u32(h.cause.origin).map_or("?", EstopOrigin::name)),
-        "source": latched.then(|| names.source_name(h.cause.source)),
-        "reason": latched.then(|| str_of(&h.cause.reason).to_string()),
-        "cause": latched.then(|| shm_schema::event::info(h.cause.code).map_or("", |i| i.name)),
-        "resets": h.resets,
+    Some(EstopStatus {
+        latched,
+        origin: latched.then(|| h.cause.origin.into()),
+        source: latched.then(|| names.source_name(h.cause.source)),
+        reason: latched.then(|| str_of(&h.cause.reason).to_string()),
+        cause: latched.then(|| {
+            shm_schema::event::info(h.cause.code)
+                .map_or("", |i| i.name)
+                .to_string()
+        }),
+        resets: h.resets,
     })
 }
 
 /// trajgen's program: state, line, motion time.
-fn program_json(snap: &Snapshot) -> Value {
-    let Some(sp) = &snap.setpoint else {
-        return Value::Null;
+fn program_status(snap: &Snapshot) -> Option<ProgramStatus> {
+    let sp = snap.setpoint.as_ref()?;
+    let state = match shm_schema::MotionState::from_u32(sp.state) {
+        Some(shm_schema::MotionState::Idle) => MotionState::Idle,
+        Some(shm_schema::MotionState::Moving) => MotionState::Moving,
+        Some(shm_schema::MotionState::Done) => MotionState::Done,
+        Some(shm_schema::MotionState::Fault) => MotionState::Fault,
+        None => MotionState::Unknown,
     };
-    let state = match MotionState::from_u32(sp.state) {
-        Some(MotionState::Idle) => "idle",
-        Some(MotionState::Moving) => "moving",
-        Some(MotionState::Done) => "done",
-        Some(MotionState::Fault) => "fault",
-        None => "?",
+    let holds = match sp.hold {
+        shm_schema::motion::hold::WAIT => Some(Hold {
+            what: HoldKind::Wait,
+            input: snap
+                .cell
+                .as_deref()
+                .and_then(|c| c.io().get(sp.hold_io as usize))
+                .map(|e| str_of(&e.name).to_string()),
+        }),
+        shm_schema::motion::hold::DELAY => Some(Hold {
+            what: HoldKind::Delay,
+            input: None,
+        }),
+        _ => None,
     };
-    json!({
-        "state": state,
-        "program_id": sp.program_id,
-        "line": sp.line,
-        "motion_time_s": sp.motion_time_s,
-        "waited_s": sp.waited_s,
-        "holds": match sp.hold {
-            shm_schema::motion::hold::WAIT => json!({"for": "wait", "input": snap.cell.as_deref().and_then(|c| c.io().get(sp.hold_io as usize)).map(|e| str_of(&e.name))}),
-            shm_schema::motion::hold::DELAY => json!({"for": "delay"}),
-            _ => Value::Null,
+    Some(ProgramStatus {
+        state,
+        program_id: sp.program_id,
+        line: sp.line,
+        motion_time_s: sp.motion_time_s,
+        waited_s: sp.waited_s,
+        holds,
+        path_speed: sp.path_speed,
+        speed_override: sp.speed_override,
+        program_speed: sp.program_speed,
+        space: if sp.space == 0 {
+            Space::Cartesian
+        } else {
+            Space::Joint
         },
-        "path_speed": sp.path_speed,
-        "speed_override": sp.speed_override,
-        "program_speed": sp.program_speed,
-        "space": if sp.space == 0 { "cartesian" } else { "joint" },
-        "cartesian": &sp.cartesian[..(sp.coords as usize).min(sp.cartesian.len())],
-        "fault": (sp.fault != 0).then(|| shm_schema::motion::trajgen_fault::text(sp.fault)),
+        cartesian: sp.cartesian[..(sp.coords as usize).min(sp.cartesian.len())].to_vec(),
+        fault: (sp.fault != 0).then(|| shm_schema::motion::trajgen_fault::text(sp.fault).into()),
     })
 }
 
-/// The JSON object of `supervisor status --json`.
-pub fn to_json(instance: &InstanceName, snap: &Snapshot) -> Value {
-    let mut procs = Map::new();
-    for p in &snap.processes {
-        let s = &p.status;
-        let detector =
-            |d: &DetectorV1| json!({"level": d.level, "limit": d.limit, "total": d.total});
-        procs.insert(
-            p.name.clone(),
-            json!({
-                "pid": s.pid,
-                "state": state_name(s.state),
-                "estop": {
-                    "latched": s.estop & estop_seen::LATCHED != 0,
-                    "reacting": s.estop & estop_seen::REACTING != 0,
-                    "safe": s.estop & estop_seen::SAFE != 0,
-                    "raised": s.estop & estop_seen::RAISED != 0,
-                },
-                "health": {
-                    "pending_sequence_overrun": detector(&s.pending_sequence),
-                    "transport_overrun": detector(&s.transport),
-                    "thread_offset_variance": detector(&s.thread_offset),
-                },
-                "policy": policy_name(s.policy),
-                "priority": s.priority,
-                "cpu": s.cpu,
-                "fault": s.fault,
-                "period_us": s.stats.period_ns as f64 * 1e-3,
-                "cycles": s.stats.cycles,
-                "overruns": s.stats.overruns,
-                "skipped": s.stats.skipped,
-                "max_exec_us": s.stats.max_exec_ns as f64 * 1e-3,
-                "wakeup_latency_us": p.latency.as_ref().map(|h| Summary::of(h).to_json()),
-                "exec_time_us": p.exec_time.as_ref().filter(|h| h.count > 0).map(|h| Summary::of(h).to_json()),
-            }),
-        );
-    }
-    json!({
-        "instance": instance.as_str(),
-        "estop": estop_json(snap),
-        "program": program_json(snap),
-        "processes": procs,
-        "servo": snap.servo.as_ref().map(|s| servo_json(s, snap.cell.as_deref())),
-        "io": snap.cell.as_deref().map(|c| io_json(c, snap.io.as_ref())),
-        "sense_to_command_us": snap.sense_to_command.as_ref().filter(|h| h.count > 0).map(|h| Summary::of(h).to_json()),
-    })
+/// Percentiles of a histogram that has samples.
+fn percentiles(h: Option<&LatencyHistogramV1>) -> Option<Percentiles> {
+    h.filter(|h| h.count > 0).map(Percentiles::of)
 }
 
-/// The supervisor's part of `supervisor status` (its `Info` answer): the e-stop, the
-/// program, and per process its life and restarts.
-pub fn supervisor_lines(info: &Value) -> String {
-    let mut out = format!(
-        "supervisor pid {} ({}), e-stop resets {}\n",
-        info["pid"],
-        info["mode"].as_str().unwrap_or("?"),
-        info["resets"]
-    );
-    match &info["estop"] {
-        Value::Null => out += "e-stop: clear\n",
-        e => {
-            out += &format!(
-                "e-stop: LATCHED: {}\n  `supervisor reset`, then `supervisor start`\n",
-                e["text"].as_str().unwrap_or("?")
-            )
-        }
+fn process_status(p: &Seen) -> ProcessStatus {
+    let s = &p.status;
+    let detector = |d: &DetectorV1| Detector {
+        level: d.level,
+        limit: d.limit,
+        total: d.total,
+    };
+    ProcessStatus {
+        pid: s.pid,
+        state: proc_state(s.state),
+        estop: EstopSeen {
+            latched: s.estop & estop_seen::LATCHED != 0,
+            reacting: s.estop & estop_seen::REACTING != 0,
+            safe: s.estop & estop_seen::SAFE != 0,
+            raised: s.estop & estop_seen::RAISED != 0,
+        },
+        health: Health {
+            pending_sequence_overrun: detector(&s.pending_sequence),
+            transport_overrun: detector(&s.transport),
+            thread_offset_variance: detector(&s.thread_offset),
+        },
+        policy: policy_name(s.policy).into(),
+        priority: s.priority,
+        cpu: s.cpu,
+        fault: s.fault,
+        period_us: s.stats.period_ns as f64 * 1e-3,
+        cycles: s.stats.cycles,
+        overruns: s.stats.overruns,
+        skipped: s.stats.skipped,
+        max_exec_us: s.stats.max_exec_ns as f64 * 1e-3,
+        // An empty wake-up histogram still says "published" (all zeros), as it always did.
+        wakeup_latency_us: p.latency.as_deref().map(Percentiles::of),
+        exec_time_us: percentiles(p.exec_time.as_deref()),
     }
-    match &info["job"] {
-        Value::Null => {
-            out += "program: none";
-            if let Some(l) = info["last_job"].as_object() {
-                out += &format!(
-                    " (last: {} {})",
-                    l["program"].as_str().unwrap_or("?"),
-                    if l["ok"] == true { "done" } else { "failed" }
-                );
-            }
-            out += "\n";
-        }
-        j => {
-            out += &format!(
-                "program: {} line {} motion {:.2} / {:.2} s{}\n",
-                j["program"].as_str().unwrap_or("?"),
-                j["line"],
-                j["motion_time_s"].as_f64().unwrap_or(0.0),
-                j["predicted_s"].as_f64().unwrap_or(0.0),
-                if j["paused"] == true { " PAUSED" } else { "" }
-            )
-        }
-    }
-    if let Some(procs) = info["processes"].as_array() {
-        for p in procs {
-            out += &format!(
-                "  {:<9} {:<10} pid {:<8} restarts {}{}{}{}\n",
-                p["name"].as_str().unwrap_or("?"),
-                p["life"].as_str().unwrap_or("?"),
-                p["pid"],
-                p["restarts"],
-                if p["critical"] == false {
-                    "  not critical"
-                } else {
-                    ""
-                },
-                p["listening"]
-                    .as_str()
-                    .map_or(String::new(), |a| format!("  listening on {a}")),
-                p["why"]
-                    .as_str()
-                    .map_or(String::new(), |w| format!("  ({w})"))
-            );
-        }
-    }
-    out
 }
 
-/// The table of `supervisor status`.
-pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
-    let seen = &snap.processes;
-    let mut out = format!(
-        "instance {instance}: wake-up latency since each process started (µs)\n\
-         process    pid      state     policy       prio    cycles  overruns       p50       p99     p99.9    p99.99       max  exec p99\n"
+/// The document of `supervisor status --json`: what `snap` read, with the supervisor's `info`.
+pub fn status(instance: &InstanceName, snap: &Snapshot, info: Info) -> Status {
+    Status {
+        instance: instance.as_str().to_string(),
+        estop: estop_status(snap),
+        program: program_status(snap),
+        processes: snap
+            .processes
+            .iter()
+            .map(|p| (p.name.clone(), process_status(p)))
+            .collect(),
+        servo: snap
+            .servo
+            .as_ref()
+            .map(|s| servo_status(s, snap.cell.as_deref())),
+        io: snap.cell.as_deref().map(|c| io_status(c, snap.io.as_ref())),
+        sense_to_command_us: percentiles(snap.sense_to_command.as_deref()),
+        supervisor: info,
+    }
+}
+
+/// `supervisor status` as text: the supervisor's lines, then the table of the processes, the
+/// arm and the IO.
+pub fn human(status: &Status) -> String {
+    let mut out = status.supervisor.lines();
+    out += &format!(
+        "instance {}: wake-up latency since each process started (µs)\n\
+         process    pid      state     policy       prio    cycles  overruns       p50       p99     p99.9    p99.99       max  exec p99\n",
+        status.instance
     );
-    for p in seen {
-        let s = &p.status;
+    for (name, p) in &status.processes {
         out += &format!(
             "{:<9}  {:<7}  {:<8}  {:<11}  {:>4}  {:>8}  {:>8}",
-            p.name,
-            s.pid,
-            state_name(s.state),
-            policy_name(s.policy),
-            s.priority,
-            s.stats.cycles,
-            s.stats.overruns
+            name,
+            p.pid,
+            control_plane::word(&p.state),
+            p.policy,
+            p.priority,
+            p.cycles,
+            p.overruns
         );
-        match &p.latency {
-            Some(h) => {
-                let m = Summary::of(h);
+        match &p.wakeup_latency_us {
+            Some(m) => {
                 let exec = p
-                    .exec_time
-                    .as_ref()
-                    .filter(|h| h.count > 0)
-                    .map_or("-".to_string(), |h| format!("{:.1}", Summary::of(h).p99_us));
+                    .exec_time_us
+                    .map_or("-".to_string(), |e| format!("{:.1}", e.p99_us));
                 out += &format!(
                     "  {:>8.1}  {:>8.1}  {:>8.1}  {:>8.1}  {:>8.1}  {:>8}\n",
                     m.p50_us, m.p99_us, m.p99_9_us, m.p99_99_us, m.max_us, exec
@@ -479,68 +445,54 @@ pub fn human(instance: &InstanceName, snap: &Snapshot) -> String {
             None => out += "  (no latency histogram published)\n",
         }
     }
-    if let Some(h) = snap.sense_to_command.as_ref().filter(|h| h.count > 0) {
-        let m = Summary::of(h);
+    if let Some(m) = &status.sense_to_command_us {
         out += &format!(
             "sense to command (encoder sample to the drives applying its command): p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs\n",
             m.p50_us, m.p99_us, m.max_us
         );
     }
-    if let Some(s) = &snap.servo {
-        let v = servo_json(s, snap.cell.as_deref());
+    if let Some(s) = &status.servo {
         out += &format!(
             "arm: {}{}{}\n",
-            v["power"].as_str().unwrap_or("?"),
-            if s.status & st::SETTLED != 0 {
-                ", settled"
-            } else {
-                ""
-            },
-            match &v["fault"] {
-                Value::Null => String::new(),
-                f => format!(
+            control_plane::word(&s.power),
+            if s.settled { ", settled" } else { "" },
+            match &s.fault {
+                None => String::new(),
+                Some(f) => format!(
                     ", e-stop: {} latched{} (value {}, limit {}); reset, then enable",
-                    f["name"].as_str().unwrap_or("?"),
-                    f["axis"]
-                        .as_str()
+                    f.name,
+                    f.axis
+                        .as_deref()
                         .map_or(String::new(), |a| format!(" on axis {a}")),
-                    f["value"],
-                    f["limit"]
+                    f.value,
+                    f.limit
                 ),
             }
         );
-        if let Some(axes) = v["axes"].as_object() {
-            for (name, a) in axes {
-                out += &format!(
-                    "  axis {name:<8} {:<10} {:<24} position {:>10.4}  following error {:>8.4}{}\n",
-                    a["power"].as_str().unwrap_or("?"),
-                    a["drive_state"].as_str().unwrap_or("?"),
-                    a["position"].as_f64().unwrap_or(f64::NAN),
-                    a["following_error"].as_f64().unwrap_or(f64::NAN),
-                    if a["settled"] == true {
-                        "  settled"
-                    } else {
-                        ""
-                    }
-                );
-            }
+        for (name, a) in &s.axes {
+            out += &format!(
+                "  axis {name:<8} {:<10} {:<24} position {:>10.4}  following error {:>8.4}{}\n",
+                control_plane::word(&a.power),
+                a.drive_state,
+                a.position,
+                a.following_error,
+                if a.settled { "  settled" } else { "" }
+            );
         }
     }
-    if let Some(cell) = snap.cell.as_deref().filter(|c| !c.io().is_empty()) {
-        let v = io_json(cell, snap.io.as_ref());
-        let words: Vec<String> = v["entries"]
-            .as_array()
-            .into_iter()
-            .flatten()
+    if let Some(io) = status.io.as_ref().filter(|io| !io.entries.is_empty()) {
+        let words: Vec<String> = io
+            .entries
+            .iter()
             .map(|e| {
-                let value = e["value"].as_u64().map_or("?".into(), |v| v.to_string());
-                format!("{}={value}", e["name"].as_str().unwrap_or("?"))
+                let value = e.value().map_or("?".into(), |v| v.to_string());
+                format!("{}={value}", e.name())
             })
             .collect();
         out += &format!(
             "io: {}{}\n",
             words.join("  "),
-            if v["outputs_safe"] == true {
+            if io.outputs_safe == Some(true) {
                 "  (outputs held safe by the e-stop)"
             } else {
                 ""

@@ -444,7 +444,7 @@ async fn action(
 ) -> Response {
     let instance = s.instance;
     let result = tokio::task::spawn_blocking(move || -> Result<String, (StatusCode, String)> {
-        use crate::ctl::{Reply, Request};
+        use control_plane::{Reply, Request};
         let req = match what.as_str() {
             "estop" => {
                 return crate::control::estop(instance.as_str(), "e-stop button of the web view")
@@ -454,7 +454,7 @@ async fn action(
             "start" => Request::Start,
             other => return Err((StatusCode::NOT_FOUND, format!("no action {other:?}"))),
         };
-        match crate::ctl::call(&instance, &req) {
+        match control_plane::channel::call(&instance, &req) {
             Ok(Reply::Done(m)) => Ok(m),
             Ok(Reply::Refused(m) | Reply::Failed(m)) => Err((StatusCode::CONFLICT, m)),
             Ok(other) => Ok(format!("{other:?}")),
@@ -620,7 +620,7 @@ fn latency_json(latencies: &[LatencyWatch]) -> Value {
         .iter()
         .filter_map(|l| {
             let h = l.last.as_deref().filter(|h| h.count > 0)?;
-            let f = crate::figures::ProcessLatency::of(&l.name, h);
+            let f = control_plane::figures::ProcessLatency::of(&l.name, h);
             Some(json!({
                 "name": f.process,
                 "samples": h.count,

@@ -225,7 +225,7 @@ fn connect(inst: &str) -> std::os::unix::net::UnixStream {
 }
 
 /// The answer on `s`, decoded (`None` if the connection closed without one).
-fn answer(s: &mut std::os::unix::net::UnixStream) -> Option<supervisor::ctl::Reply> {
+fn answer(s: &mut std::os::unix::net::UnixStream) -> Option<control_plane::Reply> {
     let mut len = [0u8; 4];
     s.read_exact(&mut len).ok()?;
     let mut body = vec![0u8; u32::from_le_bytes(len) as usize];
@@ -233,9 +233,9 @@ fn answer(s: &mut std::os::unix::net::UnixStream) -> Option<supervisor::ctl::Rep
     postcard::from_bytes(&body).ok()
 }
 
-fn refused_with(r: Option<supervisor::ctl::Reply>, what: &str, words: &str) {
+fn refused_with(r: Option<control_plane::Reply>, what: &str, words: &str) {
     match r {
-        Some(supervisor::ctl::Reply::Refused(m)) => {
+        Some(control_plane::Reply::Refused(m)) => {
             assert!(m.contains(words), "{what}: refused, but {m:?}")
         }
         other => panic!("{what}: not refused: {other:?}"),
@@ -252,7 +252,7 @@ fn control_frames_are_taken_whole_or_not_at_all() {
         let test = "ctl-frames";
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
-        let down = postcard::to_allocvec(&supervisor::ctl::Request::Down).expect("encode");
+        let down = postcard::to_allocvec(&control_plane::Request::Down).expect("encode");
 
         let mut inside = down.clone();
         inside.extend_from_slice(b"junk");
@@ -288,18 +288,20 @@ fn control_frames_are_taken_whole_or_not_at_all() {
         assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
 
         // A client that half-closes after its request gets the answer.
-        let info = postcard::to_allocvec(&supervisor::ctl::Request::Info).expect("encode");
+        let info = postcard::to_allocvec(&control_plane::Request::Info).expect("encode");
         let mut s = connect(&up.inst);
         s.write_all(&frame(&info)).expect("write");
         s.shutdown(std::net::Shutdown::Write).expect("half-close");
         match answer(&mut s) {
-            Some(supervisor::ctl::Reply::Json(j)) => assert!(j.contains("\"arm\""), "{j}"),
+            Some(control_plane::Reply::Info(info)) => {
+                assert!(info.arm.as_ref().is_some_and(|a| a.enabled), "{info:?}")
+            }
             other => panic!("a half-closed client got {other:?}"),
         }
 
         // Connections beyond the limit are refused "busy" at once; the held ones go when their
         // request does not come; then the channel serves again.
-        let held: Vec<_> = (0..supervisor::ctl::MAX_CONNECTIONS)
+        let held: Vec<_> = (0..control_plane::channel::MAX_CONNECTIONS)
             .map(|_| connect(&up.inst))
             .collect();
         std::thread::sleep(Duration::from_millis(200));

@@ -231,7 +231,12 @@ fn status_reports_the_running_cell_and_its_latency() {
             }
             std::thread::sleep(Duration::from_millis(200));
         };
+        // The document is the one its type (and so its JSON Schema) describes.
+        let typed: control_plane::status::Status =
+            serde_json::from_value(j.clone()).expect("status --json is the documented Status");
+        assert_eq!(typed.instance, inst);
         for p in ["drives", "servo", "trajgen", "iobridge"] {
+            assert_eq!(typed.processes[p].policy, "SCHED_FIFO");
             let proc_ = &j["processes"][p];
             assert_eq!(proc_["policy"], "SCHED_FIFO", "{p}: {proc_}");
             assert!(proc_["cycles"].as_u64() > Some(0), "{p}: {proc_}");

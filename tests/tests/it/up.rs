@@ -116,8 +116,14 @@ impl Up {
         err
     }
 
+    /// `status --json`, checked against its type (every key known, none missing: the
+    /// document its JSON Schema describes).
     pub(crate) fn status(&self) -> Value {
         let out = self.ok(&["status", "--json"]);
+        let typed: Result<control_plane::status::Status, _> = serde_json::from_str(out.trim());
+        if let Err(e) = typed {
+            panic!("status --json is not the documented Status ({e}):\n{out}");
+        }
         serde_json::from_str(out.trim()).expect("status JSON")
     }
 

@@ -28,7 +28,7 @@
 //! supervisor tick; a client that does not read its answer only keeps its own connection open
 //! (until it hangs up or the supervisor ends), it is never waited for.
 
-use serde::{Deserialize, Serialize};
+use crate::{Reply, Request};
 use shm_schema::InstanceName;
 use std::io::{ErrorKind, Read, Write};
 use std::os::fd::{AsFd, BorrowedFd};
@@ -62,100 +62,75 @@ const ACCEPTS_PER_POLL: usize = 64;
 /// After accepting failed (no descriptor left), how long the listener rests.
 const ACCEPT_PAUSE: Duration = Duration::from_millis(100);
 
-/// What a client asks a running cell.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub enum Request {
-    /// The cell's own view: processes (pid, state, restarts), the arm, the e-stop, the job.
-    /// Answered with [`Reply::Json`] (the `supervisor` part of `status --json`).
-    Info,
-    /// Validate and run a program. `wait`: answer when it ends, with its report.
-    Exec {
-        /// The program's name as the user gave it (for messages and the report).
-        name: String,
-        /// Its source, the file's bytes (checked, with line and column, by the cell).
-        source: Vec<u8>,
-        /// Answer when the program ends (with [`Reply::Report`]), not when it starts.
-        wait: bool,
-        /// With `wait`: include the trace (CSV) in the report.
-        trace: bool,
-        /// With `wait`: include the figures (`--plot`) in the report.
-        figures: bool,
-    },
-    /// Decelerate along the path to rest and hold.
-    Pause,
-    /// Go on along the path.
-    Resume,
-    /// Come to rest along the path and drop the rest of the program.
-    Abort,
-    /// The live speed override: the path at `percent` (1..=100) of its programmed speed.
-    Speed {
-        /// 1..=100.
-        percent: f64,
-    },
-    /// Clear the e-stop and what can be cleared.
-    Reset,
-    /// Enable the drives, holding where they stand.
-    Start,
-    /// Stop a process of the table and start it again.
-    Restart {
-        /// Its name in the table.
-        process: String,
-    },
-    /// Replace a process of the table by a new one (its command, or `command`).
-    Swap {
-        /// Its name in the table.
-        process: String,
-        /// The new command line; `None` runs the configured one again (a new build).
-        command: Option<Vec<String>>,
-    },
-    /// Stop the cell.
-    Down,
-}
-
-/// What the cell answers.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub enum Reply {
-    /// Done; a line for the user.
-    Done(String),
-    /// Not done, nothing changed: bad input or a state that does not allow it (exit 2).
-    Refused(String),
-    /// Tried and failed (exit 1).
-    Failed(String),
-    /// A JSON document (`Info`).
-    Json(String),
-    /// A program's end: `ok`, the report as JSON (`run --json`'s document: the report, or
-    /// `{"ok": false, "error": …, "events": …}`), as text, and its trace.
-    Report {
-        /// The program completed and settled.
-        ok: bool,
-        /// The report, JSON.
-        json: String,
-        /// The summary `run` prints (or the error).
-        text: String,
-        /// The trace as CSV (`run --trace`), when asked for and the program completed.
-        trace_csv: Option<String>,
-        /// What `--plot` draws, when asked for and the program completed.
-        figures: Option<Box<crate::figures::Figures>>,
-    },
-}
-
-/// Why a client could not get an answer.
+/// Why a client could not get an answer. The supervisor's own refusals and failures are
+/// answers ([`Reply::Refused`], [`Reply::Failed`]), not errors.
 #[derive(Debug)]
-pub enum CtlError {
+pub enum CallError {
     /// No supervisor serves the instance.
     NotUp(InstanceName),
-    /// The connection failed or broke (the supervisor went away mid-answer).
-    Io(String),
+    /// The request is longer than the channel takes ([`MAX_REQUEST`]): it was not sent.
+    TooLong {
+        /// Its encoded length.
+        bytes: usize,
+    },
+    /// Connecting failed for another reason than nobody listening.
+    Connect {
+        /// The instance asked.
+        instance: InstanceName,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The connection broke before the answer was complete (the supervisor went away).
+    Broke {
+        /// The instance asked.
+        instance: InstanceName,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The supervisor took the request and did not answer within [`ANSWER_TIMEOUT`].
+    NoAnswer(InstanceName),
+    /// The answer could not be decoded (a supervisor of another version?).
+    Garbled(postcard::Error),
 }
 
-impl std::fmt::Display for CtlError {
+impl std::fmt::Display for CallError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            CtlError::NotUp(i) => write!(
+            Self::NotUp(i) => write!(
                 f,
                 "instance {i} is not up (no supervisor serves it; start it with `supervisor up --instance {i}`)"
             ),
-            CtlError::Io(e) => f.write_str(e),
+            Self::TooLong { bytes } => write!(
+                f,
+                "the request is {bytes} bytes: at most {MAX_REQUEST} are accepted (a program's \
+                 source is at most {} bytes)",
+                motion_program::MAX_SOURCE_BYTES
+            ),
+            Self::Connect { instance, source } => write!(f, "instance {instance}: {source}"),
+            Self::Broke { instance, source } => write!(
+                f,
+                "instance {instance}: the supervisor's control channel broke: {source}"
+            ),
+            Self::NoAnswer(i) => write!(
+                f,
+                "instance {i}: the supervisor took the request but did not answer within {} s \
+                 (is it stuck? its log says where)",
+                ANSWER_TIMEOUT.as_secs()
+            ),
+            Self::Garbled(e) => write!(
+                f,
+                "a garbled answer ({e}): a supervisor of another version?"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for CallError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Connect { source, .. } | Self::Broke { source, .. } => Some(source),
+            Self::Garbled(e) => Some(e),
+            _ => None,
         }
     }
 }
@@ -173,29 +148,24 @@ fn frame(bytes: &[u8]) -> Vec<u8> {
 
 /// Sends `req` to the cell of `instance` and waits for its answer (as long as it takes:
 /// `exec --wait` answers when the program ends).
-pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CtlError> {
-    let addr = address(instance).map_err(|e| CtlError::Io(e.to_string()))?;
+pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CallError> {
+    let connect = |source| CallError::Connect {
+        instance: *instance,
+        source,
+    };
+    let addr = address(instance).map_err(connect)?;
     let mut s = match UnixStream::connect_addr(&addr) {
         Ok(s) => s,
         Err(e) if e.kind() == ErrorKind::ConnectionRefused => {
-            return Err(CtlError::NotUp(*instance));
+            return Err(CallError::NotUp(*instance));
         }
-        Err(e) => return Err(CtlError::Io(format!("instance {instance}: {e}"))),
+        Err(e) => return Err(connect(e)),
     };
-    let bytes = postcard::to_allocvec(req).map_err(|e| CtlError::Io(e.to_string()))?;
+    // Requests are plain data: encoding them cannot fail but for want of memory.
+    let bytes = postcard::to_allocvec(req).map_err(CallError::Garbled)?;
     if bytes.len() > MAX_REQUEST {
-        return Ok(Reply::Refused(format!(
-            "the request is {} bytes: at most {MAX_REQUEST} are accepted (a program's source \
-             is at most {} bytes)",
-            bytes.len(),
-            motion_program::MAX_SOURCE_BYTES
-        )));
+        return Err(CallError::TooLong { bytes: bytes.len() });
     }
-    let broke = |e: std::io::Error| {
-        CtlError::Io(format!(
-            "instance {instance}: the supervisor's control channel broke: {e}"
-        ))
-    };
     // A refusal (another user) may be written and the connection closed before the request
     // is even read: read the answer whatever the write did.
     // Every answer comes within a tick or a bounded wait (a start, a swap, a reset), except
@@ -208,17 +178,14 @@ pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CtlError> {
         .write_all(&frame(&bytes))
         .and_then(|()| s.shutdown(std::net::Shutdown::Write));
     match read_frame(&mut s) {
-        Ok(body) => {
-            postcard::from_bytes(&body).map_err(|e| CtlError::Io(format!("a garbled answer: {e}")))
-        }
+        Ok(body) => postcard::from_bytes(&body).map_err(CallError::Garbled),
         Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-            Err(CtlError::Io(format!(
-                "instance {instance}: the supervisor took the request but did not answer within \
-                 {} s (is it stuck? its log says where)",
-                ANSWER_TIMEOUT.as_secs()
-            )))
+            Err(CallError::NoAnswer(*instance))
         }
-        Err(e) => Err(broke(wrote.err().unwrap_or(e))),
+        Err(e) => Err(CallError::Broke {
+            instance: *instance,
+            source: wrote.err().unwrap_or(e),
+        }),
     }
 }
 
