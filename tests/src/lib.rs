@@ -49,6 +49,17 @@ pub fn default_cell() -> String {
     src.replace("listen = \"127.0.0.1:1502\"", "listen = \"127.0.0.1:0\"")
 }
 
+/// The seed's triangle at a fifth of its size, from and back to its start (40, 40): the same
+/// three blended corners and the same stop, in a quarter of the time. For the tests that check
+/// that a program runs (after a recovery, a swap, with a recorder), not the seed's figure.
+pub const SMALL_TRIANGLE: &str =
+    "MOVE(40,40,0)\nMOVE(60,40,0)\nMOVE(50,57.2,0)\nMOVE(40,40,0)\nSTOP\nEND\n";
+
+/// [`SMALL_TRIANGLE`] written into a scratch file of `test`.
+pub fn small_triangle(test: &str) -> PathBuf {
+    scratch(test, "small-triangle.prog", SMALL_TRIANGLE)
+}
+
 /// [`default_cell`] written into a scratch file of `test`.
 pub fn default_cell_file(test: &str) -> PathBuf {
     scratch(test, "default-cell.toml", &default_cell())

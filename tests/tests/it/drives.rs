@@ -54,6 +54,17 @@ pub(crate) fn triangle_in_background_as(
     cfg: Option<&Path>,
     json: bool,
 ) -> std::process::Child {
+    program_in_background_as(inst, cfg, json, &examples().join("triangle.prog"))
+}
+
+/// `supervisor run` of `program` on `inst`, in the background, its stderr captured (stdout
+/// too with `json`).
+pub(crate) fn program_in_background_as(
+    inst: &str,
+    cfg: Option<&Path>,
+    json: bool,
+    program: &Path,
+) -> std::process::Child {
     let mut cmd = supervisor();
     cmd.args(["run", "--instance", inst]);
     if json {
@@ -67,7 +78,7 @@ pub(crate) fn triangle_in_background_as(
             .arg("--config")
             .arg(integration_tests::default_cell_file(inst)),
     };
-    cmd.arg(examples().join("triangle.prog"))
+    cmd.arg(program)
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn supervisor")

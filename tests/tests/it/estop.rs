@@ -3,7 +3,8 @@
 //! killed mid-motion (`docs/operations.md`).
 
 use crate::drives::{
-    WATCHDOG, client_of, events_named, pid_of, triangle_in_background_as, until_moving, wait_for,
+    WATCHDOG, client_of, events_named, pid_of, program_in_background_as, triangle_in_background_as,
+    until_moving, wait_for,
 };
 use integration_tests::{
     assert_clean, default_cell, instance, pids_with, scratch, supervisor, with_stall_room,
@@ -38,7 +39,10 @@ fn estop(inst: &str, reason: &str) {
 /// Runs the triangle on `inst` with `cfg`, raises the user's e-stop mid-motion; returns the
 /// run's stderr and JSON report.
 fn user_estop_mid_motion(inst: &str, cfg: Option<&std::path::Path>) -> (String, serde_json::Value) {
-    let mut run = triangle_in_background_as(inst, cfg, true);
+    // The e-stop comes as soon as it moves: a small program is enough, and one that is not
+    // stopped by it (without propagation) completes in a few seconds.
+    let small = integration_tests::small_triangle(inst);
+    let mut run = program_in_background_as(inst, cfg, true, &small);
     let (name, node) = client_of(inst);
     let state = until_moving(&node, &name, &mut run);
     estop(inst, "test e-stop");
@@ -171,7 +175,8 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
             "cell.toml",
             &with_stall_room(&default_cell()),
         );
-        let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
+        let small = integration_tests::small_triangle(&inst);
+        let mut run = program_in_background_as(&inst, Some(&cfg), false, &small);
         let (name, node) = client_of(&inst);
         let state = until_moving(&node, &name, &mut run);
         let cell = pids_with(&["--instance", &inst]);
@@ -206,7 +211,7 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
         let out = supervisor()
             .args(["run", "--instance", &inst, "--config"])
             .arg(&cfg)
-            .arg(integration_tests::examples().join("triangle.prog"))
+            .arg(&small)
             .output()
             .expect("run");
         assert!(

@@ -6,7 +6,7 @@
 
 use crate::drives::{WATCHDOG, pid_of};
 use crate::up::{Up, cell};
-use integration_tests::{examples, run_with_watchdog, scratch};
+use integration_tests::{run_with_watchdog, scratch};
 use serde_json::Value;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -218,7 +218,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
         assert_eq!(rest[0], 40_000, "x at 40 mm: {rest:?}");
         assert_eq!(rest[4], 40_000, "y at 40 mm: {rest:?}");
         assert_eq!(rest[8], 0, "theta at 0 deg: {rest:?}");
-        // pymodbus polls while the triangle runs.
+        // pymodbus polls while a small triangle runs.
         let poller = Command::new("python3")
             .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/modbus_poll.py"))
             .args([&a.ip().to_string(), &a.port().to_string(), "120", "3"])
@@ -227,7 +227,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
             .spawn()
             .expect("python3");
         let tr = scratch(test, "trace.csv", "");
-        let triangle = examples().join("triangle.prog");
+        let triangle = integration_tests::small_triangle(test);
         let out = up.ok(&[
             "exec",
             triangle.to_str().expect("utf-8"),

@@ -74,7 +74,9 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         assert!(err.contains("--plot /nonexistent/dir/p.png"), "{err}");
         let plot = integration_tests::scratch(test, "exec.png", "");
         let plot_arg = plot.to_str().expect("utf-8");
-        let out = up.ok(&["exec", tri, "--wait", "--json", "--plot", plot_arg]);
+        let small = integration_tests::small_triangle(test);
+        let small = small.to_str().expect("utf-8");
+        let out = up.ok(&["exec", small, "--wait", "--json", "--plot", plot_arg]);
         let r: Value = serde_json::from_str(out.trim()).expect("report");
         assert_eq!(r["ok"], true);
         crate::cell::check_figures(&plot, r["processes"].as_object().expect("processes").len());

@@ -5,9 +5,7 @@
 
 use crate::drives::WATCHDOG;
 use crate::up::{Up, cell};
-use integration_tests::{
-    assert_clean, examples, instance, json_of, run_with_watchdog, scratch, supervisor,
-};
+use integration_tests::{assert_clean, instance, json_of, run_with_watchdog, scratch, supervisor};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -44,7 +42,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
                 .arg(&mcap)
                 .arg("--trace")
                 .arg(&trace)
-                .arg(examples().join("triangle.prog")),
+                .arg(integration_tests::small_triangle(test)),
             WATCHDOG,
         );
         let report = json_of(&out);
