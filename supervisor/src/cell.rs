@@ -6,11 +6,11 @@
 //! e-stop for it and restarts it per its policy, and latches the e-stops it sees. It never
 //! ends the cell: what a job makes of an incident is the job's business ([`crate::job`]).
 
-use crate::config::{Config, RestartPolicy};
 use crate::events::{self, Axes};
 use crate::launch::Children;
 use crate::run::{RunError, TICK};
 use crate::stall::StallWatch;
+use cell_config::{Config, RestartPolicy};
 use control_plane::channel as ctl;
 use control_plane::info::{self, Info};
 

@@ -1,7 +1,7 @@
 //! One-shot commands to a running instance: fault injection into the simulated drives, the
 //! user's e-stop, and the named digital IO.
 
-use crate::config::{FAULT_NAMES, fault_code};
+use cell_config::FaultKind;
 use control_plane::status::{IoEntry, SafeValue};
 use iceoryx2::prelude::Node;
 use runtime::events::EventSink;
@@ -91,9 +91,14 @@ pub fn inject(
     fault: &str,
     clear: bool,
 ) -> Result<String, ControlError> {
-    let code_of = fault_code(fault).ok_or_else(|| {
-        ControlError::Input(format!("fault {fault:?} is not one of {FAULT_NAMES}"))
-    })?;
+    let code_of = FaultKind::named(fault)
+        .map(FaultKind::code)
+        .ok_or_else(|| {
+            ControlError::Input(format!(
+                "fault {fault:?} is not one of {}",
+                FaultKind::names()
+            ))
+        })?;
     attached(instance, "inject", |&instance, node| {
         let cell = running_cell(node, &instance)?;
         let names: Vec<&str> = cell.axes().iter().map(|a| str_of(&a.name)).collect();

@@ -3,11 +3,11 @@
 //! beating, serving its control channel and watching the processes meanwhile.
 
 use crate::cell::{Cell, Incident};
-use crate::config::Config;
 use crate::figures::Envelope;
 use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
 use crate::run::{RunError, TICK};
+use cell_config::Config;
 use control_plane::figures::{AxisEnvelope, Figures};
 use motion_program::Commands;
 use shm_schema::drive::servo_status as st;

@@ -2,7 +2,6 @@
 //! watches their health, stops them and removes every shared-memory resource.
 
 pub mod cell;
-pub mod config;
 pub mod control;
 pub mod events;
 pub mod figures;

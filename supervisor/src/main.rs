@@ -1,12 +1,12 @@
 //! `supervisor`: launches a cell and runs programs on it.
 
+use cell_config::{Config, DEFAULT_TOML};
 use clap::{Parser, Subcommand};
 use control_plane::channel as ctl;
 use control_plane::{Reply, Request};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use supervisor::config::{Config, DEFAULT_TOML};
 use supervisor::latency_cmd::{LatencyArgs, LatencyError, latency};
 use supervisor::run::{RunError, RunOptions, run};
 

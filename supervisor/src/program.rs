@@ -4,9 +4,9 @@
 //! from where the axes stand, so the prediction is trajgen's own motion time and every
 //! reference of the path is checked against the joint limits and velocities.
 
-use crate::config::Config;
-use crate::config::io::Direction;
 use crate::run::RunError;
+use cell_config::Config;
+use cell_config::io::Direction;
 use motion_core::Params;
 use motion_core::generator::{Generator, Kin};
 use motion_core::predict::{Outcome, Prediction, simulate_with};

@@ -10,11 +10,11 @@
 //!    resource of the instance is left, and report.
 
 use crate::cell::{Cell, Mode, open_cell};
-use crate::config::Config;
 use crate::job::Enabling;
 use crate::program::{Checked, Predicted};
 use crate::report::Report;
 use crate::serve::{self, End, ProgramJob};
+use cell_config::Config;
 use runtime::signals;
 use shm_schema::{InstanceName, SetpointV2};
 use std::path::PathBuf;

@@ -14,13 +14,13 @@
 //! the drives at rest, and only then does the loop end and the processes stop ([`Stopping`]).
 
 use crate::cell::{Cell, Incident, Mode};
-use crate::config::Config;
 use crate::events;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
 use crate::program::Checked;
 use crate::report::{ProcessReport, Report};
 use crate::run::{RunError, TICK};
+use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
 use control_plane::info::{Info, JobInfo, LastJob};
 use control_plane::{Reply, Request};

@@ -18,9 +18,9 @@
 //! take the replaced process' silence for a stall.
 
 use crate::cell::{Cell, Incident};
-use crate::config::Config;
 use crate::job::Job;
 use crate::run::TICK;
+use cell_config::Config;
 use shm_schema::Power;
 use std::time::{Duration, Instant};
 

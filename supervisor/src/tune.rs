@@ -13,8 +13,8 @@
 //!    peak following error and peak effort; a PNG of command, position and effort.
 
 use crate::cell::{Cell, Mode, open_cell};
-use crate::config::Config;
 use crate::run::{RunError, TICK};
+use cell_config::Config;
 use plot::{Panel, series_png};
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;

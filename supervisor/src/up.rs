@@ -2,9 +2,9 @@
 //! control channel open to the user's other shells (docs/operations.md).
 
 use crate::cell::{Mode, open_cell};
-use crate::config::Config;
 use crate::run::RunError;
 use crate::serve::{End, serve};
+use cell_config::Config;
 use shm_schema::InstanceName;
 use std::path::Path;
 

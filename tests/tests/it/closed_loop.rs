@@ -3,10 +3,10 @@
 //! closes the loop) and in CSP (the drives close it), at 1 kHz and at 4 kHz.
 
 use crate::loop_sim::{Loop, MS};
+use cell_config::Config;
 use motion_core::generator::{Generator, Params};
 use shm_schema::MotionState;
 use shm_schema::drive::servo_status as st;
-use supervisor::config::Config;
 
 /// Runs the triangle; returns the largest |following error| per axis.
 fn triangle(cfg: &Config) -> [f64; 3] {

@@ -488,7 +488,7 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
 #[test]
 fn the_register_map_document_is_the_codes() {
     integration_tests::attributable(|| {
-        let cell = supervisor::config::Config::default_cell().to_shm();
+        let cell = cell_config::Config::default_cell().to_shm();
         let map = modbus::map::markdown(&cell);
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/fieldbus.md");
         let doc = std::fs::read_to_string(&path).unwrap_or_default();

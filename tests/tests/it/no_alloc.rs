@@ -4,6 +4,7 @@
 //! its reset, a tuning step, a setpoint that is not a number (command validation latches),
 //! reset and enable again.
 
+use cell_config::Config;
 use machine_sim::Machine;
 use motion_core::generator::{Generator, Params};
 use runtime::alloc_count::count;
@@ -12,7 +13,6 @@ use servo::{Controller, Params as ServoParams};
 use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
 use shm_schema::{EventQueue, FaultInjectionV1, RequestKind, ServoRequestV1};
-use supervisor::config::Config;
 
 #[test]
 fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {

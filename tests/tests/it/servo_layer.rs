@@ -4,15 +4,15 @@
 //! that keeps the axes still when trajgen dies.
 
 use crate::loop_sim::{Loop, MS};
+use cell_config::Config;
 use cia402::{State, cw};
 use motion_core::generator::{Generator, Params};
 use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
 use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, SetpointV2};
-use supervisor::config::Config;
 
 fn cfg_with(from: &str, to: &str) -> Config {
-    let src = supervisor::config::DEFAULT_TOML.to_string();
+    let src = cell_config::DEFAULT_TOML.to_string();
     assert!(src.contains(from), "{from:?}");
     Config::parse(&src.replacen(from, to, 1), "test").expect("valid")
 }

@@ -16,18 +16,28 @@ pub mod ethercat;
 pub mod io;
 pub mod kinematics;
 pub mod modbus;
+mod program;
 mod stability;
+
+pub use program::find_program;
 
 /// The embedded default cell (the Gantry UBA).
 pub const DEFAULT_TOML: &str = include_str!("../../examples/gantry-uba.toml");
 /// How the embedded default is named in messages.
 pub const DEFAULT_NAME: &str = "<embedded default: examples/gantry-uba.toml>";
 
-/// A configuration problem and where it is.
+/// What is wrong with a configuration: every problem found, each where it is.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConfigError {
     /// File name as given.
     pub file: String,
+    /// At least one, in the file's order.
+    pub problems: Vec<Located>,
+}
+
+/// One problem and where it is.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Located {
     /// 1-based line (0 when unknown).
     pub line: usize,
     /// 1-based column (0 when unknown).
@@ -36,17 +46,30 @@ pub struct ConfigError {
     pub message: String,
 }
 
+impl ConfigError {
+    /// One problem at a known place (or at none: line 0).
+    fn one(file: &str, line: usize, col: usize, message: String) -> Self {
+        Self {
+            file: file.into(),
+            problems: vec![Located { line, col, message }],
+        }
+    }
+}
+
+/// Every problem on its own line: `file:line:col: message`.
 impl fmt::Display for ConfigError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.line > 0 {
-            write!(
-                f,
-                "{}:{}:{}: {}",
-                self.file, self.line, self.col, self.message
-            )
-        } else {
-            write!(f, "{}: {}", self.file, self.message)
+        for (k, p) in self.problems.iter().enumerate() {
+            if k > 0 {
+                f.write_str("\n")?;
+            }
+            if p.line > 0 {
+                write!(f, "{}:{}:{}: {}", self.file, p.line, p.col, p.message)?;
+            } else {
+                write!(f, "{}: {}", self.file, p.message)?;
+            }
         }
+        Ok(())
     }
 }
 
@@ -136,7 +159,7 @@ pub struct Inject {
     /// Axis name.
     pub axis: String,
     /// `over-current`, `encoder-loss` or `following-error`.
-    pub fault: String,
+    pub fault: FaultKind,
     /// Time after the axis' drive first reaches Operation enabled (s).
     pub at: f64,
     /// How long the condition lasts (s). Default 0: one drive cycle.
@@ -144,18 +167,50 @@ pub struct Inject {
     pub duration: f64,
 }
 
-/// The CiA 402 error code of a fault name of `[[drives.inject]]` and `supervisor inject`.
-pub fn fault_code(name: &str) -> Option<u16> {
-    match name {
-        "over-current" => Some(injected::OVER_CURRENT),
-        "encoder-loss" => Some(injected::ENCODER_LOSS),
-        "following-error" => Some(injected::FOLLOWING_ERROR),
-        _ => None,
-    }
+/// A fault the simulated drives can raise (`[[drives.inject]]`, `supervisor inject`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// The drive's over-current (CiA 402 error code 0x2310).
+    OverCurrent,
+    /// The encoder lost (0x7305).
+    EncoderLoss,
+    /// The drive's own following error (0x8611).
+    FollowingError,
 }
 
-/// The fault names [`fault_code`] knows.
-pub const FAULT_NAMES: &str = "over-current, encoder-loss, following-error";
+impl FaultKind {
+    /// Every fault, in the order the messages list them.
+    pub const ALL: [Self; 3] = [Self::OverCurrent, Self::EncoderLoss, Self::FollowingError];
+
+    /// Its name in the configuration and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::OverCurrent => "over-current",
+            Self::EncoderLoss => "encoder-loss",
+            Self::FollowingError => "following-error",
+        }
+    }
+
+    /// Its CiA 402 error code.
+    pub fn code(self) -> u16 {
+        match self {
+            Self::OverCurrent => injected::OVER_CURRENT,
+            Self::EncoderLoss => injected::ENCODER_LOSS,
+            Self::FollowingError => injected::FOLLOWING_ERROR,
+        }
+    }
+
+    /// The fault called `name`.
+    pub fn named(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
+
+    /// Every name, for messages: `over-current, encoder-loss, following-error`.
+    pub fn names() -> String {
+        Self::ALL.map(Self::name).join(", ")
+    }
+}
 
 /// `servo = { ... }` of an axis.
 #[derive(Clone, Debug, Deserialize)]
@@ -288,55 +343,65 @@ pub struct Limits {
 
 /// `drive = { ... }` of an axis.
 #[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct DriveSettings {
     /// `"cst"` (servo closes the position loop; default), `"csp"` (the drive does) or `"csv"`.
-    #[serde(default = "default_mode")]
-    pub mode: String,
+    pub mode: DriveMode,
     /// The drive's position gain (CSP; effort/unit).
-    #[serde(default)]
     pub kp: f64,
     /// The drive's integral gain (CSP, CSV).
-    #[serde(default)]
     pub ki: f64,
     /// The drive's velocity gain (CSP, CSV; effort·s/unit).
-    #[serde(default)]
     pub kd: f64,
     /// Quick stop option code (0x605A): 0, 1, 2 (default) or 6.
-    #[serde(default = "default_quick_stop_option")]
     pub quick_stop_option: i32,
     /// Quick-stop deceleration (0x6085; unit/s²). Default 4 × vmax / t_acc.
-    #[serde(default)]
     pub quick_stop_deceleration: Option<f64>,
 }
 
 impl Default for DriveSettings {
     fn default() -> Self {
         Self {
-            mode: default_mode(),
+            mode: DriveMode::Cst,
             kp: 0.0,
             ki: 0.0,
             kd: 0.0,
-            quick_stop_option: default_quick_stop_option(),
+            quick_stop_option: 2,
             quick_stop_deceleration: None,
         }
     }
 }
 
-fn default_mode() -> String {
-    "cst".into()
-}
-fn default_quick_stop_option() -> i32 {
-    2
+/// Who closes an axis' position loop: its CiA 402 mode of operation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriveMode {
+    /// Cyclic synchronous torque: servo closes the loop.
+    Cst,
+    /// Cyclic synchronous position: the drive closes it with its own gains.
+    Csp,
+    /// Cyclic synchronous velocity: servo closes the position loop, the drive the velocity's.
+    Csv,
 }
 
-/// The CiA 402 mode of a `drive.mode` name.
-pub fn mode_of(name: &str) -> Option<cia402::Mode> {
-    match name {
-        "csp" => Some(cia402::Mode::Csp),
-        "csv" => Some(cia402::Mode::Csv),
-        "cst" => Some(cia402::Mode::Cst),
-        _ => None,
+impl DriveMode {
+    /// Its name in the configuration.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Cst => "cst",
+            Self::Csp => "csp",
+            Self::Csv => "csv",
+        }
+    }
+}
+
+impl From<DriveMode> for cia402::Mode {
+    fn from(m: DriveMode) -> Self {
+        match m {
+            DriveMode::Cst => Self::Cst,
+            DriveMode::Csp => Self::Csp,
+            DriveMode::Csv => Self::Csv,
+        }
     }
 }
 
@@ -378,8 +443,8 @@ pub struct Process {
     pub restart: RestartPolicy,
     /// Its reaction to an e-stop it did not raise (seed 002): `"stop"` (default), `"hold"`,
     /// `"ignore"`.
-    #[serde(default = "default_reaction")]
-    pub network_estop_config: String,
+    #[serde(default)]
+    pub network_estop_config: Reaction,
     /// Whether the cell's safety depends on it (default true). `false`: its loss, stall or
     /// health detectors are warnings and restarts, never an e-stop (a fieldbus server for an
     /// HMI, a logger). drives, servo and trajgen are always critical.
@@ -394,8 +459,27 @@ fn default_critical() -> bool {
 fn default_restart() -> RestartPolicy {
     RestartPolicy::OnFailure
 }
-fn default_reaction() -> String {
-    "stop".into()
+/// A process' reaction to an e-stop it did not raise (seed 002's `network_estop_config`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Reaction {
+    /// Bring its part to rest and make it safe (servo: rest, then disable).
+    #[default]
+    Stop,
+    /// Bring its part to rest and stay enabled.
+    Hold,
+    /// Go on.
+    Ignore,
+}
+
+impl From<Reaction> for EstopReaction {
+    fn from(r: Reaction) -> Self {
+        match r {
+            Reaction::Stop => Self::Stop,
+            Reaction::Hold => Self::Hold,
+            Reaction::Ignore => Self::Ignore,
+        }
+    }
 }
 
 impl Process {
@@ -407,19 +491,13 @@ impl Process {
 
 /// `[behaviour]`: seed 002's e-stop propagation.
 #[derive(Clone, Copy, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Behaviour {
     /// A process' own e-stop is propagated to every process. Default true.
-    #[serde(default = "yes")]
     pub propagate_estop: bool,
     /// A user's e-stop (`supervisor estop`, an e-stop input) is propagated even when
     /// `propagate_estop` is false. Default false.
-    #[serde(default)]
     pub propagate_external_estop: bool,
-}
-
-fn yes() -> bool {
-    true
 }
 
 impl Default for Behaviour {
@@ -431,192 +509,89 @@ impl Default for Behaviour {
     }
 }
 
-/// `[health_config]`: seed 002's detectors, with the seed's keys and defaults.
-#[derive(Clone, Copy, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct HealthSettings {
-    /// % of the process' rate. Default 1.
-    #[serde(default = "d_1")]
-    pub pending_sequence_overrun_percent_limit: f64,
-    /// s. Default 0.25.
-    #[serde(default = "d_quarter")]
-    pub pending_sequence_overrun_leak_time_s: f64,
-    /// s. Default 1.
-    #[serde(default = "d_1")]
-    pub pending_sequence_overrun_start_snooze_s: f64,
-    /// % of the process' rate. Default 0.5.
-    #[serde(default = "d_half")]
-    pub transport_overrun_percent_limit: f64,
-    /// s. Default 0.25.
-    #[serde(default = "d_quarter")]
-    pub transport_overrun_leak_time_s: f64,
-    /// % of the period (up to 1000). Default 1.
-    #[serde(default = "d_1")]
-    pub thread_offset_variance_percent: f64,
-    /// % of the process' rate. Default 5.
-    #[serde(default = "d_5")]
-    pub thread_offset_variance_overrun_percent_limit: f64,
-    /// s. Default 0.25.
-    #[serde(default = "d_quarter")]
-    pub thread_offset_variance_overrun_leak_time_s: f64,
-    /// s. Default 2.
-    #[serde(default = "d_2")]
-    pub thread_offset_variance_start_snooze_s: f64,
-}
-
-fn d_half() -> f64 {
-    0.5
-}
-fn d_quarter() -> f64 {
-    0.25
-}
-fn d_1() -> f64 {
-    1.0
-}
-fn d_2() -> f64 {
-    2.0
-}
-fn d_5() -> f64 {
-    5.0
-}
-
-impl Default for HealthSettings {
-    fn default() -> Self {
-        Self {
-            pending_sequence_overrun_percent_limit: 1.0,
-            pending_sequence_overrun_leak_time_s: 0.25,
-            pending_sequence_overrun_start_snooze_s: 1.0,
-            transport_overrun_percent_limit: 0.5,
-            transport_overrun_leak_time_s: 0.25,
-            thread_offset_variance_percent: 1.0,
-            thread_offset_variance_overrun_percent_limit: 5.0,
-            thread_offset_variance_overrun_leak_time_s: 0.25,
-            thread_offset_variance_start_snooze_s: 2.0,
+/// Declares `[health_config]` from one list: each key with its meaning, its default and the
+/// largest value it may take; its `Default`, its range check and its shared-memory form
+/// (`HealthConfigV1`, whose fields have the keys' names) follow from the list.
+macro_rules! health_settings {
+    ($( $(#[doc = $doc:literal])* $key:ident: default $default:literal, at most $max:literal; )*) => {
+        /// `[health_config]`: seed 002's detectors, with the seed's keys and defaults.
+        #[derive(Clone, Copy, Debug, Deserialize)]
+        #[serde(deny_unknown_fields, default)]
+        pub struct HealthSettings {
+            $( $(#[doc = $doc])* pub $key: f64, )*
         }
-    }
-}
 
-impl HealthSettings {
-    fn entries(&self) -> [(&'static str, f64); 9] {
-        [
-            (
-                "pending_sequence_overrun_percent_limit",
-                self.pending_sequence_overrun_percent_limit,
-            ),
-            (
-                "pending_sequence_overrun_leak_time_s",
-                self.pending_sequence_overrun_leak_time_s,
-            ),
-            (
-                "pending_sequence_overrun_start_snooze_s",
-                self.pending_sequence_overrun_start_snooze_s,
-            ),
-            (
-                "transport_overrun_percent_limit",
-                self.transport_overrun_percent_limit,
-            ),
-            (
-                "transport_overrun_leak_time_s",
-                self.transport_overrun_leak_time_s,
-            ),
-            (
-                "thread_offset_variance_percent",
-                self.thread_offset_variance_percent,
-            ),
-            (
-                "thread_offset_variance_overrun_percent_limit",
-                self.thread_offset_variance_overrun_percent_limit,
-            ),
-            (
-                "thread_offset_variance_overrun_leak_time_s",
-                self.thread_offset_variance_overrun_leak_time_s,
-            ),
-            (
-                "thread_offset_variance_start_snooze_s",
-                self.thread_offset_variance_start_snooze_s,
-            ),
-        ]
-    }
-}
-
-/// The reaction called `name` in the configuration.
-pub fn reaction_of(name: &str) -> Option<EstopReaction> {
-    EstopReaction::ALL.into_iter().find(|r| r.name() == name)
-}
-
-impl HealthSettings {
-    fn to_shm(self) -> HealthConfigV1 {
-        HealthConfigV1 {
-            pending_sequence_overrun_percent_limit: self.pending_sequence_overrun_percent_limit,
-            pending_sequence_overrun_leak_time_s: self.pending_sequence_overrun_leak_time_s,
-            pending_sequence_overrun_start_snooze_s: self.pending_sequence_overrun_start_snooze_s,
-            transport_overrun_percent_limit: self.transport_overrun_percent_limit,
-            transport_overrun_leak_time_s: self.transport_overrun_leak_time_s,
-            thread_offset_variance_percent: self.thread_offset_variance_percent,
-            thread_offset_variance_overrun_percent_limit: self
-                .thread_offset_variance_overrun_percent_limit,
-            thread_offset_variance_overrun_leak_time_s: self
-                .thread_offset_variance_overrun_leak_time_s,
-            thread_offset_variance_start_snooze_s: self.thread_offset_variance_start_snooze_s,
+        impl Default for HealthSettings {
+            fn default() -> Self {
+                Self { $( $key: $default, )* }
+            }
         }
-    }
+
+        impl HealthSettings {
+            /// Each key, its value and the largest value it may take (the least is 0).
+            fn entries(&self) -> Vec<(&'static str, f64, f64)> {
+                vec![ $( (stringify!($key), self.$key, $max), )* ]
+            }
+
+            fn to_shm(self) -> HealthConfigV1 {
+                HealthConfigV1 { $( $key: self.$key, )* }
+            }
+        }
+    };
+}
+
+// A stall's skipped periods count at once when it ends: above 100 % a detector forgives a
+// stall longer than a second, so the two rates that see stalls may go to 1000 %.
+health_settings! {
+    /// % of the process' rate.
+    pending_sequence_overrun_percent_limit: default 1.0, at most 1000.0;
+    /// s.
+    pending_sequence_overrun_leak_time_s: default 0.25, at most 3600.0;
+    /// s.
+    pending_sequence_overrun_start_snooze_s: default 1.0, at most 3600.0;
+    /// % of the process' rate.
+    transport_overrun_percent_limit: default 0.5, at most 100.0;
+    /// s.
+    transport_overrun_leak_time_s: default 0.25, at most 3600.0;
+    /// % of the period.
+    thread_offset_variance_percent: default 1.0, at most 1000.0;
+    /// % of the process' rate.
+    thread_offset_variance_overrun_percent_limit: default 5.0, at most 100.0;
+    /// s.
+    thread_offset_variance_overrun_leak_time_s: default 0.25, at most 3600.0;
+    /// s.
+    thread_offset_variance_start_snooze_s: default 2.0, at most 3600.0;
 }
 
 /// `[supervisor]`.
 #[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct SupervisorSettings {
-    /// s
-    #[serde(default = "default_startup")]
+    /// Longest a process may take to start (s). Default 10.
     pub startup_timeout: f64,
-    /// s
-    #[serde(default = "default_heartbeat")]
+    /// A process whose cycle count does not advance this long is stalled (s). Default 1.
     pub heartbeat_timeout: f64,
-    /// s
-    #[serde(default = "default_stop")]
+    /// Longest a process may take to stop after SIGTERM before SIGKILL (s). Default 3.
     pub stop_timeout: f64,
     /// A process that has not seen the supervisor's heartbeat this long brings the axes to
     /// rest and exits (s). Default 0.5.
-    #[serde(default = "default_supervisor_timeout")]
     pub supervisor_timeout: f64,
     /// Wait before the first restart of a process; doubles with each restart in a row (s).
     /// Default 0.5.
-    #[serde(default = "default_backoff")]
     pub restart_backoff: f64,
     /// Restarts in a row after which a process is left dead. Default 3.
-    #[serde(default = "default_restart_limit")]
     pub restart_limit: u32,
-}
-
-fn default_supervisor_timeout() -> f64 {
-    0.5
-}
-fn default_backoff() -> f64 {
-    0.5
-}
-fn default_restart_limit() -> u32 {
-    3
-}
-
-fn default_startup() -> f64 {
-    10.0
-}
-fn default_heartbeat() -> f64 {
-    1.0
-}
-fn default_stop() -> f64 {
-    3.0
 }
 
 impl Default for SupervisorSettings {
     fn default() -> Self {
         Self {
-            startup_timeout: default_startup(),
-            heartbeat_timeout: default_heartbeat(),
-            stop_timeout: default_stop(),
-            supervisor_timeout: default_supervisor_timeout(),
-            restart_backoff: default_backoff(),
-            restart_limit: default_restart_limit(),
+            startup_timeout: 10.0,
+            heartbeat_timeout: 1.0,
+            stop_timeout: 3.0,
+            supervisor_timeout: 0.5,
+            restart_backoff: 0.5,
+            restart_limit: 3,
         }
     }
 }
@@ -697,6 +672,33 @@ fn locate(src: &str, path: &[Seg]) -> Option<Range<usize>> {
     span
 }
 
+/// A problem found by validation: the key path where it is, and what is wrong.
+type Problem = (Vec<Seg>, String);
+
+fn positive(v: f64) -> bool {
+    v.is_finite() && v > 0.0
+}
+
+fn non_negative(v: f64) -> bool {
+    v.is_finite() && v >= 0.0
+}
+
+/// `problems` (at least one) placed in `src`, in the file's order.
+fn located(src: &str, file: &str, problems: Vec<Problem>) -> ConfigError {
+    let mut problems: Vec<Located> = problems
+        .into_iter()
+        .map(|(path, message)| {
+            let (line, col) = locate(src, &path).map_or((0, 0), |s| line_col(src, s.start));
+            Located { line, col, message }
+        })
+        .collect();
+    problems.sort_by_key(|p| (p.line, p.col));
+    ConfigError {
+        file: file.into(),
+        problems,
+    }
+}
+
 fn line_col(src: &str, offset: usize) -> (usize, usize) {
     let before = &src[..offset.min(src.len())];
     let line = before.matches('\n').count() + 1;
@@ -709,42 +711,35 @@ impl Config {
     /// program can be started (what `run`, `up` and `check-config` load).
     pub fn parse_and_find_programs(src: &str, file: &str) -> Result<Self, ConfigError> {
         let cfg = Self::parse(src, file)?;
-        for (j, p) in cfg.process.iter().enumerate() {
-            if let Err(why) = crate::launch::find_program(&p.command[0]) {
-                let path = [Seg::Key("process"), Seg::Index(j), Seg::Key("command")];
-                let (line, col) = locate(src, &path).map_or((0, 0), |s| line_col(src, s.start));
-                return Err(ConfigError {
-                    file: file.into(),
-                    line,
-                    col,
-                    message: format!("process {}: {why}", p.name),
-                });
-            }
+        let missing: Vec<Problem> = cfg
+            .process
+            .iter()
+            .enumerate()
+            .filter_map(|(j, p)| {
+                let why = find_program(&p.command[0]).err()?;
+                let path = vec![Seg::Key("process"), Seg::Index(j), Seg::Key("command")];
+                Some((path, format!("process {}: {why}", p.name)))
+            })
+            .collect();
+        if missing.is_empty() {
+            Ok(cfg)
+        } else {
+            Err(located(src, file, missing))
         }
-        Ok(cfg)
     }
 
     /// Parses and validates `src` (named `file` in messages).
     pub fn parse(src: &str, file: &str) -> Result<Self, ConfigError> {
         let cfg: Config = toml::from_str(src).map_err(|e| {
             let (line, col) = e.span().map_or((0, 0), |s| line_col(src, s.start));
-            ConfigError {
-                file: file.into(),
-                line,
-                col,
-                message: e.message().trim().to_string(),
-            }
+            ConfigError::one(file, line, col, e.message().trim().to_string())
         })?;
-        cfg.validate().map_err(|(path, message)| {
-            let (line, col) = locate(src, &path).map_or((0, 0), |s| line_col(src, s.start));
-            ConfigError {
-                file: file.into(),
-                line,
-                col,
-                message,
-            }
-        })?;
-        Ok(cfg)
+        let problems = cfg.validate();
+        if problems.is_empty() {
+            Ok(cfg)
+        } else {
+            Err(located(src, file, problems))
+        }
     }
 
     /// The embedded default.
@@ -760,367 +755,376 @@ impl Config {
             None => Self::parse_and_find_programs(DEFAULT_TOML, DEFAULT_NAME),
             Some(p) => {
                 let file = p.display().to_string();
-                let src = std::fs::read_to_string(p).map_err(|e| ConfigError {
-                    file: file.clone(),
-                    line: 0,
-                    col: 0,
-                    message: format!("cannot read: {e}"),
-                })?;
+                let src = std::fs::read_to_string(p)
+                    .map_err(|e| ConfigError::one(&file, 0, 0, format!("cannot read: {e}")))?;
                 Self::parse_and_find_programs(&src, &file)
             }
         }
     }
 
-    fn validate(&self) -> Result<(), (Vec<Seg>, String)> {
-        use Seg::{Index as Idx, Key as K};
-        let bad = |path: Vec<Seg>, msg: String| Err((path, msg));
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    /// Every problem of the configuration, each at its key path: the sections and the entries
+    /// are checked independently (an entry stops at its first problem), and what depends on
+    /// the process table (the periods) only once the table is sound.
+    fn validate(&self) -> Vec<Problem> {
+        let mut found: Vec<Problem> = Vec::new();
+        found.extend(self.validate_motion().err());
+        found.extend(io::validate(&self.io));
+        found.extend(kinematics::validate(&self.kinematics, &self.axis));
+        found.extend(modbus::validate(&self.modbus));
+        match &self.ethercat {
+            Some(bus) => {
+                let drives_period = self.process_named("drives").map(Process::period_s);
+                found.extend(ethercat::validate(bus, &self.axis, &self.io, drives_period));
+            }
+            None => found.extend(ethercat::io_without_bus(&self.io)),
+        }
+        let table = self.validate_processes();
+        let table_sound = table.is_empty();
+        found.extend(table);
+        if table_sound {
+            found.extend(self.validate_periods().err());
+        }
+        found.extend(self.validate_inject());
+        if self.axis.is_empty() || self.axis.len() > MAX_AXES {
+            found.push((
+                vec![Seg::Key("axis")],
+                format!(
+                    "the cell has {} axes; 1..={MAX_AXES} allowed",
+                    self.axis.len()
+                ),
+            ));
+        } else {
+            for i in 0..self.axis.len() {
+                found.extend(self.validate_axis(i, table_sound).err());
+            }
+        }
+        found.extend(self.validate_supervisor());
+        found
+    }
 
+    /// `[motion]` on its own.
+    fn validate_motion(&self) -> Result<(), Problem> {
+        use Seg::Key as K;
         let m = &self.motion;
+        let at = |k: &'static str| vec![K("motion"), K(k)];
         if !positive(m.t_acc) {
-            return bad(
-                vec![K("motion"), K("t_acc")],
+            return Err((
+                at("t_acc"),
                 format!("t_acc = {} s must be positive", m.t_acc),
-            );
+            ));
         }
         if !non_negative(m.settle_time) {
-            return bad(
-                vec![K("motion"), K("settle_time")],
-                "settle_time must be 0 s or more".into(),
-            );
+            return Err((at("settle_time"), "settle_time must be 0 s or more".into()));
         }
         if !(m.estop_stop_time.is_finite() && (0.01..=60.0).contains(&m.estop_stop_time)) {
-            return bad(
-                vec![K("motion"), K("estop_stop_time")],
+            return Err((
+                at("estop_stop_time"),
                 format!(
                     "estop_stop_time = {} s must be 0.01..=60 s",
                     m.estop_stop_time
                 ),
-            );
+            ));
         }
         if !positive(m.settle_timeout) {
-            return bad(
-                vec![K("motion"), K("settle_timeout")],
+            return Err((
+                at("settle_timeout"),
                 "settle_timeout must be positive".into(),
-            );
+            ));
         }
-        if let Some(e) = io::validate(&self.io) {
-            return Err(e);
-        }
-        if let Some(e) = kinematics::validate(&self.kinematics, &self.axis) {
-            return Err(e);
-        }
-        if let Some(e) = modbus::validate(&self.modbus) {
-            return Err(e);
-        }
-        match &self.ethercat {
-            Some(bus) => {
-                let drives_period = self.process_named("drives").map(Process::period_s);
-                if let Some(e) = ethercat::validate(bus, &self.axis, &self.io, drives_period)
-                    .into_iter()
-                    .next()
-                {
-                    return Err(e);
-                }
-            }
-            None => {
-                if let Some(e) = ethercat::io_without_bus(&self.io) {
-                    return Err(e);
-                }
-            }
-        }
-        if let Some(e) = self.validate_processes() {
-            return Err(e);
-        }
+        Ok(())
+    }
+
+    /// What the processes' periods bound: the setpoint timeout, `[drives]`' timeouts and
+    /// sub-steps.
+    fn validate_periods(&self) -> Result<(), Problem> {
+        use Seg::Key as K;
+        let m = &self.motion;
         let trajgen_period_s = self.period_s("trajgen");
         if !(m.setpoint_timeout.is_finite() && m.setpoint_timeout >= 2.0 * trajgen_period_s) {
-            return bad(
+            return Err((
                 vec![K("motion"), K("setpoint_timeout")],
                 format!(
                     "setpoint_timeout = {} s must be at least 2 trajgen periods ({} s)",
                     m.setpoint_timeout,
                     2.0 * trajgen_period_s
                 ),
-            );
+            ));
         }
         let servo_period_s = self.period_s("servo");
-        if !(self.drives.command_timeout.is_finite()
-            && self.drives.command_timeout >= 3.0 * servo_period_s)
-        {
-            return bad(
+        let d = &self.drives;
+        if !(d.command_timeout.is_finite() && d.command_timeout >= 3.0 * servo_period_s) {
+            return Err((
                 vec![K("drives"), K("command_timeout")],
                 format!(
                     "command_timeout = {} s must be at least 3 servo periods ({} s)",
-                    self.drives.command_timeout,
+                    d.command_timeout,
                     3.0 * servo_period_s
                 ),
-            );
+            ));
         }
-        if !(1..=1000).contains(&self.drives.substeps) {
-            return bad(
+        if !(1..=1000).contains(&d.substeps) {
+            return Err((
                 vec![K("drives"), K("substeps")],
                 "substeps must be 1..=1000".into(),
-            );
+            ));
         }
         let machine_period_s = self.period_s("drives");
         for (k, v, min) in [
             (
                 "feedback_timeout",
-                self.drives.feedback_timeout,
+                d.feedback_timeout,
                 3.0 * machine_period_s,
             ),
-            (
-                "enable_timeout",
-                self.drives.enable_timeout,
-                5.0 * servo_period_s,
-            ),
+            ("enable_timeout", d.enable_timeout, 5.0 * servo_period_s),
         ] {
             if !(v.is_finite() && v >= min) {
-                return bad(
+                return Err((
                     vec![K("drives"), K(k)],
                     format!("{k} = {v} s must be at least {min} s"),
-                );
+                ));
             }
         }
-        if self.drives.inject.len() > MAX_CONFIGURED_FAULTS {
-            return bad(
+        Ok(())
+    }
+
+    /// `[[drives.inject]]`: each configured fault names an axis and a fault.
+    fn validate_inject(&self) -> Vec<Problem> {
+        use Seg::{Index as Idx, Key as K};
+        let inject = &self.drives.inject;
+        if inject.len() > MAX_CONFIGURED_FAULTS {
+            return vec![(
                 vec![K("drives"), K("inject")],
                 format!(
                     "{} configured faults; at most {MAX_CONFIGURED_FAULTS}",
-                    self.drives.inject.len()
+                    inject.len()
                 ),
-            );
+            )];
         }
-        for (j, f) in self.drives.inject.iter().enumerate() {
+        let mut found = Vec::new();
+        for (j, f) in inject.iter().enumerate() {
             let at = |k: &'static str| vec![K("drives"), K("inject"), Idx(j), K(k)];
             if !self.axis.iter().any(|a| a.name == f.axis) {
-                return bad(at("axis"), format!("inject: there is no axis {:?}", f.axis));
-            }
-            if fault_code(&f.fault).is_none() {
-                return bad(
-                    at("fault"),
-                    format!("inject: fault {:?} is not one of {FAULT_NAMES}", f.fault),
-                );
-            }
-            if !(non_negative(f.at) && non_negative(f.duration) && f.at + f.duration <= 1e6) {
-                return bad(
+                found.push((at("axis"), format!("inject: there is no axis {:?}", f.axis)));
+            } else if !(non_negative(f.at) && non_negative(f.duration) && f.at + f.duration <= 1e6)
+            {
+                found.push((
                     at("at"),
                     "inject: at and duration must be 0 s or more, together at most 1e6 s".into(),
-                );
+                ));
             }
         }
+        found
+    }
 
-        if self.axis.is_empty() || self.axis.len() > MAX_AXES {
+    /// Axis `i`: its name, range, limits, gains, drive and model; with `periods` (the process
+    /// table is sound), what the servo period bounds and the loop's stability.
+    fn validate_axis(&self, i: usize, periods: bool) -> Result<(), Problem> {
+        use Seg::{Index as Idx, Key as K};
+        let a = &self.axis[i];
+        let at = |k: &'static str| vec![K("axis"), Idx(i), K(k)];
+        let sub = |t: &'static str, k: &'static str| vec![K("axis"), Idx(i), K(t), K(k)];
+        let bad = |path: Vec<Seg>, msg: String| Err((path, msg));
+        if a.name.is_empty()
+            || a.name.len() > 15
+            || !a
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_')
+        {
             return bad(
-                vec![K("axis")],
+                at("name"),
                 format!(
-                    "the cell has {} axes; 1..={MAX_AXES} allowed",
-                    self.axis.len()
+                    "axis name {:?} must be 1 to 15 letters, digits or '_'",
+                    a.name
                 ),
             );
         }
-        for (i, a) in self.axis.iter().enumerate() {
-            let at = |k: &'static str| vec![K("axis"), Idx(i), K(k)];
-            let sub = |t: &'static str, k: &'static str| vec![K("axis"), Idx(i), K(t), K(k)];
-            if a.name.is_empty()
-                || a.name.len() > 15
-                || !a
-                    .name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '_')
-            {
-                return bad(
-                    at("name"),
-                    format!(
-                        "axis name {:?} must be 1 to 15 letters, digits or '_'",
-                        a.name
-                    ),
-                );
-            }
-            if self.axis[..i].iter().any(|b| b.name == a.name) {
-                return bad(at("name"), format!("axis name {:?} is used twice", a.name));
-            }
-            if a.unit.is_empty() || a.unit.len() > 7 {
-                return bad(
-                    at("unit"),
-                    format!("unit {:?} must be 1 to 7 bytes", a.unit),
-                );
-            }
-            if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
-                return bad(
-                    at("max"),
-                    format!(
-                        "axis {}: max ({}) must be greater than min ({})",
-                        a.name, a.max, a.min
-                    ),
-                );
-            }
-            if !(a.start >= a.min && a.start <= a.max) {
-                return bad(
-                    at("start"),
-                    format!(
-                        "axis {}: start {} lies outside {} .. {}",
-                        a.name, a.start, a.min, a.max
-                    ),
-                );
-            }
-            for (k, v) in [
-                ("vmax", a.vmax),
-                ("following_error_limit", a.following_error_limit),
-                ("in_position", a.in_position),
-            ] {
-                if !positive(v) {
-                    return bad(
-                        at(k),
-                        format!("axis {}: {k} = {v} must be positive", a.name),
-                    );
-                }
-            }
-            if a.in_position >= a.following_error_limit {
-                return bad(
-                    at("in_position"),
-                    format!(
-                        "axis {}: in_position must be smaller than following_error_limit",
-                        a.name
-                    ),
-                );
-            }
-            let g = &a.servo;
-            for (k, v) in [
-                ("kp", g.kp),
-                ("ki", g.ki),
-                ("kd", g.kd),
-                ("kvff", g.kvff),
-                ("kaff", g.kaff),
-                ("integral_limit", g.integral_limit),
-            ] {
-                if !non_negative(v) {
-                    return bad(
-                        sub("servo", k),
-                        format!("axis {}: servo {k} = {v} must be 0 or more", a.name),
-                    );
-                }
-            }
-            let s = &a.sim;
-            for (k, v, pos) in [
-                ("inertia", s.inertia, true),
-                ("viscous", s.viscous, false),
-                ("coulomb", s.coulomb, false),
-                ("effort_limit", s.effort_limit, true),
-                ("encoder_resolution", s.encoder_resolution, true),
-            ] {
-                if !(if pos { positive(v) } else { non_negative(v) }) {
-                    let need = if pos { "positive" } else { "0 or more" };
-                    return bad(
-                        sub("sim", k),
-                        format!("axis {}: sim {k} = {v} must be {need}", a.name),
-                    );
-                }
-            }
-            if let Some(v) = a.settle_velocity
-                && !positive(v)
-            {
-                return bad(
-                    at("settle_velocity"),
-                    format!("axis {}: settle_velocity = {v} must be positive", a.name),
-                );
-            }
-            let servo_period_s = self.period_s("servo");
-            let t_acc = self.motion.t_acc;
-            for (k, v) in [
-                ("velocity", a.velocity_limit()),
-                ("position_step", a.position_step_limit(servo_period_s)),
-                (
-                    "velocity_step",
-                    a.velocity_step_limit(servo_period_s, t_acc),
+        if self.axis[..i].iter().any(|b| b.name == a.name) {
+            return bad(at("name"), format!("axis name {:?} is used twice", a.name));
+        }
+        if a.unit.is_empty() || a.unit.len() > 7 {
+            return bad(
+                at("unit"),
+                format!("unit {:?} must be 1 to 7 bytes", a.unit),
+            );
+        }
+        if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
+            return bad(
+                at("max"),
+                format!(
+                    "axis {}: max ({}) must be greater than min ({})",
+                    a.name, a.max, a.min
                 ),
-                ("stop_deceleration", a.stop_deceleration(t_acc)),
-            ] {
-                if !positive(v) {
-                    return bad(
-                        sub("limits", k),
-                        format!("axis {}: limits {k} = {v} must be positive", a.name),
-                    );
-                }
-            }
-            if a.velocity_limit() < a.vmax {
+            );
+        }
+        if !(a.start >= a.min && a.start <= a.max) {
+            return bad(
+                at("start"),
+                format!(
+                    "axis {}: start {} lies outside {} .. {}",
+                    a.name, a.start, a.min, a.max
+                ),
+            );
+        }
+        for (k, v) in [
+            ("vmax", a.vmax),
+            ("following_error_limit", a.following_error_limit),
+            ("in_position", a.in_position),
+        ] {
+            if !positive(v) {
                 return bad(
-                    sub("limits", "velocity"),
-                    format!(
-                        "axis {}: limits velocity = {} is below vmax = {}: every move would be refused",
-                        a.name,
-                        a.velocity_limit(),
-                        a.vmax
-                    ),
+                    at(k),
+                    format!("axis {}: {k} = {v} must be positive", a.name),
                 );
-            }
-            if a.stop_deceleration(t_acc) * servo_period_s
-                > a.velocity_step_limit(servo_period_s, t_acc)
-            {
-                return bad(
-                    sub("limits", "stop_deceleration"),
-                    format!(
-                        "axis {}: stop_deceleration = {} changes the velocity by more than limits velocity_step = {} per servo period: coming to rest would cut power",
-                        a.name,
-                        a.stop_deceleration(t_acc),
-                        a.velocity_step_limit(servo_period_s, t_acc)
-                    ),
-                );
-            }
-            let d = &a.drive;
-            let Some(mode) = mode_of(&d.mode) else {
-                return bad(
-                    sub("drive", "mode"),
-                    format!(
-                        "axis {}: drive mode {:?} is not one of \"cst\", \"csp\", \"csv\"",
-                        a.name, d.mode
-                    ),
-                );
-            };
-            if cia402::QuickStopOption::from_i16(d.quick_stop_option as i16).is_none()
-                || !(0..=8).contains(&d.quick_stop_option)
-            {
-                return bad(
-                    sub("drive", "quick_stop_option"),
-                    format!(
-                        "axis {}: drive quick_stop_option = {} must be 0, 1, 2 or 6",
-                        a.name, d.quick_stop_option
-                    ),
-                );
-            }
-            for (k, v) in [("kp", d.kp), ("ki", d.ki), ("kd", d.kd)] {
-                if !non_negative(v) {
-                    return bad(
-                        sub("drive", k),
-                        format!("axis {}: drive {k} = {v} must be 0 or more", a.name),
-                    );
-                }
-            }
-            if !positive(a.quick_stop_deceleration(t_acc)) {
-                return bad(
-                    sub("drive", "quick_stop_deceleration"),
-                    format!(
-                        "axis {}: drive quick_stop_deceleration must be positive",
-                        a.name
-                    ),
-                );
-            }
-            if mode != cia402::Mode::Cst && d.kd <= 0.0 {
-                return bad(
-                    sub("drive", "kd"),
-                    format!(
-                        "axis {}: drive mode {} needs the drive's own velocity gain kd > 0",
-                        a.name, d.mode
-                    ),
-                );
-            }
-            let machine_step_s = self.period_s("drives") / self.drives.substeps.max(1) as f64;
-            if let Err(why) = stability::check(a, mode, servo_period_s, machine_step_s) {
-                return bad(vec![K("axis"), Idx(i), K("sim"), K("inertia")], why);
             }
         }
+        if a.in_position >= a.following_error_limit {
+            return bad(
+                at("in_position"),
+                format!(
+                    "axis {}: in_position must be smaller than following_error_limit",
+                    a.name
+                ),
+            );
+        }
+        let g = &a.servo;
+        for (k, v) in [
+            ("kp", g.kp),
+            ("ki", g.ki),
+            ("kd", g.kd),
+            ("kvff", g.kvff),
+            ("kaff", g.kaff),
+            ("integral_limit", g.integral_limit),
+        ] {
+            if !non_negative(v) {
+                return bad(
+                    sub("servo", k),
+                    format!("axis {}: servo {k} = {v} must be 0 or more", a.name),
+                );
+            }
+        }
+        let s = &a.sim;
+        for (k, v, pos) in [
+            ("inertia", s.inertia, true),
+            ("viscous", s.viscous, false),
+            ("coulomb", s.coulomb, false),
+            ("effort_limit", s.effort_limit, true),
+            ("encoder_resolution", s.encoder_resolution, true),
+        ] {
+            if !(if pos { positive(v) } else { non_negative(v) }) {
+                let need = if pos { "positive" } else { "0 or more" };
+                return bad(
+                    sub("sim", k),
+                    format!("axis {}: sim {k} = {v} must be {need}", a.name),
+                );
+            }
+        }
+        if let Some(v) = a.settle_velocity
+            && !positive(v)
+        {
+            return bad(
+                at("settle_velocity"),
+                format!("axis {}: settle_velocity = {v} must be positive", a.name),
+            );
+        }
+        let d = &a.drive;
+        if cia402::QuickStopOption::from_i16(d.quick_stop_option as i16).is_none()
+            || !(0..=8).contains(&d.quick_stop_option)
+        {
+            return bad(
+                sub("drive", "quick_stop_option"),
+                format!(
+                    "axis {}: drive quick_stop_option = {} must be 0, 1, 2 or 6",
+                    a.name, d.quick_stop_option
+                ),
+            );
+        }
+        for (k, v) in [("kp", d.kp), ("ki", d.ki), ("kd", d.kd)] {
+            if !non_negative(v) {
+                return bad(
+                    sub("drive", k),
+                    format!("axis {}: drive {k} = {v} must be 0 or more", a.name),
+                );
+            }
+        }
+        if d.mode != DriveMode::Cst && d.kd <= 0.0 {
+            return bad(
+                sub("drive", "kd"),
+                format!(
+                    "axis {}: drive mode {} needs the drive's own velocity gain kd > 0",
+                    a.name,
+                    d.mode.name()
+                ),
+            );
+        }
+        if !periods {
+            return Ok(());
+        }
+        let servo_period_s = self.period_s("servo");
+        let t_acc = self.motion.t_acc;
+        if !positive(t_acc) {
+            return Ok(()); // [motion] says so; the limits derive from it
+        }
+        for (k, v) in [
+            ("velocity", a.velocity_limit()),
+            ("position_step", a.position_step_limit(servo_period_s)),
+            (
+                "velocity_step",
+                a.velocity_step_limit(servo_period_s, t_acc),
+            ),
+            ("stop_deceleration", a.stop_deceleration(t_acc)),
+        ] {
+            if !positive(v) {
+                return bad(
+                    sub("limits", k),
+                    format!("axis {}: limits {k} = {v} must be positive", a.name),
+                );
+            }
+        }
+        if a.velocity_limit() < a.vmax {
+            return bad(
+                sub("limits", "velocity"),
+                format!(
+                    "axis {}: limits velocity = {} is below vmax = {}: every move would be refused",
+                    a.name,
+                    a.velocity_limit(),
+                    a.vmax
+                ),
+            );
+        }
+        if a.stop_deceleration(t_acc) * servo_period_s
+            > a.velocity_step_limit(servo_period_s, t_acc)
+        {
+            return bad(
+                sub("limits", "stop_deceleration"),
+                format!(
+                    "axis {}: stop_deceleration = {} changes the velocity by more than limits velocity_step = {} per servo period: coming to rest would cut power",
+                    a.name,
+                    a.stop_deceleration(t_acc),
+                    a.velocity_step_limit(servo_period_s, t_acc)
+                ),
+            );
+        }
+        if !positive(a.quick_stop_deceleration(t_acc)) {
+            return bad(
+                sub("drive", "quick_stop_deceleration"),
+                format!(
+                    "axis {}: drive quick_stop_deceleration must be positive",
+                    a.name
+                ),
+            );
+        }
+        let machine_step_s = self.period_s("drives") / self.drives.substeps.max(1) as f64;
+        if let Err(why) = stability::check(a, d.mode.into(), servo_period_s, machine_step_s) {
+            return bad(vec![K("axis"), Idx(i), K("sim"), K("inertia")], why);
+        }
+        Ok(())
+    }
 
+    /// `[supervisor]` and `[health_config]`: each value within its range.
+    fn validate_supervisor(&self) -> Vec<Problem> {
+        use Seg::Key as K;
+        let mut found = Vec::new();
         let s = &self.supervisor;
         for (k, v, lo, hi) in [
             ("startup_timeout", s.startup_timeout, 0.1, 600.0),
@@ -1130,36 +1134,27 @@ impl Config {
             ("restart_backoff", s.restart_backoff, 0.0, 60.0),
         ] {
             if !(v.is_finite() && (lo..=hi).contains(&v)) {
-                return bad(
+                found.push((
                     vec![K("supervisor"), K(k)],
                     format!("{k} = {v} s must be {lo}..={hi} s"),
-                );
+                ));
             }
         }
         if s.restart_limit > 1000 {
-            return bad(
+            found.push((
                 vec![K("supervisor"), K("restart_limit")],
                 format!("restart_limit = {} must be 0..=1000", s.restart_limit),
-            );
+            ));
         }
-        for (k, v) in self.health_config.entries() {
-            let hi = match k {
-                // A stall's skipped periods count at once when it ends: above 100 % the
-                // detector forgives a stall longer than a second.
-                "thread_offset_variance_percent" | "pending_sequence_overrun_percent_limit" => {
-                    1000.0
-                }
-                _ if k.ends_with("_s") => 3600.0,
-                _ => 100.0,
-            };
+        for (k, v, hi) in self.health_config.entries() {
             if !(v.is_finite() && v >= 0.0 && v <= hi) {
-                return bad(
+                found.push((
                     vec![K("health_config"), K(k)],
                     format!("{k} = {v} must be 0..={hi}"),
-                );
+                ));
             }
         }
-        Ok(())
+        found
     }
 
     /// The period of the process called `name` (s); one of [`REQUIRED_PROCESSES`] always is.
@@ -1172,86 +1167,24 @@ impl Config {
         self.process.iter().find(|p| p.name == name)
     }
 
-    /// The process table: names, commands, periods, priorities, CPUs, policies.
-    fn validate_processes(&self) -> Option<(Vec<Seg>, String)> {
+    /// The process table: its size, each entry (name, command, period, priority, CPU), the
+    /// processes the cell needs.
+    fn validate_processes(&self) -> Vec<Problem> {
         use Seg::{Index as Idx, Key as K};
-        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) as i32;
         if self.process.is_empty() || self.process.len() > MAX_PROCESSES {
-            return Some((
+            return vec![(
                 vec![K("process")],
                 format!(
                     "the cell has {} processes; 1..={MAX_PROCESSES} allowed",
                     self.process.len()
                 ),
-            ));
+            )];
         }
-        for (j, p) in self.process.iter().enumerate() {
-            let at = |k: &'static str| vec![K("process"), Idx(j), K(k)];
-            let name = &p.name;
-            if let Err(e) = ProcessName::new(name) {
-                return Some((at("name"), format!("process name {name:?}: {e}")));
-            }
-            if self.process[..j].iter().any(|q| q.name == *name) {
-                return Some((at("name"), format!("process name {name:?} is used twice")));
-            }
-            if !p.critical && REQUIRED_PROCESSES.contains(&name.as_str()) {
-                return Some((
-                    at("critical"),
-                    format!(
-                        "process {name}: critical = false is not allowed (the cell's motion depends on it)"
-                    ),
-                ));
-            }
-            if p.command.is_empty() || p.command[0].is_empty() {
-                return Some((at("command"), format!("process {name}: command is empty")));
-            }
-            if !(50..=1_000_000).contains(&p.period_us) {
-                return Some((
-                    at("period_us"),
-                    format!(
-                        "process {name}: period_us = {} must be 50..=1000000",
-                        p.period_us
-                    ),
-                ));
-            }
-            if p.phase_us >= p.period_us {
-                return Some((
-                    at("phase_us"),
-                    format!("process {name}: phase_us must be smaller than period_us"),
-                ));
-            }
-            if !(0..=99).contains(&p.priority) {
-                return Some((
-                    at("priority"),
-                    format!(
-                        "process {name}: priority {} must be 0..=99 (0: SCHED_OTHER)",
-                        p.priority
-                    ),
-                ));
-            }
-            if let Some(cpu) = p.cpu
-                && !(0..cpus).contains(&cpu)
-            {
-                return Some((
-                    at("cpu"),
-                    format!(
-                        "process {name}: cpu {cpu} does not exist (this machine has CPUs 0..{})",
-                        cpus - 1
-                    ),
-                ));
-            }
-            if reaction_of(&p.network_estop_config).is_none() {
-                return Some((
-                    at("network_estop_config"),
-                    format!(
-                        "process {name}: network_estop_config {:?} is not one of \"stop\", \"hold\", \"ignore\"",
-                        p.network_estop_config
-                    ),
-                ));
-            }
-        }
+        let mut found: Vec<Problem> = (0..self.process.len())
+            .filter_map(|j| self.validate_process(j).err())
+            .collect();
         if let Some(k) = self.process.iter().position(|p| p.name == "machine") {
-            return Some((
+            found.push((
                 vec![K("process"), Idx(k), K("name")],
                 "the drives' process is called \"drives\" (it was \"machine\"): rename this entry"
                     .to_string(),
@@ -1259,7 +1192,7 @@ impl Config {
         }
         for required in REQUIRED_PROCESSES {
             if self.process_named(required).is_none() {
-                return Some((
+                found.push((
                     vec![K("process")],
                     format!(
                         "the cell needs a process called {required:?} (its services carry the cell's data)"
@@ -1267,7 +1200,69 @@ impl Config {
                 ));
             }
         }
-        None
+        found
+    }
+
+    /// Process `j` of the table.
+    fn validate_process(&self, j: usize) -> Result<(), Problem> {
+        use Seg::{Index as Idx, Key as K};
+        let p = &self.process[j];
+        let at = |k: &'static str| vec![K("process"), Idx(j), K(k)];
+        let name = &p.name;
+        if let Err(e) = ProcessName::new(name) {
+            return Err((at("name"), format!("process name {name:?}: {e}")));
+        }
+        if self.process[..j].iter().any(|q| q.name == *name) {
+            return Err((at("name"), format!("process name {name:?} is used twice")));
+        }
+        if !p.critical && REQUIRED_PROCESSES.contains(&name.as_str()) {
+            return Err((
+                at("critical"),
+                format!(
+                    "process {name}: critical = false is not allowed (the cell's motion depends on it)"
+                ),
+            ));
+        }
+        if p.command.is_empty() || p.command[0].is_empty() {
+            return Err((at("command"), format!("process {name}: command is empty")));
+        }
+        if !(50..=1_000_000).contains(&p.period_us) {
+            return Err((
+                at("period_us"),
+                format!(
+                    "process {name}: period_us = {} must be 50..=1000000",
+                    p.period_us
+                ),
+            ));
+        }
+        if p.phase_us >= p.period_us {
+            return Err((
+                at("phase_us"),
+                format!("process {name}: phase_us must be smaller than period_us"),
+            ));
+        }
+        if !(0..=99).contains(&p.priority) {
+            return Err((
+                at("priority"),
+                format!(
+                    "process {name}: priority {} must be 0..=99 (0: SCHED_OTHER)",
+                    p.priority
+                ),
+            ));
+        }
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) as i32;
+        if let Some(cpu) = p.cpu
+            && !(0..cpus).contains(&cpu)
+        {
+            return Err((
+                at("cpu"),
+                format!(
+                    "process {name}: cpu {cpu} does not exist (this machine has CPUs 0..{})",
+                    cpus - 1
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// The configuration as every process reads it from shared memory.
@@ -1303,7 +1298,7 @@ impl Config {
                 at_ns: ns(f.at),
                 duration_ns: ns(f.duration),
                 axis: self.axis.iter().position(|a| a.name == f.axis).unwrap_or(0) as u32,
-                code: fault_code(&f.fault).unwrap_or(0) as u32,
+                code: u32::from(f.fault.code()),
             };
         }
         let servo_period_s = self.period_s("servo");
@@ -1315,8 +1310,7 @@ impl Config {
                 phase_ns: p.phase_us * 1000,
                 priority: p.priority,
                 cpu: p.cpu.unwrap_or(-1),
-                network_estop_config: reaction_of(&p.network_estop_config)
-                    .unwrap_or(EstopReaction::Stop) as u32,
+                network_estop_config: EstopReaction::from(p.network_estop_config) as u32,
                 flags: if p.critical {
                     0
                 } else {
@@ -1339,7 +1333,7 @@ impl Config {
                 position_step_limit: a.position_step_limit(servo_period_s),
                 velocity_step_limit: a.velocity_step_limit(servo_period_s, t_acc),
                 stop_deceleration: a.stop_deceleration(t_acc),
-                mode: mode_of(&a.drive.mode).unwrap_or(cia402::Mode::Cst) as i32,
+                mode: cia402::Mode::from(a.drive.mode) as i32,
                 quick_stop_option: a.drive.quick_stop_option,
                 drive_kp: a.drive.kp,
                 drive_ki: a.drive.ki,
@@ -1393,6 +1387,38 @@ mod tests {
         let e = Config::parse(&src, "cell.toml").expect_err(to);
         let got = e.to_string();
         assert!(got.starts_with(want), "\n got: {got}\nwant: {want}");
+    }
+
+    #[test]
+    fn every_problem_is_reported_at_once_in_the_files_order() {
+        let src = DEFAULT_TOML
+            .replacen("stop_timeout = 3.0", "stop_timeout = 1e20", 1)
+            .replacen("priority = 60", "priority = 120", 1)
+            .replacen("vmax = 16.0", "vmax = 0.0", 1)
+            .replacen("t_acc = 0.525", "t_acc = -1.0", 1);
+        let e = Config::parse(&src, "cell.toml").expect_err("four problems");
+        let text = e.to_string();
+        assert_eq!(e.problems.len(), 4, "{text}");
+        let lines: Vec<usize> = e.problems.iter().map(|p| p.line).collect();
+        assert!(lines.windows(2).all(|w| w[0] < w[1]), "{text}");
+        for needle in [
+            "t_acc = -1 s must be positive",
+            "vmax = 0 must be positive",
+            "priority 120 must be 0..=99",
+            "stop_timeout = 100000000000000000000 s must be 0.1..=60 s",
+        ] {
+            assert!(text.contains(needle), "{needle:?} in\n{text}");
+        }
+        assert_eq!(text.lines().count(), 4, "one line each:\n{text}");
+    }
+
+    /// Like [`check`]: the one error is on `line` and says `needle`.
+    fn check_has(from: &str, to: &str, line: usize, needle: &str) {
+        let src = DEFAULT_TOML.replacen(from, to, 1);
+        let e = Config::parse(&src, "cell.toml").expect_err(to);
+        assert_eq!(e.problems.len(), 1, "{e}");
+        assert_eq!(e.problems[0].line, line, "{e}");
+        assert!(e.to_string().contains(needle), "{e}");
     }
 
     fn line_of(needle: &str) -> usize {
@@ -1623,18 +1649,24 @@ mod tests {
             "name = \"servo\"",
             &(src_line(line_of("name = \"iobridge\"")) + "process name \"servo\" is used twice"),
         );
-        check(
-            "name = \"trajgen\"",
-            "name = \"Trajgen\"",
-            &(src_line(line_of("name = \"trajgen\""))
-                + "process name \"Trajgen\": a process name is a lower-case letter"),
+        // Two problems: the name, and so the cell has no trajgen.
+        let src = DEFAULT_TOML.replacen("name = \"trajgen\"", "name = \"Trajgen\"", 1);
+        let e = Config::parse(&src, "cell.toml").expect_err("Trajgen");
+        let text = e.to_string();
+        assert_eq!(e.problems.len(), 2, "{text}");
+        assert!(
+            text.contains(
+                &(src_line(line_of("name = \"trajgen\""))
+                    + "process name \"Trajgen\": a process name is a lower-case letter")
+            ) && text.contains("the cell needs a process called \"trajgen\""),
+            "{text}"
         );
         check("name = \"trajgen\"", "name = \"planner\"", "cell.toml:");
-        check(
+        check_has(
             "priority = 60",
             "priority = 60\nnetwork_estop_config = \"pause\"",
-            &(src_line(line_of("priority = 60") + 1)
-                + "process iobridge: network_estop_config \"pause\" is not one of"),
+            line_of("priority = 60") + 1,
+            "unknown variant `pause`, expected one of `stop`, `hold`, `ignore`",
         );
         check(
             "stop_timeout = 3.0",
@@ -1758,13 +1790,11 @@ mod tests {
             ),
         );
         let x = line_of("name = \"x\"");
-        check(
+        check_has(
             "in_position = 0.01            # mm",
             "in_position = 0.01\ndrive = { mode = \"position\" }",
-            &format!(
-                "cell.toml:{}:11: axis x: drive mode \"position\" is not one of",
-                x + 8
-            ),
+            x + 8,
+            "unknown variant `position`, expected one of `cst`, `csp`, `csv`",
         );
         check(
             "in_position = 0.01            # mm",
