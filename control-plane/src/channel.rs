@@ -460,7 +460,7 @@ impl Conn {
         // A report too long for a frame (a very long trace) goes without its trace and
         // figures, saying so, rather than as an answer the client must refuse.
         if bytes.len() > MAX_FRAME
-            && let Reply::Report { ok, json, text, .. } = r
+            && let Reply::Report { outcome, text, .. } = r
         {
             let text = format!(
                 "{text}\n  the trace and figures asked for were left out: {} bytes, more than \
@@ -468,8 +468,7 @@ impl Conn {
                 bytes.len()
             );
             let short = Reply::Report {
-                ok: *ok,
-                json: json.clone(),
+                outcome: outcome.clone(),
                 text,
                 trace_csv: None,
                 figures: None,

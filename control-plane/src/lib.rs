@@ -7,14 +7,18 @@
 //! - [`Info`]: the supervisor's own view of its cell (the answer to [`Request::Info`]).
 //! - [`status::Status`]: `supervisor status --json`, the processes' view from shared memory
 //!   with the supervisor's.
+//! - [`report::RunReport`] and [`report::RunFailure`]: a program's end (`run --json`), with its
+//!   [`event::Event`]s.
 //! - [`figures::Figures`]: what `--plot` draws, gathered by the supervisor, drawn by the client.
 //!
-//! The JSON documents (`status --json`) are these types serialized; their JSON Schemas are
+//! The JSON documents (`status --json`, `run --json`) are these types serialized; their JSON Schemas are
 //! generated from them ([`schema`]) and checked in under `docs/schema/`.
 
 pub mod channel;
+pub mod event;
 pub mod figures;
 pub mod info;
+pub mod report;
 mod request;
 pub mod schema;
 pub mod status;

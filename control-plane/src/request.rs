@@ -3,6 +3,7 @@
 
 use crate::figures::Figures;
 use crate::info::Info;
+use crate::report::Outcome;
 use serde::{Deserialize, Serialize};
 
 /// What a client asks a running cell.
@@ -66,13 +67,10 @@ pub enum Reply {
     Failed(String),
     /// The supervisor's view of the cell (`Info`).
     Info(Box<Info>),
-    /// A program's end: `ok`, the report as JSON (`run --json`'s document: the report, or
-    /// `{"ok": false, "error": …, "events": …}`), as text, and its trace.
+    /// A program's end: its report (or why it failed), as text, and its trace.
     Report {
-        /// The program completed and settled.
-        ok: bool,
-        /// The report, JSON.
-        json: String,
+        /// The report (`run --json`'s document), or the failure.
+        outcome: Outcome,
         /// The summary `run` prints (or the error).
         text: String,
         /// The trace as CSV (`run --trace`), when asked for and the program completed.

@@ -6,10 +6,16 @@ use schemars::Schema;
 
 /// Every document with a schema: its file name under `docs/schema/` and its schema.
 pub fn all() -> Vec<(&'static str, Schema)> {
-    vec![(
-        "status.schema.json",
-        schemars::schema_for!(crate::status::Status),
-    )]
+    vec![
+        (
+            "status.schema.json",
+            schemars::schema_for!(crate::status::Status),
+        ),
+        (
+            "report.schema.json",
+            schemars::schema_for!(crate::report::RunDocument),
+        ),
+    ]
 }
 
 /// A schema as the file holds it: pretty JSON and a final newline.

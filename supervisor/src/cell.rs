@@ -17,9 +17,9 @@ use control_plane::info::{self, Info};
 /// A heartbeat gap this long (s) is reported, whatever room `supervisor_timeout` gives: the
 /// processes' own timing suffers from such a stall (a following error of vmax times it).
 const STALL_REPORTED_S: f64 = 0.1;
+use control_plane::event::Event;
 use runtime::ipc::{self, Pub, Sub};
 use runtime::signals;
-use serde_json::Value;
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
@@ -122,7 +122,7 @@ pub enum Life {
 /// What closing a cell left: its events as JSON, and why the close failed (a process that
 /// would not stop, resources left behind), if it did.
 pub(crate) struct Closed {
-    pub(crate) events: Vec<Value>,
+    pub(crate) events: Vec<Event>,
     pub(crate) problem: Option<RunError>,
 }
 
@@ -430,7 +430,7 @@ impl Cell {
         let events = self
             .events
             .iter()
-            .map(|e| events::to_json(e, &self.axes, self.t0_ns))
+            .map(|e| events::event(e, &self.axes, self.t0_ns))
             .collect();
         let instance = self.instance;
         drop(self);

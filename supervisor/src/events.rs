@@ -1,9 +1,9 @@
 //! Events as people read them: one line per event for the terminal, one JSON object per
 //! event for reports, and `supervisor events --follow`.
 
+use control_plane::event::Event;
 use runtime::ipc::{self, Sub};
 use runtime::signals;
-use serde_json::{Value, json};
 use shm_schema::event::{self, CodeInfo, SOURCE_SUPERVISOR};
 use shm_schema::{CellConfigV6, EventV1, InstanceName, ServiceId, Severity, str_of};
 use std::time::Duration;
@@ -97,22 +97,23 @@ pub fn line(e: &EventV1, axes: &Axes, t0_ns: u64) -> String {
     s
 }
 
-/// One JSON object (`docs/events.md` documents the fields).
-pub fn to_json(e: &EventV1, axes: &Axes, t0_ns: u64) -> Value {
-    let info = event::info(e.code);
-    json!({
-        "t_s": (e.stamp_ns as i128 - t0_ns as i128) as f64 * 1e-9,
-        "stamp_ns": e.stamp_ns,
-        "source": axes.source_name(e.source),
-        "seq": e.seq,
-        "severity": Severity::from_u32(e.severity).map_or("?", Severity::name),
-        "code": e.code,
-        "name": info.map_or("unknown", |i| i.name),
-        "axis": axes.get(e.axis).map(|(n, _)| n.clone()),
-        "value": if e.value.is_finite() { json!(e.value) } else { Value::Null },
-        "limit": e.limit,
-        "text": e.text(),
-    })
+/// The event as reports and `--json` give it (`docs/events.md` documents the codes).
+pub fn event(e: &EventV1, axes: &Axes, t0_ns: u64) -> Event {
+    Event {
+        t_s: (e.stamp_ns as i128 - t0_ns as i128) as f64 * 1e-9,
+        stamp_ns: e.stamp_ns,
+        source: axes.source_name(e.source),
+        seq: e.seq,
+        severity: e.severity.into(),
+        code: e.code,
+        name: event::info(e.code)
+            .map_or("unknown", |i| i.name)
+            .to_string(),
+        axis: axes.get(e.axis).map(|(n, _)| n.clone()),
+        value: e.value.is_finite().then_some(e.value),
+        limit: e.limit,
+        text: e.text().to_string(),
+    }
 }
 
 /// `supervisor events --instance NAME [--follow] [--json]`: prints the events of a running
@@ -140,7 +141,8 @@ pub fn follow(instance: &InstanceName, forever: bool, json: bool) -> Result<(), 
         }
         while let Some(e) = events.next() {
             if json {
-                println!("{}", to_json(&e, &axes, t0));
+                let doc = serde_json::to_string(&event(&e, &axes, t0));
+                println!("{}", doc.unwrap_or_default());
             } else {
                 println!("{}", line(&e, &axes, t0));
             }

@@ -369,7 +369,7 @@ fn run_failed(e: &RunError, json: bool) -> ExitCode {
     if json {
         println!(
             "{}",
-            serde_json::json!({"ok": false, "error": e.to_string(), "events": e.events()})
+            serde_json::to_string(&e.document()).unwrap_or_default()
         );
     }
     // Through the non-blocking writer where the command has one: a blocked stderr must not
@@ -448,12 +448,12 @@ fn ctl_reply(
             ExitCode::FAILURE
         }
         Reply::Report {
-            ok,
-            json: body,
+            outcome,
             text,
             trace_csv,
             figures,
         } => {
+            let ok = outcome.ok();
             // An output that cannot be written fails the command, after the report: the
             // program ran, and what it did is not lost with the file.
             let mut unwritten = false;
@@ -493,7 +493,7 @@ fn ctl_reply(
                 }
             }
             if json {
-                println!("{body}");
+                println!("{}", outcome.json());
             }
             if ok {
                 if !json {

@@ -1,85 +1,36 @@
 //! The result of a run: JSON for tools, a summary for people.
 
+use control_plane::event::{Event, Severity};
+use control_plane::report::{Delay, ProcessReport, RunReport};
+use indexmap::IndexMap;
 use latency::report::Summary;
 use runtime::rt::policy_name;
-use serde::Serialize;
-use serde_json::{Map, Value, json};
 use shm_schema::{MAX_AXES, ProcessStatusV2};
 
-/// One process' figures.
-#[derive(Clone, Debug, Serialize)]
-pub struct ProcessReport {
-    /// Process name.
-    pub name: String,
-    /// Process id.
-    pub pid: u32,
-    /// Scheduling policy, as the kernel reports it.
-    pub policy: String,
-    /// Real-time priority.
-    pub priority: i32,
-    /// Cycle period (µs).
-    pub period_us: f64,
-    /// Cycles run.
-    pub cycles: u64,
-    /// Overruns (CS9 rule).
-    pub overruns: u64,
-    /// Periods skipped after overruns.
-    pub skipped: u64,
-    /// Largest wake-up latency (µs).
-    pub max_wakeup_latency_us: f64,
-    /// Largest execution time (µs).
-    pub max_exec_us: f64,
-    /// CPU time used (s).
-    pub cpu_s: Option<f64>,
-    /// Wake-up latency percentiles over the whole run, from the process' own histogram.
-    #[serde(skip)]
-    pub wakeup_latency: Option<Summary>,
-    /// Execution time percentiles over the whole run, from the process' own histogram.
-    #[serde(skip)]
-    pub exec_time: Option<Summary>,
-}
-
-impl ProcessReport {
-    /// From the last status a process published.
-    pub fn new(
-        name: &str,
-        pid: u32,
-        policy: u32,
-        priority: i32,
-        s: &ProcessStatusV2,
-        cpu_s: Option<f64>,
-    ) -> Self {
-        Self {
-            name: name.into(),
-            pid,
-            policy: policy_name(policy).into(),
-            priority,
-            period_us: s.stats.period_ns as f64 * 1e-3,
-            cycles: s.stats.cycles,
-            overruns: s.stats.overruns,
-            skipped: s.stats.skipped,
-            max_wakeup_latency_us: s.stats.max_wakeup_latency_ns as f64 * 1e-3,
-            max_exec_us: s.stats.max_exec_ns as f64 * 1e-3,
-            cpu_s,
-            wakeup_latency: None,
-            exec_time: None,
-        }
-    }
-
-    /// As JSON: every field, and `wakeup_latency_us` and `exec_time_us` with the percentiles.
-    pub fn to_json(&self) -> Value {
-        let mut v = serde_json::to_value(self).unwrap_or(Value::Null);
-        if let Some(o) = v.as_object_mut() {
-            o.insert(
-                "wakeup_latency_us".into(),
-                self.wakeup_latency.map_or(Value::Null, |m| m.to_json()),
-            );
-            o.insert(
-                "exec_time_us".into(),
-                self.exec_time.map_or(Value::Null, |m| m.to_json()),
-            );
-        }
-        v
+/// One process' figures from the last status it published (its percentiles are added from
+/// its histograms).
+pub fn process_report(
+    name: &str,
+    pid: u32,
+    policy: u32,
+    priority: i32,
+    s: &ProcessStatusV2,
+    cpu_s: Option<f64>,
+) -> ProcessReport {
+    ProcessReport {
+        name: name.into(),
+        pid,
+        policy: policy_name(policy).into(),
+        priority,
+        period_us: s.stats.period_ns as f64 * 1e-3,
+        cycles: s.stats.cycles,
+        overruns: s.stats.overruns,
+        skipped: s.stats.skipped,
+        max_wakeup_latency_us: s.stats.max_wakeup_latency_ns as f64 * 1e-3,
+        max_exec_us: s.stats.max_exec_ns as f64 * 1e-3,
+        cpu_s,
+        wakeup_latency_us: None,
+        exec_time_us: None,
     }
 }
 
@@ -156,7 +107,7 @@ pub struct Report {
     /// The trace.
     pub trace: Vec<TraceRow>,
     /// Every event of the run (`docs/events.md`).
-    pub events: Vec<Value>,
+    pub events: Vec<Event>,
     /// Sense-to-command latency the drives measured over the run: sampling the encoders to
     /// applying the command computed from that sample.
     pub sense_to_command: Option<Summary>,
@@ -165,12 +116,9 @@ pub struct Report {
     pub figures: Option<Box<control_plane::figures::Figures>>,
 }
 
-fn per_axis<T: Serialize>(names: &[String], values: &[T]) -> Value {
-    let mut m = Map::new();
-    for (n, v) in names.iter().zip(values) {
-        m.insert(n.clone(), json!(v));
-    }
-    Value::Object(m)
+/// `values` keyed by the axes' `names`, in their order.
+fn per_axis<T: Clone>(names: &[String], values: &[T]) -> IndexMap<String, T> {
+    names.iter().cloned().zip(values.iter().cloned()).collect()
 }
 
 impl Report {
@@ -179,48 +127,50 @@ impl Report {
         self.measured_s - self.theoretical_s
     }
 
-    /// The JSON object of `supervisor run --json`.
-    pub fn to_json(&self) -> Value {
-        let mut procs = Map::new();
-        for p in &self.processes {
-            procs.insert(p.name.clone(), p.to_json());
+    /// The document of `supervisor run --json`.
+    pub fn document(&self) -> RunReport {
+        RunReport {
+            ok: self.ok,
+            program: self.program.clone(),
+            instance: self.instance.clone(),
+            cell: self.cell.clone(),
+            theoretical_s: self.theoretical_s,
+            predicted_s: self.predicted_s,
+            measured_s: self.measured_s,
+            waited_s: self.waited_s,
+            difference_s: self.difference_s(),
+            trajgen_period_s: self.trajgen_period_s,
+            settle_s: self.settle_s,
+            final_position: per_axis(&self.axes, &self.final_position),
+            final_error: per_axis(&self.axes, &self.final_error),
+            max_following_error: per_axis(&self.axes, &self.max_following_error),
+            axes: self.axes.clone(),
+            units: per_axis(&self.axes, &self.units),
+            vmax: per_axis(&self.axes, &self.vmax),
+            t_acc: self.t_acc,
+            start: per_axis(&self.axes, &self.start),
+            periods_us: self.periods_us.iter().cloned().collect(),
+            setpoints: self.setpoints as u64,
+            lost_setpoints: self.lost_setpoints,
+            lost_servo_states: self.lost_servo_states,
+            trace_truncated: self.trace_truncated,
+            starved: self.starved,
+            iobridge_delay_us: self
+                .iobridge_delay_us
+                .map(|(mean, max)| Delay { mean, max }),
+            processes: self
+                .processes
+                .iter()
+                .map(|p| (p.name.clone(), p.clone()))
+                .collect(),
+            sense_to_command_us: self.sense_to_command,
+            events: self.events.clone(),
         }
-        let periods: Map<String, Value> = self
-            .periods_us
-            .iter()
-            .map(|(k, v)| (k.clone(), json!(v)))
-            .collect();
-        json!({
-            "ok": self.ok,
-            "program": self.program,
-            "instance": self.instance,
-            "cell": self.cell,
-            "theoretical_s": self.theoretical_s,
-            "predicted_s": self.predicted_s,
-            "measured_s": self.measured_s,
-            "waited_s": self.waited_s,
-            "difference_s": self.difference_s(),
-            "trajgen_period_s": self.trajgen_period_s,
-            "settle_s": self.settle_s,
-            "final_position": per_axis(&self.axes, &self.final_position),
-            "final_error": per_axis(&self.axes, &self.final_error),
-            "max_following_error": per_axis(&self.axes, &self.max_following_error),
-            "axes": self.axes,
-            "units": per_axis(&self.axes, &self.units),
-            "vmax": per_axis(&self.axes, &self.vmax),
-            "t_acc": self.t_acc,
-            "start": per_axis(&self.axes, &self.start),
-            "periods_us": periods,
-            "setpoints": self.setpoints,
-            "lost_setpoints": self.lost_setpoints,
-            "lost_servo_states": self.lost_servo_states,
-            "trace_truncated": self.trace_truncated,
-            "starved": self.starved,
-            "iobridge_delay_us": self.iobridge_delay_us.map(|(mean, max)| json!({"mean": mean, "max": max})),
-            "processes": procs,
-            "sense_to_command_us": self.sense_to_command.map_or(Value::Null, |m| m.to_json()),
-            "events": self.events,
-        })
+    }
+
+    /// [`Report::document`] as JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(&self.document()).unwrap_or_default()
     }
 
     /// The human summary.
@@ -275,7 +225,7 @@ impl Report {
         let worst = self
             .events
             .iter()
-            .filter(|e| e["severity"] != "info")
+            .filter(|e| e.severity != Severity::Info)
             .count();
         s += &format!(
             "  events             {} ({} warnings or errors)\n",
@@ -294,7 +244,7 @@ impl Report {
         }
         s += "  process    pid      policy       prio  period   cycles   overruns  wake-up µs: p50    p99  p99.9      max  exec µs p99     max   cpu\n";
         for p in &self.processes {
-            let m = p.wakeup_latency.unwrap_or_default();
+            let m = p.wakeup_latency_us.unwrap_or_default();
             s += &format!(
                 "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>16.1} {:>6.1} {:>6.1} {:>8.1}  {:>11.1} {:>7.0}   {}\n",
                 p.name,
@@ -308,7 +258,7 @@ impl Report {
                 m.p99_us,
                 m.p99_9_us,
                 p.max_wakeup_latency_us,
-                p.exec_time.map_or(f64::NAN, |e| e.p99_us),
+                p.exec_time_us.map_or(f64::NAN, |e| e.p99_us),
                 p.max_exec_us,
                 p.cpu_s.map_or("-".to_string(), |c| format!("{c:.2} s"))
             );

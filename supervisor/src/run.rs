@@ -15,6 +15,7 @@ use crate::program::{Checked, Predicted};
 use crate::report::Report;
 use crate::serve::{self, End, ProgramJob};
 use cell_config::Config;
+use control_plane::event::Event;
 use runtime::signals;
 use shm_schema::{InstanceName, SetpointV2};
 use std::path::PathBuf;
@@ -49,7 +50,7 @@ pub enum RunError {
         /// What went wrong.
         message: String,
         /// The events of the run up to the failure (`docs/events.md`).
-        events: Vec<serde_json::Value>,
+        events: Vec<Event>,
         /// A program's figures up to the failure (`--plot`), when it had started.
         figures: Option<Box<control_plane::figures::Figures>>,
     },
@@ -68,10 +69,21 @@ impl RunError {
     }
 
     /// The events the failed run recorded.
-    pub fn events(&self) -> &[serde_json::Value] {
+    pub fn events(&self) -> &[Event] {
         match self {
             Self::Failed { events, .. } => events,
             _ => &[],
+        }
+    }
+}
+
+impl RunError {
+    /// The failure as `run --json` prints it.
+    pub fn document(&self) -> control_plane::report::RunFailure {
+        control_plane::report::RunFailure {
+            ok: false,
+            error: self.to_string(),
+            events: self.events().to_vec(),
         }
     }
 }

@@ -18,16 +18,18 @@ use crate::events;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
 use crate::program::Checked;
-use crate::report::{ProcessReport, Report};
+use crate::report::{Report, process_report};
 use crate::run::{RunError, TICK};
 use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
+use control_plane::event::Event;
 use control_plane::info::{Info, JobInfo, LastJob};
+use control_plane::report::Outcome;
+use control_plane::report::ProcessReport;
 use control_plane::{Reply, Request};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
-use serde_json::{Value, json};
 use shm_schema::ControlKind;
 use shm_schema::drive::servo_status as st;
 use std::time::{Duration, Instant};
@@ -388,10 +390,10 @@ impl Loop<'_> {
         }
     }
 
-    fn events_json(&self, from: usize) -> Vec<Value> {
+    fn events_json(&self, from: usize) -> Vec<Event> {
         self.cell.events[from.min(self.cell.events.len())..]
             .iter()
-            .map(|e| events::to_json(e, &self.cell.axes, self.cell.t0_ns))
+            .map(|e| events::event(e, &self.cell.axes, self.cell.t0_ns))
             .collect()
     }
 
@@ -436,20 +438,15 @@ impl Loop<'_> {
     fn finish(&mut self, r: &Running, result: &Result<Report, RunError>) {
         // The CSV trace only for a waiter that asked for it (it may be long).
         let wants_trace = r.waiters.iter().any(|w| w.trace);
-        let (ok, json, text, csv) = match result {
+        let (outcome, text, csv) = match result {
             Ok(rep) => (
-                true,
-                rep.to_json(),
+                Outcome::Completed(Box::new(rep.document())),
                 rep.human(),
                 wants_trace.then(|| crate::run::trace_csv(rep)),
             ),
-            Err(e) => (
-                false,
-                json!({"ok": false, "error": e.to_string(), "events": e.events()}),
-                e.to_string(),
-                None,
-            ),
+            Err(e) => (Outcome::Failed(e.document()), e.to_string(), None),
         };
+        let ok = outcome.ok();
         match result {
             Ok(rep) => tracing::info!(
                 "{} done: {:.3} s measured, {:.3} s theoretical",
@@ -467,7 +464,6 @@ impl Loop<'_> {
             theoretical_s: result.as_ref().ok().map(|r| r.theoretical_s),
             ran_s: r.started.elapsed().as_secs_f64(),
         });
-        let body = json.to_string();
         for w in &r.waiters {
             let figures = match result {
                 Ok(rep) if w.figures => rep.figures.clone(),
@@ -479,8 +475,7 @@ impl Loop<'_> {
             self.server.reply(
                 w.conn,
                 &Reply::Report {
-                    ok,
-                    json: body.clone(),
+                    outcome: outcome.clone(),
                     text: text.clone(),
                     trace_csv: if w.trace { csv.clone() } else { None },
                     figures,
@@ -924,7 +919,7 @@ pub(crate) fn process_reports(cell: &Cell) -> Vec<ProcessReport> {
         let pid = p.pid();
         let status = cell.statuses[k].unwrap_or_default();
         let (policy, priority) = sched_of(pid as i32).unwrap_or((status.policy, status.priority));
-        let mut r = ProcessReport::new(
+        let mut r = process_report(
             &cell.names[k],
             pid,
             policy,
@@ -932,10 +927,10 @@ pub(crate) fn process_reports(cell: &Cell) -> Vec<ProcessReport> {
             &status,
             cpu_seconds(pid),
         );
-        r.wakeup_latency = cell.latencies[k]
+        r.wakeup_latency_us = cell.latencies[k]
             .as_deref()
             .map(latency::report::Summary::of);
-        r.exec_time = cell.exec_times[k]
+        r.exec_time_us = cell.exec_times[k]
             .as_deref()
             .filter(|h| h.count > 0)
             .map(latency::report::Summary::of);

@@ -105,7 +105,7 @@ pub struct TuneReport {
     #[serde(skip)]
     pub samples: Vec<Sample>,
     /// Every event of the session.
-    pub events: Vec<serde_json::Value>,
+    pub events: Vec<control_plane::event::Event>,
 }
 
 /// The figures of a recorded step of `amplitude` from `start` (samples from the step on).

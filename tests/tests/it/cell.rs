@@ -33,6 +33,11 @@ fn config_with(test: &str, from: &str, to: &str) -> PathBuf {
 
 /// Checks a successful `--json` run: on time, on target, every process reported.
 pub(crate) fn check_run(j: &serde_json::Value, target: [f64; 3]) {
+    // The document is the one its type (and JSON Schema) describes: every key known, none
+    // missing.
+    if let Err(e) = serde_json::from_value::<control_plane::report::RunReport>(j.clone()) {
+        panic!("the run's JSON is not the documented report ({e}): {j}");
+    }
     let f = |k: &str| {
         j[k].as_f64()
             .unwrap_or_else(|| panic!("{k} missing in {j}"))

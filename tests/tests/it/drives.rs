@@ -95,6 +95,13 @@ pub(crate) fn wait_for(mut run: std::process::Child) -> std::process::Output {
 }
 
 pub(crate) fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json::Value> {
+    // A run's document (it says `ok`; a tuning report does not) is the one its type (and JSON
+    // Schema) describes, completed or failed.
+    if j.get("ok").is_some()
+        && let Err(e) = serde_json::from_value::<control_plane::report::RunDocument>(j.clone())
+    {
+        panic!("the run's JSON is not the documented report ({e}): {j}");
+    }
     j["events"]
         .as_array()
         .unwrap_or_else(|| panic!("no events in {j}"))
