@@ -28,6 +28,8 @@ pub struct Info {
     pub last_job: Option<LastJob>,
     /// The drives are being enabled.
     pub enabling: bool,
+    /// The process being replaced (`swap`, `restart`); `null` when none.
+    pub swapping: Option<String>,
     /// The cell is going down (`down`, a signal): the axes come to rest, then the processes
     /// stop.
     pub going_down: bool,

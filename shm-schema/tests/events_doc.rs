@@ -16,7 +16,8 @@ fn render() -> String {
          supervisor prints them as they happen (`supervisor run`, `supervisor events --instance \
          NAME --follow`) and lists them in `--json` reports (`events`: objects with `t_s`, \
          `stamp_ns`, `source`, `seq`, `severity`, `code`, `name`, `axis`, `value`, `limit`, \
-         `text`).\n\nCodes are grouped by hundreds: 1xx the drives (device side), 2xx servo's \
+         `text`: the type `control_plane::event::Event`, in the report's JSON Schema \
+         [schema/report.schema.json](schema/report.schema.json)).\n\nCodes are grouped by hundreds: 1xx the drives (device side), 2xx servo's \
          refusals and faults, 3xx the arm's power, 4xx timing, 5xx the supervisor.\n\n\
          | code | name | severity | value (and limit) | meaning |\n|---:|---|---|---|---|\n",
         EVENT_TEXT_LEN - 1

@@ -298,6 +298,8 @@ pub(crate) struct Cell {
     pub(crate) setpoint_sub: Sub<SetpointV2>,
     pub(crate) servo_sub: Sub<ServoStateV3>,
     pub(crate) image_sub: Sub<FieldbusImageV1>,
+    /// While a swap measures the fieldbus image's gaps: every image read is seen by it.
+    pub(crate) image_gaps: Option<crate::swap::GapMeter>,
     pub(crate) handover_sub: Sub<TrajgenHandoverV2>,
     /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
     /// its history, die with it).
@@ -406,6 +408,7 @@ impl Cell {
             setpoint_sub,
             servo_sub,
             image_sub,
+            image_gaps: None,
             handover_sub,
             handover_pub,
             stalls: StallWatch::new(Duration::from_secs_f64(
@@ -812,7 +815,11 @@ impl Cell {
         while let Some(s) = self.servo_sub.next() {
             self.last_servo = Some(s);
         }
-        while self.image_sub.next().is_some() {}
+        while let Some(img) = self.image_sub.next() {
+            if let Some(g) = &mut self.image_gaps {
+                g.see(img.written_ns);
+            }
+        }
     }
 
     /// Runs `f` on the children with a tick that keeps the heartbeat going (every 10 ms), so
@@ -1051,6 +1058,7 @@ impl Cell {
             job: None,
             last_job: None,
             enabling: false,
+            swapping: None,
             going_down: false,
         }
     }

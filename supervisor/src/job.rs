@@ -447,6 +447,9 @@ impl Job {
             }
         }
         while let Some(img) = cell.image_sub.next() {
+            if let Some(g) = &mut cell.image_gaps {
+                g.see(img.written_ns);
+            }
             if self.last.is_some() {
                 let d = img.written_ns.saturating_sub(img.measured_ns);
                 let im = &mut self.images;

@@ -67,6 +67,18 @@ impl<T: Serialize> Enc<[T; MAX_AXES]> for PerAxis {
     }
 }
 
+/// A fixed array of numbers, whole (the tool's coordinates: named by the kinematics, not by
+/// the axes).
+struct Array;
+impl<T: Serialize, const N: usize> Enc<[T; N]> for Array {
+    fn enc(v: &[T; N], _: &[String]) -> Value {
+        json!(v.as_slice())
+    }
+    fn schema(_: &[T; N], _: &[String]) -> Value {
+        json!({"type": "array", "items": {"type": "number"}})
+    }
+}
+
 /// NUL-padded text.
 struct Text;
 impl<const N: usize> Enc<[u8; N]> for Text {
@@ -105,9 +117,15 @@ trait Message: Copy + std::fmt::Debug + 'static {
     }
 }
 
-macro_rules! message {
-    ($t:ty, $name:literal, stamp: |$s:ident| $stamp:expr, seq: |$q:ident| $seq:expr,
-     { $($f:ident : $k:ident),* $(,)? }) => {
+/// Declares the recorded payloads, each with its schema's name, where its time stamp and its
+/// sequence number are, and its fields as they are recorded (`Num`, `PerAxis`, `Text`,
+/// `Nested`), plus those deliberately not recorded (`not recorded { … }`). Every field of the
+/// payload is one or the other: [`coverage`] (checked by a test against the type's size)
+/// fails the build's tests when a field is added to a payload and not here.
+macro_rules! messages {
+    ($( $t:ty, $name:literal, stamp: |$s:ident| $stamp:expr, seq: |$q:ident| $seq:expr,
+        { $($f:ident : $k:ident),* $(,)? } $(not recorded { $($skip:ident),* $(,)? })? ; )*) => {
+        $(
         impl Message for $t {
             const NAME: &'static str = $name;
             fn json(&self, axes: &[String]) -> Value {
@@ -130,69 +148,87 @@ macro_rules! message {
                 $seq
             }
         }
+        )*
+
+        /// Per payload declared above: its schema's name, the bytes of the fields it names
+        /// (recorded or not), and its size. The two are equal when every field is named (the
+        /// payloads have no padding: `shm-schema`'s layout test).
+        #[cfg(test)]
+        fn coverage() -> Vec<(&'static str, usize, usize)> {
+            vec![$({
+                let d = <$t>::default();
+                let named = 0 $(+ std::mem::size_of_val(&d.$f))*
+                    $($(+ std::mem::size_of_val(&d.$skip))*)?;
+                ($name, named, std::mem::size_of::<$t>())
+            }),*]
+        }
     };
 }
 
-message!(SetpointV2, "rtc.SetpointV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
-    seq: Num, stamp_ns: Num, program_id: Num, line: Num, state: Num, fault: Num,
-    fault_line: Num, motion_time_s: Num, theoretical_s: Num, segment_time_s: Num,
-    path_speed: Num, speed_override: Num, program_speed: Num, hold: Num, space: Num,
-    waited_s: Num, commands_taken: Num, queue_free: Num, starved: Num, control_seq: Num,
-    position: PerAxis, velocity: PerAxis, acceleration: PerAxis,
-});
-message!(ServoStateV3, "rtc.ServoStateV3", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
-    seq: Num, stamp_ns: Num, measured_stamp_ns: Num, setpoint_seq: Num, status: Num,
-    power: Num, settled_axes: Num, fault_code: Num, fault_axis: Num, fault_value: Num,
-    fault_limit: Num, controlword: PerAxis, statusword: PerAxis, cmd_position: PerAxis,
-    cmd_velocity: PerAxis, act_position: PerAxis, act_velocity: PerAxis,
-    following_error: PerAxis, effort: PerAxis, peak_program: Num,
-    peak_following_error: PerAxis,
-});
-message!(DriveFeedbackV2, "rtc.DriveFeedbackV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
-    seq: Num, stamp_ns: Num, command_seq: Num, sense_to_command_ns: Num,
-    statusword: PerAxis, mode_display: PerAxis, error_code: PerAxis, position: PerAxis,
-    velocity: PerAxis, torque: PerAxis, following_error: PerAxis,
-});
-message!(DriveCommandV2, "rtc.DriveCommandV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
-    seq: Num, stamp_ns: Num, feedback_seq: Num, feedback_stamp_ns: Num, controlword: PerAxis,
-    mode: PerAxis, target_position: PerAxis, target_velocity: PerAxis,
-    target_torque: PerAxis, velocity_offset: PerAxis, torque_offset: PerAxis,
-});
-message!(DigitalIoV1, "rtc.DigitalIoV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
-    seq: Num, stamp_ns: Num, values: Num, changed: Num, taken: Num, refused: Num,
-    count: Num, outputs_safe: Num,
-});
-// The supervisor's own events and its tools' (`supervisor inject`) share a source and number
-// separately: no loss is counted from theirs.
-message!(EventV1, "rtc.EventV1", stamp: |s| Some(s.stamp_ns), seq: |s| (s.source != shm_schema::event::SOURCE_SUPERVISOR).then_some((u64::from(s.source), s.seq)), {
-    seq: Num, stamp_ns: Num, source: Num, severity: Num, code: Num, axis: Num, value: Num,
-    limit: Num, text: Text,
-});
-message!(EstopV1, "rtc.EstopV1", stamp: |s| Some(s.stamp_ns), seq: |_s| None, {
-    stamp_ns: Num, kind: Num, origin: Num, source: Num, code: Num, reason: Text,
-});
-message!(HostStateV1, "rtc.HostStateV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.beat)), {
-    stamp_ns: Num, beat: Num, resets: Num, pid: Num, estop: Num, cause: Nested, handover: Num,
-});
-message!(CycleStatsV1, "rtc.CycleStatsV1", stamp: |_s| None, seq: |_s| None, {
-    period_ns: Num, cycles: Num, overruns: Num, skipped: Num, wakeup_latency_ns: Num,
-    max_wakeup_latency_ns: Num, exec_ns: Num, max_exec_ns: Num, overrun_flag: Num,
-});
-message!(DetectorV1, "rtc.DetectorV1", stamp: |_s| None, seq: |_s| None, {
-    level: Num, limit: Num, total: Num,
-});
-message!(ProcessStatusV2, "rtc.ProcessStatusV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((u64::from(s.pid), s.stats.cycles)), {
-    pid: Num, index: Num, state: Num, policy: Num, priority: Num, cpu: Num, fault: Num,
-    stamp_ns: Num, stats: Nested, pending_sequence: Nested, transport: Nested,
-    thread_offset: Nested, estop: Num,
-});
-message!(MotionCommandV2, "rtc.MotionCommandV2", stamp: |_s| None, seq: |_s| None, {
-    seq: Num, program_id: Num, line: Num, kind: Num, count: Num, io: Num, value: Num,
-    time_s: Num, speed: Num, target: PerAxis,
-});
-message!(MotionControlV2, "rtc.MotionControlV2", stamp: |_s| None, seq: |_s| None, {
-    seq: Num, kind: Num, value: Num,
-});
+messages! {
+    SetpointV2, "rtc.SetpointV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+        seq: Num, stamp_ns: Num, program_id: Num, line: Num, state: Num, fault: Num,
+        fault_line: Num, motion_time_s: Num, theoretical_s: Num, segment_time_s: Num,
+        path_speed: Num, speed_override: Num, program_speed: Num, hold: Num, space: Num,
+        waited_s: Num, commands_taken: Num, queue_free: Num, starved: Num, control_seq: Num,
+        position: PerAxis, velocity: PerAxis, acceleration: PerAxis, motion_start_ns: Num,
+        motion_end_ns: Num, axes: Num, hold_io: Num, coords: Num, cartesian: Array,
+        cartesian_velocity: Array,
+    };
+    ServoStateV3, "rtc.ServoStateV3", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+        seq: Num, stamp_ns: Num, measured_stamp_ns: Num, setpoint_seq: Num, status: Num,
+        power: Num, settled_axes: Num, fault_code: Num, fault_axis: Num, fault_value: Num,
+        fault_limit: Num, controlword: PerAxis, statusword: PerAxis, cmd_position: PerAxis,
+        cmd_velocity: PerAxis, act_position: PerAxis, act_velocity: PerAxis,
+        following_error: PerAxis, effort: PerAxis, peak_program: Num,
+        peak_following_error: PerAxis, request_seq: Num, axes: Num, axis_power: PerAxis,
+    } not recorded { reserved, reserved2, reserved3 };
+    DriveFeedbackV2, "rtc.DriveFeedbackV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+        seq: Num, stamp_ns: Num, command_seq: Num, sense_to_command_ns: Num,
+        statusword: PerAxis, mode_display: PerAxis, error_code: PerAxis, position: PerAxis,
+        velocity: PerAxis, torque: PerAxis, following_error: PerAxis, axes: Num,
+    } not recorded { reserved };
+    DriveCommandV2, "rtc.DriveCommandV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+        seq: Num, stamp_ns: Num, feedback_seq: Num, feedback_stamp_ns: Num, controlword: PerAxis,
+        mode: PerAxis, target_position: PerAxis, target_velocity: PerAxis,
+        target_torque: PerAxis, velocity_offset: PerAxis, torque_offset: PerAxis, axes: Num,
+    } not recorded { reserved };
+    DigitalIoV1, "rtc.DigitalIoV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.seq)), {
+        seq: Num, stamp_ns: Num, values: Num, changed: Num, taken: Num, refused: Num,
+        count: Num, outputs_safe: Num,
+    };
+    // The supervisor's own events and its tools' (`supervisor inject`) share a source and
+    // number separately: no loss is counted from theirs.
+    EventV1, "rtc.EventV1", stamp: |s| Some(s.stamp_ns), seq: |s| (s.source != shm_schema::event::SOURCE_SUPERVISOR).then_some((u64::from(s.source), s.seq)), {
+        seq: Num, stamp_ns: Num, source: Num, severity: Num, code: Num, axis: Num, value: Num,
+        limit: Num, text: Text,
+    };
+    EstopV1, "rtc.EstopV1", stamp: |s| Some(s.stamp_ns), seq: |_s| None, {
+        stamp_ns: Num, kind: Num, origin: Num, source: Num, code: Num, reason: Text,
+    };
+    HostStateV1, "rtc.HostStateV1", stamp: |s| Some(s.stamp_ns), seq: |s| Some((0, s.beat)), {
+        stamp_ns: Num, beat: Num, resets: Num, pid: Num, estop: Num, cause: Nested, handover: Num,
+    } not recorded { reserved };
+    CycleStatsV1, "rtc.CycleStatsV1", stamp: |_s| None, seq: |_s| None, {
+        period_ns: Num, cycles: Num, overruns: Num, skipped: Num, wakeup_latency_ns: Num,
+        max_wakeup_latency_ns: Num, exec_ns: Num, max_exec_ns: Num, overrun_flag: Num,
+    } not recorded { reserved };
+    DetectorV1, "rtc.DetectorV1", stamp: |_s| None, seq: |_s| None, {
+        level: Num, limit: Num, total: Num,
+    };
+    ProcessStatusV2, "rtc.ProcessStatusV2", stamp: |s| Some(s.stamp_ns), seq: |s| Some((u64::from(s.pid), s.stats.cycles)), {
+        pid: Num, index: Num, state: Num, policy: Num, priority: Num, cpu: Num, fault: Num,
+        stamp_ns: Num, stats: Nested, pending_sequence: Nested, transport: Nested,
+        thread_offset: Nested, estop: Num, rt_flags: Num, name: Text,
+    } not recorded { reserved };
+    MotionCommandV2, "rtc.MotionCommandV2", stamp: |_s| None, seq: |_s| None, {
+        seq: Num, program_id: Num, line: Num, kind: Num, count: Num, io: Num, value: Num,
+        time_s: Num, speed: Num, target: PerAxis,
+    };
+    MotionControlV2, "rtc.MotionControlV2", stamp: |_s| None, seq: |_s| None, {
+        seq: Num, kind: Num, value: Num,
+    } not recorded { reserved };
+}
 
 /// iobridge's image, decoded: the positions in axis units.
 impl Message for FieldbusImageV1 {
@@ -864,5 +900,21 @@ impl Background {
 impl Drop for Background {
     fn drop(&mut self) {
         let _ = self.stop();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_field_of_every_recorded_payload_is_recorded_or_said_not_to_be() {
+        for (name, named, size) in coverage() {
+            assert_eq!(
+                named, size,
+                "{name}: its fields named in `messages!` cover {named} of its {size} bytes: a \
+                 field of the payload is neither recorded nor listed as `not recorded`"
+            );
+        }
     }
 }

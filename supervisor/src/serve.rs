@@ -20,6 +20,7 @@ use crate::launch::cpu_seconds;
 use crate::program::Checked;
 use crate::report::{Report, process_report};
 use crate::run::{RunError, TICK};
+use crate::swap::{Step, Swap};
 use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
 use control_plane::event::Event;
@@ -111,6 +112,15 @@ struct Loop<'a> {
     last_job: Option<LastJob>,
     down: bool,
     stopping: Option<Stopping>,
+    /// A `swap` or `restart` in progress, who asked, and whether the drives were enabled.
+    swapping: Option<Swapping>,
+}
+
+/// A replacement the loop steps ([`crate::swap`]).
+struct Swapping {
+    swap: Swap,
+    conn: ConnId,
+    was_enabled: bool,
 }
 
 /// Runs the loop; see the module documentation. `first` is `run`'s program.
@@ -131,10 +141,12 @@ pub(crate) fn serve(
         last_job: None,
         down: false,
         stopping: None,
+        swapping: None,
     };
     loop {
         l.wait();
-        if signals::stop_requested() && l.stopping.is_none() {
+        // Going down waits for a swap in progress to end (its steps are bounded).
+        if signals::stop_requested() && l.stopping.is_none() && l.swapping.is_none() {
             l.go_down(End::Interrupted, "the supervisor was stopped by a signal");
         }
         let cfg = l.cfg;
@@ -145,12 +157,15 @@ pub(crate) fn serve(
             l.server.drain(Duration::from_millis(200));
             return end;
         }
+        if l.stopping.is_none() {
+            l.swap_step(&incidents);
+        }
         let requests = l.server.poll();
         for (conn, req) in requests {
             l.handle(conn, req);
         }
         l.pending_step();
-        if l.down && l.stopping.is_none() {
+        if l.down && l.stopping.is_none() && l.swapping.is_none() {
             l.go_down(End::Down, "`supervisor down` stopped the cell");
         }
         if let Some(end) = l.stop_step() {
@@ -235,6 +250,16 @@ impl Loop<'_> {
                     _ => {}
                 }
             }
+        }
+        // A swap that carries the program: its setpoints are recorded, nothing is sent.
+        if let Some(r) = &mut self.running
+            && self
+                .swapping
+                .as_ref()
+                .is_some_and(|s| s.swap.carries_program())
+        {
+            r.job.record(self.cell);
+            return None;
         }
         if let Some(r) = &mut self.running
             && let Some(result) = r.job.step(self.cell, self.cfg, incidents)
@@ -499,6 +524,18 @@ impl Loop<'_> {
             self.server.reply(conn, &reply);
             return;
         }
+        // A swap in progress: what would change the cell waits for its end; `down` is kept
+        // for after it.
+        if let Some(s) = &self.swapping
+            && !matches!(req, Request::Info | Request::Down)
+        {
+            let busy = format!(
+                "busy: {} is being replaced (`swap`/`restart`); try again in a moment",
+                s.swap.process()
+            );
+            self.server.reply(conn, &Reply::Refused(busy));
+            return;
+        }
         let reply = match req {
             Request::Info => Some(Reply::Info(Box::new(self.info()))),
             Request::Exec {
@@ -521,8 +558,8 @@ impl Loop<'_> {
             Request::Speed { percent } => self.speed(conn, percent),
             Request::Reset => self.reset(conn),
             Request::Start => self.start(conn),
-            Request::Restart { process } => Some(self.replace(&process, None, false)),
-            Request::Swap { process, command } => Some(self.replace(&process, command, true)),
+            Request::Restart { process } => self.replace(conn, &process, None, false),
+            Request::Swap { process, command } => self.replace(conn, &process, command, true),
             Request::Down => {
                 self.down = true;
                 Some(Reply::Done(format!(
@@ -551,6 +588,7 @@ impl Loop<'_> {
         });
         info.last_job = self.last_job.clone();
         info.enabling = self.enabling.is_some();
+        info.swapping = self.swapping.as_ref().map(|s| s.swap.process().to_string());
         info.going_down = self.stopping.is_some();
         info
     }
@@ -802,37 +840,47 @@ impl Loop<'_> {
         }
     }
 
-    /// `restart` and `swap`: see [`crate::swap`].
-    fn replace(&mut self, process: &str, command: Option<Vec<String>>, swap: bool) -> Reply {
+    /// `restart` and `swap`: checked here, then stepped by the loop ([`crate::swap`]); the
+    /// answer comes when the swap ends.
+    fn replace(
+        &mut self,
+        conn: ConnId,
+        process: &str,
+        command: Option<Vec<String>>,
+        swap: bool,
+    ) -> Option<Reply> {
         let Some(k) = self.cell.index_of(process) else {
-            return Reply::Refused(format!(
+            return Some(Reply::Refused(format!(
                 "no process {process:?} in this cell (it has {})",
                 self.cell.names.join(", ")
-            ));
+            )));
         };
         if let Some(c) = &command {
             let Some(first) = c.first() else {
-                return Reply::Refused("--command is empty".into());
+                return Some(Reply::Refused("--command is empty".into()));
             };
             if let Err(e) = crate::launch::find_program(first) {
-                return Reply::Refused(format!("--command: {e}; nothing was changed"));
+                return Some(Reply::Refused(format!(
+                    "--command: {e}; nothing was changed"
+                )));
             }
         }
         let motion = matches!(process, "trajgen" | "servo" | "drives");
+        let mut carried = None;
         if process == "trajgen"
-            && let Some(r) = &mut self.running
+            && let Some(r) = &self.running
         {
             if r.job.last.is_some_and(|sp| sp.path_speed == 0.0) {
-                return Reply::Refused(
+                return Some(Reply::Refused(
                     "the program is paused: `supervisor resume` first (a swap pauses and resumes it itself)"
                         .into(),
-                );
+                ));
             }
             if r.job.motion_done() {
-                return Reply::Refused(
+                return Some(Reply::Refused(
                     "the program's motion has ended (the axes settle); try again in a moment"
                         .into(),
-                );
+                ));
             }
             // The handover record describes a segment; a WAIT or a DELAY has none.
             if let Some(sp) = r
@@ -845,44 +893,59 @@ impl Loop<'_> {
                 } else {
                     "a DELAY"
                 };
-                return Reply::Refused(format!(
+                return Some(Reply::Refused(format!(
                     "the program holds at {what} (line {}): trajgen is swapped while the program \
                      moves or with no program; nothing was changed",
                     sp.line
-                ));
+                )));
             }
-            return match crate::swap::trajgen_during_program(
-                self.cell, self.cfg, k, command, swap, &mut r.job,
-            ) {
-                Ok(text) => Reply::Done(text),
-                Err(e) => {
-                    if e.program_lost {
-                        let r = self.running.take().expect("checked");
-                        let err = self.with_events(RunError::failed(&e.message), r.events_from);
-                        self.finish(&r, &Err(err));
-                    }
-                    Reply::Failed(e.message)
-                }
-            };
-        }
-        if motion && let Some(r) = &self.running {
-            return Reply::Refused(format!(
+            carried = Some(&r.job);
+        } else if motion && let Some(r) = &self.running {
+            return Some(Reply::Refused(format!(
                 "{process} can be replaced only while no program runs ({} is running; \
                  `supervisor abort` ends it, or wait for it)",
                 r.job.name
-            ));
+            )));
         }
         if self.enabling.is_some() {
-            return Reply::Refused("the drives are being enabled; try again in a moment".into());
+            return Some(Reply::Refused(
+                "the drives are being enabled; try again in a moment".into(),
+            ));
         }
         let was_enabled = self
             .cell
             .last_servo
             .is_some_and(|s| s.status & st::ENABLED != 0);
-        let result = crate::swap::replace(self.cell, self.cfg, k, command, swap);
-        match result {
-            Ok(text) => {
-                if motion && was_enabled && self.cell.estop.is_none() {
+        match Swap::begin(self.cell, self.cfg, k, command, swap, carried) {
+            Ok(swap) => {
+                self.swapping = Some(Swapping {
+                    swap,
+                    conn,
+                    was_enabled,
+                });
+                None
+            }
+            Err(e) => Some(Reply::Failed(e)),
+        }
+    }
+
+    /// The next step of a swap in progress; its answer when it ends.
+    fn swap_step(&mut self, incidents: &[Incident]) {
+        let Some(s) = &mut self.swapping else {
+            return;
+        };
+        let job = match &mut self.running {
+            Some(r) if s.swap.carries_program() => Some(&mut r.job),
+            _ => None,
+        };
+        let reply = match s.swap.step(self.cell, self.cfg, incidents, job) {
+            Step::Going => return,
+            Step::Done(text) => {
+                let reenable = s.swap.on_motion_path()
+                    && !s.swap.carries_program()
+                    && s.was_enabled
+                    && self.cell.estop.is_none();
+                if reenable {
                     // The new process re-enables bumplessly, holding where the axes stand.
                     self.enabling = Some((Enabling::new(self.cfg), Vec::new()));
                     Reply::Done(format!("{text}; re-enabling the drives"))
@@ -890,7 +953,17 @@ impl Loop<'_> {
                     Reply::Done(text)
                 }
             }
-            Err(e) => Reply::Failed(e),
+            Step::Failed(e) => Reply::Failed(e),
+            Step::ProgramLost(e) => {
+                if let Some(r) = self.running.take() {
+                    let err = self.with_events(RunError::failed(&e), r.events_from);
+                    self.finish(&r, &Err(err));
+                }
+                Reply::Failed(e)
+            }
+        };
+        if let Some(s) = self.swapping.take() {
+            self.server.reply(s.conn, &reply);
         }
     }
 }

@@ -4,7 +4,7 @@
 //!   break**. The new one starts beside the old one (the services allow two publishers);
 //!   once it is cyclic, the old one is stopped, so its outputs (the fieldbus image) never
 //!   miss more than a cycle or so.
-//! - trajgen **during a program**: [`trajgen_during_program`]: pause (the axes come to rest
+//! - trajgen **during a program**: pause (the axes come to rest
 //!   on the path within `t_acc`), the old trajgen's handover record (the segment and where on
 //!   it), the new trajgen goes on from that record, the program's commands after the
 //!   segment's are sent again, resume. No e-stop, the drives stay enabled; the motion time
@@ -17,329 +17,477 @@
 //! processes do not count the gap as pending-sequence overruns, and the supervisor does not
 //! take the replaced process' silence for a stall.
 
+//!
+//! A [`Swap`] is a job of the supervisor's loop ([`crate::serve`]): [`Swap::begin`] takes the
+//! first step, [`Swap::step`] one more every tick, and meanwhile the loop beats, watches the
+//! processes and answers the control channel (a request that would change the cell waits
+//! for the swap's end: it is refused "busy", `down` is kept for after it).
 use crate::cell::{Cell, Incident};
 use crate::job::Job;
 use crate::run::TICK;
 use cell_config::Config;
-use shm_schema::Power;
+use shm_schema::{ControlKind, Power, TrajgenHandoverV2};
 use std::time::{Duration, Instant};
 
-/// Replaces process `k`: `swap` with `command` (or its configured command: a new build),
-/// or restarts it as it runs. Returns what was done, with the swap's duration and, for the
-/// processes that publish the fieldbus image, its largest gap.
-pub(crate) fn replace(
-    cell: &mut Cell,
-    cfg: &Config,
-    k: usize,
-    command: Option<Vec<String>>,
-    swap: bool,
-) -> Result<String, String> {
-    let name = cell.names[k].clone();
-    let previous = cell.command_of(k);
-    if swap {
-        cell.set_command(k, command);
-    }
-    let motion = matches!(name.as_str(), "trajgen" | "servo" | "drives");
-    let start = Instant::now();
-    if motion
-        && cell
-            .last_servo
-            .is_some_and(|s| s.power != Power::Disabled as u8)
-    {
-        // Brakes on: the axes come to rest (they are at rest: no program runs) and the
-        // drives are disabled before the process goes.
-        cell.request(shm_schema::RequestKind::Disable)
-            .map_err(|e| e.to_string())?;
-        let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 2.0);
-        wait_until(
-            cell,
-            cfg,
-            k,
-            limit,
-            &mut GapMeter::default(),
-            &mut Cell::drain_motion,
-            |c| {
-                c.last_servo
-                    .is_some_and(|s| s.power == Power::Disabled as u8)
-            },
-        )
-        .map_err(|e| format!("{name}: the drives did not disable: {e}"))?;
-    }
-    cell.set_handover(k, true);
-    let result = handover(cell, cfg, k, motion);
-    cell.set_handover(k, false);
-    cell.ignore_statuses_of(k, None);
-    let (old, new, gap) = result.inspect_err(|_| cell.set_command(k, previous))?;
-    cell.restarts[k] += 1;
-    let what = if swap { "swapped" } else { "restarted" };
-    let gap = gap.map_or(String::new(), |(g, n)| {
-        format!(
-            "; fieldbus image: {n} images during the handover, largest gap {:.2} ms",
-            g as f64 * 1e-6
-        )
-    });
-    tracing::info!("{name} {what} (pid {old:?} → {new})");
-    Ok(format!(
-        "{name} {what} in {:.0} ms (pid {} → {new}){gap}",
-        start.elapsed().as_secs_f64() * 1e3,
-        old.map_or("-".to_string(), |p| p.to_string())
-    ))
-}
-
-/// Why a swap of trajgen during a program failed, and whether the program survived it.
+/// A replacement in progress; see the module documentation.
 #[derive(Debug)]
-pub(crate) struct TrajgenSwapError {
-    /// What went wrong.
-    pub message: String,
-    /// The program cannot go on (the old trajgen is gone and the new one did not take it
-    /// over): the caller ends it.
-    pub program_lost: bool,
-}
-
-/// Swaps trajgen (process `k`) while `job` runs; see the module documentation. `command`
-/// (checked by the caller) replaces its command line when `swap`.
-pub(crate) fn trajgen_during_program(
-    cell: &mut Cell,
-    cfg: &Config,
+pub(crate) struct Swap {
     k: usize,
-    command: Option<Vec<String>>,
+    name: String,
+    /// `swap` (a new command, or a new build of it) or `restart`.
     swap: bool,
-    job: &mut Job,
-) -> Result<String, TrajgenSwapError> {
-    let kept = |message: String| TrajgenSwapError {
-        message,
-        program_lost: false,
-    };
-    let start = Instant::now();
-    let limit = Duration::from_secs_f64(cfg.motion.t_acc + 2.0);
-    let mut gaps = GapMeter::default();
-    let seq = cell.motion_control(shm_schema::ControlKind::Pause);
-    let paused = wait_until(
-        cell,
-        cfg,
-        k,
-        limit,
-        &mut gaps,
-        &mut |c: &mut Cell| job.record(c),
-        |c| {
-            c.last_sp
-                .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0)
-        },
-    );
-    let program_id = job.program_id;
-    let record = std::cell::Cell::new(None);
-    let recorded = paused.and_then(|()| {
-        wait_until(
-            cell,
-            cfg,
-            k,
-            limit,
-            &mut gaps,
-            &mut |c: &mut Cell| job.record(c),
-            |c| {
-                if let Some(h) = c.handover_sub.latest() {
-                    record.set(Some(h));
-                }
-                record
-                    .get()
-                    .is_some_and(|h| h.valid == 1 && h.program_id == program_id)
-            },
-        )
-    });
-    let h = match (recorded, record.get()) {
-        (Ok(()), Some(h)) => h,
-        (r, _) => {
-            // Nothing was replaced: the program goes on with the old trajgen.
-            cell.motion_control(shm_schema::ControlKind::Resume);
-            let why = r.err().unwrap_or_else(|| "no handover record".into());
-            return Err(kept(format!(
-                "trajgen was not swapped: it did not pause on a segment ({why}); the program goes on"
-            )));
-        }
-    };
-    let previous = cell.command_of(k);
-    if swap {
-        cell.set_command(k, command);
-    }
-    cell.set_handover(k, true);
-    let old = cell.children.get(k).map(|p| p.pid());
-    if let Some(problem) = cell.stop_process(k) {
-        tracing::warn!("the old trajgen {problem}");
-    }
-    let started = runtime::time::now_ns();
-    cell.offer_handover(&h);
-    let resumed = cell.start_process(k, cfg).and_then(|_| {
-        let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
-        wait_until(
-            cell,
-            cfg,
-            k,
-            startup,
-            &mut gaps,
-            &mut |c: &mut Cell| job.record(c),
-            |c| {
-                c.cyclic(k)
-                    && c.last_sp.is_some_and(|sp| {
-                        sp.stamp_ns > started && sp.program_id == program_id && sp.path_speed == 0.0
-                    })
-            },
-        )
-        .map_err(|e| format!("the new trajgen did not take the motion over: {e}"))
-    });
-    cell.set_handover(k, false);
-    // Withdrawn: a trajgen started later (a restart) must not take an old motion over.
-    cell.offer_handover(&shm_schema::TrajgenHandoverV2::default());
-    if let Err(e) = resumed {
-        cell.set_command(k, previous);
-        return Err(TrajgenSwapError {
-            message: format!("{e}; the program is lost, the axes rest on its path"),
-            program_lost: true,
-        });
-    }
-    let new = cell.children.get(k).map_or(0, |p| p.pid());
-    job.rewind_to(h.command_seq);
-    let seq = cell.motion_control(shm_schema::ControlKind::Resume);
-    wait_until(
-        cell,
-        cfg,
-        k,
-        limit,
-        &mut gaps,
-        &mut |c: &mut Cell| job.record(c),
-        |c| c.last_sp.is_some_and(|sp| sp.control_seq >= seq),
-    )
-    .map_err(|e| kept(format!("the new trajgen did not resume: {e}")))?;
-    cell.restarts[k] += 1;
-    let what = if swap { "swapped" } else { "restarted" };
-    tracing::info!("trajgen {what} during {} (pid {old:?} → {new})", job.name);
-    Ok(format!(
-        "trajgen {what} during {} in {:.0} ms (pid {} → {new}): paused at line {} on the path, resumed from there",
-        job.name,
-        start.elapsed().as_secs_f64() * 1e3,
-        old.map_or("-".to_string(), |p| p.to_string()),
-        h.line
-    ))
+    /// The command line before; restored if the swap fails.
+    previous: Option<Vec<String>>,
+    /// The process is on the motion path (trajgen, servo, drives).
+    motion: bool,
+    /// The program trajgen carries through this swap (its name and id), if any.
+    program: Option<(String, u32)>,
+    old: Option<u32>,
+    start: Instant,
+    stage: Stage,
 }
 
-/// What a handover did: the old and new pids, the fieldbus image's largest gap (ns) and
-/// how many images arrived meanwhile.
-type Handover = (Option<u32>, u32, Option<(u64, u64)>);
+#[derive(Debug)]
+enum Stage {
+    /// Brakes on: servo disables the drives before the process goes.
+    Disabling { since: Instant },
+    /// Make before break: the new one started beside the old one; until it is cyclic.
+    Beside { new: u32, since: Instant },
+    /// The old one stopped: a few ticks of the image from the new one alone.
+    Alone { new: u32, since: Instant },
+    /// The old one stopped and the new one started; until it is cyclic.
+    Replacing { new: u32, since: Instant },
+    /// trajgen during a program: until the path speed is 0 on the path.
+    Pausing { seq: u64, since: Instant },
+    /// Until the old trajgen's handover record of the program (the newest seen).
+    Recording {
+        since: Instant,
+        seen: Option<TrajgenHandoverV2>,
+    },
+    /// The new trajgen started with the record; until it holds the motion, paused.
+    TakingOver {
+        record: TrajgenHandoverV2,
+        started_ns: u64,
+        since: Instant,
+    },
+    /// The program's commands after the record's sent again, resumed; until trajgen took it.
+    Resuming {
+        record: TrajgenHandoverV2,
+        seq: u64,
+        since: Instant,
+    },
+}
 
-/// Stops the old process and starts the new one (make before break outside the motion
-/// path).
-fn handover(cell: &mut Cell, cfg: &Config, k: usize, motion: bool) -> Result<Handover, String> {
-    let name = cell.names[k].clone();
-    let old = cell.children.get(k).map(|p| p.pid());
-    let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
-    let mut gaps = GapMeter::default();
-    let new = if !motion && old.is_some() {
-        cell.ignore_statuses_of(k, old);
-        let new = cell.start_process(k, cfg)?;
-        if let Err(e) = wait_until(
-            cell,
-            cfg,
+/// Where a swap is after a step.
+#[derive(Debug)]
+pub(crate) enum Step {
+    /// Not done yet.
+    Going,
+    /// Done; what was done, for the user.
+    Done(String),
+    /// Failed; nothing was replaced, or the old process keeps running (why, for the user).
+    Failed(String),
+    /// trajgen during a program failed after the old one was gone: the program cannot go on.
+    ProgramLost(String),
+}
+
+impl Swap {
+    /// Starts replacing process `k` (`swap` with `command`, or its configured command: a new
+    /// build; or a restart as it runs). `job`: the program trajgen carries through the swap
+    /// (trajgen only; the caller checked that it moves on a segment).
+    pub(crate) fn begin(
+        cell: &mut Cell,
+        cfg: &Config,
+        k: usize,
+        command: Option<Vec<String>>,
+        swap: bool,
+        job: Option<&Job>,
+    ) -> Result<Self, String> {
+        let name = cell.names[k].clone();
+        let previous = cell.command_of(k);
+        let motion = matches!(name.as_str(), "trajgen" | "servo" | "drives");
+        let mut s = Self {
             k,
-            startup,
-            &mut gaps,
-            &mut Cell::drain_motion,
-            |c| c.cyclic(k),
+            name,
+            swap,
+            previous,
+            motion,
+            program: job.map(|j| (j.name.clone(), j.program_id)),
+            old: cell.children.get(k).map(|p| p.pid()),
+            start: Instant::now(),
+            stage: Stage::Disabling {
+                since: Instant::now(),
+            },
+        };
+        if swap {
+            cell.set_command(k, command);
+        }
+        let now = Instant::now();
+        if s.program.is_some() {
+            let seq = cell.motion_control(ControlKind::Pause);
+            s.stage = Stage::Pausing { seq, since: now };
+        } else if motion
+            && cell
+                .last_servo
+                .is_some_and(|st| st.power != Power::Disabled as u8)
+        {
+            // Brakes on: the axes are at rest (no program runs); the drives are disabled
+            // before the process goes.
+            if let Err(e) = cell.request(shm_schema::RequestKind::Disable) {
+                cell.set_command(k, s.previous.clone());
+                return Err(e.to_string());
+            }
+            s.stage = Stage::Disabling { since: now };
+        } else {
+            s.stage = s.replace(cell, cfg)?;
+        }
+        if s.program.is_none() {
+            cell.image_gaps = Some(GapMeter::default());
+        }
+        Ok(s)
+    }
+
+    /// The program this swap carries: the loop only records its setpoints meanwhile.
+    pub(crate) fn carries_program(&self) -> bool {
+        self.program.is_some()
+    }
+
+    /// The process being replaced.
+    pub(crate) fn process(&self) -> &str {
+        &self.name
+    }
+
+    /// The process is on the motion path: the caller re-enables the drives after it.
+    pub(crate) fn on_motion_path(&self) -> bool {
+        self.motion
+    }
+
+    /// Takes the next step, on this tick's `incidents`; `job` is the program it carries.
+    pub(crate) fn step(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        incidents: &[Incident],
+        job: Option<&mut Job>,
+    ) -> Step {
+        let k = self.k;
+        let lost = incidents
+            .iter()
+            .find(|i| concerns(i, &self.name))
+            .map(ToString::to_string);
+        let motion_limit = Duration::from_secs_f64(cfg.motion.t_acc + 2.0);
+        let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
+        let late = |since: Instant, limit: Duration| {
+            (since.elapsed() > limit).then(|| format!("not within {:.1} s", limit.as_secs_f64()))
+        };
+        match std::mem::replace(
+            &mut self.stage,
+            Stage::Disabling {
+                since: Instant::now(),
+            },
         ) {
-            // Break nothing: the new one goes, the old one stays.
-            let _ = cell.stop_pid(new);
-            return Err(format!(
-                "the new {name} did not become cyclic ({e}); the old one (pid {}) keeps running",
-                old.map_or(0, |p| p)
-            ));
+            Stage::Disabling { since } => {
+                let off = cell
+                    .last_servo
+                    .is_some_and(|s| s.power == Power::Disabled as u8);
+                let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 2.0);
+                if let Some(why) = lost.or_else(|| (!off).then(|| late(since, limit)).flatten()) {
+                    return self.fail(
+                        cell,
+                        format!("{}: the drives did not disable: {why}", self.name),
+                    );
+                }
+                if !off {
+                    self.stage = Stage::Disabling { since };
+                    return Step::Going;
+                }
+                match self.replace(cell, cfg) {
+                    Ok(stage) => self.stage = stage,
+                    Err(e) => return self.fail(cell, e),
+                }
+                Step::Going
+            }
+            Stage::Beside { new, since } => {
+                let why = lost.or_else(|| {
+                    if cell.cyclic(k) {
+                        None
+                    } else {
+                        late(since, startup)
+                    }
+                });
+                if let Some(why) = why {
+                    // Break nothing: the new one goes, the old one stays.
+                    let _ = cell.stop_pid(new);
+                    let old = self.old.map_or(0, |p| p);
+                    return self.fail(
+                        cell,
+                        format!(
+                            "the new {} did not become cyclic ({why}); the old one (pid {old}) keeps running",
+                            self.name
+                        ),
+                    );
+                }
+                if !cell.cyclic(k) {
+                    self.stage = Stage::Beside { new, since };
+                    return Step::Going;
+                }
+                if let Some(problem) = cell.stop_process(k) {
+                    tracing::warn!("the old {} {problem}", self.name);
+                }
+                self.stage = Stage::Alone {
+                    new,
+                    since: Instant::now(),
+                };
+                Step::Going
+            }
+            Stage::Alone { new, since } => {
+                if since.elapsed() < 5 * TICK {
+                    self.stage = Stage::Alone { new, since };
+                    return Step::Going;
+                }
+                self.done(cell, new)
+            }
+            Stage::Replacing { new, since } => {
+                if lost.is_none() && cell.cyclic(k) {
+                    return self.done(cell, new);
+                }
+                if let Some(why) = lost.or_else(|| late(since, startup)) {
+                    return self.fail(
+                        cell,
+                        format!("the new {} did not become cyclic: {why}", self.name),
+                    );
+                }
+                self.stage = Stage::Replacing { new, since };
+                Step::Going
+            }
+            Stage::Pausing { seq, since } => {
+                let paused = cell
+                    .last_sp
+                    .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0);
+                if lost.is_none() && paused {
+                    self.stage = Stage::Recording {
+                        since: Instant::now(),
+                        seen: None,
+                    };
+                    return Step::Going;
+                }
+                match lost.or_else(|| late(since, motion_limit)) {
+                    Some(why) => self.not_paused(cell, why),
+                    None => {
+                        self.stage = Stage::Pausing { seq, since };
+                        Step::Going
+                    }
+                }
+            }
+            Stage::Recording { since, seen } => {
+                let program_id = self.program.as_ref().map_or(0, |p| p.1);
+                let seen = cell.handover_sub.latest().or(seen);
+                let record = seen.filter(|h| h.valid == 1 && h.program_id == program_id);
+                let record = match (lost, record) {
+                    (None, Some(record)) => record,
+                    (lost, _) => {
+                        return match lost.or_else(|| late(since, motion_limit)) {
+                            Some(why) => self.not_paused(cell, why),
+                            None => {
+                                self.stage = Stage::Recording { since, seen };
+                                Step::Going
+                            }
+                        };
+                    }
+                };
+                cell.set_handover(k, true);
+                if let Some(problem) = cell.stop_process(k) {
+                    tracing::warn!("the old trajgen {problem}");
+                }
+                let started_ns = runtime::time::now_ns();
+                cell.offer_handover(&record);
+                if let Err(e) = cell.start_process(k, cfg) {
+                    return self.program_lost(
+                        cell,
+                        format!("the new trajgen did not take the motion over: {e}"),
+                    );
+                }
+                self.stage = Stage::TakingOver {
+                    record,
+                    started_ns,
+                    since: Instant::now(),
+                };
+                Step::Going
+            }
+            Stage::TakingOver {
+                record,
+                started_ns,
+                since,
+            } => {
+                let program_id = record.program_id;
+                let holds = lost.is_none()
+                    && cell.cyclic(k)
+                    && cell.last_sp.is_some_and(|sp| {
+                        sp.stamp_ns > started_ns
+                            && sp.program_id == program_id
+                            && sp.path_speed == 0.0
+                    });
+                if !holds {
+                    if let Some(why) = lost.or_else(|| late(since, startup)) {
+                        return self.program_lost(
+                            cell,
+                            format!("the new trajgen did not take the motion over: {why}"),
+                        );
+                    }
+                    self.stage = Stage::TakingOver {
+                        record,
+                        started_ns,
+                        since,
+                    };
+                    return Step::Going;
+                }
+                cell.set_handover(k, false);
+                // Withdrawn: a trajgen started later (a restart) must not take an old motion
+                // over.
+                cell.offer_handover(&TrajgenHandoverV2::default());
+                if let Some(job) = job {
+                    job.rewind_to(record.command_seq);
+                }
+                let seq = cell.motion_control(ControlKind::Resume);
+                self.stage = Stage::Resuming {
+                    record,
+                    seq,
+                    since: Instant::now(),
+                };
+                Step::Going
+            }
+            Stage::Resuming { record, seq, since } => {
+                if lost.is_none() && cell.last_sp.is_some_and(|sp| sp.control_seq >= seq) {
+                    cell.restarts[k] += 1;
+                    let new = cell.children.get(k).map_or(0, |p| p.pid());
+                    let what = self.what();
+                    let program = self.program.as_ref().map_or("", |p| p.0.as_str());
+                    tracing::info!(
+                        "trajgen {what} during {program} (pid {:?} → {new})",
+                        self.old
+                    );
+                    return Step::Done(format!(
+                        "trajgen {what} during {program} in {:.0} ms (pid {} → {new}): paused at line {} on the path, resumed from there",
+                        self.start.elapsed().as_secs_f64() * 1e3,
+                        self.old.map_or("-".to_string(), |p| p.to_string()),
+                        record.line
+                    ));
+                }
+                if let Some(why) = lost.or_else(|| late(since, motion_limit)) {
+                    return Step::Failed(format!("the new trajgen did not resume: {why}"));
+                }
+                self.stage = Stage::Resuming { record, seq, since };
+                Step::Going
+            }
+        }
+    }
+
+    /// Stops the old process and starts the new one: beside it outside the motion path
+    /// (make before break), in its place on it.
+    fn replace(&self, cell: &mut Cell, cfg: &Config) -> Result<Stage, String> {
+        let k = self.k;
+        cell.set_handover(k, true);
+        let since = Instant::now();
+        if !self.motion && self.old.is_some() {
+            cell.ignore_statuses_of(k, self.old);
+            let new = cell
+                .start_process(k, cfg)
+                .inspect_err(|_| self.undo(cell))?;
+            return Ok(Stage::Beside { new, since });
         }
         if let Some(problem) = cell.stop_process(k) {
-            tracing::warn!("the old {name} {problem}");
+            tracing::warn!("the old {} {problem}", self.name);
         }
-        // A few more ticks: the image keeps flowing from the new one alone.
-        let _ = wait_until(
-            cell,
-            cfg,
-            k,
-            5 * TICK,
-            &mut gaps,
-            &mut Cell::drain_motion,
-            |_| false,
-        );
-        new
-    } else {
-        if let Some(problem) = cell.stop_process(k) {
-            tracing::warn!("the old {name} {problem}");
-        }
-        let new = cell.start_process(k, cfg)?;
-        wait_until(
-            cell,
-            cfg,
-            k,
-            startup,
-            &mut gaps,
-            &mut Cell::drain_motion,
-            |c| c.cyclic(k),
-        )
-        .map_err(|e| format!("the new {name} did not become cyclic: {e}"))?;
-        new
-    };
-    Ok((old, new, gaps.result()))
+        let new = cell
+            .start_process(k, cfg)
+            .inspect_err(|_| self.undo(cell))?;
+        Ok(Stage::Replacing { new, since })
+    }
+
+    fn what(&self) -> &'static str {
+        if self.swap { "swapped" } else { "restarted" }
+    }
+
+    /// The new process is cyclic: done.
+    fn done(&mut self, cell: &mut Cell, new: u32) -> Step {
+        let k = self.k;
+        cell.set_handover(k, false);
+        cell.ignore_statuses_of(k, None);
+        cell.restarts[k] += 1;
+        let gap =
+            cell.image_gaps
+                .take()
+                .and_then(|g| g.result())
+                .map_or(String::new(), |(g, n)| {
+                    format!(
+                        "; fieldbus image: {n} images during the handover, largest gap {:.2} ms",
+                        g as f64 * 1e-6
+                    )
+                });
+        let what = self.what();
+        tracing::info!("{} {what} (pid {:?} → {new})", self.name, self.old);
+        Step::Done(format!(
+            "{} {what} in {:.0} ms (pid {} → {new}){gap}",
+            self.name,
+            self.start.elapsed().as_secs_f64() * 1e3,
+            self.old.map_or("-".to_string(), |p| p.to_string())
+        ))
+    }
+
+    /// The handover is over and the command line as it was.
+    fn undo(&self, cell: &mut Cell) {
+        cell.set_handover(self.k, false);
+        cell.ignore_statuses_of(self.k, None);
+        cell.set_command(self.k, self.previous.clone());
+        cell.image_gaps = None;
+    }
+
+    fn fail(&self, cell: &mut Cell, why: String) -> Step {
+        self.undo(cell);
+        Step::Failed(why)
+    }
+
+    /// trajgen did not pause on a segment: nothing was replaced; the program goes on with the
+    /// old trajgen.
+    fn not_paused(&self, cell: &mut Cell, why: String) -> Step {
+        cell.motion_control(ControlKind::Resume);
+        cell.set_command(self.k, self.previous.clone());
+        Step::Failed(format!(
+            "trajgen was not swapped: it did not pause on a segment ({why}); the program goes on"
+        ))
+    }
+
+    fn program_lost(&self, cell: &mut Cell, why: String) -> Step {
+        self.undo(cell);
+        cell.offer_handover(&TrajgenHandoverV2::default());
+        Step::ProgramLost(format!(
+            "{why}; the program is lost, the axes rest on its path"
+        ))
+    }
 }
 
 /// The largest interval between consecutive fieldbus images seen (ns), and their count.
-#[derive(Default)]
-struct GapMeter {
+#[derive(Debug, Default)]
+pub(crate) struct GapMeter {
     last_ns: Option<u64>,
     max_ns: u64,
     count: u64,
 }
 
 impl GapMeter {
-    fn take(&mut self, cell: &mut Cell) {
-        while let Some(img) = cell.image_sub.next() {
-            if let Some(t) = self.last_ns
-                && img.written_ns > t
-            {
-                self.max_ns = self.max_ns.max(img.written_ns - t);
-            }
-            self.last_ns = Some(
-                self.last_ns
-                    .map_or(img.written_ns, |t| t.max(img.written_ns)),
-            );
-            self.count += 1;
+    /// An image written at `written_ns`.
+    pub(crate) fn see(&mut self, written_ns: u64) {
+        if let Some(t) = self.last_ns
+            && written_ns > t
+        {
+            self.max_ns = self.max_ns.max(written_ns - t);
         }
+        self.last_ns = Some(self.last_ns.map_or(written_ns, |t| t.max(written_ns)));
+        self.count += 1;
     }
 
     fn result(&self) -> Option<(u64, u64)> {
         (self.count > 1).then_some((self.max_ns, self.count))
-    }
-}
-
-/// Ticks the cell until `done` holds (Ok), process `k` is lost, or `limit` passes; `sink`
-/// takes the setpoints and servo states that arrive.
-fn wait_until(
-    cell: &mut Cell,
-    cfg: &Config,
-    k: usize,
-    limit: Duration,
-    gaps: &mut GapMeter,
-    sink: &mut dyn FnMut(&mut Cell),
-    done: impl Fn(&Cell) -> bool,
-) -> Result<(), String> {
-    let start = Instant::now();
-    loop {
-        std::thread::sleep(TICK);
-        let incidents = cell.tick(cfg);
-        gaps.take(cell);
-        sink(cell);
-        if let Some(i) = incidents.iter().find(|i| concerns(i, &cell.names[k])) {
-            return Err(i.to_string());
-        }
-        if done(cell) {
-            return Ok(());
-        }
-        if start.elapsed() > limit {
-            return Err(format!("not within {:.1} s", limit.as_secs_f64()));
-        }
     }
 }
 

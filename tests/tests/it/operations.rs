@@ -330,7 +330,41 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
             "{} --instance {{instance}} --name {{name}}",
             trajgen.display()
         );
-        let out = up.ok(&["swap", "trajgen", "--command", &cmd]);
+        // The swap is a job of the supervisor's loop: the control channel answers meanwhile,
+        // and refuses what would change the cell until the swap has ended.
+        let swap = up
+            .command()
+            .args(["swap", "trajgen", "--command", &cmd, "--instance", &up.inst])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("swap");
+        let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
+        let start = Instant::now();
+        let busy = loop {
+            assert!(start.elapsed() < WATCHDOG, "the swap never showed in Info");
+            match control_plane::channel::call(&instance, &control_plane::Request::Info) {
+                Ok(control_plane::Reply::Info(info)) if info.swapping.is_some() => {
+                    assert_eq!(info.swapping.as_deref(), Some("trajgen"), "{info:?}");
+                    break control_plane::channel::call(&instance, &control_plane::Request::Start);
+                }
+                Ok(control_plane::Reply::Info(_)) => {}
+                other => panic!("Info during a swap: {other:?}"),
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        };
+        match busy {
+            Ok(control_plane::Reply::Refused(why)) => assert!(why.contains("busy"), "{why}"),
+            other => panic!("start during a swap: {other:?}"),
+        }
+        let out = swap.wait_with_output().expect("swap");
+        assert!(
+            out.status.success(),
+            "{}\nlog:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            up.log()
+        );
+        let out = String::from_utf8_lossy(&out.stdout).to_string();
         println!("{}", out.trim());
         up.until("enabled again", |s| {
             s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false

@@ -60,7 +60,7 @@ impl Up {
         up
     }
 
-    fn command(&self) -> Command {
+    pub(crate) fn command(&self) -> Command {
         supervisor_in(self.netns.as_deref())
     }
 
