@@ -61,6 +61,8 @@ pub enum Request {
 pub enum Reply {
     /// Done; a line for the user.
     Done(String),
+    /// A process replaced (`swap`, `restart`).
+    Replaced(Box<Replaced>),
     /// Not done, nothing changed: bad input or a state that does not allow it (exit 2).
     Refused(String),
     /// Tried and failed (exit 1).
@@ -78,4 +80,57 @@ pub enum Reply {
         /// What `--plot` draws, when asked for and the program completed.
         figures: Option<Box<Figures>>,
     },
+}
+
+/// A process replaced by `swap` or `restart`: the answer's data, and its words
+/// ([`Replaced::text`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Replaced {
+    /// The process' name in the table.
+    pub process: String,
+    /// `swap` (true) or `restart`.
+    pub swapped: bool,
+    /// From the request to the new process holding its part (ms).
+    pub took_ms: f64,
+    /// The old process' pid; `None` when it was not running.
+    pub old_pid: Option<u32>,
+    /// The new process' pid.
+    pub new_pid: u32,
+    /// The fieldbus image during the handover (make before break): (images, largest gap in
+    /// ms).
+    pub image: Option<(u64, f64)>,
+    /// trajgen during a program: the program, and the line it paused and resumed at.
+    pub program: Option<(String, u32)>,
+    /// The drives are enabled again (a process of the motion path replaced with the brakes
+    /// on).
+    pub reenabling: bool,
+}
+
+impl Replaced {
+    /// The answer in words, e.g. `iobridge swapped in 141 ms (pid 26957 → 26994); fieldbus
+    /// image: 37 images during the handover, largest gap 7.17 ms`.
+    pub fn text(&self) -> String {
+        let what = if self.swapped { "swapped" } else { "restarted" };
+        let old = self.old_pid.map_or("-".to_string(), |p| p.to_string());
+        let mut s = match &self.program {
+            Some((program, line)) => format!(
+                "{} {what} during {program} in {:.0} ms (pid {old} → {}): paused at line {line} \
+                 on the path, resumed from there",
+                self.process, self.took_ms, self.new_pid
+            ),
+            None => format!(
+                "{} {what} in {:.0} ms (pid {old} → {})",
+                self.process, self.took_ms, self.new_pid
+            ),
+        };
+        if let Some((images, gap_ms)) = self.image {
+            s += &format!(
+                "; fieldbus image: {images} images during the handover, largest gap {gap_ms:.2} ms"
+            );
+        }
+        if self.reenabling {
+            s += "; re-enabling the drives";
+        }
+        s
+    }
 }

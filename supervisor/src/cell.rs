@@ -6,9 +6,9 @@
 //! e-stop for it and restarts it per its policy, and latches the e-stops it sees. It never
 //! ends the cell: what a job makes of an incident is the job's business ([`crate::job`]).
 
+use crate::error::RunError;
 use crate::events::{self, Axes};
 use crate::launch::Children;
-use crate::run::{RunError, TICK};
 use crate::stall::StallWatch;
 use cell_config::{Config, RestartPolicy};
 use control_plane::channel as ctl;
@@ -118,6 +118,10 @@ pub enum Life {
     /// Lost for good (policy `never`, or the restart limit); the reason.
     Down(String),
 }
+
+/// The supervisor's tick: its loop runs at least this often (at once when a child exits or
+/// a client connects), and so does its heartbeat.
+pub(crate) const TICK: std::time::Duration = std::time::Duration::from_millis(10);
 
 /// What closing a cell left: its events as JSON, and why the close failed (a process that
 /// would not stop, resources left behind), if it did.

@@ -2,11 +2,12 @@
 //! program ([`Job`]). Neither blocks: the supervisor's loop calls `step` every tick and keeps
 //! beating, serving its control channel and watching the processes meanwhile.
 
+use crate::cell::TICK;
 use crate::cell::{Cell, Incident};
+use crate::error::RunError;
 use crate::figures::Envelope;
 use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
-use crate::run::{RunError, TICK};
 use cell_config::Config;
 use control_plane::figures::{AxisEnvelope, Figures};
 use motion_program::Commands;

@@ -3,6 +3,7 @@
 
 pub mod cell;
 pub mod control;
+pub mod error;
 pub mod events;
 pub mod figures;
 pub mod job;

@@ -7,8 +7,9 @@ use control_plane::{Reply, Request};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use supervisor::error::RunError;
 use supervisor::latency_cmd::{LatencyArgs, LatencyError, latency};
-use supervisor::run::{RunError, RunOptions, run};
+use supervisor::run::{RunOptions, run};
 
 #[derive(Parser)]
 #[command(
@@ -435,6 +436,10 @@ fn ctl_reply(
             println!("{m}");
             ExitCode::SUCCESS
         }
+        Reply::Replaced(r) => {
+            println!("{}", r.text());
+            ExitCode::SUCCESS
+        }
         Reply::Info(info) => {
             println!("{}", serde_json::to_string(&info).unwrap_or_default());
             ExitCode::SUCCESS
@@ -673,7 +678,7 @@ fn main() -> ExitCode {
                 (&plot, "--plot"),
                 (&record, "--record"),
             ] {
-                if let Some(Err(e)) = path.as_deref().map(|p| supervisor::run::writable(p, flag)) {
+                if let Some(Err(e)) = path.as_deref().map(|p| supervisor::out::writable(p, flag)) {
                     eprintln!("error: {e}");
                     return ExitCode::from(2);
                 }

@@ -4,7 +4,7 @@
 //! from where the axes stand, so the prediction is trajgen's own motion time and every
 //! reference of the path is checked against the joint limits and velocities.
 
-use crate::run::RunError;
+use crate::error::RunError;
 use cell_config::Config;
 use cell_config::io::Direction;
 use motion_core::Params;

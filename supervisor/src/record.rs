@@ -705,14 +705,14 @@ const GONE: Duration = Duration::from_secs(3);
 
 /// Records `instance` until `stop` says so, the duration is over or the cell goes down.
 /// `ready` is called once every subscriber is in place. Errors when the instance is not up
-/// (a [`crate::run::RunError::Input`]) or a file cannot be written.
+/// (a [`crate::error::RunError::Input`]) or a file cannot be written.
 pub fn record(
     instance: &InstanceName,
     opts: &RecordOptions,
     stop: &dyn Fn() -> bool,
     ready: &mut dyn FnMut(&Path),
-) -> Result<Recorded, crate::run::RunError> {
-    use crate::run::RunError;
+) -> Result<Recorded, crate::error::RunError> {
+    use crate::error::RunError;
     ipc::quiet_iceoryx2_log();
     if ipc::live_node_pids(instance).unwrap_or_default().is_empty() {
         return Err(RunError::Input(format!(
@@ -811,17 +811,17 @@ impl Background {
         instance: &InstanceName,
         file: &Path,
         tick: &mut dyn FnMut(),
-    ) -> Result<Self, crate::run::RunError> {
+    ) -> Result<Self, crate::error::RunError> {
         use std::io::BufRead;
         let exe = std::env::current_exe()
-            .map_err(|e| crate::run::RunError::failed(format!("record: {e}")))?;
+            .map_err(|e| crate::error::RunError::failed(format!("record: {e}")))?;
         let mut child = std::process::Command::new(exe)
             .args(["record", "--instance", instance.as_str(), "--out"])
             .arg(file)
             .stdin(std::process::Stdio::null())
             .stdout(std::process::Stdio::piped())
             .spawn()
-            .map_err(|e| crate::run::RunError::failed(format!("record: {e}")))?;
+            .map_err(|e| crate::error::RunError::failed(format!("record: {e}")))?;
         // Its first line says it is ready; read on a thread so that `tick` goes on.
         let (tx, rx) = std::sync::mpsc::channel();
         let out = child.stdout.take().map(std::io::BufReader::new);
@@ -857,7 +857,7 @@ impl Background {
         };
         if !line.starts_with("recording") {
             let why = me.stop();
-            return Err(crate::run::RunError::failed(format!(
+            return Err(crate::error::RunError::failed(format!(
                 "the recorder did not start{}",
                 if why.trim().is_empty() {
                     String::new()

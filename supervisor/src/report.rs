@@ -266,3 +266,25 @@ impl Report {
         s
     }
 }
+
+/// The trace as CSV: `t_s, cmd_<axis>..., act_<axis>...`, one row per setpoint.
+pub(crate) fn trace_csv(report: &Report) -> String {
+    use std::fmt::Write as _;
+    let n = report.axes.len();
+    let mut out = String::new();
+    let mut header = vec!["t_s".to_string()];
+    header.extend(report.axes.iter().map(|a| format!("cmd_{a}")));
+    header.extend(report.axes.iter().map(|a| format!("act_{a}")));
+    let _ = writeln!(out, "{}", header.join(","));
+    for r in &report.trace {
+        let _ = write!(out, "{:.6}", r.t_s);
+        for v in &r.cmd[..n] {
+            let _ = write!(out, ",{v:.6}");
+        }
+        for v in &r.act[..n] {
+            let _ = write!(out, ",{v:.6}");
+        }
+        let _ = writeln!(out);
+    }
+    out
+}

@@ -9,17 +9,18 @@
 //! 4. Stop every process (SIGTERM, then SIGKILL), drop our ports, check that no iceoryx2
 //!    resource of the instance is left, and report.
 
-use crate::cell::{Cell, Mode, open_cell};
+use crate::cell::{Cell, Mode, TICK, open_cell};
+use crate::error::RunError;
 use crate::job::Enabling;
+use crate::out::writable;
 use crate::program::{Checked, Predicted};
 use crate::report::Report;
+use crate::report::trace_csv;
 use crate::serve::{self, End, ProgramJob};
 use cell_config::Config;
-use control_plane::event::Event;
 use runtime::signals;
 use shm_schema::{InstanceName, SetpointV2};
 use std::path::PathBuf;
-use std::time::Duration;
 
 /// What `supervisor run` was asked to do.
 #[derive(Clone, Debug)]
@@ -39,65 +40,6 @@ pub struct RunOptions {
     /// Show progress on stderr.
     pub progress: bool,
 }
-
-/// Why a run failed.
-#[derive(Debug)]
-pub enum RunError {
-    /// Bad input (program, configuration, instance): nothing was started. Exit code 2.
-    Input(String),
-    /// The run started and failed. Exit code 1.
-    Failed {
-        /// What went wrong.
-        message: String,
-        /// The events of the run up to the failure (`docs/events.md`).
-        events: Vec<Event>,
-        /// A program's figures up to the failure (`--plot`), when it had started.
-        figures: Option<Box<control_plane::figures::Figures>>,
-    },
-    /// Ctrl-C / SIGTERM. Exit code 130.
-    Interrupted,
-}
-
-impl RunError {
-    /// A started run failed (its events are attached when the run ends).
-    pub fn failed(message: impl Into<String>) -> Self {
-        Self::Failed {
-            message: message.into(),
-            events: Vec::new(),
-            figures: None,
-        }
-    }
-
-    /// The events the failed run recorded.
-    pub fn events(&self) -> &[Event] {
-        match self {
-            Self::Failed { events, .. } => events,
-            _ => &[],
-        }
-    }
-}
-
-impl RunError {
-    /// The failure as `run --json` prints it.
-    pub fn document(&self) -> control_plane::report::RunFailure {
-        control_plane::report::RunFailure {
-            ok: false,
-            error: self.to_string(),
-            events: self.events().to_vec(),
-        }
-    }
-}
-
-impl std::fmt::Display for RunError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            RunError::Input(m) | RunError::Failed { message: m, .. } => f.write_str(m),
-            RunError::Interrupted => f.write_str("interrupted; every process was stopped"),
-        }
-    }
-}
-
-pub(crate) const TICK: Duration = Duration::from_millis(10);
 
 /// Reads and checks the program at `path` on `cfg`'s cell from the axes' configured start
 /// (`supervisor check`, and `run` before anything starts): parsed, every target within the
@@ -209,63 +151,6 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         crate::figures::write_png(f, path).map_err(RunError::failed)?;
     }
     Ok(report)
-}
-
-/// Whether a file can be written at `path` (`flag` names it in the error): its directory
-/// exists and this user may write there, and it is not a directory or a file this user may
-/// not write. Checked before anything starts, so a run is never lost to a typo in an
-/// output's name.
-pub fn writable(path: &std::path::Path, flag: &str) -> Result<(), String> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => std::path::Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(format!(
-            "{flag} {}: the directory {} does not exist",
-            path.display(),
-            dir.display()
-        ));
-    }
-    if path.is_dir() {
-        return Err(format!("{flag} {}: is a directory", path.display()));
-    }
-    use nix::unistd::{AccessFlags, access};
-    let (what, check) = if path.exists() {
-        ("the file", path)
-    } else {
-        ("the directory", dir)
-    };
-    access(check, AccessFlags::W_OK).map_err(|e| {
-        format!(
-            "{flag} {}: {what} {} cannot be written ({})",
-            path.display(),
-            check.display(),
-            e.desc()
-        )
-    })
-}
-
-/// The trace as CSV: `t_s, cmd_<axis>..., act_<axis>...`, one row per setpoint.
-pub(crate) fn trace_csv(report: &Report) -> String {
-    use std::fmt::Write as _;
-    let n = report.axes.len();
-    let mut out = String::new();
-    let mut header = vec!["t_s".to_string()];
-    header.extend(report.axes.iter().map(|a| format!("cmd_{a}")));
-    header.extend(report.axes.iter().map(|a| format!("act_{a}")));
-    let _ = writeln!(out, "{}", header.join(","));
-    for r in &report.trace {
-        let _ = write!(out, "{:.6}", r.t_s);
-        for v in &r.cmd[..n] {
-            let _ = write!(out, ",{v:.6}");
-        }
-        for v in &r.act[..n] {
-            let _ = write!(out, ",{v:.6}");
-        }
-        let _ = writeln!(out);
-    }
-    out
 }
 
 /// Blocking helpers for commands that drive the cell step by step (`tune`).

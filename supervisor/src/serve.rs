@@ -13,13 +13,14 @@
 //! program that moves comes to rest along its path first (as `abort` does), then servo disables
 //! the drives at rest, and only then does the loop end and the processes stop ([`Stopping`]).
 
+use crate::cell::TICK;
 use crate::cell::{Cell, Incident, Mode};
+use crate::error::RunError;
 use crate::events;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
 use crate::program::Checked;
 use crate::report::{Report, process_report};
-use crate::run::{RunError, TICK};
 use crate::swap::{Step, Swap};
 use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
@@ -467,7 +468,7 @@ impl Loop<'_> {
             Ok(rep) => (
                 Outcome::Completed(Box::new(rep.document())),
                 rep.human(),
-                wants_trace.then(|| crate::run::trace_csv(rep)),
+                wants_trace.then(|| crate::report::trace_csv(rep)),
             ),
             Err(e) => (Outcome::Failed(e.document()), e.to_string(), None),
         };
@@ -940,18 +941,16 @@ impl Loop<'_> {
         };
         let reply = match s.swap.step(self.cell, self.cfg, incidents, job) {
             Step::Going => return,
-            Step::Done(text) => {
-                let reenable = s.swap.on_motion_path()
+            Step::Done(mut replaced) => {
+                replaced.reenabling = s.swap.on_motion_path()
                     && !s.swap.carries_program()
                     && s.was_enabled
                     && self.cell.estop.is_none();
-                if reenable {
+                if replaced.reenabling {
                     // The new process re-enables bumplessly, holding where the axes stand.
                     self.enabling = Some((Enabling::new(self.cfg), Vec::new()));
-                    Reply::Done(format!("{text}; re-enabling the drives"))
-                } else {
-                    Reply::Done(text)
                 }
+                Reply::Replaced(Box::new(replaced))
             }
             Step::Failed(e) => Reply::Failed(e),
             Step::ProgramLost(e) => {

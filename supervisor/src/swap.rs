@@ -22,10 +22,11 @@
 //! first step, [`Swap::step`] one more every tick, and meanwhile the loop beats, watches the
 //! processes and answers the control channel (a request that would change the cell waits
 //! for the swap's end: it is refused "busy", `down` is kept for after it).
+use crate::cell::TICK;
 use crate::cell::{Cell, Incident};
 use crate::job::Job;
-use crate::run::TICK;
 use cell_config::Config;
+use control_plane::Replaced;
 use shm_schema::{ControlKind, Power, TrajgenHandoverV2};
 use std::time::{Duration, Instant};
 
@@ -83,8 +84,8 @@ enum Stage {
 pub(crate) enum Step {
     /// Not done yet.
     Going,
-    /// Done; what was done, for the user.
-    Done(String),
+    /// Done; what was done.
+    Done(Replaced),
     /// Failed; nothing was replaced, or the old process keeps running (why, for the user).
     Failed(String),
     /// trajgen during a program failed after the old one was gone: the program cannot go on.
@@ -360,18 +361,22 @@ impl Swap {
                 if lost.is_none() && cell.last_sp.is_some_and(|sp| sp.control_seq >= seq) {
                     cell.restarts[k] += 1;
                     let new = cell.children.get(k).map_or(0, |p| p.pid());
-                    let what = self.what();
                     let program = self.program.as_ref().map_or("", |p| p.0.as_str());
                     tracing::info!(
-                        "trajgen {what} during {program} (pid {:?} → {new})",
+                        "trajgen {} during {program} (pid {:?} → {new})",
+                        self.what(),
                         self.old
                     );
-                    return Step::Done(format!(
-                        "trajgen {what} during {program} in {:.0} ms (pid {} → {new}): paused at line {} on the path, resumed from there",
-                        self.start.elapsed().as_secs_f64() * 1e3,
-                        self.old.map_or("-".to_string(), |p| p.to_string()),
-                        record.line
-                    ));
+                    return Step::Done(Replaced {
+                        process: self.name.clone(),
+                        swapped: self.swap,
+                        took_ms: self.start.elapsed().as_secs_f64() * 1e3,
+                        old_pid: self.old,
+                        new_pid: new,
+                        image: None,
+                        program: Some((program.to_string(), record.line)),
+                        reenabling: false,
+                    });
                 }
                 if let Some(why) = lost.or_else(|| late(since, motion_limit)) {
                     return Step::Failed(format!("the new trajgen did not resume: {why}"));
@@ -414,24 +419,22 @@ impl Swap {
         cell.set_handover(k, false);
         cell.ignore_statuses_of(k, None);
         cell.restarts[k] += 1;
-        let gap =
-            cell.image_gaps
-                .take()
-                .and_then(|g| g.result())
-                .map_or(String::new(), |(g, n)| {
-                    format!(
-                        "; fieldbus image: {n} images during the handover, largest gap {:.2} ms",
-                        g as f64 * 1e-6
-                    )
-                });
-        let what = self.what();
-        tracing::info!("{} {what} (pid {:?} → {new})", self.name, self.old);
-        Step::Done(format!(
-            "{} {what} in {:.0} ms (pid {} → {new}){gap}",
-            self.name,
-            self.start.elapsed().as_secs_f64() * 1e3,
-            self.old.map_or("-".to_string(), |p| p.to_string())
-        ))
+        let image = cell
+            .image_gaps
+            .take()
+            .and_then(|g| g.result())
+            .map(|(gap_ns, images)| (images, gap_ns as f64 * 1e-6));
+        tracing::info!("{} {} (pid {:?} → {new})", self.name, self.what(), self.old);
+        Step::Done(Replaced {
+            process: self.name.clone(),
+            swapped: self.swap,
+            took_ms: self.start.elapsed().as_secs_f64() * 1e3,
+            old_pid: self.old,
+            new_pid: new,
+            image,
+            program: None,
+            reenabling: false,
+        })
     }
 
     /// The handover is over and the command line as it was.

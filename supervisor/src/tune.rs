@@ -12,8 +12,9 @@
 //!    (until the error stays within the larger of 2 % of the step and the in-position band),
 //!    peak following error and peak effort; a PNG of command, position and effort.
 
+use crate::cell::TICK;
 use crate::cell::{Cell, Mode, open_cell};
-use crate::run::{RunError, TICK};
+use crate::error::RunError;
 use cell_config::Config;
 use plot::{Panel, series_png};
 use serde::Serialize;

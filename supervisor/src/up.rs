@@ -2,7 +2,7 @@
 //! control channel open to the user's other shells (docs/operations.md).
 
 use crate::cell::{Mode, open_cell};
-use crate::run::RunError;
+use crate::error::RunError;
 use crate::serve::{End, serve};
 use cell_config::Config;
 use shm_schema::InstanceName;
@@ -21,7 +21,7 @@ pub fn up(
         .map_err(|e| RunError::Input(format!("--instance {instance:?}: {e}")))?;
     // An output that cannot be written is refused before anything starts.
     if let Some(f) = record {
-        crate::run::writable(f, "--record").map_err(RunError::Input)?;
+        crate::out::writable(f, "--record").map_err(RunError::Input)?;
     }
     let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Up)?;
     tracing::info!(

@@ -22,8 +22,8 @@
 //!   page of another origin cannot send it without a CORS preflight, which is never granted),
 //!   and a `POST` or a WebSocket upgrade whose `Origin` is not this server's is refused.
 
+use crate::error::RunError;
 use crate::events::Axes;
-use crate::run::RunError;
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Query, State};

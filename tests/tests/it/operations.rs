@@ -280,15 +280,22 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         let s = up.status();
         assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
         // trajgen carries the motion: swapped during it, the program goes on along the path.
-        let out = up.ok(&["swap", "trajgen"]);
-        println!("{}", out.trim());
-        assert!(out.contains("trajgen swapped during"), "{out}");
-        let swap_ms: f64 = out
-            .split(" in ")
-            .nth(1)
-            .and_then(|r| r.split(" ms").next())
-            .and_then(|v| v.parse().ok())
-            .expect("the swap's duration");
+        // (Asked on the control channel itself: the answer's data, not its words.)
+        let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
+        let swap = control_plane::Request::Swap {
+            process: "trajgen".into(),
+            command: None,
+        };
+        let replaced = match control_plane::channel::call(&instance, &swap) {
+            Ok(control_plane::Reply::Replaced(r)) => r,
+            other => panic!(
+                "swap trajgen during the program: {other:?}\nlog:\n{}",
+                up.log()
+            ),
+        };
+        println!("{}", replaced.text());
+        assert!(replaced.program.is_some(), "{replaced:?}");
+        let swap_ms = replaced.took_ms;
         // servo cannot be swapped under a moving arm.
         let err = up.refused(&["swap", "servo"]);
         assert!(err.contains("only while no program runs"), "{err}");
@@ -339,7 +346,6 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
             .stderr(Stdio::piped())
             .spawn()
             .expect("swap");
-        let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
         let start = Instant::now();
         let busy = loop {
             assert!(start.elapsed() < WATCHDOG, "the swap never showed in Info");

@@ -1,0 +1,62 @@
+//! Why a run, a start or a tuning session failed, as the CLI reports it (exit 2, 1 or 130).
+
+use control_plane::event::Event;
+
+/// Why a run failed.
+#[derive(Debug)]
+pub enum RunError {
+    /// Bad input (program, configuration, instance): nothing was started. Exit code 2.
+    Input(String),
+    /// The run started and failed. Exit code 1.
+    Failed {
+        /// What went wrong.
+        message: String,
+        /// The events of the run up to the failure (`docs/events.md`).
+        events: Vec<Event>,
+        /// A program's figures up to the failure (`--plot`), when it had started.
+        figures: Option<Box<control_plane::figures::Figures>>,
+    },
+    /// Ctrl-C / SIGTERM. Exit code 130.
+    Interrupted,
+}
+
+impl RunError {
+    /// A started run failed (its events are attached when the run ends).
+    pub fn failed(message: impl Into<String>) -> Self {
+        Self::Failed {
+            message: message.into(),
+            events: Vec::new(),
+            figures: None,
+        }
+    }
+
+    /// The events the failed run recorded.
+    pub fn events(&self) -> &[Event] {
+        match self {
+            Self::Failed { events, .. } => events,
+            _ => &[],
+        }
+    }
+}
+
+impl RunError {
+    /// The failure as `run --json` prints it.
+    pub fn document(&self) -> control_plane::report::RunFailure {
+        control_plane::report::RunFailure {
+            ok: false,
+            error: self.to_string(),
+            events: self.events().to_vec(),
+        }
+    }
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Input(m) | RunError::Failed { message: m, .. } => f.write_str(m),
+            RunError::Interrupted => f.write_str("interrupted; every process was stopped"),
+        }
+    }
+}
+
+impl std::error::Error for RunError {}
