@@ -549,7 +549,7 @@ impl Parser<'_> {
 /// True for instructions that take time: a loop of nothing else would spin.
 fn moves_or_waits(op: &Op) -> bool {
     match op {
-        // STOP at rest takes no time: a body of STOPs alone would spin.
+        // A STOP before any move takes no time: a body of STOPs alone could spin.
         Op::Move { .. } | Op::Wait { .. } => true,
         Op::Delay { seconds } => *seconds > 0.0,
         Op::Repeat { body, .. } => body.iter().any(|i| moves_or_waits(&i.op)),
