@@ -355,7 +355,7 @@ fn control_done(r: Result<String, supervisor::control::ControlError>) -> ExitCod
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            eprint!("{}", errors(&e));
             ExitCode::from(match e {
                 supervisor::control::ControlError::Input(_) => 2,
                 supervisor::control::ControlError::Failed(_) => 1,
@@ -375,7 +375,7 @@ fn run_failed(e: &RunError, json: bool) -> ExitCode {
     }
     // Through the non-blocking writer where the command has one: a blocked stderr must not
     // keep the verdict (the exit status, the JSON above) from the caller.
-    supervisor::out::line(&format!("error: {e}"));
+    supervisor::out::line(errors(&e).trim_end());
     ExitCode::from(match e {
         RunError::Input(_) => 2,
         RunError::Failed { .. } => 1,
@@ -419,7 +419,7 @@ fn ctl_call(instance: &str, req: Request) -> ExitCode {
     match ctl::call(&instance, &req) {
         Ok(reply) => ctl_reply(reply, false, None, None),
         Err(e) => {
-            eprintln!("error: {e}");
+            eprint!("{}", errors(&e));
             ExitCode::from(2)
         }
     }
@@ -492,7 +492,7 @@ fn ctl_reply(
                     }
                     Ok(()) => {}
                     Err(e) => {
-                        eprintln!("error: {e}");
+                        eprint!("{}", errors(&e));
                         unwritten = true;
                     }
                 }
@@ -524,7 +524,7 @@ fn check(program: &std::path::Path, config: Option<&std::path::Path>) -> ExitCod
     let cfg = match Config::load(config) {
         Ok(c) => c,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprint!("{}", errors(&e));
             return ExitCode::from(2);
         }
     };
@@ -565,7 +565,7 @@ fn check(program: &std::path::Path, config: Option<&std::path::Path>) -> ExitCod
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            eprint!("{}", errors(&e));
             ExitCode::from(2)
         }
     }
@@ -600,7 +600,7 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
                 }
             }
             Err((code, e)) => {
-                eprintln!("error: {e}");
+                eprint!("{}", errors(&e));
                 return ExitCode::from(code);
             }
         }
@@ -679,7 +679,7 @@ fn main() -> ExitCode {
                 (&record, "--record"),
             ] {
                 if let Some(Err(e)) = path.as_deref().map(|p| supervisor::out::writable(p, flag)) {
-                    eprintln!("error: {e}");
+                    eprint!("{}", errors(&e));
                     return ExitCode::from(2);
                 }
             }
@@ -708,7 +708,7 @@ fn main() -> ExitCode {
             let code = match ctl::call(&i, &req) {
                 Ok(r) => ctl_reply(r, json, trace.as_deref(), plot.as_deref()),
                 Err(e) => {
-                    eprintln!("error: {e}");
+                    eprint!("{}", errors(&e));
                     ExitCode::from(2)
                 }
             };
@@ -768,11 +768,11 @@ fn main() -> ExitCode {
             match latency(&args) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(LatencyError::Input(e)) => {
-                    eprintln!("error: {e}");
+                    eprint!("{}", errors(&e));
                     ExitCode::from(2)
                 }
                 Err(LatencyError::Failed(e)) => {
-                    eprintln!("error: {e}");
+                    eprint!("{}", errors(&e));
                     ExitCode::FAILURE
                 }
             }
@@ -813,7 +813,7 @@ fn main() -> ExitCode {
                         }) {
                             Ok(()) => {}
                             Err(e) => {
-                                eprintln!("error: {e}");
+                                eprint!("{}", errors(&e));
                                 return ExitCode::FAILURE;
                             }
                         }
@@ -838,7 +838,7 @@ fn main() -> ExitCode {
         {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
-                eprintln!("error: {e}");
+                eprint!("{}", errors(&e));
                 ExitCode::from(2)
             }
         },
@@ -878,7 +878,7 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => {
-                eprintln!("error: {e}");
+                eprint!("{}", errors(&e));
                 ExitCode::from(2)
             }
         },
@@ -946,7 +946,7 @@ fn record(
     let (duration, size_mb, every) = match checked {
         Ok(v) => v,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprint!("{}", errors(&e));
             return ExitCode::from(2);
         }
     };
@@ -988,7 +988,7 @@ fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
         return ExitCode::from(2);
     };
     if let Some(Err(e)) = token.as_deref().map(supervisor::web::check_token) {
-        eprintln!("error: {e}");
+        eprint!("{}", errors(&e));
         return ExitCode::from(2);
     }
     if let Err(e) = runtime::signals::install() {
@@ -1009,4 +1009,18 @@ fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => run_failed(&e, false),
     }
+}
+
+/// `e` for stderr: each of its lines that starts a problem (not an indented continuation)
+/// prefixed `error: ` (a configuration with several problems has one line each).
+fn errors(e: &dyn std::fmt::Display) -> String {
+    let mut out = String::new();
+    for line in e.to_string().lines() {
+        if !line.starts_with(char::is_whitespace) {
+            out += "error: ";
+        }
+        out += line;
+        out += "\n";
+    }
+    out
 }
