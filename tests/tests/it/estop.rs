@@ -198,6 +198,11 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
             );
             std::thread::sleep(Duration::from_millis(10));
         }
+        // What servo published between the last read and its exit (its last state, disabled,
+        // comes just before it leaves).
+        while let Some(s) = state.next() {
+            last = Some(s);
+        }
         let last = last.expect("servo published");
         assert_eq!(last.power, Power::Disabled as u8, "{last:?}");
         assert!(
