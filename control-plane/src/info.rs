@@ -149,13 +149,11 @@ impl Info {
     /// The supervisor's part of `supervisor status`: the e-stop, the program, and per process
     /// its life and restarts.
     pub fn lines(&self) -> String {
-        let mode = match self.mode {
-            Mode::Run => "run",
-            Mode::Up => "up",
-        };
         let mut out = format!(
-            "supervisor pid {} ({mode}), e-stop resets {}\n",
-            self.pid, self.resets
+            "supervisor pid {} ({}), e-stop resets {}\n",
+            self.pid,
+            crate::word(&self.mode),
+            self.resets
         );
         match &self.estop {
             None => out += "e-stop: clear\n",

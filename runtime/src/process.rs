@@ -343,6 +343,8 @@ fn run_inner<T: Task>(
     let mut clock = CycleClock::new(own.period_ns, own.phase_ns, start_ns);
     let mut health = Health::new(&ctx.cell.health, own.period_ns, start_ns);
     let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
+    // The execution-time histogram half an interval after the wake-up latency's.
+    let exec_phase = latency_every / 2;
     let leave_limit_ns = ctx.cell.estop_stop_time_ns.saturating_add(LEAVE_GRACE_NS);
     let mut overruns = OverrunReporter::default();
     let mut skipped = 0u64;
@@ -483,7 +485,7 @@ fn run_inner<T: Task>(
         if phase == 0 {
             latency_pub.send(clock.histogram());
         }
-        if phase == latency_every / 2 {
+        if phase == exec_phase {
             exec_pub.send(clock.exec_histogram());
         }
         if let Some(e) = overruns.check(now, clock.stats().overruns) {

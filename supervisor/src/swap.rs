@@ -22,8 +22,7 @@
 //! first step, [`Swap::step`] one more every tick, and meanwhile the loop beats, watches the
 //! processes and answers the control channel (a request that would change the cell waits
 //! for the swap's end: it is refused "busy", `down` is kept for after it).
-use crate::cell::TICK;
-use crate::cell::{Cell, Incident};
+use crate::cell::{Cell, Incident, TICK};
 use crate::job::Job;
 use cell_config::Config;
 use control_plane::Replaced;
