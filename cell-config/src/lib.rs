@@ -707,6 +707,28 @@ fn line_col(src: &str, offset: usize) -> (usize, usize) {
 }
 
 impl Config {
+    /// What the motion language may name on this cell: its coordinates, joints and named IO.
+    pub fn cell_spec(&self) -> motion_program::CellSpec {
+        let named = |dir: io::Direction| -> Vec<(String, u32)> {
+            self.io
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| e.direction == dir)
+                .map(|(k, e)| (e.name.clone(), k as u32))
+                .collect()
+        };
+        motion_program::CellSpec {
+            coords: self.kinematics.coords(&self.axis),
+            joints: self
+                .axis
+                .iter()
+                .map(|a| (a.name.clone(), a.unit.clone()))
+                .collect(),
+            outputs: named(io::Direction::Output),
+            inputs: named(io::Direction::Input),
+        }
+    }
+
     /// Parses and validates `src` (named `file` in messages), and checks that every process'
     /// program can be started (what `run`, `up` and `check-config` load).
     pub fn parse_and_find_programs(src: &str, file: &str) -> Result<Self, ConfigError> {

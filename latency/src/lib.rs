@@ -17,6 +17,7 @@
 //! [`shm_schema::LatencyHistogramV1`]), and cyclictest's 1-µs histogram with its overflows
 //! ([`histfile`]); as text like cyclictest's, as JSON ([`report`]) or as a PNG (the `plot` crate draws it).
 
+pub mod command;
 pub mod histfile;
 pub mod measure;
 pub mod peer;

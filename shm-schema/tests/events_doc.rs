@@ -28,7 +28,11 @@ fn render() -> String {
             c.code,
             c.name,
             c.severity.name(),
-            if c.unit.is_empty() { "—" } else { c.unit },
+            if c.unit.text().is_empty() {
+                "—"
+            } else {
+                c.unit.text()
+            },
             c.meaning.replace('|', "\\|")
         );
     }

@@ -7,11 +7,11 @@
 //! ends the cell: what a job makes of an incident is the job's business ([`crate::job`]).
 
 use crate::error::RunError;
-use crate::events::{self, Axes};
 use crate::launch::Children;
 use crate::stall::StallWatch;
 use cell_config::{Config, RestartPolicy};
 use control_plane::channel as ctl;
+use control_plane::event::{self as events, Axes};
 use control_plane::info::{self, Info};
 
 /// A heartbeat gap this long (s) is reported, whatever room `supervisor_timeout` gives: the

@@ -60,3 +60,13 @@ impl std::fmt::Display for RunError {
 }
 
 impl std::error::Error for RunError {}
+
+impl From<recorder::RecordError> for RunError {
+    fn from(e: recorder::RecordError) -> Self {
+        if e.is_input() {
+            Self::Input(e.to_string())
+        } else {
+            Self::failed(e.to_string())
+        }
+    }
+}

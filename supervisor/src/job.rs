@@ -5,9 +5,9 @@
 use crate::cell::TICK;
 use crate::cell::{Cell, Incident};
 use crate::error::RunError;
-use crate::figures::Envelope;
 use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
+use cell_client::figures::Envelope;
 use cell_config::Config;
 use control_plane::figures::{AxisEnvelope, Figures};
 use motion_program::Commands;
@@ -622,7 +622,7 @@ impl Job {
         });
         Figures {
             title,
-            path: crate::figures::path_of(rows, kin.as_ref(), n, &coords),
+            path: cell_client::figures::path_of(rows, kin.as_ref(), n, &coords),
             following_error: cfg
                 .axis
                 .iter()

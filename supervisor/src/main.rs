@@ -4,11 +4,11 @@ use cell_config::{Config, DEFAULT_TOML};
 use clap::{Parser, Subcommand};
 use control_plane::channel as ctl;
 use control_plane::{Reply, Request};
+use latency::command::{LatencyArgs, LatencyError, latency};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use supervisor::error::RunError;
-use supervisor::latency_cmd::{LatencyArgs, LatencyError, latency};
 use supervisor::run::{RunOptions, run};
 
 #[derive(Parser)]
@@ -222,50 +222,7 @@ enum Cmd {
         p50/p99/p99.9/p99.99 and Ovf (samples >= --histogram-us). Ctrl-C prints the figures \
         so far. --histfile writes cyclictest's histogram format; --plot a PNG of it."
     )]
-    Latency {
-        /// Period of the measuring loops (µs).
-        #[arg(long, short = 'i', default_value_t = 1000)]
-        interval_us: u64,
-        /// Phase of the loops on the grid of CLOCK_MONOTONIC (µs), as a process' phase in the
-        /// cell; default half the interval. 0 puts every wake-up on a whole millisecond,
-        /// together with the kernel's tick.
-        #[arg(long)]
-        phase_us: Option<u64>,
-        /// How long each test runs: seconds, or 30s, 5m, 2h, 1d. Default: until Ctrl-C.
-        #[arg(long, short = 'D')]
-        duration: Option<String>,
-        /// Timer threads, pinned round-robin over the CPUs (default: one per CPU, as --smp).
-        #[arg(long, short = 't', conflicts_with = "smp")]
-        threads: Option<usize>,
-        /// One timer thread per CPU, each pinned to its CPU (cyclictest -S); the default.
-        #[arg(long, short = 'S')]
-        smp: bool,
-        /// SCHED_FIFO priority of every measuring thread (0: SCHED_OTHER).
-        #[arg(long, short = 'p', default_value_t = 80)]
-        priority: i32,
-        /// Range of the 1-µs histogram (cyclictest -h); larger samples count as overflows.
-        #[arg(long, default_value_t = 1000)]
-        histogram_us: usize,
-        /// Write the histogram in cyclictest's --histfile format.
-        #[arg(long)]
-        histfile: Option<PathBuf>,
-        /// Print one JSON object on stdout instead of the text lines.
-        #[arg(long)]
-        json: bool,
-        /// Write a PNG of the histogram.
-        #[arg(long)]
-        plot: Option<PathBuf>,
-        /// Tests to run, in order, comma-separated: timer, ipc, and the baselines of the IPC
-        /// hop: pipe (a raw pipe) and unix (a raw Unix datagram socket).
-        #[arg(long, default_value = "timer,ipc")]
-        test: String,
-        /// Instance name of the IPC hop's services (default latency-<pid>).
-        #[arg(long)]
-        instance: Option<String>,
-        /// No progress on stderr.
-        #[arg(long, short = 'q')]
-        quiet: bool,
-    },
+    Latency(LatencyArgs),
     /// Commissioning: start the cell, step one axis (and optionally move it out and back),
     /// report rise time, overshoot, settling time and peak following error, stop the cell.
     Tune {
@@ -348,7 +305,7 @@ enum Cmd {
 
 /// Reports a one-shot command to a running instance (`inject`, `estop`): its message on
 /// stdout, exit 0; or its error, exit 2 for bad input, 1 when it failed.
-fn control_done(r: Result<String, supervisor::control::ControlError>) -> ExitCode {
+fn control_done(r: Result<String, cell_client::control::ControlError>) -> ExitCode {
     match r {
         Ok(msg) => {
             println!("{msg}");
@@ -357,8 +314,8 @@ fn control_done(r: Result<String, supervisor::control::ControlError>) -> ExitCod
         Err(e) => {
             eprint!("{}", errors(&e));
             ExitCode::from(match e {
-                supervisor::control::ControlError::Input(_) => 2,
-                supervisor::control::ControlError::Failed(_) => 1,
+                cell_client::control::ControlError::Input(_) => 2,
+                cell_client::control::ControlError::Failed(_) => 1,
             })
         }
     }
@@ -486,7 +443,7 @@ fn ctl_reply(
             }
             // A failed program's figures show it up to the failure.
             if let (Some(path), Some(f)) = (plot, figures) {
-                match supervisor::figures::write_png(&f, path) {
+                match cell_client::figures::write_png(&f, path) {
                     Ok(()) if !ok => {
                         eprintln!("figures up to the failure: {}", path.display())
                     }
@@ -583,13 +540,13 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
             Ok(other) => return Err((1, format!("unexpected answer: {other:?}"))),
             Err(e) => return Err((2, e.to_string())),
         };
-        let snap = supervisor::status::read(&instance).map_err(|e| (1, e))?;
-        Ok(supervisor::status::status(&instance, &snap, info))
+        let snap = cell_client::status::read(&instance).map_err(|e| (1, e))?;
+        Ok(cell_client::status::status(&instance, &snap, info))
     };
     loop {
         match once() {
             Ok(status) => {
-                let text = supervisor::status::human(&status);
+                let text = cell_client::status::human(&status);
                 if json {
                     println!("{}", serde_json::to_string(&status).unwrap_or_default());
                 } else if watch {
@@ -685,11 +642,11 @@ fn main() -> ExitCode {
             }
             let mut recorder = match record
                 .as_deref()
-                .map(|f| supervisor::record::Background::start(&i, f, &mut || {}))
+                .map(|f| recorder::Background::start(&i, f, &mut || {}))
                 .transpose()
             {
                 Ok(r) => r,
-                Err(e) => return run_failed(&e, json),
+                Err(e) => return run_failed(&RunError::from(e), json),
             };
             let source = match std::fs::read(&program) {
                 Ok(s) => s,
@@ -736,47 +693,17 @@ fn main() -> ExitCode {
                 command: command.map(|c| c.split_whitespace().map(str::to_string).collect()),
             },
         ),
-        Cmd::Latency {
-            interval_us,
-            phase_us,
-            duration,
-            threads,
-            smp: _,
-            priority,
-            histogram_us,
-            histfile,
-            json,
-            plot,
-            test,
-            instance,
-            quiet,
-        } => {
-            let args = LatencyArgs {
-                interval_us,
-                phase_us,
-                duration,
-                threads,
-                priority,
-                histogram_us,
-                histfile,
-                json,
-                plot,
-                tests: test,
-                instance,
-                quiet,
-            };
-            match latency(&args) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(LatencyError::Input(e)) => {
-                    eprint!("{}", errors(&e));
-                    ExitCode::from(2)
-                }
-                Err(LatencyError::Failed(e)) => {
-                    eprint!("{}", errors(&e));
-                    ExitCode::FAILURE
-                }
+        Cmd::Latency(args) => match latency(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(LatencyError::Input(e)) => {
+                eprint!("{}", errors(&e));
+                ExitCode::from(2)
             }
-        }
+            Err(LatencyError::Failed(e)) => {
+                eprint!("{}", errors(&e));
+                ExitCode::FAILURE
+            }
+        },
         Cmd::LatencyPeer { args } => {
             match latency::peer::Args::parse(&args).and_then(|a| latency::peer::run(&a)) {
                 Ok(()) => ExitCode::SUCCESS,
@@ -834,7 +761,7 @@ fn main() -> ExitCode {
             json,
         } => match shm_schema::InstanceName::new(&instance)
             .map_err(|e| format!("--instance {instance:?}: {e}"))
-            .and_then(|i| supervisor::events::follow(&i, follow, json))
+            .and_then(|i| cell_client::events::follow(&i, follow, json))
         {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
@@ -847,15 +774,17 @@ fn main() -> ExitCode {
             axis,
             fault,
             clear,
-        } => control_done(supervisor::control::inject(&instance, &axis, &fault, clear)),
+        } => control_done(cell_client::control::inject(
+            &instance, &axis, &fault, clear,
+        )),
         Cmd::Estop { instance, reason } => {
-            control_done(supervisor::control::estop(&instance, &reason))
+            control_done(cell_client::control::estop(&instance, &reason))
         }
         Cmd::Io {
             instance,
             name,
             value,
-        } => control_done(supervisor::control::io(
+        } => control_done(cell_client::control::io(
             &instance,
             name.as_deref(),
             value.as_deref(),
@@ -923,7 +852,7 @@ fn record(
     rotate_size: Option<f64>,
     rotate_time: Option<f64>,
 ) -> ExitCode {
-    use supervisor::record::{RecordOptions, Rotate};
+    use recorder::{RecordOptions, Rotate};
     let i = match instance_of(instance) {
         Ok(i) => i,
         Err(c) => return c,
@@ -962,18 +891,17 @@ fn record(
             every: every.map(std::time::Duration::from_secs_f64),
         },
     };
-    let result =
-        supervisor::record::record(&i, &opts, &runtime::signals::stop_requested, &mut |path| {
-            use std::io::Write;
-            println!("recording instance {i} to {}", path.display());
-            let _ = std::io::stdout().flush();
-        });
+    let result = recorder::record(&i, &opts, &runtime::signals::stop_requested, &mut |path| {
+        use std::io::Write;
+        println!("recording instance {i} to {}", path.display());
+        let _ = std::io::stdout().flush();
+    });
     match result {
         Ok(r) => {
             print!("{}", r.text());
             ExitCode::SUCCESS
         }
-        Err(e) => run_failed(&e, false),
+        Err(e) => failed(&e, e.is_input()),
     }
 }
 
@@ -987,7 +915,7 @@ fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
         eprintln!("error: --listen {listen:?} is not an IP:port address (\"127.0.0.1:8080\")");
         return ExitCode::from(2);
     };
-    if let Some(Err(e)) = token.as_deref().map(supervisor::web::check_token) {
+    if let Some(Err(e)) = token.as_deref().map(web_view::check_token) {
         eprint!("{}", errors(&e));
         return ExitCode::from(2);
     }
@@ -995,20 +923,26 @@ fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
         eprintln!("error: cannot install signal handlers: {e}");
         return ExitCode::FAILURE;
     }
-    let opts = supervisor::web::WebOptions {
+    let opts = web_view::WebOptions {
         instance: i,
         listen,
         token,
     };
-    let result = supervisor::web::web(&opts, &mut |addr| {
+    let result = web_view::web(&opts, &mut |addr| {
         use std::io::Write;
         println!("serving instance {i} on http://{addr}/");
         let _ = std::io::stdout().flush();
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => run_failed(&e, false),
+        Err(e) => failed(&e, e.is_input()),
     }
+}
+
+/// Reports a command's error on stderr; exit 2 when the user's input was wrong, else 1.
+fn failed(e: &dyn std::error::Error, input: bool) -> ExitCode {
+    eprint!("{}", errors(&e));
+    ExitCode::from(if input { 2 } else { 1 })
 }
 
 /// `e` for stderr: each of its lines that starts a problem (not an indented continuation)

@@ -6,11 +6,10 @@
 
 use crate::error::RunError;
 use cell_config::Config;
-use cell_config::io::Direction;
 use motion_core::Params;
 use motion_core::generator::{Generator, Kin};
 use motion_core::predict::{Outcome, Prediction, simulate_with};
-use motion_program::{CellSpec, Commands, Op, Program, Space};
+use motion_program::{Commands, Op, Program, Space};
 use shm_schema::MAX_AXES;
 use shm_schema::motion::trajgen_fault;
 use std::sync::Arc;
@@ -47,29 +46,6 @@ pub struct Predicted {
     pub outputs: Vec<motion_core::predict::OutputEvent>,
 }
 
-/// What the motion language may name on this cell.
-pub fn cell_spec(cfg: &Config) -> CellSpec {
-    let named = |dir: Direction| -> Vec<(String, u32)> {
-        cfg.io
-            .iter()
-            .enumerate()
-            .filter(|(_, e)| e.direction == dir)
-            .map(|(k, e)| (e.name.clone(), k as u32))
-            .collect()
-    };
-    let axes: Vec<(String, String)> = cfg
-        .axis
-        .iter()
-        .map(|a| (a.name.clone(), a.unit.clone()))
-        .collect();
-    CellSpec {
-        coords: cfg.kinematics.coords(&cfg.axis),
-        joints: axes,
-        outputs: named(Direction::Output),
-        inputs: named(Direction::Input),
-    }
-}
-
 /// The generator's parameters for this cell (trajgen builds the same from the shared
 /// configuration).
 pub fn params(cfg: &Config) -> Params {
@@ -88,7 +64,7 @@ impl Checked {
         let at = |line: u32, col: u32, message: &str| {
             RunError::Input(format!("{name}:{line}:{col}: {message}"))
         };
-        let program = motion_program::parse(bytes, &cell_spec(cfg))
+        let program = motion_program::parse(bytes, &cfg.cell_spec())
             .map_err(|e| at(e.line, e.col, &e.message))?;
         let kin = kin(cfg)?;
         let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();

@@ -75,7 +75,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let mut recorder = match opts
         .record
         .as_deref()
-        .map(|f| crate::record::Background::start(&instance, f, &mut || cell.keep_alive()))
+        .map(|f| {
+            recorder::Background::start(&instance, f, &mut || cell.keep_alive())
+                .map_err(RunError::from)
+        })
         .transpose()
     {
         Ok(r) => r,
@@ -109,7 +112,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
                 // The figures up to the failure: what a user looks at to see why.
                 if let (Some(path), Some(mut f)) = (&opts.plot, figures) {
                     f.latency = latency_figures;
-                    match crate::figures::write_png(&f, path) {
+                    match cell_client::figures::write_png(&f, path) {
                         Ok(()) => {
                             message += &format!("\n  figures up to the failure: {}", path.display())
                         }
@@ -148,7 +151,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
     }
     if let (Some(path), Some(f)) = (&opts.plot, &report.figures) {
-        crate::figures::write_png(f, path).map_err(RunError::failed)?;
+        cell_client::figures::write_png(f, path).map_err(RunError::failed)?;
     }
     Ok(report)
 }

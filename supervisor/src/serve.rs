@@ -16,7 +16,6 @@
 use crate::cell::TICK;
 use crate::cell::{Cell, Incident, Mode};
 use crate::error::RunError;
-use crate::events;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
 use crate::program::Checked;
@@ -24,6 +23,7 @@ use crate::report::{Report, process_report};
 use crate::swap::{Step, Swap};
 use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
+use control_plane::event as events;
 use control_plane::event::Event;
 use control_plane::info::{Info, JobInfo, LastJob};
 use control_plane::report::Outcome;

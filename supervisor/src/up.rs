@@ -35,7 +35,10 @@ pub fn up(
             .join(", ")
     );
     let mut recorder = match record
-        .map(|f| crate::record::Background::start(&instance, f, &mut || cell.keep_alive()))
+        .map(|f| {
+            recorder::Background::start(&instance, f, &mut || cell.keep_alive())
+                .map_err(RunError::from)
+        })
         .transpose()
     {
         Ok(r) => r,

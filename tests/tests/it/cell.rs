@@ -87,7 +87,7 @@ pub(crate) fn check_run(j: &serde_json::Value, target: [f64; 3]) {
 /// only their legend's swatches, a few dozen pixels): the commanded and measured path, one
 /// histogram per process, the following error of x and y.
 pub(crate) fn check_figures(path: &Path, processes: usize) {
-    use supervisor::figures::{HEIGHT, WIDTH, areas};
+    use cell_client::figures::{HEIGHT, WIDTH, areas};
     let file = std::fs::File::open(path).expect("the PNG was written");
     let mut reader = png::Decoder::new(std::io::BufReader::new(file))
         .read_info()

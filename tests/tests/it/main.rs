@@ -27,7 +27,7 @@ static ALLOC: runtime::alloc_count::CountingAllocator = runtime::alloc_count::Co
 /// `src` as the commands trajgen takes on the default Gantry UBA cell (program `id`).
 pub(crate) fn gantry_commands(src: &str, id: u32) -> Vec<shm_schema::MotionCommandV2> {
     let cfg = cell_config::Config::default_cell();
-    motion_program::parse(src.as_bytes(), &supervisor::program::cell_spec(&cfg))
+    motion_program::parse(src.as_bytes(), &cfg.cell_spec())
         .expect("the program parses")
         .commands(id)
         .collect()

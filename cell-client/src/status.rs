@@ -289,7 +289,7 @@ fn estop_status(snap: &Snapshot) -> Option<EstopStatus> {
     let names = snap
         .cell
         .as_deref()
-        .map(crate::events::Axes::of_cell)
+        .map(control_plane::event::Axes::of_cell)
         .unwrap_or_default();
     Some(EstopStatus {
         latched,

@@ -1,4 +1,4 @@
-//! `supervisor record`: every service of a running cell into MCAP files, for Foxglove and
+//! The recorder (`supervisor record`): every service of a running cell into MCAP files, for Foxglove and
 //! PlotJuggler (docs/recording.md).
 //!
 //! An observer like any other: its own node, subscribers with the largest buffers the services
@@ -11,7 +11,7 @@
 //! (a subscriber's buffer overflowed) are counted per topic from the gaps in their sequence
 //! numbers.
 
-use crate::events::Axes;
+use control_plane::event::Axes;
 use iceoryx2::prelude::ZeroCopySend;
 use mcap::records::MessageHeader;
 use runtime::ipc::{self, Sub};
@@ -703,52 +703,94 @@ impl Drop for Leave {
 /// How long without the supervisor's heartbeat before the recording takes the cell for gone.
 const GONE: Duration = Duration::from_secs(3);
 
+/// Why a recording did not start or did not finish.
+#[derive(Debug)]
+pub enum RecordError {
+    /// No process of the instance is running.
+    NotUp(InstanceName),
+    /// Processes of the instance run, but none publishes the cell's configuration.
+    NoConfiguration(InstanceName),
+    /// Attaching to the cell's shared memory failed.
+    Attach(String),
+    /// A file could not be created or written (the words name it).
+    File(String),
+    /// The recorder's own process could not be started.
+    Spawn(std::io::Error),
+    /// The recorder's process started but did not begin recording (its words, if any).
+    NotStarted(String),
+}
+
+impl RecordError {
+    /// Whether the user asked for what cannot be (an instance that is not up): the CLI
+    /// exits 2, else 1.
+    pub fn is_input(&self) -> bool {
+        matches!(self, Self::NotUp(_) | Self::NoConfiguration(_))
+    }
+}
+
+impl std::fmt::Display for RecordError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NotUp(i) => write!(f, "instance {i} is not up (`supervisor up --instance {i}`)"),
+            Self::NoConfiguration(i) => {
+                write!(f, "instance {i} publishes no cell configuration: is it up?")
+            }
+            Self::Attach(e) | Self::File(e) => f.write_str(e),
+            Self::Spawn(e) => write!(f, "record: {e}"),
+            Self::NotStarted(why) if why.is_empty() => f.write_str("the recorder did not start"),
+            Self::NotStarted(why) => write!(f, "the recorder did not start: {why}"),
+        }
+    }
+}
+
+impl std::error::Error for RecordError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Spawn(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
 /// Records `instance` until `stop` says so, the duration is over or the cell goes down.
-/// `ready` is called once every subscriber is in place. Errors when the instance is not up
-/// (a [`crate::error::RunError::Input`]) or a file cannot be written.
+/// `ready` is called once every subscriber is in place.
 pub fn record(
     instance: &InstanceName,
     opts: &RecordOptions,
     stop: &dyn Fn() -> bool,
     ready: &mut dyn FnMut(&Path),
-) -> Result<Recorded, crate::error::RunError> {
-    use crate::error::RunError;
+) -> Result<Recorded, RecordError> {
     ipc::quiet_iceoryx2_log();
     if ipc::live_node_pids(instance).unwrap_or_default().is_empty() {
-        return Err(RunError::Input(format!(
-            "instance {instance} is not up (`supervisor up --instance {instance}`)"
-        )));
+        return Err(RecordError::NotUp(*instance));
     }
-    let f = |e: String| RunError::failed(e);
+    let f = RecordError::File;
+    let attach = |e: ipc::IpcError| RecordError::Attach(e.to_string());
     // Whatever happens from here, the recorder leaves nothing of the instance behind it once
     // the cell is gone (declared before the node: dropped after it).
     let _leave = Leave(*instance);
-    let node = ipc::node(instance, &format!("recorder-{}", std::process::id()))
-        .map_err(|e| f(e.to_string()))?;
-    let cell_sub = Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1)
-        .map_err(|e| f(e.to_string()))?;
+    let node = ipc::node(instance, &format!("recorder-{}", std::process::id())).map_err(attach)?;
+    let cell_sub =
+        Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1).map_err(attach)?;
     let start = Instant::now();
     let cell = loop {
         if let Some(c) = cell_sub.latest() {
             break Box::new(c);
         }
         if start.elapsed() > Duration::from_secs(2) {
-            return Err(RunError::Input(format!(
-                "instance {instance} publishes no cell configuration: is it up?"
-            )));
+            return Err(RecordError::NoConfiguration(*instance));
         }
         std::thread::sleep(Duration::from_millis(5));
     };
     drop(cell_sub);
     let axes: Vec<String> = Axes::of_cell(&cell).axes.into_iter().map(|a| a.0).collect();
-    let mut chans = topics(&node, instance, &cell).map_err(f)?;
+    let mut chans = topics(&node, instance, &cell).map_err(RecordError::Attach)?;
     let list: Topics = chans
         .iter()
         .map(|c| (c.name().to_string(), c.schema_name(), c.schema(&axes)))
         .collect();
     let mut out = Out::create(&opts.out, opts.rotate, 0, &list).map_err(f)?;
-    let host = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1)
-        .map_err(|e| f(e.to_string()))?;
+    let host = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(attach)?;
     let clock = Clock::new();
     ready(&out.path);
     let began = Instant::now();
@@ -811,18 +853,19 @@ impl Background {
         instance: &InstanceName,
         file: &Path,
         tick: &mut dyn FnMut(),
-    ) -> Result<Self, crate::error::RunError> {
+    ) -> Result<Self, RecordError> {
         use std::io::BufRead;
-        let exe = std::env::current_exe()
-            .map_err(|e| crate::error::RunError::failed(format!("record: {e}")))?;
+        let exe = std::env::current_exe().map_err(RecordError::Spawn)?;
         let mut child = std::process::Command::new(exe)
             .args(["record", "--instance", instance.as_str(), "--out"])
             .arg(file)
             .stdin(std::process::Stdio::null())
             .stdout(std::process::Stdio::piped())
             .spawn()
-            .map_err(|e| crate::error::RunError::failed(format!("record: {e}")))?;
-        // Its first line says it is ready; read on a thread so that `tick` goes on.
+            .map_err(RecordError::Spawn)?;
+        // Its first line on stdout says it is ready (whatever it says: a recorder that cannot
+        // start writes its reasons to stderr and exits, closing stdout with no line); read on
+        // a thread so that `tick` goes on.
         let (tx, rx) = std::sync::mpsc::channel();
         let out = child.stdout.take().map(std::io::BufReader::new);
         let reader = std::thread::spawn(move || {
@@ -855,16 +898,9 @@ impl Background {
             child: Some(child),
             out,
         };
-        if !line.starts_with("recording") {
+        if line.is_empty() {
             let why = me.stop();
-            return Err(crate::error::RunError::failed(format!(
-                "the recorder did not start{}",
-                if why.trim().is_empty() {
-                    String::new()
-                } else {
-                    format!(": {}", why.trim())
-                }
-            )));
+            return Err(RecordError::NotStarted(why.trim().to_string()));
         }
         Ok(me)
     }

@@ -22,8 +22,6 @@
 //!   page of another origin cannot send it without a CORS preflight, which is never granted),
 //!   and a `POST` or a WebSocket upgrade whose `Origin` is not this server's is refused.
 
-use crate::error::RunError;
-use crate::events::Axes;
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Query, State};
@@ -31,6 +29,7 @@ use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
+use control_plane::event::Axes;
 use runtime::ipc::{self, Sub};
 use serde_json::{Value, json};
 use shm_schema::estop::HostStateV1;
@@ -79,28 +78,67 @@ struct Shared {
     hello: Arc<Mutex<Option<Arc<str>>>>,
 }
 
+/// Why the web view did not start or stopped.
+#[derive(Debug)]
+pub enum WebError {
+    /// `--listen` names an address other than loopback and no `--token` was given.
+    TokenNeeded(SocketAddr),
+    /// The token given is too short or holds characters a URL or a cookie cannot carry.
+    BadToken(TokenError),
+    /// The address cannot be listened on (in use, not this machine's).
+    CannotListen(SocketAddr, std::io::Error),
+    /// The server itself failed (its runtime, its thread, a socket).
+    Server(std::io::Error),
+}
+
+impl WebError {
+    /// Whether the user's input was wrong (nothing was started): the CLI exits 2, else 1.
+    pub fn is_input(&self) -> bool {
+        !matches!(self, Self::Server(_))
+    }
+}
+
+impl std::fmt::Display for WebError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::TokenNeeded(a) => write!(
+                f,
+                "--listen {a} opens the cell's controls (e-stop, reset, start) to the network: give --token"
+            ),
+            Self::BadToken(e) => e.fmt(f),
+            Self::CannotListen(a, e) => write!(f, "web: cannot listen on {a}: {e}"),
+            Self::Server(e) => write!(f, "web: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for WebError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::CannotListen(_, e) | Self::Server(e) => Some(e),
+            Self::BadToken(e) => Some(e),
+            Self::TokenNeeded(_) => None,
+        }
+    }
+}
+
 /// Serves the page until SIGINT or SIGTERM. `ready` gets the address it listens on.
-pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), RunError> {
+pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), WebError> {
     if !opts.listen.ip().is_loopback() && opts.token.is_none() {
-        return Err(RunError::Input(format!(
-            "--listen {} opens the cell's controls (e-stop, reset, start) to the network: give --token",
-            opts.listen
-        )));
+        return Err(WebError::TokenNeeded(opts.listen));
     }
     if let Some(t) = &opts.token {
-        check_token(t).map_err(RunError::Input)?;
+        check_token(t).map_err(WebError::BadToken)?;
     }
     let (frames, _) = broadcast::channel(64);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .map_err(|e| RunError::failed(format!("web: {e}")))?;
+        .map_err(WebError::Server)?;
     let listener = rt
         .block_on(tokio::net::TcpListener::bind(opts.listen))
-        .map_err(|e| RunError::Input(format!("web: cannot listen on {}: {e}", opts.listen)))?;
-    let addr = listener
-        .local_addr()
-        .map_err(|e| RunError::failed(format!("web: {e}")))?;
+        .map_err(|e| WebError::CannotListen(opts.listen, e))?;
+    let addr = listener.local_addr().map_err(WebError::Server)?;
     let shared = Shared {
         instance: opts.instance,
         token: opts.token.clone(),
@@ -114,7 +152,7 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), R
         std::thread::Builder::new()
             .name("web-sampler".into())
             .spawn(move || sample_forever(instance, &frames, &hello))
-            .map_err(|e| RunError::failed(format!("web: {e}")))?
+            .map_err(WebError::Server)?
     };
     let app = Router::new()
         .route(
@@ -146,9 +184,7 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), R
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     });
-    let result = rt
-        .block_on(async { serve.await })
-        .map_err(|e| RunError::failed(format!("web: {e}")));
+    let result = rt.block_on(async { serve.await }).map_err(WebError::Server);
     STOP.store(true, std::sync::atomic::Ordering::Relaxed);
     let _ = sampler.join();
     result
@@ -164,21 +200,40 @@ fn page(kind: &'static str, body: &'static str) -> Response {
 
 /// A token the view accepts: at least 8 characters, each a letter, a digit or `-_.~` (it
 /// travels in a URL and a cookie as it is).
-pub fn check_token(token: &str) -> Result<(), String> {
+pub fn check_token(token: &str) -> Result<(), TokenError> {
     if token.chars().count() < 8 {
-        return Err("--token must have at least 8 characters".into());
+        return Err(TokenError::TooShort);
     }
     if !token
         .chars()
         .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.' | '~'))
     {
-        return Err(
-            "--token may hold letters, digits and - _ . ~ only (it travels in a URL and a cookie)"
-                .into(),
-        );
+        return Err(TokenError::BadCharacter);
     }
     Ok(())
 }
+
+/// What is wrong with a `--token`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TokenError {
+    /// Fewer than 8 characters.
+    TooShort,
+    /// A character other than a letter, a digit or `- _ . ~`.
+    BadCharacter,
+}
+
+impl std::fmt::Display for TokenError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::TooShort => "--token must have at least 8 characters",
+            Self::BadCharacter => {
+                "--token may hold letters, digits and - _ . ~ only (it travels in a URL and a cookie)"
+            }
+        })
+    }
+}
+
+impl std::error::Error for TokenError {}
 
 /// The cookie that carries the token for the page's own requests (its scripts, its
 /// WebSocket), one per port.
@@ -447,8 +502,11 @@ async fn action(
         use control_plane::{Reply, Request};
         let req = match what.as_str() {
             "estop" => {
-                return crate::control::estop(instance.as_str(), "e-stop button of the web view")
-                    .map_err(|e| (StatusCode::CONFLICT, e.to_string()));
+                return cell_client::control::estop(
+                    instance.as_str(),
+                    "e-stop button of the web view",
+                )
+                .map_err(|e| (StatusCode::CONFLICT, e.to_string()));
             }
             "reset" => Request::Reset,
             "start" => Request::Start,
@@ -676,13 +734,13 @@ fn frame(
     peak_fe: &[f64; MAX_AXES],
 ) -> Value {
     let joints: Option<Vec<f64>> = servo.map(|s| s.act_position[..n].to_vec());
-    let tool = servo.and_then(|s| crate::figures::tool_of(kin, &s.act_position, n));
+    let tool = servo.and_then(|s| cell_client::figures::tool_of(kin, &s.act_position, n));
     // The commanded tool is trajgen's own, on the program's path whatever the host's
     // stalls did to servo's extrapolation; through the kinematics from servo's command when
     // the setpoint does not carry it (a trajgen of another language may not).
     let command_tool = match sp.filter(|sp| sp.coords > 0) {
         Some(sp) => Some(sp.cartesian[..(sp.coords as usize).min(MAX_AXES)].to_vec()),
-        None => servo.and_then(|s| crate::figures::tool_of(kin, &s.cmd_position, n)),
+        None => servo.and_then(|s| cell_client::figures::tool_of(kin, &s.cmd_position, n)),
     };
     let estop = host
         .filter(|h| h.estop != 0)

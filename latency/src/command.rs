@@ -1,6 +1,6 @@
-//! `supervisor latency`: the options, their checks, progress and the output files.
+//! `supervisor latency`: its options, their checks, its progress and its output files.
 
-use latency::{Options, Results, Test, Threads, histfile, report};
+use crate::{Options, Results, Test, Threads, histfile, report};
 use runtime::signals;
 use shm_schema::InstanceName;
 use std::io::{IsTerminal, Write};
@@ -10,32 +10,50 @@ use std::time::{Duration, Instant};
 /// The hidden subcommand that runs a hop's sender (see `latency::peer`).
 pub const PEER_SUBCOMMAND: &str = "latency-peer";
 
-/// The command line of `supervisor latency`, as given.
-#[derive(Clone, Debug)]
+/// The command line of `supervisor latency`.
+#[derive(Clone, Debug, clap::Args)]
 pub struct LatencyArgs {
-    /// `--interval-us`.
+    /// Period of the measuring loops (µs).
+    #[arg(long, short = 'i', default_value_t = 1000)]
     pub interval_us: u64,
-    /// `--phase-us`; `None` for half the interval.
+    /// Phase of the loops on the grid of CLOCK_MONOTONIC (µs), as a process' phase in the
+    /// cell; default half the interval. 0 puts every wake-up on a whole millisecond,
+    /// together with the kernel's tick.
+    #[arg(long)]
     pub phase_us: Option<u64>,
-    /// `--duration`.
+    /// How long each test runs: seconds, or 30s, 5m, 2h, 1d. Default: until Ctrl-C.
+    #[arg(long, short = 'D')]
     pub duration: Option<String>,
-    /// `--threads`.
+    /// Timer threads, pinned round-robin over the CPUs (default: one per CPU, as --smp).
+    #[arg(long, short = 't', conflicts_with = "smp")]
     pub threads: Option<usize>,
-    /// `--priority`.
+    /// One timer thread per CPU, each pinned to its CPU (cyclictest -S); the default.
+    #[arg(long, short = 'S')]
+    pub smp: bool,
+    /// SCHED_FIFO priority of every measuring thread (0: SCHED_OTHER).
+    #[arg(long, short = 'p', default_value_t = 80)]
     pub priority: i32,
-    /// `--histogram-us`.
+    /// Range of the 1-µs histogram (cyclictest -h); larger samples count as overflows.
+    #[arg(long, default_value_t = 1000)]
     pub histogram_us: usize,
-    /// `--histfile`.
+    /// Write the histogram in cyclictest's --histfile format.
+    #[arg(long)]
     pub histfile: Option<PathBuf>,
-    /// `--json`.
+    /// Print one JSON object on stdout instead of the text lines.
+    #[arg(long)]
     pub json: bool,
-    /// `--plot`.
+    /// Write a PNG of the histogram.
+    #[arg(long)]
     pub plot: Option<PathBuf>,
-    /// `--test`, comma-separated.
+    /// Tests to run, in order, comma-separated: timer, ipc, and the baselines of the IPC
+    /// hop: pipe (a raw pipe) and unix (a raw Unix datagram socket).
+    #[arg(long = "test", default_value = "timer,ipc")]
     pub tests: String,
-    /// `--instance`.
+    /// Instance name of the IPC hop's services (default latency-<pid>).
+    #[arg(long)]
     pub instance: Option<String>,
-    /// `--quiet`.
+    /// No progress on stderr.
+    #[arg(long, short = 'q')]
     pub quiet: bool,
 }
 
@@ -47,6 +65,16 @@ pub enum LatencyError {
     /// The measurement failed. Exit code 1.
     Failed(String),
 }
+
+impl std::fmt::Display for LatencyError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Input(e) | Self::Failed(e) => f.write_str(e),
+        }
+    }
+}
+
+impl std::error::Error for LatencyError {}
 
 /// Parses a duration like cyclictest's `-D`: seconds, or a number with `s`, `m`, `h` or `d`.
 pub fn parse_duration(text: &str) -> Result<Duration, String> {
@@ -184,7 +212,7 @@ pub fn latency(args: &LatencyArgs) -> Result<(), LatencyError> {
             opts.priority
         );
     }
-    let results = latency::run(&opts, |running, elapsed| {
+    let results = crate::run(&opts, |running, elapsed| {
         if args.quiet || last.elapsed() < every {
             return;
         }
