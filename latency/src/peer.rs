@@ -15,25 +15,37 @@ use runtime::signals;
 use runtime::time::now_ns;
 use shm_schema::{InstanceName, ServiceId, SetpointV2};
 
-/// What the sender is told.
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// What the sender is told (`supervisor latency-peer`'s arguments).
+#[derive(Clone, Debug, PartialEq, Eq, clap::Args)]
 pub struct Args {
-    /// [`Test::Ipc`], [`Test::Pipe`] or [`Test::Unix`].
+    /// ipc, pipe or unix.
+    #[arg(long, value_parser = transport)]
     pub transport: Test,
     /// Instance of the IPC hop's services.
+    #[arg(long)]
     pub instance: String,
     /// Period (µs).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub interval_us: u64,
     /// Phase on the grid (µs).
+    #[arg(long, default_value_t = 0)]
     pub phase_us: u64,
     /// CPU to pin to.
+    #[arg(long)]
     pub cpu: usize,
     /// `SCHED_FIFO` priority (0: `SCHED_OTHER`).
+    #[arg(long)]
     pub priority: i32,
 }
 
+fn transport(name: &str) -> Result<Test, String> {
+    Test::from_name(name)
+        .filter(|t| *t != Test::Timer)
+        .ok_or_else(|| format!("{name:?} is not ipc, pipe or unix"))
+}
+
 impl Args {
-    /// As command-line arguments (what [`Args::parse`] reads back).
+    /// As command-line arguments (what clap reads back).
     pub fn to_args(&self) -> Vec<String> {
         vec![
             "--transport".into(),
@@ -49,46 +61,6 @@ impl Args {
             "--priority".into(),
             self.priority.to_string(),
         ]
-    }
-
-    /// Reads the arguments of [`Args::to_args`].
-    pub fn parse(args: &[String]) -> Result<Self, String> {
-        let mut it = args.iter();
-        let (mut transport, mut instance, mut interval_us, mut cpu, mut priority) =
-            (None, None, None, None, None);
-        let mut phase_us = 0;
-        while let Some(flag) = it.next() {
-            let value = it.next().ok_or_else(|| format!("{flag} needs a value"))?;
-            let bad = |what: &str| format!("{flag} {value:?}: {what}");
-            match flag.as_str() {
-                "--transport" => {
-                    transport = Some(
-                        Test::from_name(value)
-                            .filter(|t| *t != Test::Timer)
-                            .ok_or_else(|| bad("not ipc, pipe or unix"))?,
-                    )
-                }
-                "--instance" => instance = Some(value.clone()),
-                "--interval-us" => {
-                    interval_us = Some(value.parse().map_err(|_| bad("not a number"))?)
-                }
-                "--phase-us" => phase_us = value.parse().map_err(|_| bad("not a number"))?,
-                "--cpu" => cpu = Some(value.parse().map_err(|_| bad("not a CPU number"))?),
-                "--priority" => priority = Some(value.parse().map_err(|_| bad("not a number"))?),
-                _ => return Err(format!("unknown argument {flag:?}")),
-            }
-        }
-        let missing = |what: &str| format!("missing {what}");
-        Ok(Self {
-            transport: transport.ok_or_else(|| missing("--transport"))?,
-            instance: instance.ok_or_else(|| missing("--instance"))?,
-            interval_us: interval_us
-                .filter(|i| *i > 0)
-                .ok_or_else(|| missing("a positive --interval-us"))?,
-            phase_us,
-            cpu: cpu.ok_or_else(|| missing("--cpu"))?,
-            priority: priority.ok_or_else(|| missing("--priority"))?,
-        })
     }
 }
 
@@ -157,7 +129,19 @@ mod tests {
             cpu: 1,
             priority: 80,
         };
-        assert_eq!(Args::parse(&a.to_args()), Ok(a));
-        assert!(Args::parse(&["--transport".into(), "timer".into()]).is_err());
+        use clap::Parser;
+        #[derive(Debug, Parser)]
+        struct Peer {
+            #[command(flatten)]
+            args: Args,
+        }
+        let parse = |args: Vec<String>| {
+            Peer::try_parse_from(std::iter::once("latency-peer".to_string()).chain(args))
+                .map(|p| p.args)
+        };
+        assert_eq!(parse(a.to_args()).ok(), Some(a.clone()));
+        let mut timer = a.to_args();
+        timer[1] = "timer".into();
+        assert!(parse(timer).is_err());
     }
 }

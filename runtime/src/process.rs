@@ -155,18 +155,12 @@ pub fn run<T: Task>(
     build: impl FnOnce(&Context) -> Result<T, SetupError>,
 ) -> ExitCode {
     crate::abort_on_panic();
+    let (instance, name) = match parse_args(default_name, about) {
+        Ok(a) => a,
+        Err(code) => return code,
+    };
     // A blocked stderr (a full pipe, a paused terminal) must never stall a process.
     let _log = init_logging_lossy();
-    let (instance, name) = match parse_args(default_name, about) {
-        Ok(Some(a)) => a,
-        Ok(None) => return ExitCode::SUCCESS,
-        Err(msg) => {
-            eprintln!(
-                "{default_name}: {msg}\nusage: {default_name} [--instance NAME] [--name NAME]"
-            );
-            return ExitCode::from(2);
-        }
-    };
     match run_inner(name, instance, build) {
         Ok(Exit::Stopped) => ExitCode::SUCCESS,
         Ok(Exit::SupervisorLost) => {
@@ -233,34 +227,52 @@ where
     ipc::quiet_iceoryx2_log();
 }
 
-fn parse_args(
-    default_name: &str,
-    about: &str,
-) -> Result<Option<(InstanceName, ProcessName)>, String> {
-    let mut instance = DEFAULT_INSTANCE.to_string();
-    let mut name = default_name.to_string();
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--instance" => instance = args.next().ok_or("--instance needs a NAME")?,
-            s if s.starts_with("--instance=") => instance = s["--instance=".len()..].to_string(),
-            "--name" => name = args.next().ok_or("--name needs a NAME")?,
-            s if s.starts_with("--name=") => name = s["--name=".len()..].to_string(),
-            "-h" | "--help" => {
-                println!(
-                    "{default_name} — {about}\n\nusage: {default_name} [--instance NAME] [--name NAME]\n\n\
-                     Started by the supervisor; reads its settings from the cell configuration \
-                     the supervisor publishes for instance NAME (default {DEFAULT_INSTANCE}), in the \
-                     process table entry called NAME (default {default_name})."
-                );
-                return Ok(None);
-            }
-            other => return Err(format!("unknown argument {other:?}")),
-        }
-    }
-    let instance = InstanceName::new(&instance).map_err(|e| e.to_string())?;
-    let name = ProcessName::new(&name).map_err(|e| format!("--name {name:?}: {e}"))?;
-    Ok(Some((instance, name)))
+/// The command line of every process of a cell; its name and words are the process' own.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// The cell's instance: the prefix of its services (as `supervisor up --instance`).
+    #[arg(long, default_value = DEFAULT_INSTANCE, value_parser = instance_name)]
+    instance: InstanceName,
+    /// The process' entry in the cell's process table (default: the program's own name).
+    #[arg(long, value_parser = process_name)]
+    name: Option<ProcessName>,
+}
+
+fn instance_name(s: &str) -> Result<InstanceName, String> {
+    InstanceName::new(s).map_err(|e| e.to_string())
+}
+
+fn process_name(s: &str) -> Result<ProcessName, String> {
+    ProcessName::new(s).map_err(|e| e.to_string())
+}
+
+/// The instance and the process' name from the command line, or how to exit: 0 after
+/// `--help`, 2 after an argument clap refused (its message names it).
+fn parse_args(default_name: &str, about: &str) -> Result<(InstanceName, ProcessName), ExitCode> {
+    use clap::{CommandFactory, FromArgMatches};
+    let cmd = Args::command()
+        .name(default_name.to_string())
+        .about(about.to_string())
+        .after_help(format!(
+            "Started by the supervisor; reads its settings from the cell configuration the \
+             supervisor publishes for the instance, in the process table entry called NAME \
+             (default {default_name})."
+        ));
+    let args = cmd
+        .try_get_matches()
+        .and_then(|m| Args::from_arg_matches(&m))
+        .map_err(|e| {
+            let _ = e.print();
+            ExitCode::from(if e.use_stderr() { 2 } else { 0 })
+        })?;
+    let name = match args.name {
+        Some(n) => n,
+        None => process_name(default_name).map_err(|e| {
+            eprintln!("{default_name}: {e}");
+            ExitCode::from(2)
+        })?,
+    };
+    Ok((args.instance, name))
 }
 
 enum Exit {

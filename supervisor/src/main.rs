@@ -297,10 +297,7 @@ enum Cmd {
     },
     /// The sending side of a latency hop (started by `supervisor latency`).
     #[command(hide = true, name = "latency-peer")]
-    LatencyPeer {
-        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
-        args: Vec<String>,
-    },
+    LatencyPeer(latency::peer::Args),
 }
 
 /// Reports a one-shot command to a running instance (`inject`, `estop`): its message on
@@ -704,15 +701,13 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
-        Cmd::LatencyPeer { args } => {
-            match latency::peer::Args::parse(&args).and_then(|a| latency::peer::run(&a)) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => {
-                    eprintln!("latency-peer: {e}");
-                    ExitCode::FAILURE
-                }
+        Cmd::LatencyPeer(args) => match latency::peer::run(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("latency-peer: {e}");
+                ExitCode::FAILURE
             }
-        }
+        },
         Cmd::Tune {
             axis,
             step,

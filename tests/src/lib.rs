@@ -386,6 +386,51 @@ pub fn attributable(test: impl FnOnce()) {
     std::panic::resume_unwind(panic);
 }
 
+/// The command line of a cell's process (`exe`, its program, named `name`): `--help` names it
+/// and its two arguments and exits 0; an unknown argument, a bad `--instance` or `--name` is
+/// refused naming the argument, exit 2, before it touches anything of an instance. For each
+/// process crate's own test (which makes cargo build the binary with the tests: the
+/// integration tests find it built).
+pub fn check_process_command_line(exe: &str, name: &str) {
+    let run = |args: &[&str]| {
+        let out = Command::new(exe)
+            .args(args)
+            .env("RTC_LOG", "error")
+            .output()
+            .expect("the process' program");
+        let text = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
+        (out.status.code(), text)
+    };
+    let (code, help) = run(&["--help"]);
+    assert_eq!(code, Some(0), "{name} --help:\n{help}");
+    for word in [name, "--instance", "--name"] {
+        assert!(
+            help.contains(word),
+            "{name} --help does not name {word}:\n{help}"
+        );
+    }
+    for (args, named) in [
+        (&["--bogus"][..], "--bogus"),
+        (&["--instance", "a/b"], "--instance"),
+        (&["--instance"], "--instance"),
+        (
+            &[
+                "--name",
+                "a name with spaces that is far too long for a process",
+            ],
+            "--name",
+        ),
+    ] {
+        let (code, text) = run(args);
+        assert_eq!(code, Some(2), "{name} {args:?} was not refused:\n{text}");
+        assert!(
+            text.contains(named),
+            "{name} {args:?}: the error does not name {named}:\n{text}"
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
