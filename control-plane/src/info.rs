@@ -30,6 +30,8 @@ pub struct Info {
     pub enabling: bool,
     /// The process being replaced (`swap`, `restart`); `null` when none.
     pub swapping: Option<String>,
+    /// The axis being tuned (`supervisor tune`); `null` when none.
+    pub tuning: Option<String>,
     /// The cell is going down (`down`, a signal): the axes come to rest, then the processes
     /// stop.
     pub going_down: bool,

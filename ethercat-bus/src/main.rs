@@ -797,9 +797,7 @@ fn main() -> ExitCode {
                 seq: 0,
                 reply_wait_ns: ctx.own.period_ns / 2,
                 buf: [0; 1536],
-                command_fresh: Freshness::new(
-                    ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
-                ),
+                command_fresh: Freshness::new(ctx.period_of("servo")?),
                 command_timeout_ns: ctx.cell.drive_command_timeout_ns,
                 last_command_ns: None,
                 command: None,

@@ -98,9 +98,7 @@ fn main() -> ExitCode {
                 cycles: 0,
                 servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
                 last: None,
-                servo_fresh: Freshness::new(
-                    ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
-                ),
+                servo_fresh: Freshness::new(ctx.period_of("servo")?),
                 output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
                 io,
                 field: Sub::new(&ctx.node, i, ServiceId::FieldInputs, 64)?,

@@ -68,6 +68,21 @@ pub struct Context {
     pub cell: CellConfigV6,
 }
 
+impl Context {
+    /// The period (ns) of the process called `name`, one this process reads from or feeds
+    /// (servo: `trajgen`, `drives`): a cell without it is refused at set-up, by name, never
+    /// run on a guessed period.
+    pub fn period_of(&self, name: &str) -> Result<u64, SetupError> {
+        self.cell.period_of(name).ok_or_else(|| {
+            format!(
+                "the cell's process table has no process called {name:?}, whose period {} needs",
+                self.name
+            )
+            .into()
+        })
+    }
+}
+
 /// What one cycle gets from the runtime and gives back to it.
 #[derive(Debug)]
 pub struct Cycle<'a> {

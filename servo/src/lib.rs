@@ -82,10 +82,9 @@ pub struct Params {
 }
 
 impl Params {
-    /// From the cell configuration, for a servo of period `period_ns`. The setpoints' period
-    /// is that of the process called `trajgen` (four servo periods without one).
-    pub fn from_cell(cell: &CellConfigV6, period_ns: u64) -> Self {
-        let trajgen_ns = cell.period_of("trajgen").unwrap_or(4 * period_ns);
+    /// From the cell configuration, for a servo of period `period_ns` fed setpoints every
+    /// `trajgen_ns`.
+    pub fn from_cell(cell: &CellConfigV6, period_ns: u64, trajgen_ns: u64) -> Self {
         Self {
             axes: cell.axes as usize,
             axis: cell.axis,

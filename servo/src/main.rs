@@ -29,18 +29,17 @@ struct Servo {
 impl Servo {
     fn new(ctx: &Context) -> Result<Self, SetupError> {
         let i = &ctx.instance;
+        let trajgen_ns = ctx.period_of("trajgen")?;
         Ok(Self {
-            controller: Controller::new(Params::from_cell(&ctx.cell, ctx.own.period_ns)),
+            controller: Controller::new(Params::from_cell(
+                &ctx.cell,
+                ctx.own.period_ns,
+                trajgen_ns,
+            )),
             feedback: None,
             setpoint_ns: None,
-            setpoint_fresh: Freshness::new(
-                ctx.cell
-                    .period_of("trajgen")
-                    .unwrap_or(4 * ctx.own.period_ns),
-            ),
-            feedback_fresh: Freshness::new(
-                ctx.cell.period_of("drives").unwrap_or(ctx.own.period_ns),
-            ),
+            setpoint_fresh: Freshness::new(trajgen_ns),
+            feedback_fresh: Freshness::new(ctx.period_of("drives")?),
             raised: false,
             requests: Sub::new(&ctx.node, i, ServiceId::ServoRequest, 16)?,
             setpoints: Sub::new(&ctx.node, i, ServiceId::Setpoint, 8)?,

@@ -1063,6 +1063,7 @@ impl Cell {
             last_job: None,
             enabling: false,
             swapping: None,
+            tuning: None,
             going_down: false,
         }
     }

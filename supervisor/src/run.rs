@@ -9,17 +9,15 @@
 //! 4. Stop every process (SIGTERM, then SIGKILL), drop our ports, check that no iceoryx2
 //!    resource of the instance is left, and report.
 
-use crate::cell::{Cell, Mode, TICK, open_cell};
+use crate::cell::{Mode, open_cell};
 use crate::error::RunError;
-use crate::job::Enabling;
 use crate::out::writable;
 use crate::program::{Checked, Predicted};
 use crate::report::Report;
 use crate::report::trace_csv;
 use crate::serve::{self, End, ProgramJob};
 use cell_config::Config;
-use runtime::signals;
-use shm_schema::{InstanceName, SetpointV2};
+use shm_schema::InstanceName;
 use std::path::PathBuf;
 
 /// What `supervisor run` was asked to do.
@@ -92,7 +90,12 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         progress: opts.progress,
         plot: opts.plot.is_some(),
     };
-    let end = serve::serve(&cfg, &mut cell, &mut server, Some(first));
+    let end = serve::serve(
+        &cfg,
+        &mut cell,
+        &mut server,
+        Some(serve::First::Program(first)),
+    );
     cell.refresh_latency();
     let processes = serve::process_reports(&cell);
     let latency_figures = serve::latency_figures(&cell);
@@ -128,7 +131,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             Err(e) => return Err(e),
         },
         End::Interrupted => return Err(RunError::Interrupted),
-        End::Down => {
+        End::Down | End::Tuned(_) => {
             return Err(RunError::failed(
                 "`supervisor down` stopped the cell before the program ended",
             ));
@@ -154,36 +157,4 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         cell_client::figures::write_png(f, path).map_err(RunError::failed)?;
     }
     Ok(report)
-}
-
-/// Blocking helpers for commands that drive the cell step by step (`tune`).
-impl Cell {
-    /// One tick: fails on any incident, an e-stop or a signal.
-    pub(crate) fn check_health(&mut self, cfg: &Config) -> Result<(), RunError> {
-        if signals::stop_requested() {
-            return Err(RunError::Interrupted);
-        }
-        if let Some(i) = self.tick(cfg).first() {
-            return Err(i.error());
-        }
-        if self.estop.is_some() && !self.reactions_pending() {
-            return Err(RunError::failed(
-                self.estop_text().unwrap_or_else(|| "e-stop".into()),
-            ));
-        }
-        Ok(())
-    }
-
-    /// Enables the arm; the first setpoint from after the enable.
-    pub(crate) fn startup(&mut self, cfg: &Config) -> Result<SetpointV2, RunError> {
-        let mut en = Enabling::new(cfg);
-        loop {
-            self.check_health(cfg)?;
-            self.drain_motion();
-            if let Some(r) = en.step(self) {
-                return r;
-            }
-            std::thread::sleep(TICK);
-        }
-    }
 }

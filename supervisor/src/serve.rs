@@ -6,8 +6,8 @@
 //! 2. advances what runs on the cell: enabling the arm, the program job;
 //! 3. takes the control channel's requests and answers those that are complete.
 //!
-//! `run` is this loop with one program queued at the start, ending with it; `up` is this loop
-//! until `down` or a signal.
+//! `run` is this loop with one program queued at the start, ending with it; `tune` the same
+//! with a tuning session ([`crate::tune::Tuning`]); `up` is this loop until `down` or a signal.
 //!
 //! Going down (`down`, SIGTERM, SIGINT) is a controlled stop, never a stop through a fault: a
 //! program that moves comes to rest along its path first (as `abort` does), then servo disables
@@ -21,6 +21,7 @@ use crate::launch::cpu_seconds;
 use crate::program::Checked;
 use crate::report::{Report, process_report};
 use crate::swap::{Step, Swap};
+use crate::tune::{Measured, Tuning};
 use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
 use control_plane::event as events;
@@ -46,6 +47,14 @@ pub(crate) struct ProgramJob {
     pub plot: bool,
 }
 
+/// What `run` and `tune` queue for once the drives are enabled.
+pub(crate) enum First {
+    /// `run`'s program.
+    Program(ProgramJob),
+    /// `tune`'s session.
+    Tune(Tuning),
+}
+
 /// Why the loop ended.
 pub(crate) enum End {
     /// `supervisor down`.
@@ -54,6 +63,8 @@ pub(crate) enum End {
     Interrupted,
     /// `run`: the program ended (or the cell failed before it could start).
     Program(Box<Result<Report, RunError>>),
+    /// `tune`: the session ended (or the cell failed before it could start).
+    Tuned(Box<Result<Measured, RunError>>),
 }
 
 /// A request whose answer waits for the cell.
@@ -106,7 +117,9 @@ struct Loop<'a> {
     cell: &'a mut Cell,
     server: &'a mut Server,
     enabling: Option<(Enabling, Vec<ConnId>)>,
-    queued: Option<ProgramJob>,
+    queued: Option<First>,
+    /// `tune`'s session, once the drives are enabled.
+    tuning: Option<Tuning>,
     running: Option<Running>,
     pending: Vec<Pending>,
     /// The last program's end, for `status`.
@@ -129,7 +142,7 @@ pub(crate) fn serve(
     cfg: &Config,
     cell: &mut Cell,
     server: &mut Server,
-    first: Option<ProgramJob>,
+    first: Option<First>,
 ) -> End {
     let mut l = Loop {
         cfg,
@@ -137,6 +150,7 @@ pub(crate) fn serve(
         server,
         enabling: Some((Enabling::new(cfg), Vec::new())),
         queued: first,
+        tuning: None,
         running: None,
         pending: Vec::new(),
         last_job: None,
@@ -192,7 +206,8 @@ impl Loop<'_> {
     /// Enabling, the job; `Some` when `run` is over.
     fn advance(&mut self, incidents: &[Incident]) -> Option<End> {
         let run = self.cell.mode == Mode::Run;
-        if self.running.is_none() {
+        // A tuning session reads every state itself.
+        if self.running.is_none() && self.tuning.is_none() {
             self.cell.drain_motion();
             // Hours up: keep the newest events only (a job's own are kept whole).
             if self.cell.events.len() > 20_000 {
@@ -228,7 +243,14 @@ impl Loop<'_> {
                     }
                 }
                 match (result, self.queued.take()) {
-                    (Ok(sp), Some(p)) => {
+                    (Ok(sp), Some(First::Tune(mut t))) => {
+                        t.begin(&sp);
+                        self.tuning = Some(t);
+                    }
+                    (Err(e), Some(First::Tune(_))) => {
+                        return Some(End::Tuned(Box::new(Err(self.with_events(e, 0)))));
+                    }
+                    (Ok(sp), Some(First::Program(p))) => {
                         let n = self.cfg.axis.len();
                         match p
                             .program
@@ -251,6 +273,12 @@ impl Loop<'_> {
                     _ => {}
                 }
             }
+        }
+        if let Some(t) = &mut self.tuning
+            && let Some(result) = t.step(self.cell, self.cfg, incidents)
+        {
+            self.tuning = None;
+            return Some(End::Tuned(Box::new(result)));
         }
         // A swap that carries the program: its setpoints are recorded, nothing is sent.
         if let Some(r) = &mut self.running
@@ -311,7 +339,7 @@ impl Loop<'_> {
     /// path (trajgen aborts it), or, at rest, the drives are disabled.
     fn go_down(&mut self, end: End, why: &str) {
         // A program sent but not yet moving is dropped too (an abort empties trajgen's queue).
-        let had_program = self.running.is_some();
+        let had_program = self.running.is_some() || self.tuning.take().is_some();
         self.abandon(why);
         let moving = had_program
             || self
@@ -525,6 +553,17 @@ impl Loop<'_> {
             self.server.reply(conn, &reply);
             return;
         }
+        // A tuning session: the cell is the session's until it ends; `down` ends it.
+        if let Some(t) = &self.tuning
+            && !matches!(req, Request::Info | Request::Down)
+        {
+            let busy = format!(
+                "busy: axis {} is being tuned (`supervisor tune`); `supervisor down` ends it",
+                self.cfg.axis[t.axis()].name
+            );
+            self.server.reply(conn, &Reply::Refused(busy));
+            return;
+        }
         // A swap in progress: what would change the cell waits for its end; `down` is kept
         // for after it.
         if let Some(s) = &self.swapping
@@ -590,6 +629,10 @@ impl Loop<'_> {
         info.last_job = self.last_job.clone();
         info.enabling = self.enabling.is_some();
         info.swapping = self.swapping.as_ref().map(|s| s.swap.process().to_string());
+        info.tuning = self
+            .tuning
+            .as_ref()
+            .map(|t| self.cfg.axis[t.axis()].name.clone());
         info.going_down = self.stopping.is_some();
         info
     }

@@ -1,4 +1,5 @@
-//! `supervisor tune`: commissioning help on the real processes of the cell.
+//! `supervisor tune`: commissioning help on the real processes of the cell, as a job of the
+//! supervisor's one loop ([`Tuning`]).
 //!
 //! 1. Start the cell of the configuration (as `run` does), enable, wait until the axes settle.
 //! 2. **Step**: a `Step` request offsets the reference of one axis by the amplitude (servo
@@ -12,9 +13,9 @@
 //!    (until the error stays within the larger of 2 % of the step and the in-position band),
 //!    peak following error and peak effort; a PNG of command, position and effort.
 
-use crate::cell::TICK;
-use crate::cell::{Cell, Mode, open_cell};
+use crate::cell::{Cell, Incident, Mode, open_cell};
 use crate::error::RunError;
+use crate::serve::{End, First, serve};
 use cell_config::Config;
 use plot::{Panel, series_png};
 use serde::Serialize;
@@ -188,10 +189,22 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     }
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    let (mut session, server) = open_cell(&cfg, instance, Mode::Run)?;
-    let measured = measure(&mut session, &cfg, i, opts);
-    let closed = session.close(server);
-    let (samples, start, ramp) = match measured {
+    let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
+    let first = First::Tune(Tuning::new(i, opts.step, opts.ramp));
+    let end = serve(&cfg, &mut cell, &mut server, Some(first));
+    let closed = cell.close(server);
+    let measured = match end {
+        End::Tuned(m) => *m,
+        End::Interrupted => Err(RunError::Interrupted),
+        End::Down | End::Program(_) => Err(RunError::failed(
+            "`supervisor down` stopped the cell before the tuning ended",
+        )),
+    };
+    let Measured {
+        samples,
+        start,
+        ramp,
+    } = match measured {
         Ok(m) => m,
         // A failed session still reports its events.
         Err(RunError::Failed { message, .. }) => {
@@ -211,7 +224,10 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
         instance: instance.to_string(),
         axis: a.name.clone(),
         unit: a.unit.clone(),
-        servo_period_us: cfg.process_named("servo").map_or(1000, |p| p.period_us),
+        servo_period_us: cfg
+            .process_named("servo")
+            .expect("a validated configuration has its required processes")
+            .period_us,
         step: opts.step,
         step_response: step_figures(&samples, start, opts.step, a.in_position),
         ramp,
@@ -220,195 +236,325 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     })
 }
 
-type Measured = (Vec<Sample>, f64, Option<RampFigures>);
+/// What a tuning session measured: the step response from the step on, where the axis
+/// stood before it, the ramp's figures.
+#[derive(Debug)]
+pub(crate) struct Measured {
+    samples: Vec<Sample>,
+    start: f64,
+    ramp: Option<RampFigures>,
+}
 
 /// Longest wait for servo to take a step, or for the axes to settle.
 const PATIENCE: Duration = Duration::from_secs(3);
 
-/// Reads servo's states as they come, for at most `limit`, handing each to `stop` until it
-/// returns true (then true). Fails on a process failure or a latched fault.
-fn watch(
-    session: &mut Cell,
-    cfg: &Config,
-    limit: Duration,
-    mut stop: impl FnMut(&ServoStateV3) -> bool,
-) -> Result<bool, RunError> {
-    let start = Instant::now();
-    while start.elapsed() < limit {
-        session.check_health(cfg)?;
-        while let Some(s) = session.servo_sub.next() {
-            if s.status & st::FAULT_LATCHED != 0 {
-                session.take_events();
-                return Err(RunError::failed(session.fault_text(&s)));
-            }
-            if stop(&s) {
-                return Ok(true);
-            }
-        }
-        std::thread::sleep(TICK);
-    }
-    Ok(false)
-}
+/// How long the response is recorded after the axis settled.
+const TAIL: Duration = Duration::from_millis(300);
 
-/// Waits (at most `limit`) until servo says the arm is settled; records every servo state on
-/// the way into `log` when given. Returns the settled state.
-fn until_settled(
-    session: &mut Cell,
-    cfg: &Config,
-    limit: Duration,
-    mut log: Option<&mut Vec<ServoStateV3>>,
-) -> Result<Option<ServoStateV3>, RunError> {
-    let mut settled = None;
-    watch(session, cfg, limit, |s| {
-        if let Some(l) = log.as_deref_mut() {
-            l.push(*s);
-        }
-        if s.status & st::SETTLED != 0 {
-            settled = Some(*s);
-        }
-        settled.is_some()
-    })?;
-    Ok(settled)
-}
-
-fn measure(
-    session: &mut Cell,
-    cfg: &Config,
-    i: usize,
-    opts: &TuneOptions,
-) -> Result<Measured, RunError> {
-    let start_sp = session.startup(cfg)?;
-    let settled = until_settled(session, cfg, PATIENCE, None)?
-        .ok_or_else(|| RunError::failed("the axes did not settle after enabling"))?;
-    let start = settled.cmd_position[i];
-
-    // The step: record until settled again, plus a little, at most 3 s.
-    session.request_with(RequestKind::Step, i as u32, opts.step)?;
-    let mut log = Vec::new();
-    // Skip the cycles before servo took the request.
-    let taken = watch(session, cfg, PATIENCE, |s| {
-        let stepped = (s.cmd_position[i] - start).abs() > opts.step.abs() / 2.0;
-        if stepped {
-            log.push(*s);
-        }
-        stepped
-    })?;
-    if !taken {
-        session.take_events();
-        return Err(RunError::failed(
-            "servo did not take the step (see the request-refused event)",
-        ));
-    }
-    until_settled(session, cfg, PATIENCE, Some(&mut log))?;
-    watch(session, cfg, Duration::from_millis(300), |s| {
-        log.push(*s);
-        false
-    })?;
-    let t0 = log[0].stamp_ns;
-    let samples: Vec<Sample> = log
-        .iter()
-        .map(|s| Sample {
-            t_s: (s.stamp_ns - t0) as f64 * 1e-9,
-            command: s.cmd_position[i],
-            position: s.act_position[i],
-            effort: s.effort[i],
-        })
-        .collect();
-    session.request_with(RequestKind::Step, i as u32, 0.0)?;
-    // Servo's states queued before it took the step back still say "settled": wait for the
-    // command to return first.
-    let returned = watch(session, cfg, PATIENCE, |s| {
-        (s.cmd_position[i] - start).abs() < opts.step.abs() / 2.0
-    })?;
-    if !returned {
-        return Err(RunError::failed("servo did not take the step back"));
-    }
-    until_settled(session, cfg, PATIENCE, None)?
-        .ok_or_else(|| RunError::failed("the axis did not settle after the step back"))?;
-
-    let ramp = match opts.ramp {
-        None => None,
-        Some(d) => Some(ramp(session, cfg, i, d, start_sp.seq)?),
-    };
-    Ok((samples, start, ramp))
-}
-
-/// Out by `d` on axis `i` and back, through trajgen.
-fn ramp(
-    session: &mut Cell,
-    cfg: &Config,
-    i: usize,
-    d: f64,
+/// A tuning session as a job of the supervisor's loop ([`crate::serve`]), stepped every tick
+/// once the drives are enabled: the step, its response, the step back, the ramp (see the
+/// module documentation). The loop answers the control channel meanwhile (`status`, `estop`;
+/// what would change the cell is refused busy) and a signal or `down` ends it with a
+/// controlled stop.
+#[derive(Debug)]
+pub(crate) struct Tuning {
+    axis: usize,
+    step: f64,
+    ramp: Option<f64>,
+    stage: Stage,
+    /// When the stage began: its patience counts from there.
+    since: Instant,
+    /// The axis' commanded position at rest before the step.
+    start: f64,
+    /// Servo's states from the step on.
+    log: Vec<ServoStateV3>,
+    samples: Vec<Sample>,
+    /// Makes the ramp's program id this session's own.
     salt: u64,
-) -> Result<RampFigures, RunError> {
-    let n = cfg.axis.len();
-    let mut home = [0.0; MAX_AXES];
-    let sp = session
-        .setpoint_sub
-        .latest()
-        .ok_or_else(|| RunError::failed("trajgen publishes no setpoint"))?;
-    home[..n].copy_from_slice(&sp.position[..n]);
-    let mut out = home;
-    out[i] += d;
-    let program_id = (std::process::id() ^ (salt as u32).rotate_left(8)) | 1;
-    let cmd = |seq: u64, kind: CommandKind, target: [f64; MAX_AXES]| MotionCommandV2 {
-        seq,
-        program_id,
-        line: seq as u32,
-        kind: kind as u32,
-        count: n as u32,
-        target,
-        ..MotionCommandV2::default()
-    };
-    // A joint move: the step is one axis' own, whatever the kinematics.
-    for c in [
-        cmd(1, CommandKind::MoveJ, out),
-        cmd(2, CommandKind::MoveJ, home),
-        cmd(3, CommandKind::End, home),
-    ] {
-        if !session.command_pub.send(&c) {
-            return Err(RunError::failed(
-                "trajgen's command service refused a command",
-            ));
+}
+
+/// Where a tuning session stands; each stage ends on what servo (or trajgen) reports, or
+/// fails when it waits longer than its patience.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stage {
+    /// Enabled: until servo says the axes are settled.
+    Settling,
+    /// The step requested: until servo's command moved by half of it.
+    Stepping,
+    /// The response, every state recorded, until the axis settles (or its patience ends).
+    Responding,
+    /// [`TAIL`] more of the response.
+    Tail,
+    /// The step back requested: until servo's command returned.
+    Returning,
+    /// Until the axis settles back.
+    SettlingBack,
+    /// The ramp's moves sent to trajgen: until it reports the program done.
+    Ramping {
+        program_id: u32,
+        peak: f64,
+        limit: Duration,
+    },
+    /// Until the axis settles after the ramp.
+    RampSettling { end_ns: u64, peak: f64 },
+}
+
+impl Tuning {
+    /// A session on axis `axis`: a step of `step`, then a ramp out by `ramp` and back.
+    pub(crate) fn new(axis: usize, step: f64, ramp: Option<f64>) -> Self {
+        Self {
+            axis,
+            step,
+            ramp,
+            stage: Stage::Settling,
+            since: Instant::now(),
+            start: 0.0,
+            log: Vec::new(),
+            samples: Vec::new(),
+            salt: 0,
         }
     }
-    let mut peak = 0.0f64;
-    let mut end_ns = None;
-    let start = Instant::now();
-    let limit =
-        Duration::from_secs_f64(2.0 * (d.abs() / cfg.axis[i].vmax + 4.0 * cfg.motion.t_acc) + 5.0);
-    while end_ns.is_none() {
-        if start.elapsed() > limit {
-            return Err(RunError::failed("the ramp did not end"));
+
+    /// Begins once the drives are enabled; `sp` is the first setpoint after.
+    pub(crate) fn begin(&mut self, sp: &shm_schema::SetpointV2) {
+        self.salt = sp.seq;
+        self.to(Stage::Settling);
+    }
+
+    /// The axis being tuned.
+    pub(crate) fn axis(&self) -> usize {
+        self.axis
+    }
+
+    fn to(&mut self, stage: Stage) {
+        self.stage = stage;
+        self.since = Instant::now();
+    }
+
+    /// One tick: reads what servo and trajgen published and moves on; `Some` at the end.
+    pub(crate) fn step(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        incidents: &[Incident],
+    ) -> Option<Result<Measured, RunError>> {
+        if let Some(i) = incidents.first() {
+            return Some(Err(i.error()));
         }
-        session.check_health(cfg)?;
-        while let Some(sp) = session.setpoint_sub.next() {
-            if sp.program_id == program_id && sp.state == MotionState::Done as u32 {
-                end_ns = Some(sp.motion_end_ns);
+        if cell.estop.is_some() && !cell.reactions_pending() {
+            let text = cell.estop_text().unwrap_or_else(|| "e-stop".into());
+            return Some(Err(RunError::failed(text)));
+        }
+        self.tick(cell, cfg).transpose()
+    }
+
+    fn tick(&mut self, cell: &mut Cell, cfg: &Config) -> Result<Option<Measured>, RunError> {
+        while let Some(sp) = cell.setpoint_sub.next() {
+            cell.last_sp = Some(sp);
+            if let Stage::Ramping {
+                program_id, peak, ..
+            } = self.stage
+                && sp.program_id == program_id
+                && sp.state == MotionState::Done as u32
+            {
+                self.to(Stage::RampSettling {
+                    end_ns: sp.motion_end_ns,
+                    peak,
+                });
             }
         }
-        while let Some(s) = session.servo_sub.next() {
+        while let Some(img) = cell.image_sub.next() {
+            if let Some(g) = &mut cell.image_gaps {
+                g.see(img.written_ns);
+            }
+        }
+        while let Some(s) = cell.servo_sub.next() {
+            cell.last_servo = Some(s);
             if s.status & st::FAULT_LATCHED != 0 {
-                session.take_events();
-                return Err(RunError::failed(session.fault_text(&s)));
+                cell.take_events();
+                return Err(RunError::failed(cell.fault_text(&s)));
             }
-            peak = peak.max(s.following_error[i].abs());
+            if let Some(done) = self.see(cell, cfg, &s)? {
+                return Ok(Some(done));
+            }
         }
-        std::thread::sleep(TICK);
+        let waited = self.since.elapsed();
+        match self.stage {
+            Stage::Settling if waited > PATIENCE => {
+                Err(RunError::failed("the axes did not settle after enabling"))
+            }
+            Stage::Stepping if waited > PATIENCE => {
+                cell.take_events();
+                Err(RunError::failed(
+                    "servo did not take the step (see the request-refused event)",
+                ))
+            }
+            // A response that does not settle is measured all the same (its figures say so).
+            Stage::Responding if waited > PATIENCE => {
+                self.to(Stage::Tail);
+                Ok(None)
+            }
+            Stage::Tail if waited > TAIL => {
+                self.step_back(cell)?;
+                Ok(None)
+            }
+            Stage::Returning if waited > PATIENCE => {
+                Err(RunError::failed("servo did not take the step back"))
+            }
+            Stage::SettlingBack if waited > PATIENCE => Err(RunError::failed(
+                "the axis did not settle after the step back",
+            )),
+            Stage::Ramping { limit, .. } if waited > limit => {
+                Err(RunError::failed("the ramp did not end"))
+            }
+            Stage::RampSettling { end_ns, peak } if waited > PATIENCE => {
+                Ok(Some(self.measured(cfg, end_ns, peak, None)))
+            }
+            _ => Ok(None),
+        }
     }
-    let mut log = Vec::new();
-    let settled = until_settled(session, cfg, PATIENCE, Some(&mut log))?;
-    for s in &log {
-        peak = peak.max(s.following_error[i].abs());
+
+    /// One of servo's states, in order; `Some` when the session is over.
+    fn see(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        s: &ServoStateV3,
+    ) -> Result<Option<Measured>, RunError> {
+        let i = self.axis;
+        let settled = s.status & st::SETTLED != 0;
+        match self.stage {
+            Stage::Settling if settled => {
+                self.start = s.cmd_position[i];
+                cell.request_with(RequestKind::Step, i as u32, self.step)?;
+                self.to(Stage::Stepping);
+            }
+            // The cycles before servo took the request are skipped.
+            Stage::Stepping if (s.cmd_position[i] - self.start).abs() > self.step.abs() / 2.0 => {
+                self.log.push(*s);
+                self.to(Stage::Responding);
+            }
+            Stage::Responding => {
+                self.log.push(*s);
+                if settled {
+                    self.to(Stage::Tail);
+                }
+            }
+            Stage::Tail => self.log.push(*s),
+            // Servo's states queued before it took the step back still say "settled": the
+            // command returns first.
+            Stage::Returning if (s.cmd_position[i] - self.start).abs() < self.step.abs() / 2.0 => {
+                self.to(Stage::SettlingBack);
+            }
+            Stage::SettlingBack if settled => match self.ramp {
+                None => return Ok(Some(self.measured(cfg, 0, 0.0, None))),
+                Some(d) => self.send_ramp(cell, cfg, d)?,
+            },
+            Stage::Ramping {
+                program_id,
+                peak,
+                limit,
+            } => {
+                self.stage = Stage::Ramping {
+                    program_id,
+                    peak: peak.max(s.following_error[i].abs()),
+                    limit,
+                };
+            }
+            Stage::RampSettling { end_ns, peak } => {
+                let peak = peak.max(s.following_error[i].abs());
+                if settled {
+                    return Ok(Some(self.measured(cfg, end_ns, peak, Some(s))));
+                }
+                self.stage = Stage::RampSettling { end_ns, peak };
+            }
+            _ => {}
+        }
+        Ok(None)
     }
-    let end = end_ns.unwrap_or(0);
-    Ok(RampFigures {
-        distance: d,
-        peak_following_error: peak,
-        settling_s: settled.map(|s| {
-            (s.stamp_ns.saturating_sub(end) as f64 * 1e-9 - cfg.motion.settle_time).max(0.0)
-        }),
-    })
+
+    /// The response recorded: its samples kept, the step taken back.
+    fn step_back(&mut self, cell: &mut Cell) -> Result<(), RunError> {
+        let i = self.axis;
+        let t0 = self.log.first().map_or(0, |s| s.stamp_ns);
+        self.samples = self
+            .log
+            .iter()
+            .map(|s| Sample {
+                t_s: s.stamp_ns.saturating_sub(t0) as f64 * 1e-9,
+                command: s.cmd_position[i],
+                position: s.act_position[i],
+                effort: s.effort[i],
+            })
+            .collect();
+        cell.request_with(RequestKind::Step, i as u32, 0.0)?;
+        self.to(Stage::Returning);
+        Ok(())
+    }
+
+    /// Out by `d` on the axis and back, through trajgen: a joint move, the step is one axis'
+    /// own whatever the kinematics.
+    fn send_ramp(&mut self, cell: &mut Cell, cfg: &Config, d: f64) -> Result<(), RunError> {
+        let (i, n) = (self.axis, cfg.axis.len());
+        let sp = cell
+            .last_sp
+            .ok_or_else(|| RunError::failed("trajgen publishes no setpoint"))?;
+        let mut home = [0.0; MAX_AXES];
+        home[..n].copy_from_slice(&sp.position[..n]);
+        let mut out = home;
+        out[i] += d;
+        let program_id = (std::process::id() ^ (self.salt as u32).rotate_left(8)) | 1;
+        let cmd = |seq: u64, kind: CommandKind, target: [f64; MAX_AXES]| MotionCommandV2 {
+            seq,
+            program_id,
+            line: seq as u32,
+            kind: kind as u32,
+            count: n as u32,
+            target,
+            ..MotionCommandV2::default()
+        };
+        for c in [
+            cmd(1, CommandKind::MoveJ, out),
+            cmd(2, CommandKind::MoveJ, home),
+            cmd(3, CommandKind::End, home),
+        ] {
+            if !cell.command_pub.send(&c) {
+                return Err(RunError::failed(
+                    "trajgen's command service refused a command",
+                ));
+            }
+        }
+        let limit = Duration::from_secs_f64(
+            2.0 * (d.abs() / cfg.axis[i].vmax + 4.0 * cfg.motion.t_acc) + 5.0,
+        );
+        self.to(Stage::Ramping {
+            program_id,
+            peak: 0.0,
+            limit,
+        });
+        Ok(())
+    }
+
+    fn measured(
+        &mut self,
+        cfg: &Config,
+        end_ns: u64,
+        peak: f64,
+        settled: Option<&ServoStateV3>,
+    ) -> Measured {
+        Measured {
+            samples: std::mem::take(&mut self.samples),
+            start: self.start,
+            ramp: self.ramp.map(|distance| RampFigures {
+                distance,
+                peak_following_error: peak,
+                settling_s: settled.map(|s| {
+                    (s.stamp_ns.saturating_sub(end_ns) as f64 * 1e-9 - cfg.motion.settle_time)
+                        .max(0.0)
+                }),
+            }),
+        }
+    }
 }
 
 impl TuneReport {

@@ -54,7 +54,7 @@ pub fn up(
     let why = match end {
         End::Down => "supervisor down",
         End::Interrupted => "a signal",
-        End::Program(_) => "the program",
+        End::Program(_) | End::Tuned(_) => "the program",
     };
     tracing::info!("instance {instance}: going down ({why})");
     if let Some(e) = cell.close(server).problem {

@@ -344,6 +344,72 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
     });
 }
 
+/// `tune` is a job of the supervisor's one loop: while it steps and ramps an axis, the control
+/// channel answers (`status`) and refuses what would change the cell, saying why; `down` ends
+/// the session with a controlled stop.
+#[test]
+fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
+    integration_tests::attributable(|| {
+        let inst = instance("tune-busy");
+        let mut tune = supervisor()
+            .args(["tune", "--instance", &inst, "--axis", "x", "--step", "0.2"])
+            .args(["--ramp", "30"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("tune");
+        let start = Instant::now();
+        let mut busy = None;
+        while busy.is_none() && tune.try_wait().expect("tune").is_none() {
+            assert!(start.elapsed() < WATCHDOG, "tune did not end");
+            let out = supervisor()
+                .args(["pause", "--instance", &inst])
+                .output()
+                .expect("pause");
+            let err = String::from_utf8_lossy(&out.stderr).to_string();
+            if err.contains("busy: axis x is being tuned") {
+                assert_eq!(out.status.code(), Some(2), "{err}");
+                busy = Some(err);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(busy.is_some(), "no request was refused busy while tune ran");
+        // The channel answers meanwhile (tune may have ended since: then nothing is up).
+        let status = supervisor()
+            .args(["status", "--json", "--instance", &inst])
+            .output()
+            .expect("status");
+        if tune.try_wait().expect("tune").is_none() {
+            let j = json_of(&status);
+            assert_eq!(j["supervisor"]["arm"]["enabled"], true, "{j}");
+            assert_eq!(j["supervisor"]["tuning"], "x", "{j}");
+            // `down` ends the session: a controlled stop, not a fault; tune fails saying so.
+            let down = supervisor()
+                .args(["down", "--instance", &inst])
+                .output()
+                .expect("down");
+            assert!(
+                down.status.success(),
+                "{}",
+                String::from_utf8_lossy(&down.stderr)
+            );
+            let out = tune.wait_with_output().expect("tune");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{err}");
+            assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
+            assert!(!err.contains("] error "), "a fault on the way down: {err}");
+        } else {
+            let out = tune.wait_with_output().expect("tune");
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        assert_clean(&inst);
+    });
+}
+
 #[test]
 fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
     integration_tests::attributable(|| {

@@ -35,7 +35,11 @@ impl Loop {
         let (machine, servo) = (proc("drives"), proc("servo"));
         Self {
             machine: Machine::new(cell, machine.period_ns),
-            servo: Controller::new(ServoParams::from_cell(cell, servo.period_ns)),
+            servo: Controller::new(ServoParams::from_cell(
+                cell,
+                servo.period_ns,
+                cell.period_of("trajgen").expect("trajgen"),
+            )),
             fb: None,
             cmd: None,
             state: ServoStateV3::default(),

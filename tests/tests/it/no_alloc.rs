@@ -22,6 +22,7 @@ fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
         let mut servo = Controller::new(ServoParams::from_cell(
             &cell,
             cell.period_of("servo").expect("servo"),
+            cell.period_of("trajgen").expect("trajgen"),
         ));
         let mut generator = Generator::new(Params::from_cell(&cell), &[40.0, 40.0, 0.0]);
         let cmds = crate::gantry_commands("MOVE(60,50,10)\nSTOP\nEND", 1);
