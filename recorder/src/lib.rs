@@ -495,7 +495,7 @@ impl Out {
         };
         let file = File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let mut writer = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
+            .compression(Some(mcap::Compression::Lz4))
             .profile("")
             .create(BufWriter::new(file))
             .map_err(|e| format!("{}: {e}", path.display()))?;
