@@ -9,7 +9,8 @@
 //!    process' own entry in its process table, found by name;
 //! 4. the task's own set-up (`build`: opens ports, preallocates, validates) — may fail;
 //! 5. real-time set-up ([`crate::rt::setup`]) with the entry's priority and CPU;
-//! 6. the cycle: wait; read the e-stop ([`EstopWatch::poll`]); [`Task::cycle`]; the health
+//! 6. the cycle ([`Runner::cycle`], one per wake-up of the process' clock; a test drives it
+//!    cycle by cycle): read the e-stop ([`EstopWatch::poll`]); [`Task::cycle`]; the health
 //!    detectors ([`Health`]); publish [`ProcessStatusV2`]; about every 100 ms the wake-up
 //!    latency and execution-time histograms, half an interval apart (30 KB each: about 2 µs
 //!    from cold caches, `cargo bench -p runtime --bench publish`; one per cycle at most);
@@ -290,8 +291,12 @@ fn parse_args(default_name: &str, about: &str) -> Result<(InstanceName, ProcessN
     Ok((args.instance, name))
 }
 
-enum Exit {
+/// How a process' cycle ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Exit {
+    /// A stop was asked (SIGTERM, SIGINT) and the task came to a safe stop.
     Stopped,
+    /// The supervisor stopped beating: the task was brought to a safe stop.
     SupervisorLost,
 }
 
@@ -305,177 +310,267 @@ fn run_inner<T: Task>(
     let Some(cell) = wait_for_cell_config(&node, &instance)? else {
         return Ok(Exit::Stopped); // stopped before the cell configuration arrived
     };
-    let Some((index, own)) = cell.process_named(name.as_str()).map(|(i, p)| (i, *p)) else {
-        return Err(format!(
-            "the cell configuration has no process called {name:?} (its process table: {})",
-            cell.processes()
-                .iter()
-                .map(|p| shm_schema::str_of(&p.name))
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
-        .into());
-    };
-    let ctx = Context {
-        instance,
-        name,
-        index,
-        own,
-        node,
-        cell,
-    };
-    let status_pub = Pub::<ProcessStatusV2>::new(&ctx.node, &instance, ServiceId::Status(name))?;
-    let latency_pub =
-        Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(name))?;
-    let exec_pub = Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::ExecTime(name))?;
-    let mut events = EventSink::new(&ctx.node, &instance, index as u32)?;
-    let mut estop = EstopWatch::new(&ctx.node, &instance, &ctx.cell, index, now_ns())?;
-    let mut queue = EventQueue::default();
-    let mut task = build(&ctx)?;
-    // Connect to the subscribers that exist now (the supervisor's), so the first event in the
-    // cycle does not pay for it.
-    events.connect();
-    estop.connect();
-
-    let (report, _rt_guard) = rt::setup(RtRequest {
-        priority: own.priority,
-        cpu: usize::try_from(own.cpu).ok(),
-    });
-    let mut status = ProcessStatusV2 {
-        pid: std::process::id(),
-        index: index as u32,
-        state: ProcState::Starting as u32,
-        policy: report.policy,
-        priority: report.priority,
-        cpu: report.cpu,
-        rt_flags: report.flags,
-        name: name.field(),
-        ..ProcessStatusV2::default()
-    };
-    status_pub.send(&status);
-    tracing::info!(
-        "{name} ({instance}) cyclic: period {} µs, phase {} µs, {} priority {}{}",
-        own.period_ns / 1000,
-        own.phase_ns / 1000,
-        rt::policy_name(report.policy),
-        report.priority,
-        if report.cpu >= 0 {
-            format!(", CPU {}", report.cpu)
-        } else {
-            String::new()
-        }
-    );
-
-    let start_ns = now_ns();
-    let mut clock = CycleClock::new(own.period_ns, own.phase_ns, start_ns);
-    let mut health = Health::new(&ctx.cell.health, own.period_ns, start_ns);
-    let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
-    // The execution-time histogram half an interval after the wake-up latency's.
-    let exec_phase = latency_every / 2;
-    let leave_limit_ns = ctx.cell.estop_stop_time_ns.saturating_add(LEAVE_GRACE_NS);
-    let mut overruns = OverrunReporter::default();
-    let mut skipped = 0u64;
-    let mut transport = ipc::transport_errors();
-    let mut leaving_since: Option<u64> = None;
-    let mut safe_reported = false;
-    status.state = ProcState::Cyclic as u32;
-    // The cycle. Nothing in this loop allocates, locks or logs (see `Task::cycle`).
+    let ctx = Context::of(instance, name, node, cell)?;
+    let (priority, cpu) = (ctx.own.priority, usize::try_from(ctx.own.cpu).ok());
+    let mut runner = Runner::new(ctx, build)?;
+    // The real-time set-up after the task's own (a bus' bring-up runs under SCHED_OTHER).
+    let (rt, _rt_guard) = rt::setup(RtRequest { priority, cpu });
+    runner.start(rt);
+    // The cycle. Nothing in it allocates, locks or logs (see `Task::cycle`, `Runner::cycle`).
     loop {
-        let wake = match clock.wait() {
+        let wake = match runner.clock.wait() {
             Ok(w) => w,
             Err(WaitError::Interrupted) => continue,
             Err(WaitError::Os(e)) => {
                 return Err(format!("clock_nanosleep failed: errno {e}").into());
             }
         };
+        if runner.cycle(&wake) == Flow::Leave {
+            break;
+        }
+    }
+    Ok(runner.finish())
+}
+
+impl Context {
+    /// The context of process `name` in `cell`: its entry in the process table, found by name.
+    pub fn of(
+        instance: InstanceName,
+        name: ProcessName,
+        node: Node<Ipc>,
+        cell: CellConfigV6,
+    ) -> Result<Self, SetupError> {
+        let Some((index, own)) = cell.process_named(name.as_str()).map(|(i, p)| (i, *p)) else {
+            return Err(format!(
+                "the cell configuration has no process called {name:?} (its process table: {})",
+                cell.processes()
+                    .iter()
+                    .map(|p| shm_schema::str_of(&p.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+            .into());
+        };
+        Ok(Self {
+            instance,
+            name,
+            index,
+            own,
+            node,
+            cell,
+        })
+    }
+}
+
+/// What the loop does after a cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Flow {
+    /// Wait for the next wake-up.
+    Next,
+    /// The process is leaving (a stop was asked or the supervisor is lost) and its task is
+    /// safe, or took longer than the e-stop stop time and [`LEAVE_GRACE_NS`]: end the loop.
+    Leave,
+}
+
+/// A process of the cell once set up: its task, its clock, its ports (status, histograms,
+/// events, e-stop) and its health detectors, one cycle at a time ([`Runner::cycle`]). [`run`]
+/// is a loop over it; a test drives it cycle by cycle.
+pub struct Runner<T: Task> {
+    ctx: Context,
+    task: T,
+    /// The process' clock: [`CycleClock::wait`] gives the next wake-up.
+    pub clock: CycleClock,
+    status: ProcessStatusV2,
+    status_pub: Pub<ProcessStatusV2>,
+    latency_pub: Pub<LatencyHistogramV1>,
+    exec_pub: Pub<LatencyHistogramV1>,
+    events: EventSink,
+    estop: EstopWatch,
+    queue: EventQueue,
+    health: Health,
+    overruns: OverrunReporter,
+    /// Cycles between two publications of a histogram, and the execution time's offset.
+    latency_every: u64,
+    exec_phase: u64,
+    leave_limit_ns: u64,
+    skipped: u64,
+    transport: u64,
+    leaving_since: Option<u64>,
+    safe_reported: bool,
+}
+
+impl<T: Task> std::fmt::Debug for Runner<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Runner")
+            .field("name", &self.ctx.name.as_str())
+            .field("cycles", &self.clock.stats().cycles)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<T: Task> Runner<T> {
+    /// Opens the process' ports and builds its task; [`Runner::start`] then starts it.
+    pub fn new(
+        ctx: Context,
+        build: impl FnOnce(&Context) -> Result<T, SetupError>,
+    ) -> Result<Self, SetupError> {
+        let (instance, name, own) = (ctx.instance, ctx.name, ctx.own);
+        let status_pub =
+            Pub::<ProcessStatusV2>::new(&ctx.node, &instance, ServiceId::Status(name))?;
+        let latency_pub =
+            Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(name))?;
+        let exec_pub =
+            Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::ExecTime(name))?;
+        let events = EventSink::new(&ctx.node, &instance, ctx.index as u32)?;
+        let estop = EstopWatch::new(&ctx.node, &instance, &ctx.cell, ctx.index, now_ns())?;
+        let task = build(&ctx)?;
+        // Connect to the subscribers that exist now (the supervisor's), so the first event in
+        // the cycle does not pay for it.
+        events.connect();
+        estop.connect();
+        let status = ProcessStatusV2 {
+            pid: std::process::id(),
+            index: ctx.index as u32,
+            state: ProcState::Starting as u32,
+            name: name.field(),
+            ..ProcessStatusV2::default()
+        };
+        let start_ns = now_ns();
+        let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
+        Ok(Self {
+            clock: CycleClock::new(own.period_ns, own.phase_ns, start_ns),
+            health: Health::new(&ctx.cell.health, own.period_ns, start_ns),
+            leave_limit_ns: ctx.cell.estop_stop_time_ns.saturating_add(LEAVE_GRACE_NS),
+            latency_every,
+            // The execution-time histogram half an interval after the wake-up latency's.
+            exec_phase: latency_every / 2,
+            ctx,
+            task,
+            status,
+            status_pub,
+            latency_pub,
+            exec_pub,
+            events,
+            estop,
+            queue: EventQueue::default(),
+            overruns: OverrunReporter::default(),
+            skipped: 0,
+            transport: ipc::transport_errors(),
+            leaving_since: None,
+            safe_reported: false,
+        })
+    }
+
+    /// Publishes the first status (state `Starting`, with what the real-time set-up `rt`
+    /// got), says so in the log and starts the clock from now: the first wake-up is the next
+    /// deadline on the process' grid.
+    pub fn start(&mut self, rt: rt::RtReport) {
+        let (name, instance, own) = (self.ctx.name, self.ctx.instance, self.ctx.own);
+        self.status.policy = rt.policy;
+        self.status.priority = rt.priority;
+        self.status.cpu = rt.cpu;
+        self.status.rt_flags = rt.flags;
+        self.status_pub.send(&self.status);
+        tracing::info!(
+            "{name} ({instance}) cyclic: period {} µs, phase {} µs, {} priority {}{}",
+            own.period_ns / 1000,
+            own.phase_ns / 1000,
+            rt::policy_name(rt.policy),
+            rt.priority,
+            if rt.cpu >= 0 {
+                format!(", CPU {}", rt.cpu)
+            } else {
+                String::new()
+            }
+        );
+        let start_ns = now_ns();
+        self.clock = CycleClock::new(own.period_ns, own.phase_ns, start_ns);
+        self.health = Health::new(&self.ctx.cell.health, own.period_ns, start_ns);
+        self.status.state = ProcState::Cyclic as u32;
+    }
+
+    /// The task.
+    pub fn task(&self) -> &T {
+        &self.task
+    }
+
+    /// One cycle from `wake`: the e-stop read, the task's cycle, an e-stop it raises, the
+    /// health detectors, the status (every cycle), a histogram (one of the two every
+    /// [`LATENCY_PUBLISH_INTERVAL_NS`] / 2), an overrun burst, the events; then the clock's
+    /// execution time.
+    ///
+    /// # Real-time
+    /// No allocation, lock or log of its own: arithmetic, copies and the IPC calls (each
+    /// publish may allocate once inside iceoryx2: `ipc`; `tests/runner.rs` counts them).
+    pub fn cycle(&mut self, wake: &Wake) -> Flow {
         let now = wake.actual_ns;
+        let own_critical = self.ctx.own.critical();
         if signals::stop_requested() {
-            estop.leave();
+            self.estop.leave();
         }
-        if estop.poll(now, &mut queue) {
-            health.restart(now);
-            safe_reported = false;
+        if self.estop.poll(now, &mut self.queue) {
+            self.health.restart(now);
+            self.safe_reported = false;
         }
-        if estop.leaving() && leaving_since.is_none() {
-            leaving_since = Some(now);
-            status.state = ProcState::Stopping as u32;
+        if self.estop.leaving() && self.leaving_since.is_none() {
+            self.leaving_since = Some(now);
+            self.status.state = ProcState::Stopping as u32;
         }
         let mut cx = Cycle {
-            wake: &wake,
-            clock: &mut clock,
-            events: &mut queue,
-            estop: *estop.view(),
-            handover: estop.handover(),
+            wake,
+            clock: &mut self.clock,
+            events: &mut self.queue,
+            estop: *self.estop.view(),
+            handover: self.estop.handover(),
             raise: None,
             pending: 0,
             transport: 0,
             safe: true,
         };
-        task.cycle(&mut cx);
+        self.task.cycle(&mut cx);
         let (raise, mut pending, safe) = (cx.raise, cx.pending, cx.safe);
         let own_transport = cx.transport;
         if let Some((origin, cause, reason)) = raise
-            && !estop.raised()
+            && !self.estop.raised()
         {
-            estop.raise(
+            self.estop.raise(
                 now,
                 origin,
                 cause,
                 &[shm_schema::str_of(&reason)],
-                &mut queue,
+                &mut self.queue,
             );
         }
         // Periods this process skipped: its outputs missed that many syncs.
-        let s = clock.stats().skipped;
-        pending += s - skipped;
-        skipped = s;
-        if estop.handover() {
+        let s = self.clock.stats().skipped;
+        pending += s - self.skipped;
+        self.skipped = s;
+        if self.estop.handover() {
             // A process of the cell is being replaced: its gap is announced, not a fault.
             pending = 0;
         }
         let t = ipc::transport_errors();
-        let expired = health.cycle(
+        let expired = self.health.cycle(
             now,
             wake.latency_ns(),
             pending,
-            t - transport + own_transport,
+            t - self.transport + own_transport,
         );
-        transport = t;
+        self.transport = t;
         if let Some(d) = expired
-            && (!own.critical() || !estop.view().latched)
+            && (!own_critical || !self.estop.view().latched)
         {
-            let r = health.bucket(d).report(now);
-            let what = if own.critical() {
-                code::HEALTH_EXPIRED
-            } else {
-                code::NOT_CRITICAL_FAILED
-            };
-            let (level, limit) = (f64::from(r.level), f64::from(r.limit));
-            queue.push(EventV1::new(
-                now,
-                what,
-                -1,
-                level,
-                limit,
-                &[d.name(), " expired"],
-            ));
-            if own.critical() {
-                estop.raise(
-                    now,
-                    EstopOrigin::Host,
-                    code::HEALTH_EXPIRED,
-                    &[d.name(), " expired in ", name.as_str()],
-                    &mut queue,
-                );
-            } else {
-                // Not part of the cell's safety: a warning, and the detectors start afresh.
-                health.restart(now);
-            }
+            self.detector_expired(now, d, own_critical);
         }
-        let view = *estop.view();
-        if view.latched && view.react.is_some() && safe && !safe_reported && !estop.leaving() {
-            safe_reported = true;
-            queue.push(EventV1::new(
+        let view = *self.estop.view();
+        if view.latched
+            && view.react.is_some()
+            && safe
+            && !self.safe_reported
+            && !self.estop.leaving()
+        {
+            self.safe_reported = true;
+            self.queue.push(EventV1::new(
                 now,
                 code::ESTOP_SAFE,
                 -1,
@@ -484,71 +579,109 @@ fn run_inner<T: Task>(
                 &["e-stop reaction complete"],
             ));
         }
-        status.stamp_ns = now;
-        status.fault = task.fault();
-        status.stats = *clock.stats();
-        status.pending_sequence = health.pending.report(now);
-        status.transport = health.transport.report(now);
-        status.thread_offset = health.offset.report(now);
-        status.estop = (if view.latched { estop_seen::LATCHED } else { 0 })
-            | (if view.react.is_some() {
-                estop_seen::REACTING
-            } else {
-                0
-            })
-            | (if view.react.is_some() && safe {
-                estop_seen::SAFE
-            } else {
-                0
-            })
-            | (if estop.raised() {
-                estop_seen::RAISED
-            } else {
-                0
-            });
-        status_pub.send(&status);
-        // The two histograms (30 KB each) half an interval apart: one copy per cycle at most.
-        let phase = status.stats.cycles % latency_every;
-        if phase == 0 {
-            latency_pub.send(clock.histogram());
+        self.publish_status(now, &view, safe);
+        if let Some(e) = self.overruns.check(now, self.clock.stats().overruns) {
+            self.queue.push(e);
         }
-        if phase == exec_phase {
-            exec_pub.send(clock.exec_histogram());
-        }
-        if let Some(e) = overruns.check(now, clock.stats().overruns) {
-            queue.push(e);
-        }
-        events.drain(&mut queue);
-        clock.finish(&wake, now_ns());
-        if let Some(since) = leaving_since
-            && (safe || now.saturating_sub(since) > leave_limit_ns)
-        {
-            break;
+        self.events.drain(&mut self.queue);
+        self.clock.finish(wake, now_ns());
+        match self.leaving_since {
+            Some(since) if safe || now.saturating_sub(since) > self.leave_limit_ns => Flow::Leave,
+            _ => Flow::Next,
         }
     }
-    task.stop(now_ns(), &mut queue);
-    events.drain(&mut queue);
-    status.state = ProcState::Stopping as u32;
-    status_pub.send(&status);
-    latency_pub.send(clock.histogram());
-    exec_pub.send(clock.exec_histogram());
-    let h = clock.histogram();
-    let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
-    tracing::info!(
-        "{name} ({instance}) stopped after {} cycles, {} overruns; wake-up latency p50 {:.1} µs, \
-         p99 {:.1} µs, p99.9 {:.1} µs, max {:.1} µs",
-        clock.stats().cycles,
-        clock.stats().overruns,
-        us(h.percentile(1, 2)),
-        us(h.percentile(99, 100)),
-        us(h.percentile(999, 1000)),
-        us(Some(h.max_ns)),
-    );
-    Ok(if estop.supervisor_lost() && !signals::stop_requested() {
-        Exit::SupervisorLost
-    } else {
-        Exit::Stopped
-    })
+
+    /// A health detector expired: an event; for a critical process an e-stop, for another
+    /// a warning and the detectors start afresh.
+    ///
+    /// # Real-time
+    /// Copies only.
+    fn detector_expired(&mut self, now: u64, d: crate::health::Detector, critical: bool) {
+        let r = self.health.bucket(d).report(now);
+        let what = if critical {
+            code::HEALTH_EXPIRED
+        } else {
+            code::NOT_CRITICAL_FAILED
+        };
+        let (level, limit) = (f64::from(r.level), f64::from(r.limit));
+        self.queue.push(EventV1::new(
+            now,
+            what,
+            -1,
+            level,
+            limit,
+            &[d.name(), " expired"],
+        ));
+        if critical {
+            self.estop.raise(
+                now,
+                EstopOrigin::Host,
+                code::HEALTH_EXPIRED,
+                &[d.name(), " expired in ", self.ctx.name.as_str()],
+                &mut self.queue,
+            );
+        } else {
+            self.health.restart(now);
+        }
+    }
+
+    /// The status every cycle; the two histograms (30 KB each) half an interval apart, one
+    /// copy per cycle at most.
+    ///
+    /// # Real-time
+    /// Copies and the IPC calls only.
+    fn publish_status(&mut self, now: u64, view: &EstopView, safe: bool) {
+        let st = &mut self.status;
+        st.stamp_ns = now;
+        st.fault = self.task.fault();
+        st.stats = *self.clock.stats();
+        st.pending_sequence = self.health.pending.report(now);
+        st.transport = self.health.transport.report(now);
+        st.thread_offset = self.health.offset.report(now);
+        let bit = |on: bool, b: u32| if on { b } else { 0 };
+        let reacting = view.react.is_some();
+        st.estop = bit(view.latched, estop_seen::LATCHED)
+            | bit(reacting, estop_seen::REACTING)
+            | bit(reacting && safe, estop_seen::SAFE)
+            | bit(self.estop.raised(), estop_seen::RAISED);
+        self.status_pub.send(st);
+        let phase = st.stats.cycles % self.latency_every;
+        if phase == 0 {
+            self.latency_pub.send(self.clock.histogram());
+        }
+        if phase == self.exec_phase {
+            self.exec_pub.send(self.clock.exec_histogram());
+        }
+    }
+
+    /// After the loop: the task's stop, its last events, the last status and histograms, and
+    /// one line of figures; how the process ends.
+    pub fn finish(mut self) -> Exit {
+        let (name, instance) = (self.ctx.name, self.ctx.instance);
+        self.task.stop(now_ns(), &mut self.queue);
+        self.events.drain(&mut self.queue);
+        self.status.state = ProcState::Stopping as u32;
+        self.status_pub.send(&self.status);
+        self.latency_pub.send(self.clock.histogram());
+        self.exec_pub.send(self.clock.exec_histogram());
+        let h = self.clock.histogram();
+        let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
+        tracing::info!(
+            "{name} ({instance}) stopped after {} cycles, {} overruns; wake-up latency p50 {:.1} µs, \
+             p99 {:.1} µs, p99.9 {:.1} µs, max {:.1} µs",
+            self.clock.stats().cycles,
+            self.clock.stats().overruns,
+            us(h.percentile(1, 2)),
+            us(h.percentile(99, 100)),
+            us(h.percentile(999, 1000)),
+            us(Some(h.max_ns)),
+        );
+        if self.estop.supervisor_lost() && !signals::stop_requested() {
+            Exit::SupervisorLost
+        } else {
+            Exit::Stopped
+        }
+    }
 }
 
 /// Turns the overrun counter into events: one at the first overrun of a burst, then at most
