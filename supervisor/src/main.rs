@@ -21,6 +21,29 @@ struct Cli {
     cmd: Cmd,
 }
 
+/// `--instance NAME`: the cell a command acts on, declared once for every command that takes
+/// it (`tune` has a default of its own, `latency` none).
+#[derive(clap::Args, Clone, Debug)]
+struct Instance {
+    /// Instance name: prefixes every service and shared-memory file.
+    #[arg(long = "instance", default_value = runtime::process::DEFAULT_INSTANCE)]
+    name: String,
+}
+
+impl std::ops::Deref for Instance {
+    type Target = str;
+
+    fn deref(&self) -> &str {
+        &self.name
+    }
+}
+
+impl std::fmt::Display for Instance {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Run a motion program: start the cell, move, settle, stop everything, report.
@@ -30,9 +53,8 @@ enum Cmd {
         /// Cell configuration (TOML); without it, the embedded Gantry UBA cell.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Instance name: prefixes every service and shared-memory file.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Write a CSV trace: t_s, cmd_<axis>..., act_<axis>... (one row per setpoint).
         #[arg(long)]
         trace: Option<PathBuf>,
@@ -51,9 +73,8 @@ enum Cmd {
     /// plots, the process table, e-stop / reset / start (docs/web.md). It attaches to the
     /// instance whenever it is up, and waits for it when it is not; until SIGINT or SIGTERM.
     Web {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Address to listen on (port 0: any free port, printed). Anything but a loopback
         /// address needs --token.
         #[arg(long, default_value = "127.0.0.1:8080")]
@@ -68,9 +89,8 @@ enum Cmd {
         /// The MCAP file to write.
         #[arg(long)]
         out: PathBuf,
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
@@ -87,26 +107,23 @@ enum Cmd {
         /// Cell configuration (TOML); without it, the embedded Gantry UBA cell.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Instance name: prefixes every service and shared-memory file.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Record every service of the cell into this MCAP file until it goes down.
         #[arg(long)]
         record: Option<PathBuf>,
     },
     /// Stop a cell that is up: every process leaves safely, nothing of the instance is left.
     Down {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Validate a program and run it on a cell that is up.
     Exec {
         /// Program file.
         program: PathBuf,
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Wait until the program ends and print the report `run` prints.
         #[arg(long)]
         wait: bool,
@@ -129,9 +146,8 @@ enum Cmd {
     Speed {
         /// 1 to 100.
         percent: f64,
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Check a program without starting anything: the same validation `run` and `exec` make
     /// (syntax, names, limits, the whole blended path through trajgen's generator) and its
@@ -145,42 +161,36 @@ enum Cmd {
     },
     /// Decelerate every axis to rest along the path (within t_acc) and hold.
     Pause {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Go on along the path after a pause.
     Resume {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Come to rest along the path and drop the rest of the program (not an e-stop).
     Abort {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Clear the e-stop and servo's latched faults where their cause is gone; says what
     /// cannot be cleared and why. The drives stay disabled until `start`.
     Reset {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Enable the drives, holding where the axes stand (bumpless).
     Start {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Stop one process of the cell and start it again.
     Restart {
         /// Its name in the process table.
         process: String,
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Replace one process of the cell by a new one (a new build, another program, another
     /// language) while the others keep running.
@@ -191,9 +201,8 @@ enum Cmd {
         /// are substituted); without it, the configured command starts again.
         #[arg(long)]
         command: Option<String>,
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
     },
     /// Check a configuration file (or the embedded default) and exit.
     CheckConfig {
@@ -205,9 +214,8 @@ enum Cmd {
     /// Show the processes of a running instance: state, cycles, overruns and wake-up latency
     /// percentiles since they started.
     Status {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Print one JSON object instead of the table.
         #[arg(long)]
         json: bool,
@@ -250,9 +258,8 @@ enum Cmd {
     },
     /// Print the events of a running instance as they happen (docs/events.md).
     Events {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Keep printing until Ctrl-C (without it: what arrives within half a second).
         #[arg(long, short = 'f')]
         follow: bool,
@@ -262,9 +269,8 @@ enum Cmd {
     },
     /// Inject a fault condition into a simulated drive of a running instance (or clear it).
     Inject {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Axis name.
         #[arg(long)]
         axis: String,
@@ -277,9 +283,8 @@ enum Cmd {
     /// Raise the user's e-stop on a running instance (seed 002's trigger_estop): every process
     /// reads it in its own cycle; servo brings the axes to rest and disables the drives.
     Estop {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// Why, in a few words (kept in the e-stop and its events).
         #[arg(long, default_value = "operator e-stop")]
         reason: String,
@@ -287,9 +292,8 @@ enum Cmd {
     /// List the named digital IO of a running instance, or set one: an output as a program's
     /// OUT does, an input as a device of the simulated field would (docs/io.md).
     Io {
-        /// Instance name.
-        #[arg(long, default_value = runtime::process::DEFAULT_INSTANCE)]
-        instance: String,
+        #[command(flatten)]
+        instance: Instance,
         /// The IO's name (`[[io]]`); none lists them all.
         name: Option<String>,
         /// 0 or 1.
@@ -818,7 +822,7 @@ fn main() -> ExitCode {
             let opts = RunOptions {
                 program,
                 config,
-                instance,
+                instance: instance.name,
                 trace,
                 record,
                 plot,
