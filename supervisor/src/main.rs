@@ -26,21 +26,22 @@ struct Cli {
 #[derive(clap::Args, Clone, Debug)]
 struct Instance {
     /// Instance name: prefixes every service and shared-memory file.
-    #[arg(long = "instance", default_value = runtime::process::DEFAULT_INSTANCE)]
-    name: String,
+    // Its id is `instance`: an id of `name` would be the same argument as `io`'s NAME.
+    #[arg(long, value_name = "NAME", default_value = runtime::process::DEFAULT_INSTANCE)]
+    instance: String,
 }
 
 impl std::ops::Deref for Instance {
     type Target = str;
 
     fn deref(&self) -> &str {
-        &self.name
+        &self.instance
     }
 }
 
 impl std::fmt::Display for Instance {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.name)
+        f.write_str(&self.instance)
     }
 }
 
@@ -822,7 +823,7 @@ fn main() -> ExitCode {
             let opts = RunOptions {
                 program,
                 config,
-                instance: instance.name,
+                instance: instance.instance,
                 trace,
                 record,
                 plot,

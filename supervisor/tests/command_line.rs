@@ -67,4 +67,18 @@ fn every_command_has_help_and_a_wrong_one_is_refused_by_name() {
     let (code, _, err) = supervisor(&["status", "--bogus"]);
     assert_eq!(code, Some(2));
     assert!(err.contains("--bogus"), "{err}");
+    // `--instance` beside a command's own arguments parses (it once shared `io`'s NAME).
+    let none = format!("cli{}", std::process::id());
+    for args in [
+        &["io", "gripper", "1", "--instance", &none][..],
+        &["swap", "trajgen", "--instance", &none],
+        &["inject", "--axis", "x", "encoder-loss", "--instance", &none],
+    ] {
+        let (_, _, err) = supervisor(args);
+        assert!(!err.contains("Usage:"), "{args:?} did not parse:\n{err}");
+        assert!(
+            err.contains(&none),
+            "{args:?} did not reach instance {none}:\n{err}"
+        );
+    }
 }

@@ -6,8 +6,10 @@ use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-/// The folder holding the workspace's binaries, built once per test run (same profile as
-/// the tests).
+/// The folder holding the workspace's binaries (same profile as the tests). `cargo test
+/// --workspace` has built them already (each process crate and the supervisor test their own
+/// command line, so cargo builds their binaries with the tests) and the `cargo build --bins`
+/// here finds them fresh; it builds them when a test binary runs on its own.
 pub fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
