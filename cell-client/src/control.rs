@@ -26,6 +26,8 @@ pub enum ControlError {
     Failed(String),
 }
 
+impl std::error::Error for ControlError {}
+
 impl std::fmt::Display for ControlError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {

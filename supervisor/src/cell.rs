@@ -819,10 +819,16 @@ impl Cell {
         while let Some(s) = self.servo_sub.next() {
             self.last_servo = Some(s);
         }
+        self.drain_images(|_| {});
+    }
+
+    /// Takes the fieldbus images that arrived: a swap's gap meter sees each, then `each`.
+    pub(crate) fn drain_images(&mut self, mut each: impl FnMut(&FieldbusImageV1)) {
         while let Some(img) = self.image_sub.next() {
             if let Some(g) = &mut self.image_gaps {
                 g.see(img.written_ns);
             }
+            each(&img);
         }
     }
 

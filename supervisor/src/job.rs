@@ -447,16 +447,13 @@ impl Job {
                 }
             }
         }
-        while let Some(img) = cell.image_sub.next() {
-            if let Some(g) = &mut cell.image_gaps {
-                g.see(img.written_ns);
-            }
-            if self.last.is_some() {
+        let (moving, im) = (self.last.is_some(), &mut self.images);
+        cell.drain_images(|img| {
+            if moving {
                 let d = img.written_ns.saturating_sub(img.measured_ns);
-                let im = &mut self.images;
                 *im = (im.0 + 1, im.1 + d, im.2.max(d));
             }
-        }
+        });
         if let Some(t) = self.done_at
             && self.settled_at.is_none()
             && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout

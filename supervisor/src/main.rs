@@ -313,13 +313,10 @@ fn control_done(r: Result<String, cell_client::control::ControlError>) -> ExitCo
             println!("{msg}");
             ExitCode::SUCCESS
         }
-        Err(e) => {
-            eprint!("{}", errors(&e));
-            ExitCode::from(match e {
-                cell_client::control::ControlError::Input(_) => 2,
-                cell_client::control::ControlError::Failed(_) => 1,
-            })
-        }
+        Err(e) => failed(
+            &e,
+            matches!(e, cell_client::control::ControlError::Input(_)),
+        ),
     }
 }
 
@@ -697,14 +694,7 @@ fn main() -> ExitCode {
         ),
         Cmd::Latency(args) => match latency(&args) {
             Ok(()) => ExitCode::SUCCESS,
-            Err(LatencyError::Input(e)) => {
-                eprint!("{}", errors(&e));
-                ExitCode::from(2)
-            }
-            Err(LatencyError::Failed(e)) => {
-                eprint!("{}", errors(&e));
-                ExitCode::FAILURE
-            }
+            Err(e) => failed(&e, matches!(e, LatencyError::Input(_))),
         },
         Cmd::LatencyPeer(args) => match latency::peer::run(&args) {
             Ok(()) => ExitCode::SUCCESS,

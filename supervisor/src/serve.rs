@@ -553,26 +553,11 @@ impl Loop<'_> {
             self.server.reply(conn, &reply);
             return;
         }
-        // A tuning session: the cell is the session's until it ends; `down` ends it.
-        if let Some(t) = &self.tuning
-            && !matches!(req, Request::Info | Request::Down)
+        // A tuning session or a swap in progress: what would change the cell waits for its
+        // end; `down` ends a tuning session, and is kept for after a swap.
+        if !matches!(req, Request::Info | Request::Down)
+            && let Some(busy) = self.busy()
         {
-            let busy = format!(
-                "busy: axis {} is being tuned (`supervisor tune`); `supervisor down` ends it",
-                self.cfg.axis[t.axis()].name
-            );
-            self.server.reply(conn, &Reply::Refused(busy));
-            return;
-        }
-        // A swap in progress: what would change the cell waits for its end; `down` is kept
-        // for after it.
-        if let Some(s) = &self.swapping
-            && !matches!(req, Request::Info | Request::Down)
-        {
-            let busy = format!(
-                "busy: {} is being replaced (`swap`/`restart`); try again in a moment",
-                s.swap.process()
-            );
             self.server.reply(conn, &Reply::Refused(busy));
             return;
         }
@@ -611,6 +596,22 @@ impl Loop<'_> {
         if let Some(r) = reply {
             self.server.reply(conn, &r);
         }
+    }
+
+    /// Why the cell takes no change now: a tuning session or a swap holds it.
+    fn busy(&self) -> Option<String> {
+        if let Some(t) = &self.tuning {
+            return Some(format!(
+                "busy: axis {} is being tuned (`supervisor tune`); `supervisor down` ends it",
+                self.cfg.axis[t.axis()].name
+            ));
+        }
+        self.swapping.as_ref().map(|s| {
+            format!(
+                "busy: {} is being replaced (`swap`/`restart`); try again in a moment",
+                s.swap.process()
+            )
+        })
     }
 
     fn info(&self) -> Info {

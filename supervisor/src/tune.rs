@@ -363,11 +363,7 @@ impl Tuning {
                 });
             }
         }
-        while let Some(img) = cell.image_sub.next() {
-            if let Some(g) = &mut cell.image_gaps {
-                g.see(img.written_ns);
-            }
-        }
+        cell.drain_images(|_| {});
         while let Some(s) = cell.servo_sub.next() {
             cell.last_servo = Some(s);
             if s.status & st::FAULT_LATCHED != 0 {
