@@ -242,16 +242,51 @@ pub fn run_with_watchdog(cmd: &mut Command, watchdog: Duration) -> Output {
             };
         }
         if start.elapsed() > watchdog {
+            let stuck = where_stuck(child.id());
             let _ = child.kill();
             let _ = child.wait();
             panic!(
-                "watchdog: {:?} still running after {watchdog:?}\nstderr:\n{}",
+                "watchdog: {:?} still running after {watchdog:?}\nstderr:\n{}\n{stuck}",
                 cmd,
                 String::from_utf8_lossy(&err.join().unwrap_or_default())
             );
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Where process `pid` is stuck, for the message of a watchdog that fails a test: each thread's
+/// name, the kernel function it waits in and its kernel stack (readable by root), and, when
+/// gdb is installed, every thread's user-space backtrace.
+pub fn where_stuck(pid: u32) -> String {
+    let mut out = format!("where process {pid} is:\n");
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task"))
+        .map(|d| d.flatten().map(|e| e.path()).collect::<Vec<_>>())
+        .unwrap_or_default();
+    for t in tasks {
+        let read = |f: &str| std::fs::read_to_string(t.join(f)).unwrap_or_default();
+        out += &format!(
+            "thread {} ({}) waits in {}\n{}",
+            t.file_name().unwrap_or_default().to_string_lossy(),
+            read("comm").trim(),
+            read("wchan"),
+            read("stack")
+        );
+    }
+    if let Ok(gdb) = Command::new("timeout")
+        .args(["30", "gdb", "-p", &pid.to_string(), "-batch", "-ex"])
+        .arg("thread apply all bt")
+        .stdin(Stdio::null())
+        .output()
+    {
+        let bt = String::from_utf8_lossy(&gdb.stdout);
+        out += &bt
+            .lines()
+            .filter(|l| l.starts_with('#') || l.starts_with("Thread"))
+            .collect::<Vec<_>>()
+            .join("\n");
+    }
+    out
 }
 
 /// Every iceoryx2 file of `instance` still present: shared memory and the root folder.

@@ -61,9 +61,6 @@ fn kill_while_starting(inst: &str, cfg: &Path, when: Kill) {
 /// unusable (`HangsInCreation`: a service file never finalized) or dirty (a half-created node
 /// that every later `down` reported as left behind).
 #[test]
-#[ignore = "in 2 of 3 fresh-clone CI runs the `up` after the kills stayed silent for 180 s \
-            (stuck before its first log line; reproduced 2 of 4 under load, not root-caused): \
-            run with --ignored"]
 fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
     integration_tests::attributable(|| {
         let test = "killed-up";

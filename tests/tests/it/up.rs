@@ -141,12 +141,20 @@ impl Up {
             {
                 return v;
             }
-            assert!(
-                start.elapsed() < WATCHDOG,
-                "{what}: never happened\n{}\nlog:\n{}",
-                String::from_utf8_lossy(&out.stdout),
-                self.log()
-            );
+            if start.elapsed() >= WATCHDOG {
+                let stuck = match &self.child {
+                    Some(c) => integration_tests::where_stuck(c.id()),
+                    None => String::new(),
+                };
+                panic!(
+                    "{what}: never happened\nlast status ({}):\n{}{}\nlog:\n{}\n{stuck}\nfiles: {:?}",
+                    out.status,
+                    String::from_utf8_lossy(&out.stdout),
+                    String::from_utf8_lossy(&out.stderr),
+                    self.log(),
+                    integration_tests::leftovers(&self.inst)
+                );
+            }
             std::thread::sleep(Duration::from_millis(50));
         }
     }
