@@ -213,10 +213,12 @@ fn motion_time_holds_with_both_cores_loaded() {
                 })
             })
             .collect();
+        // A square of 20 mm that turns theta on one side (about 7 s): every kind of segment
+        // and blend, each cycle of each process as exposed to the load as in a longer one.
         let prog = scratch(
             "loaded",
             "square.prog",
-            "MOVE(140,40,0)\nMOVE(140,120,90)\nMOVE(40,120,0)\nMOVE(40,40,0)\nSTOP\nEND\n",
+            "MOVE(60,40,0)\nMOVE(60,60,45)\nMOVE(40,60,0)\nMOVE(40,40,0)\nSTOP\nEND\n",
         );
         let out = run_with_watchdog(
             supervisor()

@@ -12,13 +12,14 @@ use std::time::{Duration, Instant};
 
 pub(crate) const WATCHDOG: Duration = Duration::from_secs(180);
 
-/// Runs the triangle with the configuration file `cfg` on `inst`, `--json`; it must succeed.
-fn triangle_json(inst: &str, cfg: &Path) -> serde_json::Value {
+/// Runs the small triangle (a fifth of the seed's: its corners, its blends, 5 s instead of 19)
+/// of `test` with the configuration file `cfg` on `inst`, `--json`; it must succeed.
+fn small_triangle_json(test: &str, inst: &str, cfg: &Path) -> serde_json::Value {
     let out = run_with_watchdog(
         supervisor()
             .args(["run", "--json", "--instance", inst, "--config"])
             .arg(cfg)
-            .arg(examples().join("triangle.prog")),
+            .arg(integration_tests::small_triangle(test)),
         WATCHDOG,
     );
     assert!(
@@ -29,7 +30,7 @@ fn triangle_json(inst: &str, cfg: &Path) -> serde_json::Value {
     json_of(&out)
 }
 
-/// The run ended on the triangle's start, every axis within the following-error limit.
+/// The run ended on the (small) triangle's start, every axis within the following-error limit.
 fn on_target(j: &serde_json::Value) {
     for (axis, want) in [("x", 40.0), ("y", 40.0), ("theta", 0.0)] {
         let got = j["final_position"][axis].as_f64().expect("final");
@@ -255,12 +256,12 @@ fn an_absurd_inertia_is_refused_before_anything_starts() {
 }
 
 #[test]
-fn csp_axes_follow_the_triangle_on_the_real_processes() {
+fn csp_axes_follow_the_small_triangle_on_the_real_processes() {
     integration_tests::attributable(|| {
         let inst = instance("csp");
         let cfg = integration_tests::cell_in_csp();
         let cfg = scratch("csp", "cell.toml", &cfg);
-        let j = triangle_json(&inst, &cfg);
+        let j = small_triangle_json("csp", &inst, &cfg);
         on_target(&j);
         assert!(j["sense_to_command_us"]["p50_us"].as_f64().expect("sense") > 0.0);
         assert_clean(&inst);
@@ -411,12 +412,12 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
 }
 
 #[test]
-fn the_triangle_completes_with_servo_and_the_drives_at_4_khz() {
+fn the_small_triangle_completes_with_servo_and_the_drives_at_4_khz() {
     integration_tests::attributable(|| {
         let inst = instance("4khz");
         let cfg = integration_tests::cell_at_rate(250);
         let cfg = scratch("4khz", "cell.toml", &cfg);
-        let j = triangle_json(&inst, &cfg);
+        let j = small_triangle_json("4khz", &inst, &cfg);
         assert_eq!(j["processes"]["servo"]["period_us"].as_f64(), Some(250.0));
         on_target(&j);
         // The drives measured it (its figures belong to the benchmark, not to a test).

@@ -12,8 +12,14 @@ use std::path::PathBuf;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-/// A short program: out and back on x (2 segments, about 13 s from the default start).
+/// A short program: out and back on x (2 segments, about 13 s from the default start), for a
+/// test that acts on the cell several times while it moves.
 const SHORT: &str = "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n";
+/// Out and back on x, half as far (about 7 s): a program that must still move several seconds
+/// after a test saw it moving, and that a test then waits to complete.
+const MID: &str = "MOVE(90, 40, 0)\nMOVE(40, 40, 0)\nEND\n";
+/// A brief program (about 3 s from the default start): the cell runs a program again.
+const BRIEF: &str = "MOVE(60, 40, 0)\nMOVE(40, 40, 0)\nEND\n";
 
 fn cell(test: &str) -> PathBuf {
     scratch(test, "cell.toml", &with_stall_room(&default_cell()))
@@ -128,7 +134,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         );
         assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
         // The next program starts where the abort left the axes.
-        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
         // `down` while a client waits for a program: the client is told, not dropped.
         let waiting = supervisor()
             .args(["exec", "--wait", "--instance", &up.inst])
@@ -181,7 +187,7 @@ fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named()
         std::thread::sleep(Duration::from_millis(500));
         assert_eq!(up.status()["supervisor"]["arm"]["enabled"], false);
         up.ok(&["start"]);
-        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
         // A fault whose cause is still there: reset clears the e-stop and says what stays.
         up.ok(&["inject", "--axis", "x", "encoder-loss"]);
         up.until("servo's fault", |s| {
@@ -194,7 +200,7 @@ fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named()
         up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
         up.ok(&["reset"]);
         up.ok(&["start"]);
-        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
         up.down();
     });
 }
@@ -234,7 +240,7 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
             up.ok(&["reset"]);
             up.ok(&["start"]);
         }
-        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
         up.down();
     });
 }
@@ -271,8 +277,8 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         let up = Up::start(test, &cell(test));
         // The gripper holds a part: no swap may open it.
         up.ok(&["io", "gripper", "1"]);
-        let triangle = integration_tests::examples().join("triangle.prog");
-        let mut run = up.exec_in_background(&triangle);
+        // Two swaps while it moves: the program lasts 13 s.
+        let mut run = up.exec_in_background(program(test, SHORT));
         up.until("moving", moving);
         let out = up.ok(&["swap", "iobridge"]);
         println!("{}", out.trim());
@@ -377,7 +383,7 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         });
         let s = up.status();
         assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
-        up.ok(&["exec", &program(test, SHORT), "--wait"]);
+        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
         // A bad command changes nothing.
         let err = up.refused(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
         assert!(err.contains("nothing was changed"), "{err}");
@@ -431,7 +437,7 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
         let mut cmd = supervisor();
         cmd.args(["run", "--instance", &inst, "--config"])
             .arg(&cfg)
-            .arg(program(test, SHORT));
+            .arg(program(test, BRIEF));
         let out = run_with_watchdog(&mut cmd, WATCHDOG);
         assert!(
             out.status.success(),
@@ -475,7 +481,7 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
         let mut cmd = supervisor();
         cmd.args(["run", "--json", "--instance", &inst, "--config"])
             .arg(&cfg)
-            .arg(program(test, SHORT));
+            .arg(program(test, BRIEF));
         let out = run_with_watchdog(&mut cmd, WATCHDOG);
         assert!(
             out.status.success(),
@@ -622,7 +628,7 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
         io_value(s, "gripper_closed") == Some(1)
     });
     assert_eq!(io_value(&s, "cycle_lamp"), Some(1), "{s}");
-    let run = up.exec_in_background(program(test, SHORT));
+    let run = up.exec_in_background(program(test, MID));
     up.until("moving", moving);
     up.ok(&["io", "estop_ok", "0"]);
     let s = up.until("latched, outputs safe", |s| {
@@ -666,7 +672,7 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
     assert_eq!(io_value(&s, "cycle_lamp"), Some(0), "{s}");
     up.ok(&["io", "cycle_lamp", "1"]);
     up.ok(&["start"]);
-    up.ok(&["exec", &program(test, SHORT), "--wait"]);
+    up.ok(&["exec", &program(test, BRIEF), "--wait"]);
     up.down();
 }
 
