@@ -28,7 +28,7 @@
 //! supervisor tick; a client that does not read its answer only keeps its own connection open
 //! (until it hangs up or the supervisor ends), it is never waited for.
 
-use crate::{Reply, Request};
+use crate::{Refusal, Reply, Request};
 use shm_schema::InstanceName;
 use std::io::{ErrorKind, Read, Write};
 use std::os::fd::{AsFd, BorrowedFd};
@@ -317,22 +317,20 @@ impl Server {
                 }
                 Ok(None) if c.eof => {
                     c.asked = true;
-                    c.set_reply(&Reply::Refused(format!(
-                        "the request ended after {} bytes, before its frame was complete",
-                        c.input.len()
-                    )));
+                    c.set_reply(&Reply::Refused(Refusal::Incomplete {
+                        bytes: c.input.len(),
+                    }));
                 }
                 Ok(None) if c.opened.elapsed() > REQUEST_TIMEOUT => {
                     c.asked = true;
-                    c.set_reply(&Reply::Refused(format!(
-                        "no complete request within {} s of connecting",
-                        REQUEST_TIMEOUT.as_secs()
-                    )));
+                    c.set_reply(&Reply::Refused(Refusal::Slow {
+                        seconds: REQUEST_TIMEOUT.as_secs(),
+                    }));
                 }
                 Ok(None) => {}
-                Err(why) => {
+                Err(refusal) => {
                     c.asked = true;
-                    c.set_reply(&Reply::Refused(why));
+                    c.set_reply(&Reply::Refused(refusal));
                 }
             }
             if c.asked {
@@ -371,22 +369,25 @@ impl Server {
                 Ok(c) if c.uid() == self.uid || c.uid() == 0 => None,
                 Ok(c) => Some((
                     format!("uid {} (pid {})", c.uid(), c.pid()),
-                    format!(
-                        "refused: this cell belongs to uid {}; uid {} may not control it",
-                        self.uid,
-                        c.uid()
-                    ),
+                    Refusal::ForeignUser {
+                        owner: self.uid,
+                        uid: c.uid(),
+                    },
                 )),
                 Err(e) => Some((
                     "an unknown peer".into(),
-                    format!("refused: cannot read the peer's credentials: {e}"),
+                    Refusal::UnknownPeer {
+                        error: e.to_string(),
+                    },
                 )),
             };
             let refusal = refusal.or_else(|| {
                 (self.conns.len() >= MAX_CONNECTIONS).then(|| {
                     (
                         "a client over the limit".into(),
-                        format!("refused: busy, {MAX_CONNECTIONS} connections are open; try again"),
+                        Refusal::Connections {
+                            limit: MAX_CONNECTIONS,
+                        },
                     )
                 })
             });
@@ -481,7 +482,7 @@ impl Conn {
 
     /// Reads what is there (at most `budget` bytes, taken from it); a complete request once
     /// it has all arrived. Whatever follows the frame, inside it or after it, refuses it.
-    fn read_request(&mut self, budget: &mut usize) -> Result<Option<Request>, String> {
+    fn read_request(&mut self, budget: &mut usize) -> Result<Option<Request>, Refusal> {
         let mut buf = [0u8; 16 * 1024];
         while !self.eof && *budget > 0 {
             let want = buf.len().min(*budget);
@@ -493,23 +494,24 @@ impl Conn {
                 }
                 Err(e) if e.kind() == ErrorKind::WouldBlock => break,
                 Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                Err(e) => return Err(format!("read: {e}")),
+                Err(e) => {
+                    return Err(Refusal::Malformed {
+                        error: format!("read: {e}"),
+                    });
+                }
             }
             if self.input.len() >= 4 {
                 let len = frame_len(&self.input);
                 if len > MAX_REQUEST {
-                    return Err(format!(
-                        "a request of {len} bytes: at most {MAX_REQUEST} are accepted \
-                         (a program's source is at most {} bytes)",
-                        motion_program::MAX_SOURCE_BYTES
-                    ));
+                    return Err(Refusal::TooLong {
+                        bytes: len,
+                        limit: MAX_REQUEST,
+                    });
                 }
                 if self.input.len() > 4 + len {
-                    return Err(format!(
-                        "{} bytes follow the request's frame: one request per connection, \
-                         nothing after it",
-                        self.input.len() - 4 - len
-                    ));
+                    return Err(Refusal::AfterFrame {
+                        bytes: self.input.len() - 4 - len,
+                    });
                 }
             }
         }
@@ -518,13 +520,10 @@ impl Conn {
         }
         match postcard::take_from_bytes::<Request>(&self.input[4..]) {
             Ok((r, [])) => Ok(Some(r)),
-            Ok((_, rest)) => Err(format!(
-                "{} bytes of junk after the request inside its frame: refused, nothing done",
-                rest.len()
-            )),
-            Err(e) => Err(format!(
-                "a garbled request ({e}): not a supervisor of this version?"
-            )),
+            Ok((_, rest)) => Err(Refusal::AfterRequest { bytes: rest.len() }),
+            Err(e) => Err(Refusal::Malformed {
+                error: format!("a garbled request ({e}): not a supervisor of this version?"),
+            }),
         }
     }
 

@@ -24,7 +24,7 @@ pub mod schema;
 pub mod status;
 
 pub use info::Info;
-pub use request::{Replaced, Reply, Request};
+pub use request::{Refusal, Replaced, Reply, Request};
 
 /// A unit variant's JSON name (`"running"` for [`info::Life::Running`]), for text.
 pub fn word<T: serde::Serialize>(v: &T) -> String {

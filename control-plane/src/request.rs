@@ -64,7 +64,7 @@ pub enum Reply {
     /// A process replaced (`swap`, `restart`).
     Replaced(Box<Replaced>),
     /// Not done, nothing changed: bad input or a state that does not allow it (exit 2).
-    Refused(String),
+    Refused(Refusal),
     /// Tried and failed (exit 1).
     Failed(String),
     /// The supervisor's view of the cell (`Info`).
@@ -81,6 +81,275 @@ pub enum Reply {
         figures: Option<Box<Figures>>,
     },
 }
+
+/// Why the cell refused a request: nothing was changed (the CLI exits 2). A client acts on
+/// the variant ([`Refusal::is_busy`]: try again later); its `Display` is the line for the
+/// user.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub enum Refusal {
+    /// The instance is going down: the axes come to rest, then the processes stop.
+    GoingDown {
+        /// The instance.
+        instance: String,
+    },
+    /// A tuning session has the cell (`supervisor tune`); `down` ends it.
+    Tuning {
+        /// The axis being tuned.
+        axis: String,
+    },
+    /// A process is being replaced (`swap`, `restart`).
+    Replacing {
+        /// The process.
+        process: String,
+    },
+    /// A program runs.
+    ProgramRunning {
+        /// The program's name.
+        program: String,
+    },
+    /// trajgen still brings the previous program to rest.
+    Settling {
+        /// The program line it is at.
+        line: u32,
+    },
+    /// The drives are being enabled.
+    Enabling,
+    /// The e-stop is latched; `supervisor reset` first.
+    EstopLatched {
+        /// The e-stop: who raised it and why.
+        estop: String,
+    },
+    /// Servo's fault is latched; `supervisor reset` first.
+    FaultLatched {
+        /// The fault: its code, axis and values.
+        fault: String,
+    },
+    /// The drives are disabled; `supervisor start` enables them.
+    Disabled,
+    /// Enabling the drives was refused (servo refused the request: why, in its words).
+    Enable {
+        /// Why.
+        error: String,
+    },
+    /// trajgen has published no setpoint yet: where the axes stand is not known.
+    NoSetpoint,
+    /// The program is wrong or would break a limit (its file, line and column, and why).
+    Program {
+        /// What is wrong, and where.
+        error: String,
+    },
+    /// A speed override outside 1 to 100 %.
+    Speed {
+        /// The percentage asked for.
+        percent: f64,
+    },
+    /// Pause, resume or abort with no program running.
+    NoProgram,
+    /// The program's motion has ended; the axes settle.
+    MotionEnded,
+    /// trajgen is swapped while the program moves, not while it is paused.
+    Paused,
+    /// trajgen is swapped while the program moves, not while it holds at a `WAIT` or `DELAY`.
+    Holding {
+        /// `WAIT` or `DELAY`.
+        instruction: String,
+        /// Its line.
+        line: u32,
+    },
+    /// No process of that name in the cell's table.
+    NoSuchProcess {
+        /// The name asked for.
+        process: String,
+        /// The table's names.
+        known: Vec<String>,
+    },
+    /// A replacement's command line cannot run.
+    Command {
+        /// Why (an empty line, a program not found).
+        error: String,
+    },
+    /// A process of the motion path is replaced only while no program runs.
+    MotionPath {
+        /// The process.
+        process: String,
+        /// The program that runs.
+        program: String,
+    },
+    /// The e-stop cannot be cleared.
+    Reset {
+        /// What holds it (an e-stop input still open, ...).
+        blockers: Vec<String>,
+    },
+    /// The request ended before its frame was complete.
+    Incomplete {
+        /// Bytes received.
+        bytes: usize,
+    },
+    /// No complete request within the channel's time after connecting.
+    Slow {
+        /// The time allowed (s).
+        seconds: u64,
+    },
+    /// A frame longer than the channel takes.
+    TooLong {
+        /// The frame's length.
+        bytes: usize,
+        /// The longest taken.
+        limit: usize,
+    },
+    /// Bytes inside the frame after the request.
+    AfterRequest {
+        /// How many.
+        bytes: usize,
+    },
+    /// Bytes after the frame: one request per connection.
+    AfterFrame {
+        /// How many.
+        bytes: usize,
+    },
+    /// The frame is not a request (undecodable: another version?), or could not be read.
+    Malformed {
+        /// What is wrong with it.
+        error: String,
+    },
+    /// Another user: the cell belongs to `owner`.
+    ForeignUser {
+        /// The cell's uid.
+        owner: u32,
+        /// The peer's uid.
+        uid: u32,
+    },
+    /// The peer's credentials cannot be read.
+    UnknownPeer {
+        /// Why.
+        error: String,
+    },
+    /// The channel holds as many connections as it takes.
+    Connections {
+        /// Its limit.
+        limit: usize,
+    },
+}
+
+impl Refusal {
+    /// The cell is busy with something that ends by itself (a program, a swap, a tuning
+    /// session, an enabling, the channel's connections): the same request may be taken later.
+    pub fn is_busy(&self) -> bool {
+        matches!(
+            self,
+            Self::Tuning { .. }
+                | Self::Replacing { .. }
+                | Self::ProgramRunning { .. }
+                | Self::Settling { .. }
+                | Self::Enabling
+                | Self::MotionEnded
+                | Self::Connections { .. }
+        )
+    }
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::GoingDown { instance } => write!(
+                f,
+                "instance {instance} is going down: the axes come to rest, then the processes stop"
+            ),
+            Self::Tuning { axis } => write!(
+                f,
+                "busy: axis {axis} is being tuned (`supervisor tune`); `supervisor down` ends it"
+            ),
+            Self::Replacing { process } => write!(
+                f,
+                "busy: {process} is being replaced (`swap`/`restart`); try again in a moment"
+            ),
+            Self::ProgramRunning { program } => {
+                write!(f, "busy: {program} is running (`supervisor abort` ends it)")
+            }
+            Self::Settling { line } => write!(
+                f,
+                "trajgen is still bringing the previous program to rest (line {line}); try again in a moment"
+            ),
+            Self::Enabling => f.write_str("the drives are being enabled; try again in a moment"),
+            Self::EstopLatched { estop } => write!(
+                f,
+                "the e-stop is latched: {estop}\n  `supervisor reset`, then `supervisor start`"
+            ),
+            Self::FaultLatched { fault } => {
+                write!(f, "{fault}\n  `supervisor reset`, then `supervisor start`")
+            }
+            Self::Disabled => {
+                f.write_str("the drives are disabled: `supervisor start` enables them")
+            }
+            Self::NoSetpoint => f.write_str("trajgen publishes no setpoint"),
+            Self::Program { error } | Self::Malformed { error } | Self::Enable { error } => {
+                f.write_str(error)
+            }
+            Self::Speed { percent } => {
+                write!(f, "speed {percent} %: 1 to 100 % of the programmed speed")
+            }
+            Self::NoProgram => f.write_str("no program is running"),
+            Self::MotionEnded => f.write_str(
+                "the program's motion has ended; the axes are settling: try again in a moment",
+            ),
+            Self::Paused => f.write_str(
+                "the program is paused: `supervisor resume` first (a swap pauses and resumes it itself)",
+            ),
+            Self::Holding { instruction, line } => write!(
+                f,
+                "the program holds at a {instruction} (line {line}): trajgen is swapped while the \
+                 program moves or with no program; nothing was changed"
+            ),
+            Self::NoSuchProcess { process, known } => write!(
+                f,
+                "no process {process:?} in this cell (it has {})",
+                known.join(", ")
+            ),
+            Self::Command { error } => write!(f, "--command: {error}; nothing was changed"),
+            Self::MotionPath { process, program } => write!(
+                f,
+                "{process} can be replaced only while no program runs ({program} is running; \
+                 `supervisor abort` ends it, or wait for it)"
+            ),
+            Self::Reset { blockers } => {
+                write!(f, "the e-stop cannot be cleared: {}", blockers.join("; "))
+            }
+            Self::Incomplete { bytes } => write!(
+                f,
+                "the request ended after {bytes} bytes, before its frame was complete"
+            ),
+            Self::TooLong { bytes, limit } => write!(
+                f,
+                "a request of {bytes} bytes: at most {limit} are accepted \
+                 (a program's source is at most {} bytes)",
+                motion_program::MAX_SOURCE_BYTES
+            ),
+            Self::AfterRequest { bytes } => write!(
+                f,
+                "{bytes} bytes of junk after the request inside its frame: refused, nothing done"
+            ),
+            Self::AfterFrame { bytes } => write!(
+                f,
+                "{bytes} bytes follow the request's frame: one request per connection, nothing after it"
+            ),
+            Self::Slow { seconds } => {
+                write!(f, "no complete request within {seconds} s of connecting")
+            }
+            Self::ForeignUser { owner, uid } => write!(
+                f,
+                "refused: this cell belongs to uid {owner}; uid {uid} may not control it"
+            ),
+            Self::UnknownPeer { error } => {
+                write!(f, "refused: cannot read the peer's credentials: {error}")
+            }
+            Self::Connections { limit } => {
+                write!(f, "refused: busy, {limit} connections are open; try again")
+            }
+        }
+    }
+}
+
+impl std::error::Error for Refusal {}
 
 /// A process replaced by `swap` or `restart`: the answer's data, and its words
 /// ([`Replaced::text`]).

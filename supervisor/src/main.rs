@@ -535,7 +535,7 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
     let once = || -> Result<control_plane::status::Status, (u8, String)> {
         let info = match ctl::call(&instance, &Request::Info) {
             Ok(Reply::Info(info)) => *info,
-            Ok(Reply::Refused(m)) => return Err((2, m)),
+            Ok(Reply::Refused(m)) => return Err((2, m.to_string())),
             Ok(other) => return Err((1, format!("unexpected answer: {other:?}"))),
             Err(e) => return Err((2, e.to_string())),
         };

@@ -29,7 +29,7 @@ use control_plane::event::Event;
 use control_plane::info::{Info, JobInfo, LastJob};
 use control_plane::report::Outcome;
 use control_plane::report::ProcessReport;
-use control_plane::{Reply, Request};
+use control_plane::{Refusal, Reply, Request};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
@@ -234,7 +234,9 @@ impl Loop<'_> {
                     Err(e) => {
                         tracing::error!("the arm is not enabled: {e}");
                         let reply = match e {
-                            RunError::Input(m) => Reply::Refused(m.clone()),
+                            RunError::Input(m) => {
+                                Reply::Refused(Refusal::Enable { error: m.clone() })
+                            }
                             e => Reply::Failed(e.to_string()),
                         };
                         for c in waiters {
@@ -545,10 +547,9 @@ impl Loop<'_> {
                     "instance {}: already going down",
                     self.cell.instance
                 )),
-                _ => Reply::Refused(format!(
-                    "instance {} is going down: the axes come to rest, then the processes stop",
-                    self.cell.instance
-                )),
+                _ => Reply::Refused(Refusal::GoingDown {
+                    instance: self.cell.instance.to_string(),
+                }),
             };
             self.server.reply(conn, &reply);
             return;
@@ -599,18 +600,14 @@ impl Loop<'_> {
     }
 
     /// Why the cell takes no change now: a tuning session or a swap holds it.
-    fn busy(&self) -> Option<String> {
+    fn busy(&self) -> Option<Refusal> {
         if let Some(t) = &self.tuning {
-            return Some(format!(
-                "busy: axis {} is being tuned (`supervisor tune`); `supervisor down` ends it",
-                self.cfg.axis[t.axis()].name
-            ));
+            return Some(Refusal::Tuning {
+                axis: self.cfg.axis[t.axis()].name.clone(),
+            });
         }
-        self.swapping.as_ref().map(|s| {
-            format!(
-                "busy: {} is being replaced (`swap`/`restart`); try again in a moment",
-                s.swap.process()
-            )
+        self.swapping.as_ref().map(|s| Refusal::Replacing {
+            process: s.swap.process().to_string(),
         })
     }
 
@@ -639,37 +636,31 @@ impl Loop<'_> {
     }
 
     /// Why a program cannot start now, if it cannot.
-    fn not_ready(&self) -> Option<String> {
+    fn not_ready(&self) -> Option<Refusal> {
         if let Some(r) = &self.running {
-            return Some(format!(
-                "busy: {} is running (`supervisor abort` ends it)",
-                r.job.name
-            ));
+            return Some(Refusal::ProgramRunning {
+                program: r.job.name.clone(),
+            });
         }
         if let Some(sp) = self
             .cell
             .last_sp
             .filter(|sp| sp.state == shm_schema::MotionState::Moving as u32)
         {
-            return Some(format!(
-                "trajgen is still bringing the previous program to rest (line {}); try again in a moment",
-                sp.line
-            ));
+            return Some(Refusal::Settling { line: sp.line });
         }
         if self.enabling.is_some() {
-            return Some("the drives are being enabled; try again in a moment".into());
+            return Some(Refusal::Enabling);
         }
-        if let Some(text) = self.cell.estop_text() {
-            return Some(format!(
-                "the e-stop is latched: {text}\n  `supervisor reset`, then `supervisor start`"
-            ));
+        if let Some(estop) = self.cell.estop_text() {
+            return Some(Refusal::EstopLatched { estop });
         }
         let enabled = self
             .cell
             .last_servo
             .is_some_and(|s| s.status & st::ENABLED != 0);
         if !enabled {
-            return Some("the drives are disabled: `supervisor start` enables them".into());
+            return Some(Refusal::Disabled);
         }
         None
     }
@@ -677,20 +668,28 @@ impl Loop<'_> {
     fn exec(&mut self, name: String, src: &[u8], waiter: Option<Waiter>) -> Option<Reply> {
         let program = match Checked::new(self.cfg, &name, src) {
             Ok(p) => p,
-            Err(e) => return Some(Reply::Refused(e.to_string())),
+            Err(e) => {
+                return Some(Reply::Refused(Refusal::Program {
+                    error: e.to_string(),
+                }));
+            }
         };
         if let Some(why) = self.not_ready() {
             return Some(Reply::Refused(why));
         }
         let Some(sp) = self.cell.last_sp else {
-            return Some(Reply::Refused("trajgen publishes no setpoint".into()));
+            return Some(Reply::Refused(Refusal::NoSetpoint));
         };
         // Validated from where the axes stand, with trajgen's own generator.
         let n = self.cfg.axis.len();
         let predicted = match program.predict(self.cfg, &sp.position[..n], &mut || self.cell.beat())
         {
             Ok(p) => p,
-            Err(e) => return Some(Reply::Refused(e.to_string())),
+            Err(e) => {
+                return Some(Reply::Refused(Refusal::Program {
+                    error: e.to_string(),
+                }));
+            }
         };
         let text = match predicted.iteration_s {
             Some(i) => format!(
@@ -711,9 +710,7 @@ impl Loop<'_> {
     /// until changed).
     fn speed(&mut self, conn: ConnId, percent: f64) -> Option<Reply> {
         if !(percent.is_finite() && (1.0..=100.0).contains(&percent)) {
-            return Some(Reply::Refused(format!(
-                "speed {percent} %: 1 to 100 % of the programmed speed"
-            )));
+            return Some(Reply::Refused(Refusal::Speed { percent }));
         }
         let seq = self
             .cell
@@ -729,12 +726,10 @@ impl Loop<'_> {
 
     fn control(&mut self, conn: ConnId, kind: ControlKind) -> Option<Reply> {
         let Some(r) = &self.running else {
-            return Some(Reply::Refused("no program is running".into()));
+            return Some(Reply::Refused(Refusal::NoProgram));
         };
         if r.job.motion_done() {
-            return Some(Reply::Refused(
-                "the program's motion has ended; the axes are settling".into(),
-            ));
+            return Some(Reply::Refused(Refusal::MotionEnded));
         }
         let seq = self.cell.motion_control(kind);
         self.pending.push(Pending::Control {
@@ -756,10 +751,7 @@ impl Loop<'_> {
         }
         let blockers = self.cell.reset_blockers();
         if !blockers.is_empty() {
-            return Some(Reply::Refused(format!(
-                "the e-stop cannot be cleared: {}",
-                blockers.join("; ")
-            )));
+            return Some(Reply::Refused(Refusal::Reset { blockers }));
         }
         if let Err(e) = self.cell.reset() {
             return Some(Reply::Failed(e.to_string()));
@@ -773,17 +765,14 @@ impl Loop<'_> {
     }
 
     fn start(&mut self, conn: ConnId) -> Option<Reply> {
-        if let Some(text) = self.cell.estop_text() {
-            return Some(Reply::Refused(format!(
-                "the e-stop is latched: {text}\n  `supervisor reset` first"
-            )));
+        if let Some(estop) = self.cell.estop_text() {
+            return Some(Reply::Refused(Refusal::EstopLatched { estop }));
         }
         if let Some(s) = self.cell.last_servo {
             if s.status & st::FAULT_LATCHED != 0 {
-                return Some(Reply::Refused(format!(
-                    "{}\n  `supervisor reset` first",
-                    self.cell.fault_text(&s)
-                )));
+                return Some(Reply::Refused(Refusal::FaultLatched {
+                    fault: self.cell.fault_text(&s),
+                }));
             }
             if s.status & st::ENABLED != 0 {
                 return Some(Reply::Done("the drives are enabled, holding".into()));
@@ -895,19 +884,21 @@ impl Loop<'_> {
         swap: bool,
     ) -> Option<Reply> {
         let Some(k) = self.cell.index_of(process) else {
-            return Some(Reply::Refused(format!(
-                "no process {process:?} in this cell (it has {})",
-                self.cell.names.join(", ")
-            )));
+            return Some(Reply::Refused(Refusal::NoSuchProcess {
+                process: process.to_string(),
+                known: self.cell.names.clone(),
+            }));
         };
         if let Some(c) = &command {
             let Some(first) = c.first() else {
-                return Some(Reply::Refused("--command is empty".into()));
+                return Some(Reply::Refused(Refusal::Command {
+                    error: "it is empty".into(),
+                }));
             };
             if let Err(e) = crate::launch::find_program(first) {
-                return Some(Reply::Refused(format!(
-                    "--command: {e}; nothing was changed"
-                )));
+                return Some(Reply::Refused(Refusal::Command {
+                    error: e.to_string(),
+                }));
             }
         }
         let motion = matches!(process, "trajgen" | "servo" | "drives");
@@ -916,16 +907,10 @@ impl Loop<'_> {
             && let Some(r) = &self.running
         {
             if r.job.last.is_some_and(|sp| sp.path_speed == 0.0) {
-                return Some(Reply::Refused(
-                    "the program is paused: `supervisor resume` first (a swap pauses and resumes it itself)"
-                        .into(),
-                ));
+                return Some(Reply::Refused(Refusal::Paused));
             }
             if r.job.motion_done() {
-                return Some(Reply::Refused(
-                    "the program's motion has ended (the axes settle); try again in a moment"
-                        .into(),
-                ));
+                return Some(Reply::Refused(Refusal::MotionEnded));
             }
             // The handover record describes a segment; a WAIT or a DELAY has none.
             if let Some(sp) = r
@@ -933,29 +918,25 @@ impl Loop<'_> {
                 .last
                 .filter(|sp| sp.hold != shm_schema::motion::hold::NONE)
             {
-                let what = if sp.hold == shm_schema::motion::hold::WAIT {
-                    "a WAIT"
+                let instruction = if sp.hold == shm_schema::motion::hold::WAIT {
+                    "WAIT"
                 } else {
-                    "a DELAY"
+                    "DELAY"
                 };
-                return Some(Reply::Refused(format!(
-                    "the program holds at {what} (line {}): trajgen is swapped while the program \
-                     moves or with no program; nothing was changed",
-                    sp.line
-                )));
+                return Some(Reply::Refused(Refusal::Holding {
+                    instruction: instruction.into(),
+                    line: sp.line,
+                }));
             }
             carried = Some(&r.job);
         } else if motion && let Some(r) = &self.running {
-            return Some(Reply::Refused(format!(
-                "{process} can be replaced only while no program runs ({} is running; \
-                 `supervisor abort` ends it, or wait for it)",
-                r.job.name
-            )));
+            return Some(Reply::Refused(Refusal::MotionPath {
+                process: process.to_string(),
+                program: r.job.name.clone(),
+            }));
         }
         if self.enabling.is_some() {
-            return Some(Reply::Refused(
-                "the drives are being enabled; try again in a moment".into(),
-            ));
+            return Some(Reply::Refused(Refusal::Enabling));
         }
         let was_enabled = self
             .cell

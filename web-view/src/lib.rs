@@ -514,7 +514,8 @@ async fn action(
         };
         match control_plane::channel::call(&instance, &req) {
             Ok(Reply::Done(m)) => Ok(m),
-            Ok(Reply::Refused(m) | Reply::Failed(m)) => Err((StatusCode::CONFLICT, m)),
+            Ok(Reply::Refused(m)) => Err((StatusCode::CONFLICT, m.to_string())),
+            Ok(Reply::Failed(m)) => Err((StatusCode::CONFLICT, m)),
             Ok(other) => Ok(format!("{other:?}")),
             Err(e) => Err((StatusCode::SERVICE_UNAVAILABLE, e.to_string())),
         }

@@ -5,6 +5,7 @@
 
 use crate::drives::WATCHDOG;
 use crate::up::{Up, cell};
+use control_plane::Refusal;
 use integration_tests::{examples, instance, pids_with, run_with_watchdog, supervisor};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::process::CommandExt;
@@ -230,11 +231,14 @@ fn answer(s: &mut std::os::unix::net::UnixStream) -> Option<control_plane::Reply
     postcard::from_bytes(&body).ok()
 }
 
-fn refused_with(r: Option<control_plane::Reply>, what: &str, words: &str) {
+/// `r` is a refusal for which `why` holds.
+fn refused_with(
+    r: Option<control_plane::Reply>,
+    what: &str,
+    why: impl Fn(&control_plane::Refusal) -> bool,
+) {
     match r {
-        Some(control_plane::Reply::Refused(m)) => {
-            assert!(m.contains(words), "{what}: refused, but {m:?}")
-        }
+        Some(control_plane::Reply::Refused(m)) => assert!(why(&m), "{what}: refused, but {m:?}"),
         other => panic!("{what}: not refused: {other:?}"),
     }
 }
@@ -255,30 +259,32 @@ fn control_frames_are_taken_whole_or_not_at_all() {
         inside.extend_from_slice(b"junk");
         let mut s = connect(&up.inst);
         s.write_all(&frame(&inside)).expect("write");
-        refused_with(
-            answer(&mut s),
-            "junk inside the frame",
-            "junk after the request",
-        );
+        refused_with(answer(&mut s), "junk inside the frame", |r| {
+            *r == Refusal::AfterRequest { bytes: 4 }
+        });
 
         let mut after = frame(&down);
         after.extend_from_slice(b"junk");
         let mut s = connect(&up.inst);
         s.write_all(&after).expect("write");
-        refused_with(answer(&mut s), "junk after the frame", "follow the request");
+        refused_with(answer(&mut s), "junk after the frame", |r| {
+            *r == Refusal::AfterFrame { bytes: 4 }
+        });
 
         let mut s = connect(&up.inst);
         s.write_all(&frame(&down)[..3]).expect("write");
         s.shutdown(std::net::Shutdown::Write).expect("half-close");
-        refused_with(
-            answer(&mut s),
-            "an incomplete frame",
-            "before its frame was complete",
-        );
+        refused_with(answer(&mut s), "an incomplete frame", |r| {
+            *r == Refusal::Incomplete { bytes: 3 }
+        });
 
         let mut s = connect(&up.inst);
         s.write_all(&(60u32 << 20).to_le_bytes()).expect("write");
-        refused_with(answer(&mut s), "a 60 MB request", "at most");
+        refused_with(
+            answer(&mut s),
+            "a 60 MB request",
+            |r| matches!(r, Refusal::TooLong { bytes, .. } if *bytes == 60 << 20),
+        );
 
         // The cell is still up and enabled: none of them was executed.
         let st = up.status();
@@ -306,7 +312,11 @@ fn control_frames_are_taken_whole_or_not_at_all() {
         // The refusal is written and the connection closed at accept, maybe before this write
         // (then it fails, EPIPE): the answer is read whatever the write did, as the CLI does.
         let _ = s.write_all(&frame(&info));
-        refused_with(answer(&mut s), "a connection over the limit", "busy");
+        refused_with(answer(&mut s), "a connection over the limit", |r| {
+            *r == Refusal::Connections {
+                limit: control_plane::channel::MAX_CONNECTIONS,
+            }
+        });
         drop(held);
         up.status();
         up.down();

@@ -366,7 +366,12 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
             std::thread::sleep(Duration::from_millis(2));
         };
         match busy {
-            Ok(control_plane::Reply::Refused(why)) => assert!(why.contains("busy"), "{why}"),
+            Ok(control_plane::Reply::Refused(why)) => assert_eq!(
+                why,
+                control_plane::Refusal::Replacing {
+                    process: "trajgen".into()
+                }
+            ),
             other => panic!("start during a swap: {other:?}"),
         }
         let out = swap.wait_with_output().expect("swap");
