@@ -12,8 +12,8 @@
 //! numbers.
 
 use control_plane::event::Axes;
-use iceoryx2::prelude::ZeroCopySend;
 use mcap::records::MessageHeader;
+use runtime::ipc::Payload;
 use runtime::ipc::{self, Sub};
 use serde::Serialize;
 use serde_json::{Map, Value, json};
@@ -387,7 +387,7 @@ trait Topic {
     fn counts(&self) -> (u64, u64);
 }
 
-struct Chan<T: Message + ZeroCopySend> {
+struct Chan<T: Message + Payload> {
     sub: Sub<T>,
     topic: String,
     last: HashMap<u64, u64>,
@@ -399,7 +399,7 @@ struct Chan<T: Message + ZeroCopySend> {
     lost: u64,
 }
 
-impl<T: Message + ZeroCopySend> Topic for Chan<T> {
+impl<T: Message + Payload> Topic for Chan<T> {
     fn name(&self) -> &str {
         &self.topic
     }
@@ -448,7 +448,7 @@ impl<T: Message + ZeroCopySend> Topic for Chan<T> {
     }
 }
 
-fn chan<T: Message + ZeroCopySend>(
+fn chan<T: Message + Payload>(
     node: &iceoryx2::prelude::Node<ipc::Ipc>,
     instance: &InstanceName,
     id: ServiceId,

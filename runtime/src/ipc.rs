@@ -1,5 +1,9 @@
 //! iceoryx2 nodes and typed ports for the services of `shm-schema`.
 //!
+//! The ports of each payload type are compiled here once ([`Payload`], [`payloads!`](crate::payloads))
+//! and reached through a `dyn` table: one indirect call per send or receive, no allocation
+//! after they are made.
+//!
 //! Every port is opened with the service's [`shm_schema::names::Qos`], so any process may
 //! create a service first. Every iceoryx2 resource of an instance is isolated by the
 //! configuration of [`config_for`]: its own shared-memory file prefix and its own root folder.
@@ -16,10 +20,11 @@ use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
+pub use iceoryx2::prelude::Node;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
-use shm_schema::{InstanceName, ServiceId};
+pub use shm_schema::{InstanceName, ServiceId};
 use std::fmt::Debug;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -141,6 +146,117 @@ pub fn node(instance: &InstanceName, name: &str) -> Result<Node<Ipc>, IpcError> 
         .map_err(|e| err(format!("iceoryx2 node {name:?} of instance {instance}"), e))
 }
 
+/// IPC calls of this process that failed (a loan, a send, a receive), for seed 002's
+/// transport detector: none is dropped silently.
+static TRANSPORT_ERRORS: AtomicU64 = AtomicU64::new(0);
+
+/// The number of failed IPC calls of this process so far.
+///
+/// # Real-time
+/// One atomic load.
+pub fn transport_errors() -> u64 {
+    TRANSPORT_ERRORS.load(Ordering::Relaxed)
+}
+
+#[inline]
+fn transport_error() {
+    TRANSPORT_ERRORS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// A payload of a service of the cell (a `shm-schema` type). Its ports are built here, in
+/// this crate, once: iceoryx2's ports are generic over the payload, and every crate that
+/// opened them made its own copy of their code (about 40 % of the code of each crate that
+/// used them, and as much of its build). [`Pub`] and [`Sub`] reach the port through a
+/// `dyn` table ([`PubPort`], [`SubPort`]) made by [`payloads!`](crate::payloads).
+pub trait Payload: Debug + ZeroCopySend + Copy + 'static {
+    /// A publisher of `id` carrying this payload.
+    fn publisher(
+        node: &Node<Ipc>,
+        instance: &InstanceName,
+        id: ServiceId,
+    ) -> Result<Box<dyn PubPort<Self>>, IpcError>;
+    /// A subscriber of `id` keeping up to `buffer` unread samples.
+    fn subscriber(
+        node: &Node<Ipc>,
+        instance: &InstanceName,
+        id: ServiceId,
+        buffer: usize,
+    ) -> Result<Box<dyn SubPort<Self>>, IpcError>;
+}
+
+/// The publishing side of a port, whatever its payload's type.
+pub trait PubPort<T> {
+    /// One loan, one copy of `value` into it, one send. False if iceoryx2 refused.
+    fn send(&self, value: &T) -> bool;
+    /// Delivers history to subscribers that connected since the last send.
+    fn update_connections(&self);
+}
+
+/// The receiving side of a port, whatever its payload's type.
+pub trait SubPort<T> {
+    /// The oldest unread sample.
+    fn receive(&self) -> Received<T>;
+}
+
+/// What a [`SubPort::receive`] found.
+#[derive(Debug)]
+pub enum Received<T> {
+    /// The oldest unread sample.
+    Sample(T),
+    /// None unread.
+    Empty,
+    /// iceoryx2 failed (counted by [`transport_errors`]).
+    Failed,
+}
+
+/// Implements [`Payload`] for each type given, with its ports compiled in the crate that
+/// calls it (this crate for every type of `shm-schema`).
+#[macro_export]
+macro_rules! payloads {
+    ($($t:ty),* $(,)?) => {$(
+        impl $crate::ipc::Payload for $t {
+            fn publisher(
+                node: &$crate::ipc::Node<$crate::ipc::Ipc>,
+                instance: &$crate::ipc::InstanceName,
+                id: $crate::ipc::ServiceId,
+            ) -> Result<Box<dyn $crate::ipc::PubPort<Self>>, $crate::ipc::IpcError> {
+                $crate::ipc::publisher::<Self>(node, instance, id)
+            }
+            fn subscriber(
+                node: &$crate::ipc::Node<$crate::ipc::Ipc>,
+                instance: &$crate::ipc::InstanceName,
+                id: $crate::ipc::ServiceId,
+                buffer: usize,
+            ) -> Result<Box<dyn $crate::ipc::SubPort<Self>>, $crate::ipc::IpcError> {
+                $crate::ipc::subscriber::<Self>(node, instance, id, buffer)
+            }
+        }
+    )*};
+}
+
+payloads!(
+    shm_schema::CellConfigV6,
+    shm_schema::DigitalIoV1,
+    shm_schema::DriveCommandV2,
+    shm_schema::DriveFeedbackV2,
+    shm_schema::EmulatorFaultV1,
+    shm_schema::EstopV1,
+    shm_schema::EthercatConfigV1,
+    shm_schema::EventV1,
+    shm_schema::FaultInjectionV1,
+    shm_schema::FieldbusImageV1,
+    shm_schema::estop::HostStateV1,
+    shm_schema::IoWriteV1,
+    shm_schema::LatencyHistogramV1,
+    shm_schema::MotionCommandV2,
+    shm_schema::MotionControlV2,
+    shm_schema::ProcessStatusV2,
+    shm_schema::ServoRequestV1,
+    shm_schema::ServoStateV3,
+    shm_schema::SetpointV2,
+    shm_schema::TrajgenHandoverV2,
+);
+
 fn open<T>(
     node: &Node<Ipc>,
     instance: &InstanceName,
@@ -165,41 +281,88 @@ where
         .map_err(|e| err(format!("service {name}"), e))
 }
 
-/// IPC calls of this process that failed (a loan, a send, a receive), for seed 002's
-/// transport detector: none is dropped silently.
-static TRANSPORT_ERRORS: AtomicU64 = AtomicU64::new(0);
-
-/// The number of failed IPC calls of this process so far.
-///
-/// # Real-time
-/// One atomic load.
-pub fn transport_errors() -> u64 {
-    TRANSPORT_ERRORS.load(Ordering::Relaxed)
-}
-
-#[inline]
-fn transport_error() {
-    TRANSPORT_ERRORS.fetch_add(1, Ordering::Relaxed);
-}
-
-/// A typed publisher of one service.
-pub struct Pub<T: Debug + ZeroCopySend + Copy + 'static> {
+struct PubOf<T: Debug + ZeroCopySend + Copy + 'static> {
     port: Publisher<Ipc, T, ()>,
     _service: PubSubFactory<Ipc, T, ()>,
 }
 
-impl<T: Debug + ZeroCopySend + Copy + 'static> Pub<T> {
+impl<T: Debug + ZeroCopySend + Copy + 'static> PubPort<T> for PubOf<T> {
+    fn send(&self, value: &T) -> bool {
+        match self.port.loan_uninit() {
+            Ok(sample) => sample.write_payload(*value).send().is_ok(),
+            Err(_) => false,
+        }
+    }
+
+    fn update_connections(&self) {
+        let _ = self.port.update_connections();
+    }
+}
+
+/// Opens (or creates) `id` and a publisher on it, for [`Payload::publisher`].
+#[doc(hidden)]
+pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+) -> Result<Box<dyn PubPort<T>>, IpcError> {
+    let service = open::<T>(node, instance, id)?;
+    let port = service
+        .publisher_builder()
+        .max_loaned_samples(2)
+        .create()
+        .map_err(|e| err(format!("publisher on {}", instance.service(id)), e))?;
+    Ok(Box::new(PubOf {
+        port,
+        _service: service,
+    }))
+}
+
+struct SubOf<T: Debug + ZeroCopySend + Copy + 'static> {
+    port: Subscriber<Ipc, T, ()>,
+    _service: PubSubFactory<Ipc, T, ()>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> SubPort<T> for SubOf<T> {
+    fn receive(&self) -> Received<T> {
+        match self.port.receive() {
+            Ok(Some(sample)) => Received::Sample(*sample.payload()),
+            Ok(None) => Received::Empty,
+            Err(_) => Received::Failed,
+        }
+    }
+}
+
+/// Opens (or creates) `id` and a subscriber on it, for [`Payload::subscriber`].
+#[doc(hidden)]
+pub fn subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+    buffer: usize,
+) -> Result<Box<dyn SubPort<T>>, IpcError> {
+    let service = open::<T>(node, instance, id)?;
+    let port = service
+        .subscriber_builder()
+        .buffer_size(buffer)
+        .create()
+        .map_err(|e| err(format!("subscriber on {}", instance.service(id)), e))?;
+    Ok(Box::new(SubOf {
+        port,
+        _service: service,
+    }))
+}
+
+/// A typed publisher of one service.
+pub struct Pub<T: Payload> {
+    port: Box<dyn PubPort<T>>,
+}
+
+impl<T: Payload> Pub<T> {
     /// Opens (or creates) `id` and a publisher on it.
     pub fn new(node: &Node<Ipc>, instance: &InstanceName, id: ServiceId) -> Result<Self, IpcError> {
-        let service = open::<T>(node, instance, id)?;
-        let port = service
-            .publisher_builder()
-            .max_loaned_samples(2)
-            .create()
-            .map_err(|e| err(format!("publisher on {}", instance.service(id)), e))?;
         Ok(Self {
-            port,
-            _service: service,
+            port: T::publisher(node, instance, id)?,
         })
     }
 
@@ -210,10 +373,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Pub<T> {
     /// documentation).
     #[inline]
     pub fn send(&self, value: &T) -> bool {
-        let ok = match self.port.loan_uninit() {
-            Ok(sample) => sample.write_payload(*value).send().is_ok(),
-            Err(_) => false,
-        };
+        let ok = self.port.send(value);
         if !ok {
             transport_error();
         }
@@ -222,23 +382,22 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Pub<T> {
 
     /// Delivers history to subscribers that connected since the last send.
     pub fn update_connections(&self) {
-        let _ = self.port.update_connections();
+        self.port.update_connections();
     }
 }
 
-impl<T: Debug + ZeroCopySend + Copy + 'static> Debug for Pub<T> {
+impl<T: Payload> Debug for Pub<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("Pub")
     }
 }
 
 /// A typed subscriber of one service.
-pub struct Sub<T: Debug + ZeroCopySend + Copy + 'static> {
-    port: Subscriber<Ipc, T, ()>,
-    _service: PubSubFactory<Ipc, T, ()>,
+pub struct Sub<T: Payload> {
+    port: Box<dyn SubPort<T>>,
 }
 
-impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
+impl<T: Payload> Sub<T> {
     /// Opens (or creates) `id` and a subscriber on it keeping up to `buffer` unread samples
     /// (older ones are dropped when it is full).
     pub fn new(
@@ -247,15 +406,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
         id: ServiceId,
         buffer: usize,
     ) -> Result<Self, IpcError> {
-        let service = open::<T>(node, instance, id)?;
-        let port = service
-            .subscriber_builder()
-            .buffer_size(buffer)
-            .create()
-            .map_err(|e| err(format!("subscriber on {}", instance.service(id)), e))?;
         Ok(Self {
-            port,
-            _service: service,
+            port: T::subscriber(node, instance, id, buffer)?,
         })
     }
 
@@ -268,9 +420,9 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
         let mut last = None;
         loop {
             match self.port.receive() {
-                Ok(Some(sample)) => last = Some(*sample.payload()),
-                Ok(None) => return last,
-                Err(_) => {
+                Received::Sample(v) => last = Some(v),
+                Received::Empty => return last,
+                Received::Failed => {
                     transport_error();
                     return last;
                 }
@@ -285,9 +437,9 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
     #[inline]
     pub fn next(&self) -> Option<T> {
         match self.port.receive() {
-            Ok(Some(sample)) => Some(*sample.payload()),
-            Ok(None) => None,
-            Err(_) => {
+            Received::Sample(v) => Some(v),
+            Received::Empty => None,
+            Received::Failed => {
                 transport_error();
                 None
             }
@@ -295,7 +447,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sub<T> {
     }
 }
 
-impl<T: Debug + ZeroCopySend + Copy + 'static> Debug for Sub<T> {
+impl<T: Payload> Debug for Sub<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("Sub")
     }

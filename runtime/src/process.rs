@@ -741,7 +741,7 @@ fn wait_for_cell_config(
 /// The sample a service keeps for late joiners (a configuration the supervisor published
 /// with history 1), waited for at most [`CONFIG_TIMEOUT`]; `None` when a stop was requested
 /// meanwhile. Set-up only. `missing` ends the error when nothing came.
-pub fn wait_for<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
+pub fn wait_for<T: ipc::Payload>(
     node: &Node<Ipc>,
     instance: &InstanceName,
     id: ServiceId,
