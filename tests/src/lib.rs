@@ -1,10 +1,13 @@
 //! Helpers for the integration tests: the real binaries, unique instance names, a watchdog,
 //! and the check that an instance left nothing behind.
 
+pub mod toml;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
+pub use toml::CellToml;
 
 /// The folder holding the workspace's binaries (same profile as the tests). `cargo test
 /// --workspace` has built them already (each process crate and the supervisor test their own
@@ -42,13 +45,12 @@ pub fn examples() -> PathBuf {
 /// on any free port (the tests run side by side; only the test of the embedded default itself
 /// listens on its 1502).
 pub fn default_cell() -> String {
-    let src =
-        std::fs::read_to_string(examples().join("gantry-uba.toml")).expect("the default cell");
-    assert!(
-        src.contains("listen = \"127.0.0.1:1502\""),
-        "the default cell's Modbus address"
-    );
-    src.replace("listen = \"127.0.0.1:1502\"", "listen = \"127.0.0.1:0\"")
+    default_cell_toml().to_string()
+}
+
+/// [`default_cell`] to edit.
+pub fn default_cell_toml() -> CellToml {
+    CellToml::example("gantry-uba.toml").set("modbus.listen", "127.0.0.1:0")
 }
 
 /// The seed's triangle at a fifth of its size, from and back to its start (40, 40): the same
@@ -81,40 +83,25 @@ pub fn default_cell_file(test: &str) -> PathBuf {
 /// iobridge skipped 1.1 s of periods and its pending-sequence detector, then at 100 %,
 /// expired: the watchdogs allow 1.5 s, the heartbeat and the pending-sequence detector 2 s.
 pub fn with_stall_room(src: &str) -> String {
-    let out = src
-        .replace("following_error_limit = 1.0", "following_error_limit = 5.0")
-        .replace(
-            "command_timeout = 0.1",
-            "command_timeout = 1.5\nfeedback_timeout = 1.5",
+    CellToml::parse(src)
+        .set("axis[*].following_error_limit", 5.0)
+        .set("drives.command_timeout", 1.5)
+        .add("drives.feedback_timeout", 1.5)
+        .set("motion.setpoint_timeout", 0.2)
+        .set(
+            "health_config.pending_sequence_overrun_percent_limit",
+            200.0,
         )
-        .replace("setpoint_timeout = 0.05", "setpoint_timeout = 0.2")
-        .replace(
-            "pending_sequence_overrun_percent_limit = 30.0",
-            "pending_sequence_overrun_percent_limit = 200.0",
-        )
-        .replace(
-            "thread_offset_variance_overrun_percent_limit = 5.0",
-            "thread_offset_variance_overrun_percent_limit = 100.0",
+        .set(
+            "health_config.thread_offset_variance_overrun_percent_limit",
+            100.0,
         )
         // An EtherCAT frame lost is a transport overrun: a stall of the emulator's thread
         // alone (one vCPU held by the host) loses frames; 50 in a row at 1 kHz trip it.
-        .replace(
-            "transport_overrun_percent_limit = 0.5",
-            "transport_overrun_percent_limit = 5.0",
-        )
-        .replace("supervisor_timeout = 0.5 ", "supervisor_timeout = 2.0 ")
-        .replace("heartbeat_timeout = 1.0 ", "heartbeat_timeout = 2.0 ");
-    assert!(
-        out.contains("feedback_timeout = 1.5")
-            && out.contains("heartbeat_timeout = 2.0")
-            && out.contains("pending_sequence_overrun_percent_limit = 200.0")
-            && !out.contains("following_error_limit = 1.0")
-            && out.contains("thread_offset_variance_overrun_percent_limit = 100.0")
-            && out.contains("transport_overrun_percent_limit = 5.0")
-            && out.contains("supervisor_timeout = 2.0"),
-        "the cell's keys moved: update with_stall_room"
-    );
-    out
+        .set("health_config.transport_overrun_percent_limit", 5.0)
+        .set("supervisor.supervisor_timeout", 2.0)
+        .set("supervisor.heartbeat_timeout", 2.0)
+        .to_string()
 }
 
 /// The default cell with the machine and servo at `period_us`, their phases scaled (a tenth
@@ -128,21 +115,17 @@ pub fn cell_at_rate(period_us: u64) -> String {
 /// `src` (a cell of the default's shape) with the drives and servo at `period_us`, as
 /// [`cell_at_rate`] does.
 pub fn at_rate(src: &str, period_us: u64) -> String {
-    src.replace(
-        "thread_offset_variance_percent = 50.0",
-        &format!(
-            "thread_offset_variance_percent = {:.1}",
-            50.0 * 1000.0 / period_us as f64
-        ),
-    )
-    .replace(
-        "period_us = 1000\nphase_us = 100",
-        &format!("period_us = {period_us}\nphase_us = {}", period_us / 10),
-    )
-    .replace(
-        "period_us = 1000\nphase_us = 400",
-        &format!("period_us = {period_us}\nphase_us = {}", period_us * 2 / 5),
-    )
+    let p = period_us as i64;
+    CellToml::parse(src)
+        .set(
+            "health_config.thread_offset_variance_percent",
+            50.0 * 1000.0 / period_us as f64,
+        )
+        .set("process[drives].period_us", p)
+        .set("process[drives].phase_us", p / 10)
+        .set("process[servo].period_us", p)
+        .set("process[servo].phase_us", p * 2 / 5)
+        .to_string()
 }
 
 /// The median of the finite values of `v` (NaN when there are none): the benches' summary.
@@ -162,17 +145,20 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 
 /// The default cell with every axis in CSP: the drives close the loop with their own gains.
 pub fn cell_in_csp() -> String {
-    let mut src = default_cell();
-    for (axis, gains) in [
-        ("x", "kp = 300.0, ki = 2000.0, kd = 2.5"),
-        ("y", "kp = 190.0, ki = 1200.0, kd = 1.6"),
-        ("theta", "kp = 13.0, ki = 80.0, kd = 0.11"),
+    let mut cell = default_cell_toml();
+    for (axis, [kp, ki, kd]) in [
+        ("x", [300.0, 2000.0, 2.5]),
+        ("y", [190.0, 1200.0, 1.6]),
+        ("theta", [13.0, 80.0, 0.11]),
     ] {
-        let at = src.find(&format!("name = \"{axis}\"")).expect("axis");
-        let sim = at + src[at..].find("sim = {").expect("sim");
-        src.insert_str(sim, &format!("drive = {{ mode = \"csp\", {gains} }}\n"));
+        let mut drive = toml_edit::InlineTable::new();
+        drive.insert("mode", "csp".into());
+        drive.insert("kp", kp.into());
+        drive.insert("ki", ki.into());
+        drive.insert("kd", kd.into());
+        cell = cell.add(&format!("axis[{axis}].drive"), drive);
     }
-    src
+    cell.to_string()
 }
 
 /// The supervisor binary, as a command to add arguments to.

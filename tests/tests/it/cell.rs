@@ -4,7 +4,7 @@ use integration_tests::{
     assert_clean, bin, examples, instance, json_of, pids_with, run_with_watchdog, scratch,
     supervisor,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Stdio;
 use std::time::Duration;
 
@@ -19,16 +19,6 @@ fn run_triangle_with(inst: &str, cfg: &Path) -> std::process::Output {
             .arg(examples().join("triangle.prog")),
         WATCHDOG,
     )
-}
-
-/// The default configuration with `from` replaced by `to`, written for `test`.
-fn config_with(test: &str, from: &str, to: &str) -> PathBuf {
-    let default = integration_tests::default_cell();
-    assert!(
-        default.contains(from),
-        "{from:?} not in the default configuration"
-    );
-    scratch(test, "cell.toml", &default.replacen(from, to, 1))
 }
 
 /// Checks a successful `--json` run: on time, on target, every process reported.
@@ -323,18 +313,20 @@ fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
 fn a_bad_config_names_file_line_and_reason() {
     integration_tests::attributable(|| {
         let inst = instance("badcfg");
-        let default = integration_tests::default_cell();
-        let line = default
+        let cfg = integration_tests::default_cell_toml()
+            .add("motion.t_dec", 1)
+            .write("badcfg", "cell.toml");
+        let line = std::fs::read_to_string(&cfg)
+            .expect("written")
             .lines()
-            .position(|l| l.starts_with("t_acc"))
-            .expect("t_acc")
+            .position(|l| l.starts_with("t_dec"))
+            .expect("t_dec")
             + 1;
-        let cfg = config_with("badcfg", "t_acc = 0.525", "t_acc = 0.525\nt_dec = 1");
         let out = run_triangle_with(&inst, &cfg);
         assert_eq!(out.status.code(), Some(2));
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(
-            err.contains(&format!("cell.toml:{}:1: unknown field `t_dec`", line + 1)),
+            err.contains(&format!("cell.toml:{line}:1: unknown field `t_dec`")),
             "{err}"
         );
         assert_clean(&inst);
@@ -347,15 +339,13 @@ fn a_bad_config_names_file_line_and_reason() {
 fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
     integration_tests::attributable(|| {
         let inst = instance("kill");
-        let wrapped = format!(
-            "command = [\"sh\", \"-c\", \"exec {} --instance {{instance}}\"]",
-            bin("iobridge").display()
-        );
-        let cfg = config_with(
-            "kill",
-            "command = [\"iobridge\", \"--instance\", \"{instance}\"]",
-            &wrapped,
-        );
+        let wrapped = format!("exec {} --instance {{instance}}", bin("iobridge").display());
+        let cfg = integration_tests::default_cell_toml()
+            .set(
+                "process[iobridge].command",
+                integration_tests::toml::strings(&["sh", "-c", &wrapped]),
+            )
+            .write("kill", "cell.toml");
         let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
         let mut child = supervisor()
             .args(["run", "--instance", &inst, "--config"])
@@ -407,11 +397,12 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
 fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
     integration_tests::attributable(|| {
         let inst = instance("nostart");
-        let cfg = config_with(
-            "nostart",
-            "command = [\"iobridge\"",
-            "command = [\"no-such-iobridge\"",
-        );
+        let cfg = integration_tests::default_cell_toml()
+            .set(
+                "process[iobridge].command",
+                integration_tests::toml::strings(&["no-such-iobridge", "--instance", "{instance}"]),
+            )
+            .write("nostart", "cell.toml");
         let out = run_triangle_with(&inst, &cfg);
         // Refused before anything starts, as `check-config` refuses it.
         assert_eq!(out.status.code(), Some(2));

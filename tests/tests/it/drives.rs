@@ -115,11 +115,13 @@ pub(crate) fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a 
 fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
     integration_tests::attributable(|| {
         let inst = instance("inject-cfg");
-        let cfg = integration_tests::default_cell().replace(
-        "substeps = 4 ",
-        "substeps = 4\n\n[[drives.inject]]\naxis = \"y\"\nfault = \"over-current\"\nat = 2.0\n\n#",
-    );
-        let cfg = scratch("inject-cfg", "cell.toml", &cfg);
+        let mut inject = toml_edit::Table::new();
+        inject.insert("axis", toml_edit::value("y"));
+        inject.insert("fault", toml_edit::value("over-current"));
+        inject.insert("at", toml_edit::value(2.0));
+        let cfg = integration_tests::default_cell_toml()
+            .push("drives.inject", inject)
+            .write("inject-cfg", "cell.toml");
         let plot = scratch("inject-cfg", "failed.png", "");
         let out = run_with_watchdog(
             supervisor()
@@ -232,9 +234,9 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
 fn an_absurd_inertia_is_refused_before_anything_starts() {
     integration_tests::attributable(|| {
         let inst = instance("inertia");
-        let cfg =
-            integration_tests::default_cell().replacen("inertia = 0.008", "inertia = 1e-300", 1);
-        let cfg = scratch("inertia", "cell.toml", &cfg);
+        let cfg = integration_tests::default_cell_toml()
+            .set("axis[x].sim.inertia", 1e-300)
+            .write("inertia", "cell.toml");
         let out = run_with_watchdog(
             supervisor()
                 .args(["run", "--instance", &inst, "--config"])
@@ -489,20 +491,15 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
 /// The default cell with a supervisor heartbeat of 5 s, so a test can stall one process for
 /// a while without the supervisor ending the run first.
 fn patient_config(test: &str) -> std::path::PathBuf {
-    let cfg = integration_tests::default_cell();
-    assert!(cfg.contains("heartbeat_timeout = 1.0"));
     // The stall is for servo's own rules to catch, not for the supervisor's heartbeat or the
     // health detectors (tested on their own in `health`).
-    scratch(
-        test,
-        "cell.toml",
-        &cfg.replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 5.0", 1)
-            .replacen(
-                "pending_sequence_overrun_percent_limit = 10.0",
-                "pending_sequence_overrun_percent_limit = 100.0",
-                1,
-            ),
-    )
+    integration_tests::default_cell_toml()
+        .set("supervisor.heartbeat_timeout", 5.0)
+        .set(
+            "health_config.pending_sequence_overrun_percent_limit",
+            100.0,
+        )
+        .write(test, "cell.toml")
 }
 
 /// Pid of `role`'s process of the run on `inst`, by its program's name (the supervisor's own

@@ -15,12 +15,10 @@ use std::time::{Duration, Instant};
 /// The default cell with `[behaviour]` set as given, and room for the host's stalls (these
 /// tests are about the e-stop, not about the cell's tolerance of a stall).
 fn cell_with_behaviour(test: &str, propagate: bool, external: bool) -> std::path::PathBuf {
-    let src = with_stall_room(&default_cell()).replace(
-        "propagate_estop = true\npropagate_external_estop = false",
-        &format!("propagate_estop = {propagate}\npropagate_external_estop = {external}"),
-    );
-    assert!(src.contains(&format!("propagate_external_estop = {external}")));
-    scratch(test, "cell.toml", &src)
+    integration_tests::CellToml::parse(&with_stall_room(&default_cell()))
+        .set("behaviour.propagate_estop", propagate)
+        .set("behaviour.propagate_external_estop", external)
+        .write(test, "cell.toml")
 }
 
 /// `supervisor estop` on `inst`; it must succeed.
@@ -137,11 +135,9 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
         let inst = instance("estop-stall");
         // The supervisor's heartbeat watch is made slower than the detector, so the detector is
         // what catches the stall.
-        let cfg = scratch(
-            "estop-stall",
-            "cell.toml",
-            &default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1),
-        );
+        let cfg = integration_tests::default_cell_toml()
+            .set("supervisor.heartbeat_timeout", 30.0)
+            .write("estop-stall", "cell.toml");
         let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
         let (name, node) = client_of(&inst);
         let state = until_moving(&node, &name, &mut run);

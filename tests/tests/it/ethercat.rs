@@ -142,13 +142,10 @@ fn standalone_line(ns: &Netns, line: &str) -> Child {
 
 /// The example cell on the test's own line: no emulator process, the bus on `m0`.
 fn cell_on_m0() -> String {
-    let src = ethercat_cell();
-    let at = src
-        .find("[[process]]\nname = \"emulator\"")
-        .expect("the emulator's entry");
-    let end = at + src[at..].find("\n\n").expect("its end");
-    src[..at].to_string()
-        + &src[end + 2..].replace("interface = \"rtc-ecat0\"", "interface = \"m0\"")
+    integration_tests::CellToml::parse(&ethercat_cell())
+        .remove("process", "emulator")
+        .set("ethercat.interface", "m0")
+        .to_string()
 }
 
 #[test]
@@ -623,8 +620,7 @@ fn an_io_bit_beyond_its_terminal_is_refused_before_anything_is_enabled() {
     // Valid on paper (the bit's range is the terminal's process data, known on the bus).
     refused_on_the_bus(
         "ecat-iobit",
-        "ethercat = { subdevice = \"di\", bit = 2 }",
-        "ethercat = { subdevice = \"di\", bit = 9 }",
+        |c| c.set("io[part_present].ethercat.bit", 9),
         "io \"part_present\": bit 9 of position 4 (di) does not exist: its inputs are 8 bits",
     );
 }
@@ -634,21 +630,23 @@ fn a_subdevice_on_sync0_without_distributed_clocks_is_refused_before_anything_is
     // Valid on paper (whether an ESC has DC is known on the bus): the EL1008 has none.
     refused_on_the_bus(
         "ecat-nodc",
-        "product = 0x03F03052       # EL1008: 8 digital inputs",
-        "product = 0x03F03052\nsync = \"dc\"",
+        |c| c.add("ethercat.subdevice[di].sync", "dc"),
         "position 4 (di) is configured on SYNC0 (sync = \"dc\", a drive's default) and its ESC has no Distributed Clocks (register 0x0008)",
     );
 }
 
-/// The example cell with `from` replaced by `to`, which `check-config` accepts: `run` exits 2
-/// saying `says`, before anything is enabled, and leaves nothing behind.
-fn refused_on_the_bus(test: &str, from: &str, to: &str, says: &str) {
+/// The example cell as `edit` makes it, which `check-config` accepts: `run` exits 2 saying
+/// `says`, before anything is enabled, and leaves nothing behind.
+fn refused_on_the_bus(
+    test: &str,
+    edit: impl FnOnce(integration_tests::CellToml) -> integration_tests::CellToml,
+    says: &str,
+) {
     integration_tests::attributable(|| {
         let inst = instance(test);
         let ns = Netns::new(test);
-        let src = ethercat_cell();
-        assert!(src.contains(from), "{from:?} not in the example");
-        let cfg = scratch(test, "cell.toml", &src.replacen(from, to, 1));
+        let cfg =
+            edit(integration_tests::CellToml::parse(&ethercat_cell())).write(test, "cell.toml");
         let check = run_with_watchdog(
             integration_tests::supervisor()
                 .arg("check-config")

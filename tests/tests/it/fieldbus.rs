@@ -412,9 +412,9 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
         let cfg = cell(
             test,
             &[
-                ("max_connections = 8", "max_connections = 2"),
-                ("idle_timeout = 60.0", "idle_timeout = 3.0"),
-                ("writes = true", "writes = false"),
+                ("modbus.max_connections", 2.into()),
+                ("modbus.idle_timeout", 3.0.into()),
+                ("modbus.writes", false.into()),
             ],
         );
         let up = Up::start(test, &cfg);

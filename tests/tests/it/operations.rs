@@ -5,7 +5,8 @@
 use crate::drives::{WATCHDOG, pid_of};
 use crate::up::Up;
 use integration_tests::{
-    assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, with_stall_room,
+    CellToml, assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, toml,
+    with_stall_room,
 };
 use serde_json::Value;
 use std::path::PathBuf;
@@ -468,20 +469,20 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
         );
         let test = "ops-python";
         let script = integration_tests::examples().join("python/iobridge.py");
-        let rust = r#"command = ["iobridge", "--instance", "{instance}"]"#;
-        let src = with_stall_room(&default_cell());
-        assert!(src.contains(rust), "the default cell's iobridge command");
-        let cfg = scratch(
-        test,
-        "cell.toml",
-        &src.replace(
-            rust,
-            &format!(
-                r#"command = ["python3", "{}", "--instance", "{{instance}}", "--name", "{{name}}"]"#,
-                script.display()
-            ),
-        ),
-    );
+        let script = script.to_str().expect("utf-8");
+        let cfg = CellToml::parse(&with_stall_room(&default_cell()))
+            .set(
+                "process[iobridge].command",
+                toml::strings(&[
+                    "python3",
+                    script,
+                    "--instance",
+                    "{instance}",
+                    "--name",
+                    "{name}",
+                ]),
+            )
+            .write(test, "cell.toml");
         let inst = instance(test);
         let mut cmd = supervisor();
         cmd.args(["run", "--json", "--instance", &inst, "--config"])
@@ -518,8 +519,10 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
         // rate, 75 missed periods, leaking one every 50 ms. The supervisor's heartbeat watch is
         // made slower than the detector, so the detector is what catches the stall.
         let test = "ops-iostall";
-        let src = default_cell().replacen("heartbeat_timeout = 1.0", "heartbeat_timeout = 30.0", 1);
-        let up = Up::start(test, &scratch(test, "cell.toml", &src));
+        let cfg = integration_tests::default_cell_toml()
+            .set("supervisor.heartbeat_timeout", 30.0)
+            .write(test, "cell.toml");
+        let up = Up::start(test, &cfg);
         let pending = |s: &Value| {
             s["processes"]["iobridge"]["health"]["pending_sequence_overrun"]["total"]
                 .as_u64()
@@ -621,12 +624,11 @@ fn io_value(s: &Value, name: &str) -> Option<u64> {
 /// `propagate_external_estop`; iobridge, which raised it, sets its outputs safe either way;
 /// reset refuses while the input stays open, and the cell recovers once it closes.
 fn an_estop_input_mid_motion(test: &str, external: bool) {
-    let src = with_stall_room(&default_cell()).replace(
-        "propagate_estop = true\npropagate_external_estop = false",
-        &format!("propagate_estop = false\npropagate_external_estop = {external}"),
-    );
-    assert!(src.contains("propagate_estop = false"));
-    let up = Up::start(test, &scratch(test, "cell.toml", &src));
+    let cfg = CellToml::parse(&with_stall_room(&default_cell()))
+        .set("behaviour.propagate_estop", false)
+        .set("behaviour.propagate_external_estop", external)
+        .write(test, "cell.toml");
+    let up = Up::start(test, &cfg);
     up.ok(&["io", "gripper", "1"]);
     up.ok(&["io", "cycle_lamp", "1"]);
     let s = up.until("the gripper closed", |s| {

@@ -154,10 +154,12 @@ fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
         }
         // A path whose joint speed exceeds an axis' vmax (the polar arm's radial axis, 16 mm/s,
         // with the tool allowed 40 mm/s): found through the kinematics, before anything moves.
-        let polar = std::fs::read_to_string(integration_tests::examples().join("polar.toml"))
-            .expect("examples/polar.toml")
-            .replace("vmax = [10.0, 10.0]", "vmax = [40.0, 40.0]");
-        let cfg = scratch(test, "polar.toml", &polar);
+        let cfg = integration_tests::CellToml::example("polar.toml")
+            .set(
+                "kinematics.vmax",
+                toml_edit::Value::Array([40.0, 40.0].into_iter().collect()),
+            )
+            .write(test, "polar.toml");
         let prog = scratch(
             test,
             "polar.prog",

@@ -11,10 +11,12 @@ use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
 use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, SetpointV2};
 
-fn cfg_with(from: &str, to: &str) -> Config {
-    let src = cell_config::DEFAULT_TOML.to_string();
-    assert!(src.contains(from), "{from:?}");
-    Config::parse(&src.replacen(from, to, 1), "test").expect("valid")
+/// The default cell with the key at `path` set to `value`.
+fn cfg_with(path: &str, value: f64) -> Config {
+    let src = integration_tests::CellToml::parse(cell_config::DEFAULT_TOML)
+        .set(path, value)
+        .to_string();
+    Config::parse(&src, "test").expect("valid")
 }
 
 /// A trajectory generator at the default start with `program` queued.
@@ -153,43 +155,36 @@ fn servo_does_not_follow_setpoints_unless_enabled() {
 fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
     integration_tests::attributable(|| {
         // (what, configuration change, setpoint x and x velocity relative to the start, code)
-        type Case<'a> = (&'a str, (&'a str, &'a str), f64, f64, u32);
+        type Case<'a> = (&'a str, Option<(&'a str, f64)>, f64, f64, u32);
         let cases: [Case; 5] = [
             (
                 "range",
-                ("max = 200.0", "max = 40.005"),
+                Some(("axis[x].max", 40.005)),
                 0.02,
                 0.0,
                 code::POSITION_OUT_OF_RANGE,
             ),
-            ("velocity", ("", ""), 0.0, 20.0, code::VELOCITY_OVER_LIMIT),
+            ("velocity", None, 0.0, 20.0, code::VELOCITY_OVER_LIMIT),
             (
                 "position step",
-                ("", ""),
+                None,
                 0.03,
                 0.0,
                 code::POSITION_STEP_OVER_LIMIT,
             ),
             (
                 "velocity step",
-                ("", ""),
+                None,
                 0.0,
                 1.0,
                 code::VELOCITY_STEP_OVER_LIMIT,
             ),
-            (
-                "not finite",
-                ("", ""),
-                f64::NAN,
-                0.0,
-                code::COMMAND_NOT_FINITE,
-            ),
+            ("not finite", None, f64::NAN, 0.0, code::COMMAND_NOT_FINITE),
         ];
-        for (what, (from, to), dx, vx, want) in cases {
-            let cfg = if from.is_empty() {
-                Config::default_cell()
-            } else {
-                cfg_with(from, to)
+        for (what, change, dx, vx, want) in cases {
+            let cfg = match change {
+                None => Config::default_cell(),
+                Some((path, value)) => cfg_with(path, value),
             };
             let mut lp = Loop::new(&cfg.to_shm());
             lp.enable();
@@ -227,7 +222,7 @@ fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
 fn a_following_error_latches_like_a_device_estop() {
     integration_tests::attributable(|| {
         // x cannot produce the force to follow (its effort barely beats friction).
-        let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
+        let cfg = cfg_with("axis[x].sim.effort_limit", 3.1);
         let cell = cfg.to_shm();
         let mut lp = Loop::new(&cell);
         lp.enable();
@@ -581,7 +576,7 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
     integration_tests::attributable(|| {
         // A following error at speed cuts power; a reset sent at once waits until every drive
         // has stopped (the quick-stop ramp ran its course) and is without power.
-        let cfg = cfg_with("effort_limit = 100.0", "effort_limit = 3.1");
+        let cfg = cfg_with("axis[x].sim.effort_limit", 3.1);
         let cell = cfg.to_shm();
         let mut lp = Loop::new(&cell);
         lp.enable();

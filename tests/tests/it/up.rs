@@ -223,11 +223,10 @@ pub(crate) fn wait_child(mut c: Child) -> std::process::ExitStatus {
 
 /// The default cell with room for the host's stalls, its Modbus server on any free port (the
 /// tests run side by side), and keys replaced as `set` says (`("max_connections = 8", "max_connections = 2")`).
-pub(crate) fn cell(test: &str, set: &[(&str, &str)]) -> PathBuf {
-    let mut src = with_stall_room(&default_cell());
-    for (from, to) in set {
-        assert!(src.contains(from), "{from:?} not in the default cell");
-        src = src.replacen(from, to, 1);
+pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
+    let mut cell = integration_tests::CellToml::parse(&with_stall_room(&default_cell()));
+    for (path, value) in set {
+        cell = cell.set(path, value.clone());
     }
-    scratch(test, "cell.toml", &src)
+    cell.write(test, "cell.toml")
 }
