@@ -2,7 +2,9 @@
 //! user's e-stop, and the named digital IO.
 
 use cell_config::FaultKind;
+use control_plane::channel::{self, CallError};
 use control_plane::status::{IoEntry, SafeValue};
+use control_plane::{Reply, Request};
 use iceoryx2::prelude::Node;
 use runtime::events::EventSink;
 use runtime::ipc::{self, Ipc, Pub, Sub};
@@ -185,12 +187,38 @@ pub fn inject(
     })
 }
 
-/// `supervisor estop`: raises the user's e-stop (seed 002's `trigger_estop`) on the running
-/// `instance`, straight on `<i>/estop` (not through the supervisor: a supervisor that is slow or
-/// dead does not delay it), and waits until a process of the cell reports it latched,
-/// resending while none has (a brand-new publisher's first sample can be lost while its
-/// connections settle).
+/// How long `estop` waits for the supervisor's answer before it raises the e-stop on shared
+/// memory itself.
+const SUPERVISOR_PATIENCE: Duration = Duration::from_millis(500);
+
+/// `supervisor estop`: raises the user's e-stop (seed 002's `trigger_estop`, origin external)
+/// on the running `instance` and waits until a process of the cell reports it latched.
+/// Through the supervisor ([`control_plane::Request::Estop`]: it publishes on its own port, so
+/// no real-time process has a new publisher to connect to in its cycle); when no supervisor
+/// serves the instance, or it does not answer within [`SUPERVISOR_PATIENCE`], straight on
+/// `<i>/estop` ([`estop_on_shared_memory`]).
 pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
+    let name = InstanceName::new(instance)
+        .map_err(|e| ControlError::Input(format!("--instance {instance:?}: {e}")))?;
+    let req = Request::Estop {
+        reason: reason.to_string(),
+    };
+    match channel::call_within(&name, &req, Some(SUPERVISOR_PATIENCE)) {
+        Ok(Reply::Done(m)) => return Ok(m),
+        Ok(Reply::Refused(r)) => return Err(ControlError::Input(r.to_string())),
+        Ok(Reply::Failed(m)) => return Err(ControlError::Failed(m)),
+        Ok(other) => tracing::warn!("the supervisor answered the e-stop with {other:?}"),
+        Err(CallError::NotUp(_)) => {}
+        Err(e) => tracing::warn!("{e}: raising the e-stop on shared memory"),
+    }
+    estop_on_shared_memory(instance, reason)
+}
+
+/// The user's e-stop published straight on `<i>/estop` by this process (a supervisor that is
+/// dead or hung does not hold it back), then waited for until a process of the cell reports
+/// it latched, resending while none has (a brand-new publisher's first sample can be lost while
+/// its connections settle). Each real-time process connects to this new publisher in a cycle.
+pub fn estop_on_shared_memory(instance: &str, reason: &str) -> Result<String, ControlError> {
     attached(instance, "estop", |&instance, node| {
         let port = Pub::<EstopV1>::new(node, &instance, ServiceId::Estop).map_err(failed)?;
         let cell = running_cell(node, &instance)?;

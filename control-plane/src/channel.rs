@@ -87,7 +87,8 @@ pub enum CallError {
         /// Why.
         source: std::io::Error,
     },
-    /// The supervisor took the request and did not answer within [`ANSWER_TIMEOUT`].
+    /// The supervisor took the request and did not answer in time ([`ANSWER_TIMEOUT`], or
+    /// the caller's patience).
     NoAnswer(InstanceName),
     /// The answer could not be decoded (a supervisor of another version?).
     Garbled(postcard::Error),
@@ -149,6 +150,23 @@ fn frame(bytes: &[u8]) -> Vec<u8> {
 /// Sends `req` to the cell of `instance` and waits for its answer (as long as it takes:
 /// `exec --wait` answers when the program ends).
 pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CallError> {
+    // Every answer comes within a tick or a bounded wait (a start, a swap, a reset), except
+    // a program's end: a supervisor that does not answer is named, not waited for forever.
+    let waits_for_program = matches!(req, Request::Exec { wait: true, .. });
+    call_within(
+        instance,
+        req,
+        (!waits_for_program).then_some(ANSWER_TIMEOUT),
+    )
+}
+
+/// [`call`], waiting at most `patience` for the answer (`None`: as long as it takes); then
+/// [`CallError::NoAnswer`].
+pub fn call_within(
+    instance: &InstanceName,
+    req: &Request,
+    patience: Option<Duration>,
+) -> Result<Reply, CallError> {
     let connect = |source| CallError::Connect {
         instance: *instance,
         source,
@@ -168,11 +186,8 @@ pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CallError> 
     }
     // A refusal (another user) may be written and the connection closed before the request
     // is even read: read the answer whatever the write did.
-    // Every answer comes within a tick or a bounded wait (a start, a swap, a reset), except
-    // a program's end: a supervisor that does not answer is named, not waited for forever.
-    let waits_for_program = matches!(req, Request::Exec { wait: true, .. });
-    if !waits_for_program {
-        let _ = s.set_read_timeout(Some(ANSWER_TIMEOUT));
+    if patience.is_some() {
+        let _ = s.set_read_timeout(patience);
     }
     let wrote = s
         .write_all(&frame(&bytes))

@@ -54,6 +54,15 @@ pub enum Request {
     },
     /// Stop the cell.
     Down,
+    /// The user's e-stop (origin `external`, as from a button), published by the supervisor
+    /// on its own long-lived port: a command-line client that published it itself made each
+    /// real-time process connect to a new publisher inside its cycle (about one overrun and
+    /// three skipped cycles each time). Answered once a process reports it latched. Taken
+    /// whatever the cell is doing (a program, a swap, a tuning session, going down).
+    Estop {
+        /// Why, in a few words (kept in the e-stop and its events).
+        reason: String,
+    },
 }
 
 /// What the cell answers.

@@ -630,6 +630,21 @@ impl Cell {
         self.beat();
     }
 
+    /// Raises the user's e-stop (`supervisor estop`; origin external, as a button's):
+    /// published to every process on the supervisor's own port, latched here.
+    pub(crate) fn raise_user(&mut self, reason: &str) {
+        let e = EstopV1::trigger(
+            runtime::time::now_ns(),
+            EstopOrigin::External,
+            SOURCE_SUPERVISOR,
+            code::ESTOP_RAISED,
+            &[reason],
+        );
+        self.estop_pub.send(&e);
+        self.latch(e);
+        self.beat();
+    }
+
     /// A process was lost: the host e-stop, its resources, its restart.
     fn lost(&mut self, k: usize, cfg: &Config, why: &str, exit_code: f64) {
         let name = self.names[k].clone();

@@ -67,10 +67,19 @@ pub(crate) enum End {
     Tuned(Box<Result<Measured, RunError>>),
 }
 
+/// How long the user's e-stop waits for a process to report it latched.
+const ESTOP_PATIENCE: Duration = Duration::from_secs(2);
+
 /// A request whose answer waits for the cell.
 enum Pending {
     Reset {
         conn: ConnId,
+        since: Instant,
+    },
+    /// The user's e-stop, until a process reports it latched.
+    Estop {
+        conn: ConnId,
+        reason: String,
         since: Instant,
     },
     Control {
@@ -79,6 +88,17 @@ enum Pending {
         kind: ControlKind,
         since: Instant,
     },
+}
+
+impl Pending {
+    /// Who waits for the answer.
+    fn conn(&self) -> ConnId {
+        match *self {
+            Self::Reset { conn, .. } | Self::Estop { conn, .. } | Self::Control { conn, .. } => {
+                conn
+            }
+        }
+    }
 }
 
 /// The cell going down: where it stands on the way (see the module documentation).
@@ -441,8 +461,7 @@ impl Loop<'_> {
             }
         }
         for p in std::mem::take(&mut self.pending) {
-            let (Pending::Reset { conn, .. } | Pending::Control { conn, .. }) = p;
-            self.server.reply(conn, &Reply::Failed(why.to_string()));
+            self.server.reply(p.conn(), &Reply::Failed(why.to_string()));
         }
     }
 
@@ -541,6 +560,24 @@ impl Loop<'_> {
     }
 
     fn handle(&mut self, conn: ConnId, req: Request) {
+        // The e-stop is taken whatever the cell is doing.
+        if let Request::Estop { reason } = req {
+            self.cell.raise_user(&reason);
+            if self.stopping.is_some() {
+                let done = format!(
+                    "e-stop raised on instance {} (going down): {reason}",
+                    self.cell.instance
+                );
+                self.server.reply(conn, &Reply::Done(done));
+            } else {
+                self.pending.push(Pending::Estop {
+                    conn,
+                    reason,
+                    since: Instant::now(),
+                });
+            }
+            return;
+        }
         if self.stopping.is_some() && !matches!(req, Request::Info) {
             let reply = match req {
                 Request::Down => Reply::Done(format!(
@@ -593,6 +630,7 @@ impl Loop<'_> {
                     self.cell.instance
                 )))
             }
+            Request::Estop { .. } => None, // taken above
         };
         if let Some(r) = reply {
             self.server.reply(conn, &r);
@@ -790,12 +828,7 @@ impl Loop<'_> {
         let pending = std::mem::take(&mut self.pending);
         for p in pending {
             match self.pending_done(&p) {
-                Some(reply) => {
-                    let conn = match p {
-                        Pending::Reset { conn, .. } | Pending::Control { conn, .. } => conn,
-                    };
-                    self.server.reply(conn, &reply);
-                }
+                Some(reply) => self.server.reply(p.conn(), &reply),
                 None => self.pending.push(p),
             }
         }
@@ -803,6 +836,23 @@ impl Loop<'_> {
 
     fn pending_done(&self, p: &Pending) -> Option<Reply> {
         match *p {
+            Pending::Estop {
+                ref reason, since, ..
+            } => {
+                if !self.cell.still_latched().is_empty() {
+                    return Some(Reply::Done(format!(
+                        "e-stop raised on instance {}: {reason}",
+                        self.cell.instance
+                    )));
+                }
+                (since.elapsed() > ESTOP_PATIENCE).then(|| {
+                    Reply::Failed(format!(
+                        "no process of instance {} reported the e-stop latched within {} s",
+                        self.cell.instance,
+                        ESTOP_PATIENCE.as_secs()
+                    ))
+                })
+            }
             Pending::Reset { since, .. } => {
                 let fault = self
                     .cell
