@@ -89,7 +89,12 @@ pub enum CallError {
     },
     /// The supervisor took the request and did not answer in time ([`ANSWER_TIMEOUT`], or
     /// the caller's patience).
-    NoAnswer(InstanceName),
+    NoAnswer {
+        /// The instance asked.
+        instance: InstanceName,
+        /// How long the client waited.
+        waited: Duration,
+    },
     /// The answer could not be decoded (a supervisor of another version?).
     Garbled(postcard::Error),
 }
@@ -112,16 +117,28 @@ impl std::fmt::Display for CallError {
                 f,
                 "instance {instance}: the supervisor's control channel broke: {source}"
             ),
-            Self::NoAnswer(i) => write!(
+            Self::NoAnswer { instance, waited } => write!(
                 f,
-                "instance {i}: the supervisor took the request but did not answer within {} s \
-                 (is it stuck? its log says where)",
-                ANSWER_TIMEOUT.as_secs()
+                "instance {instance}: the supervisor took the request but did not answer within \
+                 {:.1} s (is it stuck? its log says where)",
+                waited.as_secs_f64()
             ),
             Self::Garbled(e) => write!(
                 f,
                 "a garbled answer ({e}): a supervisor of another version?"
             ),
+        }
+    }
+}
+
+impl CallError {
+    /// The CLI's exit status for it: 2 when the request cannot have been taken (no
+    /// supervisor, too long, no connection), 1 when it may have been (the supervisor broke off
+    /// or did not answer: it may have started and failed).
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            Self::NotUp(_) | Self::TooLong { .. } | Self::Connect { .. } => 2,
+            Self::Broke { .. } | Self::NoAnswer { .. } | Self::Garbled(_) => 1,
         }
     }
 }
@@ -195,7 +212,10 @@ pub fn call_within(
     match read_frame(&mut s) {
         Ok(body) => postcard::from_bytes(&body).map_err(CallError::Garbled),
         Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-            Err(CallError::NoAnswer(*instance))
+            Err(CallError::NoAnswer {
+                instance: *instance,
+                waited: patience.unwrap_or_default(),
+            })
         }
         Err(e) => Err(CallError::Broke {
             instance: *instance,

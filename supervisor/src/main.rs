@@ -376,7 +376,7 @@ fn ctl_call(instance: &str, req: Request) -> ExitCode {
         Ok(reply) => ctl_reply(reply, false, None, None),
         Err(e) => {
             eprint!("{}", errors(&e));
-            ExitCode::from(2)
+            ExitCode::from(e.exit_code())
         }
     }
 }
@@ -665,7 +665,7 @@ fn main() -> ExitCode {
                 Ok(r) => ctl_reply(r, json, trace.as_deref(), plot.as_deref()),
                 Err(e) => {
                     eprint!("{}", errors(&e));
-                    ExitCode::from(2)
+                    ExitCode::from(e.exit_code())
                 }
             };
             if let Some(r) = recorder.as_mut() {

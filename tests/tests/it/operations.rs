@@ -430,9 +430,17 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
         let test = "ops-sigkill";
         let cfg = cell(test);
         let mut up = Up::start(test, &cfg);
+        // A client waits for a program's end: told that the supervisor broke off, exit 1 (its
+        // request was taken).
+        let waiting = up.exec_in_background(program(test, SHORT));
+        up.until("moving", moving);
         let mut child = up.child.take().expect("running");
         child.kill().expect("SIGKILL");
         let _ = child.wait();
+        let out = waiting.wait_with_output().expect("exec");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("control channel broke"), "{err}");
         let inst = up.inst.clone();
         drop(up);
         // Its processes notice (the heartbeat stops), bring the axes to rest and exit.
