@@ -673,7 +673,9 @@ impl Controller {
     /// velocity within one velocity step. Returns the offending axis and distance. Setpoints
     /// of the same source are checked by command validation instead (a step too large cuts
     /// power).
-    fn jump(&self, sp: &SetpointV2, now_ns: u64, dt: f64) -> Option<(usize, f64)> {
+    /// The first test a new source's first setpoint fails: its axis, the event code (position
+    /// or velocity), the value and the limit.
+    fn jump(&self, sp: &SetpointV2, now_ns: u64, dt: f64) -> Option<(usize, u32, f64, f64)> {
         if self
             .setpoint
             .is_some_and(|prev| prev.seq != sp.seq && sp.stamp_ns >= prev.stamp_ns)
@@ -686,8 +688,17 @@ impl Controller {
             let at_now = sp.position[i] + sp.velocity[i] * age;
             let d = (at_now - self.ref_pos[i]).abs();
             let dv = (sp.velocity[i] - self.ref_vel[i]).abs();
-            (d > self.start_tolerance(i, dt) || dv > self.p.axis[i].velocity_step_limit * scale)
-                .then_some((i, d))
+            let (d_max, dv_max) = (
+                self.start_tolerance(i, dt),
+                self.p.axis[i].velocity_step_limit * scale,
+            );
+            if d > d_max {
+                Some((i, code::SETPOINT_JUMP, d, d_max))
+            } else if dv > dv_max {
+                Some((i, code::SETPOINT_VELOCITY_JUMP, dv, dv_max))
+            } else {
+                None
+            }
         })
     }
 
@@ -977,18 +988,23 @@ impl Controller {
                 return;
             }
             match self.jump(sp, now_ns, dt) {
-                Some((i, d)) => {
+                Some((i, test, value, limit)) => {
                     out.state.status |= st::SETPOINT_JUMP;
                     if !self.jump_reported {
                         self.jump_reported = true;
                         let a = &self.p.axis[i];
+                        let what = if test == code::SETPOINT_JUMP {
+                            ": setpoint refused (its position), servo holds"
+                        } else {
+                            ": setpoint refused (its velocity), servo holds"
+                        };
                         events.push(EventV1::new(
                             now_ns,
-                            code::SETPOINT_JUMP,
+                            test,
                             i as i32,
-                            d,
-                            self.start_tolerance(i, dt),
-                            &[str_of(&a.name), ": setpoint refused, servo holds"],
+                            value,
+                            limit,
+                            &[str_of(&a.name), what],
                         ));
                     }
                 }

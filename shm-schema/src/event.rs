@@ -182,7 +182,11 @@ pub mod code {
     /// The enabling sequence did not complete within the enable timeout (s).
     pub const ENABLE_TIMEOUT: u32 = 210;
     /// A new source's first setpoint does not start where servo holds; refused, servo holds.
+    /// value: its distance from where servo holds (axis unit), limit: how far it may be.
     pub const SETPOINT_JUMP: u32 = 211;
+    /// A new source's first setpoint does not start at the velocity servo holds; refused,
+    /// servo holds. value: the difference (axis unit/s), limit: the velocity step limit.
+    pub const SETPOINT_VELOCITY_JUMP: u32 = 217;
     /// No fresh setpoint for longer than the setpoint timeout; value: its age (s). The
     /// reference comes to rest.
     pub const SETPOINT_STALE: u32 = 212;
@@ -454,6 +458,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Warning,
         unit: Unit::Axis,
         meaning: "The first setpoint of a source (after enabling, after a stale spell, after trajgen restarted) lies further from where servo holds than the axis may start from (1.5 cycles at vmax plus the in-position band, at most one position step): it is refused and servo holds. trajgen restarts from where servo holds once at rest.",
+    },
+    CodeInfo {
+        code: code::SETPOINT_VELOCITY_JUMP,
+        name: "setpoint-velocity-jump",
+        severity: Severity::Warning,
+        unit: Unit::AxisPerSecond,
+        meaning: "The first setpoint of a source (after enabling, after a stale spell, after trajgen restarted) starts at a velocity further from the one servo holds than the axis' velocity step limit allows (scaled by a late cycle): it is refused and servo holds, as for `setpoint-jump`.",
     },
     CodeInfo {
         code: code::SETPOINT_STALE,

@@ -428,7 +428,7 @@ impl Job {
             if s.status & st::SETPOINT_JUMP != 0 {
                 cell.take_events();
                 return Err(RunError::failed(
-                    "servo refused a setpoint as a jump (see the setpoint-jump event)",
+                    "servo refused a setpoint as a jump (see the setpoint-jump or setpoint-velocity-jump event)",
                 ));
             }
             if let Some(d) = &self.done {

@@ -759,3 +759,35 @@ fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
         }
     });
 }
+
+/// Issue 21 item 16: a new source's first setpoint refused says which test refused it, with
+/// that test's own value and limit: its position (`setpoint-jump`, axis unit) or its velocity
+/// (`setpoint-velocity-jump`, axis unit/s). An event had reported the position within its
+/// limit when the velocity was what refused the setpoint.
+#[test]
+fn a_refused_first_setpoint_names_the_test_that_refused_it() {
+    integration_tests::attributable(|| {
+        let cell = Config::default_cell().to_shm();
+        let refused = |x: f64, vx: f64| {
+            let mut lp = Loop::new(&cell);
+            lp.enable();
+            let sp = setpoint(&lp, 1, x, vx);
+            let s = lp.step_with(None, Some(&sp), None);
+            assert_ne!(s.status & st::SETPOINT_JUMP, 0, "{x}, {vx}: not refused");
+            *lp.events
+                .iter()
+                .find(|e| e.code == code::SETPOINT_JUMP || e.code == code::SETPOINT_VELOCITY_JUMP)
+                .unwrap_or_else(|| panic!("{x}, {vx}: no event in {:?}", lp.codes()))
+        };
+        // Where servo holds (x = 40), at 5 mm/s: the velocity refuses it.
+        let e = refused(40.0, 5.0);
+        assert_eq!((e.code, e.axis), (code::SETPOINT_VELOCITY_JUMP, 0));
+        assert!(e.value > e.limit && (e.value - 5.0).abs() < 1e-6, "{e:?}");
+        assert!(e.text().contains("velocity"), "{}", e.text());
+        // 2 mm away at rest: the position refuses it.
+        let e = refused(42.0, 0.0);
+        assert_eq!((e.code, e.axis), (code::SETPOINT_JUMP, 0));
+        assert!(e.value > e.limit && e.value > 1.9, "{e:?}");
+        assert!(e.text().contains("position"), "{}", e.text());
+    });
+}
