@@ -339,6 +339,17 @@ fn run_failed(e: &RunError, json: bool) -> ExitCode {
     })
 }
 
+/// A client's output piped into a reader that stops early (`status --watch | head`) ends the
+/// command quietly, as it ends any Unix tool: SIGPIPE back to its default. Rust ignores it,
+/// so the next `println!` panicked, and `abort_on_panic` turned that into an abort with a
+/// backtrace. Not for the commands that keep a cell (`up`, `run`, `tune`) or serve one (`web`,
+/// `record`): they must never die half-way.
+fn quiet_on_a_closed_pipe() {
+    use nix::sys::signal::{SigHandler, Signal, signal};
+    // SAFETY: SIG_DFL installs no handler of ours; no other thread runs yet.
+    let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
+}
+
 /// Logging on stderr through `tracing`. For the commands that watch a cell (`up`, `run`,
 /// `tune`) the writer is non-blocking: a full pipe or a paused terminal loses lines, never
 /// stalls the supervisor. The guard flushes on exit.
@@ -570,10 +581,14 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
 fn main() -> ExitCode {
     runtime::abort_on_panic();
     let cli = Cli::parse();
-    let _log = init_logging(matches!(
+    let watching = matches!(
         cli.cmd,
         Cmd::Up { .. } | Cmd::Run { .. } | Cmd::Tune { .. } | Cmd::Web { .. } | Cmd::Record { .. }
-    ));
+    );
+    if !watching {
+        quiet_on_a_closed_pipe();
+    }
+    let _log = init_logging(watching);
     match cli.cmd {
         Cmd::Status {
             instance,

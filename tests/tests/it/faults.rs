@@ -747,3 +747,57 @@ fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
         up.down();
     });
 }
+
+/// `status --watch` piped into a reader that stops early (`| head -c 64`) ends quietly, killed by
+/// SIGPIPE as any Unix tool is, and the cell is not bothered: it used to panic on its next
+/// line and abort with a backtrace.
+#[test]
+fn a_client_whose_reader_stops_early_ends_quietly() {
+    integration_tests::attributable(|| {
+        use std::os::unix::process::ExitStatusExt;
+        let test = "closed-pipe";
+        let up = Up::start(test, &cell(test, &[]));
+        let mut watch = up
+            .command()
+            .args(["status", "--watch", "--instance", &up.inst])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("status --watch");
+        let mut first = [0u8; 64];
+        let n = watch
+            .stdout
+            .take()
+            .expect("stdout")
+            .read(&mut first)
+            .expect("a first screen");
+        assert!(n > 0, "status --watch wrote nothing");
+        // The reader is gone (dropped after its read): the next screen cannot be written.
+        let out = run_with_watchdog_wait(watch);
+        assert_eq!(
+            out.status.signal(),
+            Some(nix::sys::signal::Signal::SIGPIPE as i32),
+            "{:?}: {}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{err}");
+        up.status();
+        up.down();
+    });
+}
+
+/// Waits for `child` (its stdout already taken) under the watchdog; its output.
+fn run_with_watchdog_wait(mut child: std::process::Child) -> std::process::Output {
+    let start = Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        if start.elapsed() > WATCHDOG {
+            let stuck = integration_tests::where_stuck(child.id());
+            let _ = child.kill();
+            panic!("still running after {WATCHDOG:?}\n{stuck}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
