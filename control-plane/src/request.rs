@@ -92,8 +92,7 @@ pub enum Reply {
 }
 
 /// Why the cell refused a request: nothing was changed (the CLI exits 2). A client acts on
-/// the variant ([`Refusal::is_busy`]: try again later); its `Display` is the line for the
-/// user.
+/// the variant; its `Display` is the line for the user.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub enum Refusal {
     /// The instance is going down: the axes come to rest, then the processes stop.
@@ -238,23 +237,6 @@ pub enum Refusal {
         /// Its limit.
         limit: usize,
     },
-}
-
-impl Refusal {
-    /// The cell is busy with something that ends by itself (a program, a swap, a tuning
-    /// session, an enabling, the channel's connections): the same request may be taken later.
-    pub fn is_busy(&self) -> bool {
-        matches!(
-            self,
-            Self::Tuning { .. }
-                | Self::Replacing { .. }
-                | Self::ProgramRunning { .. }
-                | Self::Settling { .. }
-                | Self::Enabling
-                | Self::MotionEnded
-                | Self::Connections { .. }
-        )
-    }
 }
 
 impl std::fmt::Display for Refusal {

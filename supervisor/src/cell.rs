@@ -615,11 +615,13 @@ impl Cell {
         }
     }
 
-    /// Raises a host e-stop (a process lost): published to every process, latched here.
-    fn raise_host(&mut self, cause: u32, parts: &[&str]) {
+    /// Raises an e-stop from the supervisor: `Host` for a process lost, `External` for the
+    /// user's (`supervisor estop`, as a button's). Published to every process on the
+    /// supervisor's own port, latched here.
+    pub(crate) fn raise(&mut self, origin: EstopOrigin, cause: u32, parts: &[&str]) {
         let e = EstopV1::trigger(
             runtime::time::now_ns(),
-            EstopOrigin::Host,
+            origin,
             SOURCE_SUPERVISOR,
             cause,
             parts,
@@ -627,21 +629,6 @@ impl Cell {
         self.estop_pub.send(&e);
         self.latch(e);
         // The host state carries it too, so a process started later sees it at once.
-        self.beat();
-    }
-
-    /// Raises the user's e-stop (`supervisor estop`; origin external, as a button's):
-    /// published to every process on the supervisor's own port, latched here.
-    pub(crate) fn raise_user(&mut self, reason: &str) {
-        let e = EstopV1::trigger(
-            runtime::time::now_ns(),
-            EstopOrigin::External,
-            SOURCE_SUPERVISOR,
-            code::ESTOP_RAISED,
-            &[reason],
-        );
-        self.estop_pub.send(&e);
-        self.latch(e);
         self.beat();
     }
 
@@ -655,7 +642,7 @@ impl Cell {
         }
         if self.critical[k] {
             self.event(code::PROCESS_LOST, exit_code, &[&name, ": ", why]);
-            self.raise_host(code::PROCESS_LOST, &[&name, " lost"]);
+            self.raise(EstopOrigin::Host, code::PROCESS_LOST, &[&name, " lost"]);
         } else {
             self.event(code::NOT_CRITICAL_FAILED, exit_code, &[&name, ": ", why]);
         }
@@ -772,7 +759,7 @@ impl Cell {
                         for_s,
                     });
                     self.event(code::PROCESS_LOST, -1.0, &[&name, ": stalled"]);
-                    self.raise_host(code::PROCESS_LOST, &[&name, " stalled"]);
+                    self.raise(EstopOrigin::Host, code::PROCESS_LOST, &[&name, " stalled"]);
                 } else {
                     self.event(code::NOT_CRITICAL_FAILED, -1.0, &[&name, ": stalled"]);
                 }

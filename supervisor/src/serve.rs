@@ -33,8 +33,9 @@ use control_plane::{Refusal, Reply, Request};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
-use shm_schema::ControlKind;
 use shm_schema::drive::servo_status as st;
+use shm_schema::event::code;
+use shm_schema::{ControlKind, EstopOrigin};
 use std::time::{Duration, Instant};
 
 /// A program to run.
@@ -562,7 +563,8 @@ impl Loop<'_> {
     fn handle(&mut self, conn: ConnId, req: Request) {
         // The e-stop is taken whatever the cell is doing.
         if let Request::Estop { reason } = req {
-            self.cell.raise_user(&reason);
+            self.cell
+                .raise(EstopOrigin::External, code::ESTOP_RAISED, &[&reason]);
             if self.stopping.is_some() {
                 let done = format!(
                     "e-stop raised on instance {} (going down): {reason}",

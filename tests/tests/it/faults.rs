@@ -726,20 +726,10 @@ fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
             .stderr(Stdio::null())
             .spawn()
             .expect("swap");
-        let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
-        let start = Instant::now();
-        loop {
-            assert!(start.elapsed() < WATCHDOG, "the swap never showed in Info");
-            match control_plane::channel::call(&instance, &control_plane::Request::Info) {
-                Ok(control_plane::Reply::Info(info)) if info.swapping.is_some() => break,
-                Ok(_) => std::thread::sleep(Duration::from_millis(2)),
-                Err(e) => panic!("Info: {e}"),
-            }
-        }
         let estop = control_plane::Request::Estop {
             reason: "during a swap".into(),
         };
-        match control_plane::channel::call(&instance, &estop) {
+        match up.during_swap_of("iobridge", &estop) {
             Ok(control_plane::Reply::Done(m)) => assert!(m.contains("during a swap"), "{m}"),
             other => panic!("an e-stop during a swap: {other:?}"),
         }
@@ -773,7 +763,7 @@ fn a_client_whose_reader_stops_early_ends_quietly() {
             .expect("a first screen");
         assert!(n > 0, "status --watch wrote nothing");
         // The reader is gone (dropped after its read): the next screen cannot be written.
-        let out = run_with_watchdog_wait(watch);
+        let out = crate::drives::wait_for(watch);
         assert_eq!(
             out.status.signal(),
             Some(nix::sys::signal::Signal::SIGPIPE as i32),
@@ -786,18 +776,4 @@ fn a_client_whose_reader_stops_early_ends_quietly() {
         up.status();
         up.down();
     });
-}
-
-/// Waits for `child` (its stdout already taken) under the watchdog; its output.
-fn run_with_watchdog_wait(mut child: std::process::Child) -> std::process::Output {
-    let start = Instant::now();
-    while child.try_wait().expect("wait").is_none() {
-        if start.elapsed() > WATCHDOG {
-            let stuck = integration_tests::where_stuck(child.id());
-            let _ = child.kill();
-            panic!("still running after {WATCHDOG:?}\n{stuck}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    child.wait_with_output().expect("output")
 }

@@ -355,20 +355,7 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
             .stderr(Stdio::piped())
             .spawn()
             .expect("swap");
-        let start = Instant::now();
-        let busy = loop {
-            assert!(start.elapsed() < WATCHDOG, "the swap never showed in Info");
-            match control_plane::channel::call(&instance, &control_plane::Request::Info) {
-                Ok(control_plane::Reply::Info(info)) if info.swapping.is_some() => {
-                    assert_eq!(info.swapping.as_deref(), Some("trajgen"), "{info:?}");
-                    break control_plane::channel::call(&instance, &control_plane::Request::Start);
-                }
-                Ok(control_plane::Reply::Info(_)) => {}
-                other => panic!("Info during a swap: {other:?}"),
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        };
-        match busy {
+        match up.during_swap_of("trajgen", &control_plane::Request::Start) {
             Ok(control_plane::Reply::Refused(why)) => assert_eq!(
                 why,
                 control_plane::Refusal::Replacing {

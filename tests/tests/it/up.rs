@@ -159,6 +159,29 @@ impl Up {
         }
     }
 
+    /// Polls the control channel's `Info` (under the watchdog) until a swap of `process`
+    /// shows, then asks `req` at once: its answer, given while the swap runs.
+    pub(crate) fn during_swap_of(
+        &self,
+        process: &str,
+        req: &control_plane::Request,
+    ) -> Result<control_plane::Reply, control_plane::channel::CallError> {
+        let instance = shm_schema::InstanceName::new(&self.inst).expect("instance");
+        let start = Instant::now();
+        loop {
+            assert!(start.elapsed() < WATCHDOG, "the swap never showed in Info");
+            match control_plane::channel::call(&instance, &control_plane::Request::Info) {
+                Ok(control_plane::Reply::Info(info)) if info.swapping.is_some() => {
+                    assert_eq!(info.swapping.as_deref(), Some(process), "{info:?}");
+                    return control_plane::channel::call(&instance, req);
+                }
+                Ok(control_plane::Reply::Info(_)) => {}
+                other => panic!("Info during a swap: {other:?}"),
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
     /// `exec --wait --json PROGRAM` in the background, its output piped.
     pub(crate) fn exec_in_background(&self, program: impl AsRef<std::ffi::OsStr>) -> Child {
         self.command()
@@ -222,7 +245,8 @@ pub(crate) fn wait_child(mut c: Child) -> std::process::ExitStatus {
 }
 
 /// The default cell with room for the host's stalls, its Modbus server on any free port (the
-/// tests run side by side), and keys replaced as `set` says (`("max_connections = 8", "max_connections = 2")`).
+/// tests run side by side), and the keys `set` names set to its values
+/// (`("modbus.max_connections", 2.into())`).
 pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
     let mut cell = integration_tests::CellToml::parse(&with_stall_room(&default_cell()));
     for (path, value) in set {
