@@ -5,12 +5,14 @@
 //! [`cia402::pdo::RX_DEFAULT`] and [`cia402::pdo::TX_DEFAULT`]), its supported modes checked
 //! against the axis' mode, its quick stop written from the configuration, every SubDevice's
 //! process data watchdog set, Distributed Clocks set up for the SubDevices on SYNC0
-//! ([`Dc`]), and the bus taken through SAFE-OP to OP. Then the FMMUs ethercrab configured are
-//! read back from the SubDevices: the cycle's own frame uses them.
+//! ([`Dc`]), and the bus taken to SAFE-OP. Then the FMMUs ethercrab configured are read back
+//! from the SubDevices: the cycle's own frame uses them, and asks for OP itself
+//! ([`crate::frame::CyclicFrame::request_op`]), so that nothing is in OP before the cycle
+//! runs.
 //!
 //! ethercrab's futures are driven here, on this thread, by [`Pump`]: its frames go out of the
 //! cell's [`Wire`] and the replies come back into it. Nothing of ethercrab runs once the bus
-//! is in OP (its own cyclic exchange would allocate a timer per frame).
+//! is in SAFE-OP (its own cyclic exchange would allocate a timer per frame).
 
 use crate::frame::{Layout, Slot};
 use cia402::pdo::{RX_DEFAULT, TX_DEFAULT, mapping, obj, sync};
@@ -22,6 +24,10 @@ use std::future::Future;
 use std::pin::pin;
 use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
+
+/// How long a SubDevice may take to reach a state asked for (ethercrab's, and the cycle's
+/// from SAFE-OP to OP).
+pub const STATE_TRANSITION: Duration = Duration::from_secs(10);
 
 const MAX_FRAMES: usize = 16;
 const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
@@ -167,7 +173,7 @@ impl Master {
             Timeouts {
                 pdu: Duration::from_millis(200),
                 eeprom: Duration::from_millis(200),
-                state_transition: Duration::from_secs(10),
+                state_transition: STATE_TRANSITION,
                 mailbox_response: Duration::from_secs(2),
                 ..Timeouts::default()
             },
@@ -190,7 +196,7 @@ impl Master {
         })
     }
 
-    /// Brings the bus of `cfg` on `wire` to OP, the drives mapped for `axes`, SYNC0 on the
+    /// Brings the bus of `cfg` on `wire` to SAFE-OP, the drives mapped for `axes`, SYNC0 on the
     /// bus process' `timing`; see the module documentation. Errors name the SubDevice
     /// (position and name) and what is wrong.
     pub fn bring_up(
@@ -266,7 +272,7 @@ fn identity(vendor: u32, product: u32, revision: u32) -> String {
     format!("vendor {vendor:#010x}, product {product:#010x}, revision {revision:#010x}")
 }
 
-/// What the bus is once in OP.
+/// What the bus is once in SAFE-OP, its process data exchanged once.
 #[derive(Debug)]
 pub struct Up {
     /// The process image and where each SubDevice's data sits.
@@ -688,32 +694,17 @@ fn bring_up(
         _ => None,
     };
 
-    // SAFE-OP, then OP with the process data running (a drive may wait for valid outputs).
+    // SAFE-OP only: OP is asked for by the cycle's own frames (`CyclicFrame::request_op`),
+    // so that no SubDevice is ever in OP without the cycle running (its process data
+    // watchdog would take it out of OP again in the set-up's gap before the first cycle).
     let group = pump
         .run(wire, group.into_safe_op(md), long, stop)?
         .map_err(|e| format!("bringing the bus on {} to SAFE-OP: {e}", cfg.interface()))?;
-    let group = pump
-        .run(wire, group.request_into_op(md), long, stop)?
-        .map_err(|e| format!("bringing the bus on {} to OP: {e}", cfg.interface()))?;
-    let end = Instant::now() + long;
-    let wkc = loop {
-        let r = pump
-            .run(wire, group.tx_rx(md), long, stop)?
-            .map_err(|e| format!("exchanging process data on {}: {e}", cfg.interface()))?;
-        if r.all_op() {
-            break r.working_counter;
-        }
-        if Instant::now() > end {
-            let states: Vec<_> = r.subdevice_states.iter().map(|s| format!("{s}")).collect();
-            return Err(BringUpError::Failed(format!(
-                "the bus on {} did not reach OP within {} s: states {}",
-                cfg.interface(),
-                long.as_secs(),
-                states.join(", ")
-            )));
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    };
+    // The process data once, in SAFE-OP (a SubDevice takes them, and ignores its outputs).
+    let wkc = pump
+        .run(wire, group.tx_rx(md), long, stop)?
+        .map_err(|e| format!("exchanging process data on {}: {e}", cfg.interface()))?
+        .working_counter;
 
     // Where ethercrab put each SubDevice's data: its FMMUs, read back.
     let mut fmmus = Vec::new();

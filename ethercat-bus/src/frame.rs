@@ -3,7 +3,10 @@
 //! FPRD of each SubDevice's AL status and status code, so that every cycle knows which
 //! SubDevice is in which state, and an FPRD of the status of each send mailbox (SM1), so that
 //! a CoE emergency waiting there is seen; the frame after one is seen carries a read of that
-//! mailbox (one per frame). With Distributed Clocks, two datagrams follow the LRW: an FPWR of
+//! mailbox (one per frame). While the bus is being taken from SAFE-OP to OP, the frame ends
+//! with a broadcast write of AL control asking every SubDevice for OP
+//! ([`CyclicFrame::request_op`]): OP is reached with the cycle's own process data running, so
+//! a SubDevice's process data watchdog never finds the bus silent in OP. With Distributed Clocks, two datagrams follow the LRW: an FPWR of
 //! the reference clock's system time (0x0910) with the MainDevice's time, which keeps the
 //! reference on the host's clock (its drift control follows what is written), and an FRMW of
 //! it, which hands the reference's time to every other DC SubDevice and brings it back.
@@ -29,6 +32,12 @@ const DC_SYSTEM_TIME: u16 = 0x0910;
 const DC_BYTES: usize = 2 * (DGRAM + 8 + WKC);
 /// Configured-address physical read.
 pub const FPRD: u8 = 4;
+/// Broadcast write.
+const BWR: u8 = 8;
+/// The AL control register: the state a SubDevice is asked for.
+const AL_CONTROL: u16 = 0x0120;
+/// AL control's request for OP.
+const AL_OP: u16 = 0x0008;
 /// SM1's status register (bit 3: the mailbox is full).
 const SM1_STATUS: u16 = 0x080D;
 /// Bytes of a mailbox read at most (a drive's SM1 is 128 bytes or less; the frame keeps room
@@ -131,6 +140,11 @@ pub struct CyclicFrame {
     read_sent: Option<usize>,
     /// Bytes of the DC datagrams ([`DC_BYTES`] with a reference clock, else 0).
     dc_len: usize,
+    /// Whether each frame asks every SubDevice for OP ([`CyclicFrame::request_op`]).
+    op_request: bool,
+    /// Bytes of the datagrams the frame sent last carries after the fixed ones (a mailbox
+    /// read, the request for OP).
+    tail_sent: usize,
 }
 
 impl CyclicFrame {
@@ -221,6 +235,8 @@ impl CyclicFrame {
             read_next: None,
             read_sent: None,
             dc_len,
+            op_request: false,
+            tail_sent: 0,
         })
     }
 
@@ -329,6 +345,16 @@ impl CyclicFrame {
         }
     }
 
+    /// Makes every next frame ask all SubDevices for OP (a broadcast write of AL control), or
+    /// no longer. A SubDevice in OP takes the request as nothing; one with its error flag set
+    /// ignores it (its error waits for an acknowledgement the cycle never gives).
+    ///
+    /// # Real-time
+    /// A store only.
+    pub fn request_op(&mut self, on: bool) {
+        self.op_request = on;
+    }
+
     /// The SubDevice whose mailbox the frame sent last reads.
     pub fn mailbox_read(&self) -> Option<usize> {
         self.read_sent
@@ -380,20 +406,37 @@ impl CyclicFrame {
         }
         self.read_sent = self.read_next.take();
         let mut datagrams = self.datagrams;
+        // The datagram after `last`, at `at`, with `len` bytes of data.
+        let mut append = |buf: &mut [u8; MAX_FRAME], last: &mut usize, at: &mut usize, len| {
+            buf[*last + 7] |= 0x80; // more follows
+            buf[*at + 1] = self.index;
+            buf[*at + 6..*at + 8].copy_from_slice(&(len as u16).to_le_bytes());
+            buf[*at + 8..*at + DGRAM].fill(0);
+            buf[*at + DGRAM + len..*at + DGRAM + len + WKC].fill(0);
+            *last = *at;
+            *at += DGRAM + len + WKC;
+            datagrams += DGRAM + len + WKC;
+        };
+        self.buf[last + 7] &= 0x7F;
         if let Some(k) = self.read_sent {
             let s = self.layout.slots[k];
             let len = usize::from(s.mailbox_in.1);
-            self.buf[last + 7] |= 0x80; // more follows
-            self.buf[at] = FPRD;
-            self.buf[at + 1] = self.index;
-            self.buf[at + 2..at + 4].copy_from_slice(&s.station.to_le_bytes());
-            self.buf[at + 4..at + 6].copy_from_slice(&s.mailbox_in.0.to_le_bytes());
-            self.buf[at + 6..at + 8].copy_from_slice(&(len as u16).to_le_bytes());
-            self.buf[at + 8..at + DGRAM + len + WKC].fill(0);
-            datagrams += DGRAM + len + WKC;
-        } else {
-            self.buf[last + 7] &= 0x7F;
+            let here = at;
+            append(&mut self.buf, &mut last, &mut at, len);
+            self.buf[here] = FPRD;
+            self.buf[here + 2..here + 4].copy_from_slice(&s.station.to_le_bytes());
+            self.buf[here + 4..here + 6].copy_from_slice(&s.mailbox_in.0.to_le_bytes());
+            self.buf[here + DGRAM..here + DGRAM + len].fill(0);
         }
+        if self.op_request {
+            let here = at;
+            append(&mut self.buf, &mut last, &mut at, 2);
+            self.buf[here] = BWR;
+            self.buf[here + 2..here + 4].fill(0);
+            self.buf[here + 4..here + 6].copy_from_slice(&AL_CONTROL.to_le_bytes());
+            self.buf[here + DGRAM..here + DGRAM + 2].copy_from_slice(&AL_OP.to_le_bytes());
+        }
+        self.tail_sent = datagrams - self.datagrams;
         self.buf[14..16].copy_from_slice(&((datagrams as u16) | (1 << 12)).to_le_bytes());
         let len = (ETH + ECAT + datagrams).max(60);
         if len > self.len {
@@ -409,12 +452,7 @@ impl CyclicFrame {
     /// # Real-time
     /// Copies only.
     pub fn take_reply(&mut self, frame: &[u8]) -> Reply {
-        let end = ETH
-            + ECAT
-            + self.datagrams
-            + self.read_sent.map_or(0, |k| {
-                DGRAM + usize::from(self.layout.slots[k].mailbox_in.1) + WKC
-            });
+        let end = ETH + ECAT + self.datagrams + self.tail_sent;
         if frame.len() < end
             || frame[12..14] != ethercat_wire::ETHERTYPE.to_be_bytes()
             || frame[6] & 0x02 == 0

@@ -6,10 +6,11 @@
 //! - [`bringup`]: before the cycle (and again when the bus came back), ethercrab scans the
 //!   bus, the line is compared with the configuration, the drives are mapped by SDO,
 //!   Distributed Clocks set up for the SubDevices on SYNC0 ([`bringup::Dc`]) and the bus is
-//!   taken to OP, every CoE emergency kept out of ethercrab's way;
+//!   taken to SAFE-OP, every CoE emergency kept out of ethercrab's way;
 //! - [`frame`]: the cycle's one frame (LRW over the process image, the reference clock's time
 //!   written and handed on, the AL status of each SubDevice, the status of each send mailbox,
-//!   and a full one's content), built once;
+//!   a full one's content, and the request for OP until every SubDevice is there), built
+//!   once: the bus reaches OP with the cycle running, never before it;
 //! - [`Drives`]: units both ways (counts, counts/s, thousandths of the rated torque), the
 //!   controlword and mode passed through from servo (servo is the master of the CiA 402 state
 //!   machine), and what the bus does by itself when servo goes silent: a quick stop, never a

@@ -1,6 +1,6 @@
 //! `ethercat-bus`: the drives' process of a cell on EtherCAT. See the crate documentation.
 
-use ethercat_bus::bringup::{BringUpError, Dc, Master, Timing, Up};
+use ethercat_bus::bringup::{BringUpError, Dc, Master, STATE_TRANSITION, Timing, Up};
 use ethercat_bus::frame::{CyclicFrame, Layout, Reply, coe_emergency};
 use ethercat_bus::{BusIo, Drives};
 use ethercat_wire::{Received, Wire};
@@ -31,7 +31,7 @@ const REPEAT_NS: u64 = 1_000_000_000;
 
 /// Who has the bus' wire (`Bus::wire_owner`): the cycle, or the recovery thread bringing the
 /// bus up again. The cycle hands it over (`RECOVERING`) and the thread hands it back (`BACK`)
-/// with the bus in OP; neither touches the socket while the other has it.
+/// with the bus in SAFE-OP; neither touches the socket while the other has it.
 mod owner {
     pub const CYCLE: u8 = 0;
     pub const RECOVERING: u8 = 1;
@@ -49,8 +49,12 @@ const STARTUP_EMERGENCIES: usize = 8;
 struct Bus {
     wire: Arc<Wire>,
     interface: String,
-    /// The next cycle announces the bus in OP ("in OP", "back in OP").
-    announce: Option<&'static str>,
+    /// What the bus reaching OP is announced as ("in OP", "back in OP").
+    announce: &'static str,
+    /// Since when the cycle's frames have asked every SubDevice for OP (the bus came up in
+    /// SAFE-OP, at start-up or back from recovery; 0 until the first cycle); `None` once all
+    /// are there.
+    reaching_op: Option<u64>,
     /// Emergencies sent during start-up (position, code, register), told in the first cycle.
     startup_emergencies: [(usize, u16, u8); STARTUP_EMERGENCIES],
     startup_emergency_count: usize,
@@ -198,10 +202,9 @@ impl Bus {
                 }
                 self.last_sync0_cycle = None;
                 self.lost = 0;
-                self.in_op = [true; MAX_SUBDEVICES];
                 self.degraded_since_ns = None;
                 self.drives.forget();
-                self.announce = Some("back in OP on ");
+                self.ask_for_op(now, "back in OP on ");
                 self.wire_owner.store(owner::CYCLE, Ordering::Release);
                 false
             }
@@ -209,23 +212,114 @@ impl Bus {
         }
     }
 
+    /// Makes the cycle's frames ask every SubDevice for OP, from SAFE-OP, until all are
+    /// there ([`Bus::reach_op`]); `announce` says so then.
+    ///
+    /// # Real-time
+    /// Stores only.
+    fn ask_for_op(&mut self, now: u64, announce: &'static str) {
+        self.in_op = [false; MAX_SUBDEVICES];
+        self.reaching_op = Some(now);
+        self.announce = announce;
+        self.frame.request_op(true);
+    }
+
+    /// While the frames ask for OP: once every SubDevice is there, the bus is announced in OP
+    /// (with the start-up's emergencies) and the frames stop asking; a SubDevice that refused
+    /// (its error bit) or is not there after [`STATE_TRANSITION`] is named, and the bus goes to
+    /// the recovery thread. True once the bus is in OP.
+    ///
+    /// # Real-time
+    /// Reads of the last reply, copies, events and an atomic store.
+    fn reach_op(&mut self, now: u64, since: u64, cx: &mut Cycle<'_>) -> bool {
+        let n = self.frame.layout().count;
+        let mut all = true;
+        for k in 0..n {
+            let (status, code) = self.frame.al_status(k);
+            let op = status & 0x1F == 0x08;
+            self.in_op[k] = op;
+            all &= op;
+            let late = now.saturating_sub(since) > STATE_TRANSITION.as_nanos() as u64;
+            if !op && (status & 0x10 != 0 || late) {
+                let what = ") did not reach OP";
+                self.tell(
+                    now,
+                    k,
+                    code::SUBDEVICE_NOT_OP,
+                    (f64::from(status), f64::from(code)),
+                    what,
+                    cx,
+                );
+                self.frame.request_op(false);
+                self.reaching_op = None;
+                self.hand_over(now, cx);
+                return false;
+            }
+        }
+        if !all {
+            return false;
+        }
+        self.frame.request_op(false);
+        self.reaching_op = None;
+        cx.events.push(EventV1::new(
+            now,
+            code::BUS_OP,
+            -1,
+            n as f64,
+            f64::from(self.frame.layout().expected_wkc),
+            &[self.announce, &self.interface],
+        ));
+        for &(k, code, register) in
+            &self.startup_emergencies[..std::mem::take(&mut self.startup_emergency_count)]
+        {
+            self.emergency(now, k, code, register, cx);
+        }
+        true
+    }
+
     /// Tells SubDevice `k`'s CoE emergency.
     ///
     /// # Real-time
     /// Copies only.
     fn emergency(&self, now: u64, k: usize, code: u16, register: u8, cx: &mut Cycle<'_>) {
+        let what = ") sent an emergency";
+        self.tell(
+            now,
+            k,
+            code::SUBDEVICE_EMERGENCY,
+            (f64::from(code), f64::from(register)),
+            what,
+            cx,
+        );
+    }
+
+    /// The event `code` about SubDevice `k` with its `(value, limit)`: "position k (name)" and
+    /// `what`.
+    ///
+    /// # Real-time
+    /// Copies only.
+    fn tell(
+        &self,
+        now: u64,
+        k: usize,
+        code: u32,
+        reading: (f64, f64),
+        what: &str,
+        cx: &mut Cycle<'_>,
+    ) {
+        let (value, limit) = reading;
         cx.events.push(EventV1::new(
             now,
-            code::SUBDEVICE_EMERGENCY,
+            code,
             -1,
-            f64::from(code),
-            f64::from(register),
+            value,
+            limit,
             &[
                 "position ",
                 POSITIONS.get(k).copied().unwrap_or("?"),
                 " (",
                 shm_schema::str_of(&self.names[k.min(MAX_SUBDEVICES - 1)]),
-                ") sent an emergency",
+                what,
             ],
         ));
     }
@@ -304,21 +398,6 @@ impl Task for Bus {
         let now = cx.now_ns();
         if self.recovering(now, cx) {
             return;
-        }
-        if let Some(what) = self.announce.take() {
-            cx.events.push(EventV1::new(
-                now,
-                code::BUS_OP,
-                -1,
-                self.frame.layout().count as f64,
-                f64::from(self.frame.layout().expected_wkc),
-                &[what, &self.interface],
-            ));
-            for &(k, code, register) in
-                &self.startup_emergencies[..std::mem::take(&mut self.startup_emergency_count)]
-            {
-                self.emergency(now, k, code, register, cx);
-            }
         }
         // The newest command, or the last one while servo's next has not come (the drives
         // hold it, as their outputs do between frames).
@@ -404,6 +483,19 @@ impl Task for Bus {
         if !cx.estop.latched {
             self.bus_lost_raised = false;
         }
+        // On the way to OP: nothing is published (servo has no feedback, nothing can be
+        // enabled) until every SubDevice is there.
+        if let Some(since) = self.reaching_op.as_mut()
+            && *since == 0
+        {
+            *since = now; // the first cycle's request
+        }
+        if let Some(since) = self.reaching_op
+            && !self.reach_op(now, since, cx)
+        {
+            cx.set_safe(true);
+            return;
+        }
         // Each SubDevice's AL state, read in the same frame: one leaving OP is named.
         for k in 0..self.frame.layout().count {
             let (status, code) = self.frame.al_status(k);
@@ -416,21 +508,8 @@ impl Task for Bus {
                     code::SUBDEVICE_LEFT_OP,
                     &["an EtherCAT SubDevice left OP"],
                 );
-                let name = &self.names[k];
-                cx.events.push(EventV1::new(
-                    now,
-                    code::SUBDEVICE_LEFT_OP,
-                    -1,
-                    f64::from(status),
-                    f64::from(code),
-                    &[
-                        "position ",
-                        POSITIONS.get(k).copied().unwrap_or("?"),
-                        " (",
-                        shm_schema::str_of(name),
-                        ") left OP",
-                    ],
-                ));
+                let reading = (f64::from(status), f64::from(code));
+                self.tell(now, k, code::SUBDEVICE_LEFT_OP, reading, ") left OP", cx);
             }
             self.in_op[k] = op;
         }
@@ -585,9 +664,9 @@ fn open_wire(interface: &str) -> Result<Wire, SetupError> {
 }
 
 /// The recovery thread: while the cycle has handed it the wire ([`owner::RECOVERING`]),
-/// brings the bus up again from the scan, once a second until it answers as the configuration
-/// says and in the layout the cycle's frame was built for, then hands the wire back
-/// ([`owner::BACK`]). Not real-time (the process' ordinary priority); it logs why an attempt
+/// brings the bus up again from the scan to SAFE-OP, once a second until it answers as the
+/// configuration says and in the layout the cycle's frame was built for, then hands the wire
+/// back ([`owner::BACK`]): the cycle asks for OP. Not real-time (the process' ordinary priority); it logs why an attempt
 /// failed when the reason changes.
 struct Recovery {
     master: Master,
@@ -639,7 +718,7 @@ impl Recovery {
                         self.dc_again[1].store(dc.wake_ns, Ordering::Release);
                     }
                     tracing::info!(
-                        "bus on {} back in OP: {}",
+                        "bus on {} back in SAFE-OP: {}; the cycle asks for OP",
                         self.bus.interface(),
                         up.names.join(", ")
                     );
@@ -736,7 +815,7 @@ fn main() -> ExitCode {
                 100_000_000
             };
             tracing::info!(
-                "bus on {} in OP: {} (working counter {})",
+                "bus on {} in SAFE-OP: {} (working counter {}); the cycle asks for OP",
                 bus.interface(),
                 up.names.join(", "),
                 up.layout.expected_wkc
@@ -766,10 +845,13 @@ fn main() -> ExitCode {
             for (slot, e) in startup_emergencies.iter_mut().zip(&up.emergencies) {
                 *slot = *e;
             }
+            let mut frame = frame;
+            frame.request_op(true);
             Ok::<_, SetupError>(Bus {
                 wire,
                 interface: bus.interface().to_string(),
-                announce: Some("in OP on "),
+                announce: "in OP on ",
+                reaching_op: Some(0),
                 startup_emergencies,
                 startup_emergency_count: up.emergencies.len().min(STARTUP_EMERGENCIES),
                 wire_owner,
@@ -786,7 +868,7 @@ fn main() -> ExitCode {
                     }
                     n
                 },
-                in_op: [true; MAX_SUBDEVICES],
+                in_op: [false; MAX_SUBDEVICES],
                 frame,
                 drives: Drives::new(&bus, ctx.cell.axes as usize, &modes),
                 lost: 0,

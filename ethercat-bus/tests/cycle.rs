@@ -228,6 +228,46 @@ fn the_cycle_converts_both_ways_sends_only_safe_words_by_itself_and_never_alloca
     );
     let _ = frame.take_reply(&reply(&sent, 6, 1, 1));
 
+    // Asking for OP: the frame ends with a broadcast write of AL control (0x0120) = OP, after
+    // a mailbox read when there is one; the reply is still taken, the mailbox still read.
+    let fixed = 14 + 2 + 10 + 4 * PDO_BYTES + 2 + 3 * 18 + 2 * 13;
+    frame.request_op(true);
+    frame.read_mailbox(2);
+    let sent = frame.next_frame().to_vec();
+    assert_eq!(sent.len(), fixed + 10 + 128 + 2 + 10 + 2 + 2);
+    let bwr = fixed + 10 + 128 + 2;
+    assert_eq!(
+        sent[fixed + 7] & 0x80,
+        0x80,
+        "the mailbox read is not the last"
+    );
+    assert_eq!(
+        (
+            sent[bwr],
+            &sent[bwr + 2..bwr + 8],
+            &sent[bwr + 10..bwr + 12]
+        ),
+        (8, &[0, 0, 0x20, 0x01, 2, 0][..], &[8, 0][..]),
+        "BWR of AL control, 2 bytes, OP; the last datagram"
+    );
+    let _ = frame.take_reply(&reply_with(&sent, 6, 1, 1, true, &emergency(0x7320)));
+    let (k, m) = frame
+        .mailbox()
+        .expect("the mailbox read beside the request");
+    assert_eq!((k, coe_emergency(m)), (2, Some((0x7320, 0x01))));
+    let sent = frame.next_frame().to_vec();
+    assert_eq!(sent.len(), fixed + 10 + 2 + 2, "the request alone");
+    assert_eq!(sent[fixed], 8);
+    assert!(matches!(
+        frame.take_reply(&reply(&sent, 6, 1, 1)),
+        Reply::Ours { wkc: 6, al_read: 3 }
+    ));
+    frame.request_op(false);
+    let sent = frame.next_frame().to_vec();
+    assert_eq!(sent.len(), fixed, "no request once in OP");
+    assert_eq!(sent[fixed - 13 + 7] & 0x80, 0, "last");
+    let _ = frame.take_reply(&reply(&sent, 6, 1, 1));
+
     // 10 000 cycles, none allocating.
     let mut cmd = command(10, 40.0, 1.0);
     let mut rx = RxPdo::default();

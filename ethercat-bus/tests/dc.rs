@@ -105,12 +105,33 @@ fn sync0_keeps_the_bus_process_grid_through_quartz_drift_and_takes_the_outputs_t
         wake
     };
 
+    // The bus came up in SAFE-OP: the cycle's first frame asks for OP (after its AL status
+    // reads), and the reply to the second finds every SubDevice there.
     let mut frame = CyclicFrame::new(up.layout, Some(dc.station)).expect("one frame");
+    assert_eq!(
+        frame.al_status(1),
+        (0, 0),
+        "nothing read before the first frame"
+    );
+    frame.request_op(true);
+    cycle(&mut frame, &mut bus, 0);
+    assert_eq!(
+        (frame.al_status(0).0, frame.al_status(1).0),
+        (0x04, 0x04),
+        "both read in SAFE-OP by the first frame"
+    );
+    cycle(&mut frame, &mut bus, 1);
+    assert_eq!(
+        (frame.al_status(0).0, frame.al_status(1).0),
+        (0x08, 0x08),
+        "both in OP by the second frame"
+    );
+    frame.request_op(false);
     let cycles = 20_000; // 20 s
     let settle = 2_000;
     let missed_before = the_drive(&bus).sm_events_missed();
     let mut leads = Vec::new();
-    for k in 0..cycles {
+    for k in 2..cycles {
         let wake = cycle(&mut frame, &mut bus, k);
         let (r, dc_subdevices) = frame.reference_time().expect("the FRMW read the reference");
         assert_eq!(dc_subdevices, 2, "the EK1100 read, the drive took its time");

@@ -288,6 +288,9 @@ pub mod code {
     /// SYNC0 events of the drives came without new outputs (the cycle's frame was not there
     /// before them); value: how many since the last such event, limit: 0.
     pub const SYNC0_LATE: u32 = 908;
+    /// A SubDevice did not go from SAFE-OP to OP when the bus process' cycle asked for it;
+    /// value: its AL status, limit: its AL status code; the text names it.
+    pub const SUBDEVICE_NOT_OP: u32 = 909;
 }
 
 /// The unit of an event's `value` and `limit`: what a reader shows them as. Decisions on how
@@ -681,7 +684,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "bus-op",
         severity: Severity::Info,
         unit: Unit::Number("SubDevices"),
-        meaning: "The EtherCAT bus process found every SubDevice of `[[ethercat.subdevice]]` at its place, mapped the drives, and brought the bus to OP; its cycle exchanges the process data from now on. Limit: the working counter it expects of every frame; the text names the interface.",
+        meaning: "The EtherCAT bus process found every SubDevice of `[[ethercat.subdevice]]` at its place, mapped the drives, and every SubDevice reached OP: the set-up takes the bus to SAFE-OP, and the cycle's own frames ask for OP (so no SubDevice is ever in OP before the cycle runs, where its process data watchdog would take it out again); its cycle exchanges the process data from now on, and feedback reaches servo from this frame on. Limit: the working counter it expects of every frame; the text names the interface.",
     },
     CodeInfo {
         code: code::BUS_FRAMES_LOST,
@@ -731,6 +734,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Warning,
         unit: Unit::Number("SYNC0 events"),
         meaning: "Drives on Distributed Clocks (`sync = \"dc\"`) take their outputs at SYNC0, `sync0_shift` after the bus process wakes; this many SYNC0 events came with no new frame before them (the bus process woke late, a frame was lost, or two frames fell in one SYNC0 cycle), as the reference clock's time in the frames shows. At each, a drive keeps the previous outputs (a CSP drive holds its target for one more period: a step in the motion). The first, then at most one a second. Frequent: the wake-up latency of the bus process plus the frame's round trip is too close to `sync0_shift` (docs/ethercat.md, Distributed Clocks).",
+    },
+    CodeInfo {
+        code: code::SUBDEVICE_NOT_OP,
+        name: "subdevice-not-op",
+        severity: Severity::Error,
+        unit: Unit::Number("AL status (limit: AL status code)"),
+        meaning: "A SubDevice did not go from SAFE-OP to OP when the bus process' cycle asked for it (at start-up, or when the bus came back): it refused (its AL status has the error bit; the AL status code says why: 0x001D invalid outputs, 0x0030 invalid DC synchronisation, ...) or was not there 10 s after the first request (AL status code 0). The text names its position and name. Nothing is published to servo meanwhile (no drive can be enabled); the bus process brings the bus up again from the scan (`bus-recovering`), about once a second, until every SubDevice reaches OP (`bus-op`).",
     },
 ];
 
