@@ -207,6 +207,24 @@ fn extrapolate(sp: &SetpointV2, i: usize, h: f64, vmax: f64) -> (f64, f64, f64) 
     (p + v * t1 + 0.5 * a * t1 * t1 + lim * (h - t1), lim, 0.0)
 }
 
+/// The share of the acceleration command validation allows (the velocity step limit per
+/// period) that a re-join's offset may add to the new setpoint's own acceleration.
+const REJOIN_SHARE: f64 = 0.8;
+
+/// The shortest time a re-join from offset `p0`, `v0` may take so that its acceleration
+/// stays within `budget`: the Hermite offset's acceleration is largest at its ends, at most
+/// `(6 |p0| / d + 4 |v0|) / d`.
+///
+/// # Real-time
+/// Arithmetic only.
+fn rejoin_time(p0: f64, v0: f64, budget: f64) -> f64 {
+    let (p, v) = (p0.abs(), v0.abs());
+    if budget <= 0.0 || (p == 0.0 && v == 0.0) {
+        return 0.0;
+    }
+    (4.0 * v + (16.0 * v * v + 24.0 * p * budget).sqrt()) / (2.0 * budget)
+}
+
 /// A re-join in progress: an offset of the reference from the newest setpoint's
 /// extrapolation that starts at (`p0`, `v0`) and goes to 0 along a cubic (Hermite) curve over
 /// `duration_s`, so taking a late setpoint never steps the command.
@@ -624,9 +642,19 @@ impl Controller {
 
     /// Before taking `sp` from the same source: the reference it gives now differs from the
     /// one the held setpoint (and a re-join in progress) gives by the extrapolation's error
-    /// over the time trajgen was late. A small difference (within the in-position band and 5 %
-    /// of vmax) is blended out over two trajgen periods; a larger one is left for command
-    /// validation to judge (it is a step, not a late setpoint).
+    /// over the time trajgen was late, or since the trajectory's acceleration last changed (a
+    /// trapezoid's acceleration jumps; servo extrapolates the last one). A difference a
+    /// trajectory within the limits can make is blended out ([`Rejoin`]); a larger one is
+    /// left for command validation to judge (it is a step, not a late setpoint), and only the
+    /// offset already being blended goes on.
+    ///
+    /// Within the limits: the acceleration command validation allows, `a_lim` (the velocity
+    /// step limit per period), for as long as the held setpoint was extrapolated, `g`: the two
+    /// extrapolations then differ by at most `2 a_lim g` in velocity and `a_lim g²` in
+    /// position (or by the in-position band and 5 % of vmax, whichever is larger). The blend
+    /// lasts two trajgen periods, or longer where that would make the command accelerate by
+    /// more than [`REJOIN_SHARE`] of `a_lim` beside the new setpoint's own acceleration
+    /// ([`rejoin_time`]): the command then never steps by more than validation allows.
     fn rejoin_to(&mut self, sp: &SetpointV2, now_ns: u64) {
         let Some(prev) = self.setpoint else {
             self.rejoin = Rejoin::default();
@@ -635,26 +663,40 @@ impl Controller {
         let (off_p, off_v) = self.rejoin.offset(now_ns);
         let age =
             |s: &SetpointV2| self.bounded_age((now_ns as i128 - s.stamp_ns as i128) as f64 * 1e-9);
+        let g = age(&prev).max(0.0);
         let mut d_p = [0.0; MAX_AXES];
         let mut d_v = [0.0; MAX_AXES];
         let mut small = true;
+        let mut budget = [0.0; MAX_AXES];
         for i in 0..self.p.axes {
             let a = &self.p.axis[i];
             let (po, vo, _) = extrapolate(&prev, i, age(&prev), a.vmax);
-            let (pn, vn, _) = extrapolate(sp, i, age(sp), a.vmax);
-            d_p[i] = po + off_p[i] - pn;
-            d_v[i] = vo + off_v[i] - vn;
-            small &= d_p[i].abs() <= a.in_position && d_v[i].abs() <= 0.05 * a.vmax;
+            let (pn, vn, an) = extrapolate(sp, i, age(sp), a.vmax);
+            // The new difference is judged; the offset still being blended was judged before.
+            d_p[i] = po - pn;
+            d_v[i] = vo - vn;
+            let a_lim = a.velocity_step_limit / self.p.period_s;
+            small &= d_p[i].abs() <= a.in_position.max(a_lim * g * g)
+                && d_v[i].abs() <= (0.05 * a.vmax).max(2.0 * a_lim * g);
+            budget[i] = (REJOIN_SHARE * a_lim - an.abs()).max(0.1 * a_lim);
         }
-        self.rejoin = if small {
-            Rejoin {
-                start_ns: now_ns,
-                duration_s: self.p.rejoin_s,
-                p0: d_p,
-                v0: d_v,
+        // A step (not small) is left in the command; the offset in progress goes on.
+        let mut duration = self.p.rejoin_s;
+        for i in 0..self.p.axes {
+            if small {
+                d_p[i] += off_p[i];
+                d_v[i] += off_v[i];
+            } else {
+                d_p[i] = off_p[i];
+                d_v[i] = off_v[i];
             }
-        } else {
-            Rejoin::default()
+            duration = duration.max(rejoin_time(d_p[i], d_v[i], budget[i]));
+        }
+        self.rejoin = Rejoin {
+            start_ns: now_ns,
+            duration_s: duration,
+            p0: d_p,
+            v0: d_v,
         };
     }
 

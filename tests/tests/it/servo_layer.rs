@@ -791,3 +791,165 @@ fn a_refused_first_setpoint_names_the_test_that_refused_it() {
         assert!(e.text().contains("position"), "{}", e.text());
     });
 }
+
+/// A foreign trajectory generator's plain trapezoid, rest to rest from `from` to `to`, all
+/// axes together: each accelerates for `t_acc` at a constant rate, cruises, and decelerates
+/// for `t_acc`, its speed within its `vmax` (no blend: the acceleration jumps between 0 and
+/// ± its value at four instants).
+struct Trapezoid {
+    start_ns: u64,
+    from: [f64; 3],
+    to: [f64; 3],
+    /// Its duration (s): the slowest axis' distance over its vmax, plus `t_acc`.
+    t: f64,
+    t_acc: f64,
+}
+
+impl Trapezoid {
+    fn new(cell: &shm_schema::CellConfigV6, start_ns: u64, from: [f64; 3], to: [f64; 3]) -> Self {
+        let t_acc = cell.t_acc_s;
+        let cruise = (0..3)
+            .map(|i| (to[i] - from[i]).abs() / cell.axis[i].vmax)
+            .fold(t_acc, f64::max);
+        Self {
+            start_ns,
+            from,
+            to,
+            t: cruise + t_acc,
+            t_acc,
+        }
+    }
+
+    fn end_ns(&self) -> u64 {
+        self.start_ns + (self.t * 1e9) as u64
+    }
+
+    /// Its setpoint at `now_ns`.
+    fn at(&self, seq: u64, now_ns: u64) -> SetpointV2 {
+        let t = (now_ns.saturating_sub(self.start_ns) as f64 * 1e-9).min(self.t);
+        let (ta, tt) = (self.t_acc, self.t);
+        let mut sp = SetpointV2 {
+            seq,
+            stamp_ns: now_ns,
+            axes: 3,
+            state: MotionState::Moving as u32,
+            ..SetpointV2::default()
+        };
+        for i in 0..3 {
+            let v = (self.to[i] - self.from[i]) / (tt - ta);
+            let a = v / ta;
+            let (p, vel, acc) = if t < ta {
+                (0.5 * a * t * t, a * t, a)
+            } else if t < tt - ta {
+                (0.5 * a * ta * ta + v * (t - ta), v, 0.0)
+            } else if t < tt {
+                let r = tt - t;
+                (self.to[i] - self.from[i] - 0.5 * a * r * r, a * r, -a)
+            } else {
+                (self.to[i] - self.from[i], 0.0, 0.0)
+            };
+            sp.position[i] = self.from[i] + p;
+            sp.velocity[i] = vel;
+            sp.acceleration[i] = acc;
+        }
+        sp
+    }
+}
+
+/// Runs trapezoids through `targets` from the default start, a setpoint each trajgen period
+/// except while `silent(k)` (servo cycle k); fails on a latched fault. The largest change of
+/// the commanded velocity per servo period over the run, per axis.
+fn trapezoids(targets: &[[f64; 3]], silent: impl Fn(u64) -> bool) -> [f64; 3] {
+    let cell = Config::default_cell().to_shm();
+    let mut lp = Loop::new(&cell);
+    lp.enable();
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+    let mut from = [40.0, 40.0, 0.0];
+    let mut max_dv = [0.0f64; 3];
+    let mut prev = lp.state;
+    let mut seq = 0;
+    let mut k = 0u64;
+    for &to in targets {
+        let move_ = Trapezoid::new(&cell, lp.now + 100_000 + tg * lp.period, from, to);
+        // The move, then 100 ms at rest on its target.
+        while lp.now < move_.end_ns() + 100 * MS {
+            let sp = (k.is_multiple_of(tg) && !silent(k)).then(|| {
+                seq += 1;
+                move_.at(seq, lp.now + 100_000)
+            });
+            let s = lp.step_with(None, sp.as_ref(), None);
+            assert_eq!(
+                s.status & st::FAULT_LATCHED,
+                0,
+                "towards {to:?}, at {k}: {:?}",
+                lp.events
+                    .iter()
+                    .rev()
+                    .take(3)
+                    .map(|e| (e.code, e.axis, e.value, e.limit, e.text()))
+                    .collect::<Vec<_>>()
+            );
+            for (i, m) in max_dv.iter_mut().enumerate() {
+                *m = m.max((s.cmd_velocity[i] - prev.cmd_velocity[i]).abs());
+            }
+            prev = s;
+            k += 1;
+        }
+        // Followed to the end: every setpoint taken, the axes on the target.
+        for (i, a) in lp.machine.axes().iter().enumerate().take(3) {
+            assert!(
+                (a.position - to[i]).abs() < 0.05,
+                "axis {i} at {} towards {to:?}: {:?}",
+                a.position,
+                lp.codes()
+            );
+        }
+        from = to;
+    }
+    for c in [
+        code::SETPOINT_JUMP,
+        code::SETPOINT_VELOCITY_JUMP,
+        code::SETPOINT_STALE,
+    ] {
+        assert!(!lp.codes().contains(&c), "{:?}", lp.codes());
+    }
+    eprintln!("{k} servo cycles, {seq} setpoints; largest velocity steps {max_dv:?}");
+    max_dv
+}
+
+#[test]
+fn a_foreign_generators_trapezoids_within_the_limits_are_never_refused() {
+    integration_tests::attributable(|| {
+        // Issue 21's moves, then distances whose acceleration changes fall at every phase of
+        // the 4-ms setpoints (0.1 ms apart), and a move of theta alone.
+        let mut targets = vec![[140.0, 40.0, 0.0], [90.0, 126.0, 0.0], [40.0, 40.0, 0.0]];
+        for j in 0..40 {
+            let d = 8.0 + 0.0016 * f64::from(j) * 16.0;
+            let last = *targets.last().expect("one");
+            let x = if last[0] < 100.0 {
+                last[0] + d
+            } else {
+                last[0] - d
+            };
+            targets.push([x, last[1] + if j % 2 == 0 { 1.0 } else { -1.0 }, 0.0]);
+        }
+        targets.push([40.0, 40.0, 90.0]);
+        let cell = Config::default_cell().to_shm();
+        // On time, and with the generator stalled 30 and 40 ms now and then (with the setpoint
+        // before, below the 50 ms setpoint timeout), in its accelerations and its cruises.
+        let stalled = |k: u64| matches!(k % 1700, 300..330 | 1000..1040);
+        for (run, max_dv) in [
+            ("on time", trapezoids(&targets, |_| false)),
+            ("stalled", trapezoids(&targets, stalled)),
+        ] {
+            for (i, a) in cell.axes().iter().enumerate() {
+                assert!(
+                    max_dv[i] <= a.velocity_step_limit,
+                    "{run}: axis {i}: velocity step {} over {}",
+                    max_dv[i],
+                    a.velocity_step_limit
+                );
+            }
+        }
+    });
+}
