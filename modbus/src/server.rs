@@ -4,8 +4,10 @@
 //! address taken again every second while it is in use elsewhere.
 //!
 //! It answers from the newest [`Registers`] the cycle published and hands writes to the cycle
-//! as [`Msg::Act`]; it never touches shared memory itself. A malformed frame ends its
-//! connection (tokio-modbus' codec refuses it), nothing else.
+//! as [`Msg::Act`]; it never touches shared memory itself. Each request frame is held back
+//! until it is whole and judged ([`judge`]): a malformed one ends its connection, a function
+//! tokio-modbus' codec must not see (128 and above, 23, 43) is answered here with exception 1,
+//! and the rest goes on to tokio-modbus.
 
 use crate::map::Registers;
 use crate::{Action, answer};
@@ -158,106 +160,137 @@ impl tokio_modbus::server::Service for Connection {
     }
 }
 
-/// Checks the request frames as their bytes arrive, before tokio-modbus decodes them: its
-/// decoder trusts a frame's byte count (a write of 16 coils with one data byte panics it, and
-/// a panic aborts the process; slowtec/tokio-modbus#298). A frame that is not a well-formed
-/// Modbus TCP request ends the connection. It also tells where each frame ends, for the idle
-/// timeout.
-#[derive(Debug, Default)]
-struct Inspector {
-    /// The start of the current frame: the MBAP header and the PDU's first 6 bytes.
-    head: [u8; 13],
-    have: usize,
-    /// Bytes of the current frame still to come after `head` (once its length is known).
-    rest: usize,
-}
-
 /// Bytes of the MBAP header (transaction, protocol, length, unit).
 const MBAP: usize = 7;
 /// Largest PDU of a request (Modbus application protocol §4.1).
 const MAX_PDU: usize = 253;
+/// The exception code of a function this server does not serve.
+const ILLEGAL_FUNCTION: u8 = 0x01;
+/// Bytes of this server's own answers a client may leave unread before its connection ends.
+const MAX_UNWRITTEN: usize = 4096;
 
-impl Inspector {
-    /// Takes `bytes`; the number of frames they complete, or why they are not Modbus.
-    fn feed(&mut self, mut bytes: &[u8]) -> Result<usize, &'static str> {
+/// What becomes of a whole request frame ([`judge`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Verdict {
+    /// tokio-modbus decodes it and [`answer`] answers it.
+    Serve,
+    /// A function tokio-modbus' decoder must not see, and this server does not serve: answered
+    /// here with exception 1 (Illegal function), the connection kept.
+    Unserved,
+}
+
+/// The length of the frame at the start of `bytes` once its MBAP header is there (checked), or
+/// `None` before.
+fn frame_len(bytes: &[u8]) -> Result<Option<usize>, &'static str> {
+    if bytes.len() < MBAP {
+        return Ok(None);
+    }
+    if bytes[2] != 0 || bytes[3] != 0 {
+        return Err("protocol id is not 0");
+    }
+    let len = usize::from(u16::from_be_bytes([bytes[4], bytes[5]]));
+    if len < 2 || len - 1 > MAX_PDU {
+        return Err("length beyond a Modbus frame");
+    }
+    Ok(Some(MBAP - 1 + len))
+}
+
+/// Judges a whole request frame before tokio-modbus decodes it: its decoder trusts a frame's
+/// byte count (a write of 16 coils with one data byte panics it, and a panic aborts the
+/// process; slowtec/tokio-modbus#298), and it fails the connection on a function code of 128
+/// or more, on function 23 (whose counts it trusts as well) and on function 43 with a MEI type
+/// other than 14. Those functions this server does not serve: they are answered with
+/// exception 1, as the Modbus application protocol asks (§7), and the connection goes on. A
+/// frame that is not a well-formed Modbus TCP request ends the connection.
+fn judge(frame: &[u8]) -> Result<Verdict, &'static str> {
+    let p = &frame[MBAP..];
+    let word = |i: usize| usize::from(u16::from_be_bytes([p[i], p[i + 1]]));
+    match p[0] {
+        // Write multiple coils / registers: a quantity, a byte count, the data.
+        0x0F | 0x10 if p.len() >= 6 => {
+            let q = word(3);
+            let count = usize::from(p[5]);
+            let want = if p[0] == 0x0F { q.div_ceil(8) } else { 2 * q };
+            if q == 0 || count != want || p.len() != 6 + count {
+                return Err("byte count does not match the quantity");
+            }
+            Ok(Verdict::Serve)
+        }
+        0x0F | 0x10 => Err("write request too short"),
+        0x17 | 0x2B | 0x80.. => Ok(Verdict::Unserved),
+        _ => Ok(Verdict::Serve),
+    }
+}
+
+/// The exception-1 answer to `frame`: its transaction and unit, its function code with the
+/// exception bit.
+fn illegal_function(frame: &[u8]) -> [u8; MBAP + 2] {
+    let mut a = [0u8; MBAP + 2];
+    a[..2].copy_from_slice(&frame[..2]);
+    a[4..6].copy_from_slice(&3u16.to_be_bytes());
+    a[6] = frame[6];
+    a[7] = frame[MBAP] | 0x80;
+    a[8] = ILLEGAL_FUNCTION;
+    a
+}
+
+/// Request bytes held back until their frame is whole and judged ([`judge`]): the served
+/// frames go on to tokio-modbus, the unserved ones are answered here.
+#[derive(Debug, Default)]
+struct Frames {
+    /// Bytes read from the client and not yet handed on.
+    held: Vec<u8>,
+    /// The first bytes of `held` that belong to frames judged `Serve`.
+    ready: usize,
+    /// Answers of this server's own (exceptions) not yet written.
+    answers: Vec<u8>,
+}
+
+impl Frames {
+    /// Takes `bytes` from the client; how many frames they completed, or why they are not
+    /// Modbus.
+    fn feed(&mut self, bytes: &[u8]) -> Result<usize, &'static str> {
+        self.held.extend_from_slice(bytes);
         let mut frames = 0;
-        while !bytes.is_empty() {
-            if self.rest > 0 {
-                let n = self.rest.min(bytes.len());
-                self.rest -= n;
-                bytes = &bytes[n..];
-                if self.rest == 0 {
-                    self.have = 0;
-                    frames += 1;
-                }
-                continue;
+        while let Some(len) = frame_len(&self.held[self.ready..])? {
+            let at = self.ready;
+            if self.held.len() < at + len {
+                break;
             }
-            // Never more than this frame's head: the next frame's bytes are the next's.
-            let need = if self.have < MBAP {
-                MBAP
-            } else {
-                MBAP + self.pdu()?.min(6)
-            };
-            let n = (need - self.have).min(bytes.len());
-            self.head[self.have..self.have + n].copy_from_slice(&bytes[..n]);
-            self.have += n;
-            bytes = &bytes[n..];
-            if self.have < MBAP {
-                continue;
-            }
-            let pdu = self.pdu()?;
-            if self.have < MBAP + pdu.min(6) {
-                continue;
-            }
-            let p = &self.head[MBAP..self.have];
-            let word = |i: usize| usize::from(u16::from_be_bytes([p[i], p[i + 1]]));
-            match p[0] {
-                // Write multiple coils / registers: a quantity, a byte count, the data.
-                0x0F | 0x10 if pdu >= 6 => {
-                    let q = word(3);
-                    let count = usize::from(p[5]);
-                    let want = if p[0] == 0x0F { q.div_ceil(8) } else { 2 * q };
-                    if q == 0 || count != want || pdu != 6 + count {
-                        return Err("byte count does not match the quantity");
+            frames += 1;
+            match judge(&self.held[at..at + len])? {
+                Verdict::Serve => self.ready += len,
+                Verdict::Unserved => {
+                    let answer = illegal_function(&self.held[at..at + len]);
+                    self.answers.extend_from_slice(&answer);
+                    self.held.drain(at..at + len);
+                    if self.answers.len() > MAX_UNWRITTEN {
+                        return Err("the client does not read its answers");
                     }
                 }
-                0x0F | 0x10 => return Err("write request too short"),
-                // Read/write multiple registers: not served, and its decoder trusts counts too.
-                0x17 => return Err("function 23 is not served"),
-                _ => {}
-            }
-            // The frame is sound; the rest of it passes.
-            self.rest = pdu - (self.have - MBAP);
-            if self.rest == 0 {
-                self.have = 0;
-                frames += 1;
             }
         }
         Ok(frames)
     }
 
-    /// The PDU's length from the header in view (checked).
-    fn pdu(&self) -> Result<usize, &'static str> {
-        let h = &self.head;
-        if h[2] != 0 || h[3] != 0 {
-            return Err("protocol id is not 0");
-        }
-        let len = usize::from(u16::from_be_bytes([h[4], h[5]]));
-        if len < 2 || len - 1 > MAX_PDU {
-            return Err("length beyond a Modbus frame");
-        }
-        Ok(len - 1)
+    /// Hands the served bytes on into `buf`, as many as fit; how many.
+    fn take(&mut self, buf: &mut ReadBuf<'_>) -> usize {
+        let n = self.ready.min(buf.remaining());
+        buf.put_slice(&self.held[..n]);
+        self.held.drain(..n);
+        self.ready -= n;
+        n
     }
 }
 
-/// A stream that checks the frames ([`Inspector`]) and fails with `TimedOut` once no whole
-/// request arrived (and nothing could be written) for its timeout: an idle, slow or stuck
-/// client gives its connection back.
+/// A stream that checks the frames ([`Frames`]), answers those tokio-modbus must not see, and
+/// fails with `TimedOut` once no whole request arrived (and nothing could be written) for its
+/// timeout: an idle, slow or stuck client gives its connection back.
 struct Idle {
     inner: TcpStream,
     timeout: Duration,
     deadline: Pin<Box<Sleep>>,
-    inspector: Inspector,
+    frames: Frames,
 }
 
 impl Idle {
@@ -267,7 +300,7 @@ impl Idle {
             inner,
             timeout,
             deadline: Box::pin(tokio::time::sleep(timeout)),
-            inspector: Inspector::default(),
+            frames: Frames::default(),
         }
     }
 
@@ -276,6 +309,21 @@ impl Idle {
             .as_mut()
             .poll(cx)
             .map(|()| io::Error::new(io::ErrorKind::TimedOut, "idle for too long"))
+    }
+
+    /// Writes this server's own answers as far as the socket takes them.
+    fn write_answers(&mut self, cx: &mut Context<'_>) -> io::Result<()> {
+        while !self.frames.answers.is_empty() {
+            match Pin::new(&mut self.inner).poll_write(cx, &self.frames.answers) {
+                Poll::Ready(Ok(0)) => return Err(io::ErrorKind::WriteZero.into()),
+                Poll::Ready(Ok(n)) => {
+                    self.frames.answers.drain(..n);
+                }
+                Poll::Ready(Err(e)) => return Err(e),
+                Poll::Pending => break,
+            }
+        }
+        Ok(())
     }
 }
 
@@ -286,24 +334,38 @@ impl AsyncRead for Idle {
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
         let this = &mut *self;
-        let before = buf.filled().len();
-        match Pin::new(&mut this.inner).poll_read(cx, buf) {
-            Poll::Ready(Ok(())) => match this.inspector.feed(&buf.filled()[before..]) {
-                // Bytes of a frame not yet whole: the deadline runs on (a client that
-                // dribbles a frame slower than the timeout is idle too).
-                Ok(0) if buf.filled().len() > before => match this.expired(cx) {
-                    Poll::Ready(e) => Poll::Ready(Err(e)),
-                    Poll::Pending => Poll::Ready(Ok(())),
+        if buf.remaining() == 0 {
+            return Poll::Ready(Ok(()));
+        }
+        loop {
+            this.write_answers(cx)?;
+            if this.frames.take(buf) > 0 {
+                return Poll::Ready(Ok(()));
+            }
+            let mut bytes = [0u8; 512];
+            let mut read = ReadBuf::new(&mut bytes);
+            match Pin::new(&mut this.inner).poll_read(cx, &mut read) {
+                // The end of the stream (with a frame not yet whole: it never will be).
+                Poll::Ready(Ok(())) if read.filled().is_empty() => return Poll::Ready(Ok(())),
+                Poll::Ready(Ok(())) => match this.frames.feed(read.filled()) {
+                    // Bytes of a frame not yet whole: the deadline runs on (a client that
+                    // dribbles a frame slower than the timeout is idle too).
+                    Ok(0) => {
+                        if let Poll::Ready(e) = this.expired(cx) {
+                            return Poll::Ready(Err(e));
+                        }
+                    }
+                    Ok(_) => {
+                        let next = Instant::now() + this.timeout;
+                        this.deadline.as_mut().reset(next);
+                    }
+                    Err(why) => {
+                        return Poll::Ready(Err(io::Error::new(io::ErrorKind::InvalidData, why)));
+                    }
                 },
-                Ok(_) => {
-                    let next = Instant::now() + this.timeout;
-                    this.deadline.as_mut().reset(next);
-                    Poll::Ready(Ok(()))
-                }
-                Err(why) => Poll::Ready(Err(io::Error::new(io::ErrorKind::InvalidData, why))),
-            },
-            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
-            Poll::Pending => this.expired(cx).map(Err),
+                Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
+                Poll::Pending => return this.expired(cx).map(Err),
+            }
         }
     }
 }
@@ -336,7 +398,7 @@ impl AsyncWrite for Idle {
 
 #[cfg(test)]
 mod tests {
-    use super::Inspector;
+    use super::{Frames, illegal_function};
 
     fn frame(pdu: &[u8]) -> Vec<u8> {
         let mut f = vec![0, 1, 0, 0];
@@ -351,23 +413,64 @@ mod tests {
         let mut two = frame(&[4, 0, 0, 0, 56]);
         two.extend(frame(&[0x0F, 0, 0, 0, 10, 2, 0xFF, 0x03]));
         two.extend(frame(&[0x10, 0, 0, 0, 2, 4, 0, 1, 0, 50]));
-        assert_eq!(Inspector::default().feed(&two), Ok(3));
-        let mut i = Inspector::default();
-        let total: usize = two.iter().map(|b| i.feed(&[*b]).expect("sound")).sum();
+        let mut f = Frames::default();
+        assert_eq!(f.feed(&two), Ok(3));
+        assert_eq!(
+            (f.ready, f.held.len()),
+            (two.len(), two.len()),
+            "all served"
+        );
+        let mut f = Frames::default();
+        let total: usize = two.iter().map(|b| f.feed(&[*b]).expect("sound")).sum();
         assert_eq!(total, 3, "byte by byte");
+        assert_eq!(f.held, two, "held back and handed on in order");
     }
 
     #[test]
     fn frames_the_decoder_would_trust_wrongly_are_refused() {
-        let bad = |pdu: &[u8]| Inspector::default().feed(&frame(pdu)).is_err();
+        let bad = |pdu: &[u8]| Frames::default().feed(&frame(pdu)).is_err();
         assert!(bad(&[0x0F, 0, 0, 0, 16, 1, 0xFF]), "16 coils, 1 byte");
         assert!(bad(&[0x10, 0, 0, 0, 2, 2, 0, 1]), "2 registers, 2 bytes");
         assert!(bad(&[0x10, 0, 0, 0, 0, 0]), "no register");
-        assert!(bad(&[0x17, 0, 0, 0, 1, 0, 0, 0, 1, 2, 0, 0]), "function 23");
         assert!(bad(&[0x0F, 0, 0]), "short");
         let mut long = vec![0, 1, 0, 0, 0xFF, 0xFF, 1, 4];
-        assert!(Inspector::default().feed(&long).is_err(), "65535 bytes");
+        assert!(Frames::default().feed(&long).is_err(), "65535 bytes");
         long[2] = 7;
-        assert!(Inspector::default().feed(&long).is_err(), "protocol 7");
+        assert!(Frames::default().feed(&long).is_err(), "protocol 7");
+    }
+
+    #[test]
+    fn functions_the_decoder_must_not_see_are_answered_illegal_function_here() {
+        // Function 23 (well formed), 43 with MEI 13 and 14, 0x85 and 0xFF: each answered with
+        // its own transaction, unit and function code with the exception bit, exception 1;
+        // the read between them is served, in its place.
+        let mut bytes = Vec::new();
+        let unserved: [&[u8]; 5] = [
+            &[0x17, 0, 0, 0, 1, 0, 0, 0, 1, 2, 0, 0],
+            &[0x2B, 0x0D, 0],
+            &[0x2B, 0x0E, 9, 0],
+            &[0x85, 0],
+            &[0xFF],
+        ];
+        for (k, pdu) in unserved.iter().enumerate() {
+            let mut f = frame(pdu);
+            f[1] = k as u8;
+            bytes.extend(f);
+        }
+        let read = frame(&[4, 0, 0, 0, 56]);
+        bytes.extend(&read);
+        let mut f = Frames::default();
+        assert_eq!(f.feed(&bytes), Ok(6));
+        assert_eq!(f.held, read, "only the read goes on");
+        let mut want = Vec::new();
+        for (k, pdu) in unserved.iter().enumerate() {
+            want.extend([0, k as u8, 0, 0, 0, 3, 1, pdu[0] | 0x80, 1]);
+        }
+        assert_eq!(f.answers, want);
+        assert_eq!(
+            illegal_function(&frame(&[0x41, 1]))[7..],
+            [0xC1, 1],
+            "function 65"
+        );
     }
 }
