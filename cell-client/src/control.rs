@@ -26,6 +26,8 @@ pub enum ControlError {
     Input(String),
     /// Sent, but the drives did not take it. Exit 1.
     Failed(String),
+    /// The supervisor took it and it failed (why, as the supervisor says). Exit 1.
+    Cell(control_plane::Failure),
 }
 
 impl std::error::Error for ControlError {}
@@ -34,6 +36,7 @@ impl std::fmt::Display for ControlError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Input(m) | Self::Failed(m) => f.write_str(m),
+            Self::Cell(failure) => write!(f, "{failure}"),
         }
     }
 }
@@ -206,7 +209,7 @@ pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
     match channel::call_within(&name, &req, Some(SUPERVISOR_PATIENCE)) {
         Ok(Reply::Done(m)) => return Ok(m),
         Ok(Reply::Refused(r)) => return Err(ControlError::Input(r.to_string())),
-        Ok(Reply::Failed(m)) => return Err(ControlError::Failed(m)),
+        Ok(Reply::Failed(failure)) => return Err(ControlError::Cell(failure)),
         Ok(other) => tracing::warn!("the supervisor answered the e-stop with {other:?}"),
         Err(CallError::NotUp(_)) => {}
         Err(e) => tracing::warn!("{e}: raising the e-stop on shared memory"),

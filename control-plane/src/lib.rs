@@ -10,12 +10,15 @@
 //! - [`report::RunReport`] and [`report::RunFailure`]: a program's end (`run --json`), with its
 //!   [`event::Event`]s.
 //! - [`figures::Figures`]: what `--plot` draws, gathered by the supervisor, drawn by the client.
+//! - [`Failure`]: why a started job failed, as data (a variant per cause), its words for the
+//!   user from `Display`.
 //!
 //! The JSON documents (`status --json`, `run --json`) are these types serialized; their JSON Schemas are
 //! generated from them ([`schema`]) and checked in under `docs/schema/`.
 
 pub mod channel;
 pub mod event;
+pub mod failure;
 pub mod figures;
 pub mod info;
 pub mod report;
@@ -23,6 +26,7 @@ mod request;
 pub mod schema;
 pub mod status;
 
+pub use failure::Failure;
 pub use info::Info;
 pub use request::{Refusal, Replaced, Reply, Request};
 

@@ -2,6 +2,7 @@
 //! [`RunReport`] when it completed and settled, a [`RunFailure`] when it did not. Their JSON
 //! Schema, generated from [`RunDocument`], is `docs/schema/report.schema.json`.
 
+use crate::Failure;
 use crate::event::Event;
 use crate::status::Percentiles;
 use indexmap::IndexMap;
@@ -122,8 +123,10 @@ pub struct ProcessReport {
 pub struct RunFailure {
     /// Always false.
     pub ok: bool,
-    /// Why, in words.
+    /// Why, in words (`cause`'s).
     pub error: String,
+    /// Why, as data: a caller decides on this, never on `error`'s words.
+    pub cause: Failure,
     /// The events up to the failure.
     pub events: Vec<Event>,
 }

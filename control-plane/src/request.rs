@@ -1,6 +1,7 @@
 //! What a client asks a running cell ([`Request`]) and what the cell answers ([`Reply`]), as
 //! they travel on the control channel ([`crate::channel`], postcard-encoded).
 
+use crate::Failure;
 use crate::figures::Figures;
 use crate::info::Info;
 use crate::report::Outcome;
@@ -74,8 +75,8 @@ pub enum Reply {
     Replaced(Box<Replaced>),
     /// Not done, nothing changed: bad input or a state that does not allow it (exit 2).
     Refused(Refusal),
-    /// Tried and failed (exit 1).
-    Failed(String),
+    /// Tried and failed (exit 1): why.
+    Failed(Failure),
     /// The supervisor's view of the cell (`Info`).
     Info(Box<Info>),
     /// A program's end: its report (or why it failed), as text, and its trace.

@@ -10,6 +10,7 @@ use crate::error::RunError;
 use crate::launch::Children;
 use crate::stall::StallWatch;
 use cell_config::{Config, RestartPolicy};
+use control_plane::Failure;
 use control_plane::channel as ctl;
 use control_plane::event::{self as events, Axes};
 use control_plane::info::{self, Info};
@@ -76,7 +77,21 @@ impl Incident {
     pub(crate) fn error(&self) -> RunError {
         match self {
             Incident::Exited { refused: true, .. } => RunError::Input(self.to_string()),
-            _ => RunError::failed(self.to_string()),
+            Incident::Exited {
+                name, pid, status, ..
+            } => RunError::failed(Failure::Exited {
+                process: name.clone(),
+                pid: *pid,
+                status: status.clone(),
+            }),
+            Incident::Stalled { name, for_s } => RunError::failed(Failure::Stalled {
+                process: name.clone(),
+                for_s: *for_s,
+            }),
+            Incident::Fault { name, fault } => RunError::failed(Failure::ProcessFault {
+                process: name.clone(),
+                fault: *fault,
+            }),
         }
     }
 }
@@ -140,7 +155,7 @@ pub(crate) fn open_cell(
     mode: Mode,
 ) -> Result<(Cell, ctl::Server), RunError> {
     signals::install()
-        .map_err(|e| RunError::failed(format!("cannot install signal handlers: {e}")))?;
+        .map_err(|e| RunError::system(format!("cannot install signal handlers: {e}")))?;
     ipc::quiet_iceoryx2_log();
     let server = ctl::Server::bind(&instance).map_err(|e| {
         if e.kind() == std::io::ErrorKind::AddrInUse {
@@ -149,7 +164,7 @@ pub(crate) fn open_cell(
                  (`supervisor status --instance {instance}`; `supervisor down --instance {instance}` stops it)"
             ))
         } else {
-            RunError::failed(format!("instance {instance}: control channel: {e}"))
+            RunError::system(format!("instance {instance}: control channel: {e}"))
         }
     })?;
     // We hold the instance now: no other supervisor creates or removes anything of it.
@@ -190,7 +205,7 @@ fn leftover_error(instance: &InstanceName, leftovers: &[String]) -> Option<RunEr
     }
     let clients = ipc::live_node_pids(instance).unwrap_or_default();
     if clients.is_empty() {
-        return Some(RunError::failed(format!(
+        return Some(RunError::system(format!(
             "iceoryx2 resources left behind: {}",
             leftovers.join(", ")
         )));
@@ -319,7 +334,7 @@ pub(crate) struct Cell {
 impl Cell {
     /// Creates every service, publishes the configuration and starts the processes.
     fn open(cfg: &Config, instance: InstanceName, mode: Mode) -> Result<Self, RunError> {
-        let f = |e: ipc::IpcError| RunError::failed(e.to_string());
+        let f = |e: ipc::IpcError| RunError::system(e.to_string());
         let node = ipc::node(&instance, "supervisor").map_err(f)?;
         let i = &instance;
         let config_pub = Pub::new(&node, i, ServiceId::CellConfig).map_err(f)?;
@@ -366,7 +381,7 @@ impl Cell {
         for (index, p) in cfg.process.iter().enumerate() {
             children
                 .spawn(p, index, None, &instance)
-                .map_err(RunError::failed)?;
+                .map_err(RunError::system)?;
         }
         let n = cfg.process.len();
         Ok(Self {
@@ -445,7 +460,10 @@ impl Cell {
         let leftovers = ipc::remove_instance_waiting(&instance, Duration::from_secs(1));
         drop(server);
         let problem = match stopped.first() {
-            Some((name, why)) => Some(RunError::failed(format!("{name} {why}"))),
+            Some((name, why)) => Some(RunError::failed(Failure::NotStopped {
+                process: name.clone(),
+                what: why.clone(),
+            })),
             None => leftover_error(&instance, &leftovers),
         };
         Closed { events, problem }
@@ -535,9 +553,10 @@ impl Cell {
         if self.request_pub.send(&r) {
             Ok(())
         } else {
-            Err(RunError::failed(
-                "servo's request service refused a request",
-            ))
+            Err(RunError::failed(Failure::ServiceRefused {
+                service: "servo's request service".into(),
+                sample: "a request".into(),
+            }))
         }
     }
 
@@ -980,27 +999,34 @@ impl Cell {
                 .is_some_and(|n| n == "servo")
     }
 
-    /// The latched fault servo reports, in words, with the event that explains it.
-    pub(crate) fn fault_text(&self, s: &ServoStateV3) -> String {
+    /// The latched fault servo reports, with the event that explains it.
+    pub(crate) fn fault(&self, s: &ServoStateV3) -> Failure {
         let cause = self.events.iter().rev().find(|e| e.code == s.fault_code);
-        self.servo_cut_text(s.fault_code, s.fault_axis, cause)
+        self.servo_cut(s.fault_code, s.fault_axis, cause)
     }
 
-    /// "servo cut power: <cause> on axis <a>", and the event that explains it.
-    fn servo_cut_text(&self, code: u32, axis: i32, cause: Option<&EventV1>) -> String {
-        let name = shm_schema::event::info(code).map_or("unknown fault", |i| i.name);
-        let axis = usize::try_from(axis)
-            .ok()
-            .and_then(|i| self.axes.axes.get(i))
-            .map_or(String::new(), |(a, _)| format!(" on axis {a}"));
-        let line = cause.map_or(String::new(), |ev| {
-            format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
-        });
-        format!("servo cut power: {name}{axis}{line}")
+    /// The latched fault servo reports, in words.
+    pub(crate) fn fault_text(&self, s: &ServoStateV3) -> String {
+        self.fault(s).to_string()
     }
 
-    /// The latched e-stop, in words (servo's own fault as "servo cut power").
-    pub(crate) fn estop_text(&self) -> Option<String> {
+    /// Servo cut power by fault `code` on `axis`, explained by event `cause`.
+    fn servo_cut(&self, code: u32, axis: i32, cause: Option<&EventV1>) -> Failure {
+        Failure::ServoFault {
+            fault: shm_schema::event::info(code)
+                .map_or("unknown fault", |i| i.name)
+                .to_string(),
+            code,
+            axis: usize::try_from(axis)
+                .ok()
+                .and_then(|i| self.axes.axes.get(i))
+                .map(|(a, _)| a.to_string()),
+            event: cause.map(|ev| events::line(ev, &self.axes, self.t0_ns)),
+        }
+    }
+
+    /// The latched e-stop (servo's own fault as [`Failure::ServoFault`]).
+    pub(crate) fn estop_failure(&self) -> Option<Failure> {
         let (e, _) = self.estop?;
         let cause = self
             .events
@@ -1009,17 +1035,21 @@ impl Cell {
             .find(|ev| ev.code == e.code && ev.source == e.source);
         if self.is_servo_fault(&e) {
             let axis = cause.map_or(-1, |ev| ev.axis);
-            return Some(self.servo_cut_text(e.code, axis, cause));
+            return Some(self.servo_cut(e.code, axis, cause));
         }
-        let line = cause.map_or(String::new(), |ev| {
-            format!("\n  {}", events::line(ev, &self.axes, self.t0_ns))
-        });
-        let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
-        Some(format!(
-            "e-stop ({origin}) raised by {}: {}{line}",
-            self.axes.source_name(e.source),
-            str_of(&e.reason),
-        ))
+        Some(Failure::Estop {
+            origin: EstopOrigin::from_u32(e.origin)
+                .map_or("?", EstopOrigin::name)
+                .to_string(),
+            by: self.axes.source_name(e.source).to_string(),
+            reason: str_of(&e.reason).to_string(),
+            event: cause.map(|ev| events::line(ev, &self.axes, self.t0_ns)),
+        })
+    }
+
+    /// The latched e-stop, in words.
+    pub(crate) fn estop_text(&self) -> Option<String> {
+        self.estop_failure().map(|f| f.to_string())
     }
 
     /// The supervisor's view for `status --json`: per process its pid, life and restarts;

@@ -1,5 +1,6 @@
 //! Why a run, a start or a tuning session failed, as the CLI reports it (exit 2, 1 or 130).
 
+use control_plane::Failure;
 use control_plane::event::Event;
 
 /// Why a run failed.
@@ -10,7 +11,7 @@ pub enum RunError {
     /// The run started and failed. Exit code 1.
     Failed {
         /// What went wrong.
-        message: String,
+        failure: Box<Failure>,
         /// The events of the run up to the failure (`docs/events.md`).
         events: Vec<Event>,
         /// A program's figures up to the failure (`--plot`), when it had started.
@@ -22,11 +23,25 @@ pub enum RunError {
 
 impl RunError {
     /// A started run failed (its events are attached when the run ends).
-    pub fn failed(message: impl Into<String>) -> Self {
+    pub fn failed(failure: Failure) -> Self {
         Self::Failed {
-            message: message.into(),
+            failure: Box::new(failure),
             events: Vec::new(),
             figures: None,
+        }
+    }
+
+    /// The supervisor's own means failed (shared memory, a file, a signal handler): `what`,
+    /// with the system's words.
+    pub fn system(what: impl Into<String>) -> Self {
+        Self::failed(Failure::System { what: what.into() })
+    }
+
+    /// Why a started run failed; `None` for bad input or an interruption.
+    pub fn failure(&self) -> Option<&Failure> {
+        match self {
+            Self::Failed { failure, .. } => Some(failure),
+            _ => None,
         }
     }
 
@@ -45,6 +60,13 @@ impl RunError {
         control_plane::report::RunFailure {
             ok: false,
             error: self.to_string(),
+            cause: match self {
+                Self::Failed { failure, .. } => (**failure).clone(),
+                // Not a started run's failure: its words are the system's.
+                _ => Failure::System {
+                    what: self.to_string(),
+                },
+            },
             events: self.events().to_vec(),
         }
     }
@@ -53,7 +75,8 @@ impl RunError {
 impl std::fmt::Display for RunError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            RunError::Input(m) | RunError::Failed { message: m, .. } => f.write_str(m),
+            RunError::Input(m) => f.write_str(m),
+            RunError::Failed { failure, .. } => write!(f, "{failure}"),
             RunError::Interrupted => f.write_str("interrupted; every process was stopped"),
         }
     }
@@ -66,7 +89,7 @@ impl From<recorder::RecordError> for RunError {
         if e.is_input() {
             Self::Input(e.to_string())
         } else {
-            Self::failed(e.to_string())
+            Self::system(e.to_string())
         }
     }
 }

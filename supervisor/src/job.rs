@@ -9,6 +9,8 @@ use crate::program::{Checked, Predicted};
 use crate::report::{Report, TraceRow};
 use cell_client::figures::Envelope;
 use cell_config::Config;
+use control_plane::Failure;
+use control_plane::failure::AxisValue;
 use control_plane::figures::{AxisEnvelope, Figures};
 use motion_program::Commands;
 use shm_schema::drive::servo_status as st;
@@ -59,7 +61,7 @@ impl Enabling {
         if let Some(s) = cell.last_servo
             && s.status & st::FAULT_LATCHED != 0
         {
-            return Some(Err(RunError::failed(cell.fault_text(&s))));
+            return Some(Err(RunError::failed(cell.fault(&s))));
         }
         if let Some(t) = self.sent_ns
             && let Some(e) = cell
@@ -105,11 +107,10 @@ impl Enabling {
             if self.enabled_at.is_none() {
                 missing.push("the arm is not enabled".into());
             }
-            return Some(Err(RunError::failed(format!(
-                "startup did not complete within {:.1} s: {}",
-                self.timeout.as_secs_f64(),
-                missing.join(", ")
-            ))));
+            return Some(Err(RunError::failed(Failure::Startup {
+                timeout_s: self.timeout.as_secs_f64(),
+                missing,
+            })));
         }
         None
     }
@@ -251,9 +252,10 @@ impl Job {
                 },
             };
             if !cell.command_pub.send(&c) {
-                return Err(RunError::failed(
-                    "trajgen's command service refused a command",
-                ));
+                return Err(RunError::failed(Failure::ServiceRefused {
+                    service: "trajgen's command service".into(),
+                    sample: "a command".into(),
+                }));
             }
             self.sent_seq = c.seq;
         }
@@ -323,9 +325,11 @@ impl Job {
             if cell.reactions_pending() && since.elapsed() < limit {
                 return Ok(None);
             }
-            return Err(RunError::failed(
-                cell.estop_text().unwrap_or_else(|| "e-stop".into()),
-            ));
+            return Err(RunError::failed(cell.estop_failure().unwrap_or_else(
+                || Failure::System {
+                    what: "e-stop".into(),
+                },
+            )));
         }
         if let Some(i) = incidents.first() {
             return Err(i.error());
@@ -357,19 +361,19 @@ impl Job {
                 continue;
             }
             if sp.fault == trajgen_fault::ABORTED {
-                return Err(RunError::failed(format!(
-                    "{}: aborted at line {} after {:.2} s of motion; the axes rest on the path",
-                    self.name, sp.fault_line, sp.motion_time_s
-                )));
+                return Err(RunError::failed(Failure::Aborted {
+                    program: self.name.clone(),
+                    line: sp.fault_line,
+                    motion_s: sp.motion_time_s,
+                }));
             }
             if sp.fault != trajgen_fault::NONE || sp.state == MotionState::Fault as u32 {
-                return Err(RunError::failed(format!(
-                    "trajgen refused {}:{}: {} (fault {}); the axes stopped",
-                    self.name,
-                    sp.fault_line,
-                    trajgen_fault::text(sp.fault),
-                    sp.fault
-                )));
+                return Err(RunError::failed(Failure::TrajgenRefused {
+                    program: self.name.clone(),
+                    line: sp.fault_line,
+                    fault: sp.fault,
+                    what: trajgen_fault::text(sp.fault).to_string(),
+                }));
             }
             match MotionState::from_u32(sp.state) {
                 Some(MotionState::Moving) => self.keep(sp),
@@ -407,7 +411,7 @@ impl Job {
             self.keep_servo(&s);
             if s.status & st::FAULT_LATCHED != 0 {
                 cell.take_events();
-                return Err(RunError::failed(cell.fault_text(&s)));
+                return Err(RunError::failed(cell.fault(&s)));
             }
             if s.power != Power::Enabled as u8 {
                 // The e-stop's reaction: servo's state can come before its status says it
@@ -419,17 +423,13 @@ impl Job {
                     return Ok(None);
                 }
                 cell.take_events();
-                return Err(RunError::failed(format!(
-                    "the arm is no longer enabled (servo power {}): a disable request from \
-                     another client stopped the run",
-                    Power::from_u8(s.power).map_or("?", Power::name)
-                )));
+                return Err(RunError::failed(Failure::Disabled {
+                    power: Power::from_u8(s.power).map_or("?", Power::name).to_string(),
+                }));
             }
             if s.status & st::SETPOINT_JUMP != 0 {
                 cell.take_events();
-                return Err(RunError::failed(
-                    "servo refused a setpoint as a jump (see the setpoint-jump or setpoint-velocity-jump event)",
-                ));
+                return Err(RunError::failed(Failure::SetpointJump));
             }
             if let Some(d) = &self.done {
                 let inside = (0..n).all(|i| {
@@ -458,33 +458,29 @@ impl Job {
             && self.settled_at.is_none()
             && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout
         {
-            let s = cell.last_servo;
-            let errs = s.map_or(String::new(), |s| {
+            let following_error = cell.last_servo.map_or(Vec::new(), |s| {
                 (0..n)
-                    .map(|i| {
-                        format!(
-                            "{} {:.4} {}",
-                            cfg.axis[i].name, s.following_error[i], cfg.axis[i].unit
-                        )
+                    .map(|i| AxisValue {
+                        axis: cfg.axis[i].name.clone(),
+                        value: s.following_error[i],
+                        unit: cfg.axis[i].unit.clone(),
                     })
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                    .collect()
             });
-            return Err(RunError::failed(format!(
-                "the axes did not settle within {} s of the end of the motion (following error {errs})",
-                cfg.motion.settle_timeout
-            )));
+            return Err(RunError::failed(Failure::NotSettled {
+                timeout_s: cfg.motion.settle_timeout,
+                following_error,
+            }));
         }
         let Some((settle_start, final_state)) = self.settled_at else {
             return Ok(None);
         };
         self.progress.finish();
-        if let Some(text) = cell.estop_text() {
+        if let Some(estop) = cell.estop_failure() {
             cell.take_events();
-            return Err(RunError::failed(format!(
-                "{text}\n  the motion completed: by this cell's propagation rules (`[behaviour]`) \
-                 neither servo nor trajgen reacts to it, but it stays latched"
-            )));
+            return Err(RunError::failed(Failure::LatchedAfterMotion {
+                estop: Box::new(estop),
+            }));
         }
         Ok(Some(self.report(cell, cfg, settle_start, &final_state)))
     }

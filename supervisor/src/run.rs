@@ -17,6 +17,7 @@ use crate::report::Report;
 use crate::report::trace_csv;
 use crate::serve::{self, End, ProgramJob};
 use cell_config::Config;
+use control_plane::Failure;
 use shm_schema::InstanceName;
 use std::path::PathBuf;
 
@@ -108,22 +109,18 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         End::Program(r) => match *r {
             Ok(r) => r,
             Err(RunError::Failed {
-                mut message,
-                figures,
-                ..
+                failure, figures, ..
             }) => {
                 // The figures up to the failure: what a user looks at to see why.
                 if let (Some(path), Some(mut f)) = (&opts.plot, figures) {
                     f.latency = latency_figures;
                     match cell_client::figures::write_png(&f, path) {
-                        Ok(()) => {
-                            message += &format!("\n  figures up to the failure: {}", path.display())
-                        }
-                        Err(e) => message += &format!("\n  {e}"),
+                        Ok(()) => eprintln!("figures up to the failure: {}", path.display()),
+                        Err(e) => eprintln!("{e}"),
                     }
                 }
                 return Err(RunError::Failed {
-                    message,
+                    failure,
                     events: closed.events,
                     figures: None,
                 });
@@ -132,9 +129,9 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
         },
         End::Interrupted => return Err(RunError::Interrupted),
         End::Down | End::Tuned(_) => {
-            return Err(RunError::failed(
-                "`supervisor down` stopped the cell before the program ended",
-            ));
+            return Err(RunError::failed(Failure::Down {
+                job: "the program".into(),
+            }));
         }
     };
     report.sense_to_command = sense_to_command
@@ -151,10 +148,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     }
     if let Some(path) = &opts.trace {
         std::fs::write(path, trace_csv(&report))
-            .map_err(|e| RunError::failed(format!("{}: {e}", path.display())))?;
+            .map_err(|e| RunError::system(format!("{}: {e}", path.display())))?;
     }
     if let (Some(path), Some(f)) = (&opts.plot, &report.figures) {
-        cell_client::figures::write_png(f, path).map_err(RunError::failed)?;
+        cell_client::figures::write_png(f, path).map_err(RunError::system)?;
     }
     Ok(report)
 }

@@ -29,7 +29,7 @@ use control_plane::event::Event;
 use control_plane::info::{Info, JobInfo, LastJob};
 use control_plane::report::Outcome;
 use control_plane::report::ProcessReport;
-use control_plane::{Refusal, Reply, Request};
+use control_plane::{Failure, Refusal, Reply, Request};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
@@ -183,7 +183,7 @@ pub(crate) fn serve(
         l.wait();
         // Going down waits for a swap in progress to end (its steps are bounded).
         if signals::stop_requested() && l.stopping.is_none() && l.swapping.is_none() {
-            l.go_down(End::Interrupted, "the supervisor was stopped by a signal");
+            l.go_down(End::Interrupted);
         }
         let cfg = l.cfg;
         let incidents = l.cell.tick(cfg);
@@ -202,7 +202,7 @@ pub(crate) fn serve(
         }
         l.pending_step();
         if l.down && l.stopping.is_none() && l.swapping.is_none() {
-            l.go_down(End::Down, "`supervisor down` stopped the cell");
+            l.go_down(End::Down);
         }
         if let Some(end) = l.stop_step() {
             l.server.drain(Duration::from_millis(200));
@@ -258,7 +258,10 @@ impl Loop<'_> {
                             RunError::Input(m) => {
                                 Reply::Refused(Refusal::Enable { error: m.clone() })
                             }
-                            e => Reply::Failed(e.to_string()),
+                            RunError::Failed { failure, .. } => Reply::Failed((**failure).clone()),
+                            e => Reply::Failed(Failure::System {
+                                what: e.to_string(),
+                            }),
                         };
                         for c in waiters {
                             self.server.reply(c, &reply);
@@ -360,10 +363,18 @@ impl Loop<'_> {
 
     /// Starts going down: whoever waits is told; a moving program comes to rest along its
     /// path (trajgen aborts it), or, at rest, the drives are disabled.
-    fn go_down(&mut self, end: End, why: &str) {
+    fn go_down(&mut self, end: End) {
         // A program sent but not yet moving is dropped too (an abort empties trajgen's queue).
         let had_program = self.running.is_some() || self.tuning.take().is_some();
-        self.abandon(why);
+        let signal = matches!(end, End::Interrupted);
+        self.abandon(|job: &str| {
+            let job = job.to_string();
+            if signal {
+                Failure::Interrupted { job }
+            } else {
+                Failure::Down { job }
+            }
+        });
         let moving = had_program
             || self
                 .cell
@@ -446,23 +457,23 @@ impl Loop<'_> {
         }
     }
 
-    /// The cell goes down: whoever waits gets told, not dropped.
-    fn abandon(&mut self, why: &str) {
+    /// The cell goes down (`why` of what was under way): whoever waits gets told, not
+    /// dropped.
+    fn abandon(&mut self, why: impl Fn(&str) -> Failure) {
         if let Some(r) = self.running.take() {
-            let e = self.with_events(
-                RunError::failed(format!("{why} before {} ended", r.job.name)),
-                r.events_from,
-            );
+            let e = self.with_events(RunError::failed(why(&r.job.name)), r.events_from);
             let e = self.with_figures(e, &r.job);
             self.finish(&r, &Err(e));
         }
         if let Some((_, waiters)) = self.enabling.take() {
             for c in waiters {
-                self.server.reply(c, &Reply::Failed(why.to_string()));
+                self.server
+                    .reply(c, &Reply::Failed(why("the drives were enabled")));
             }
         }
         for p in std::mem::take(&mut self.pending) {
-            self.server.reply(p.conn(), &Reply::Failed(why.to_string()));
+            self.server
+                .reply(p.conn(), &Reply::Failed(why("the request was answered")));
         }
     }
 
@@ -477,9 +488,9 @@ impl Loop<'_> {
         self.cell.take_events();
         match e {
             RunError::Failed {
-                message, figures, ..
+                failure, figures, ..
             } => RunError::Failed {
-                message,
+                failure,
                 events: self.events_json(from),
                 figures,
             },
@@ -794,7 +805,12 @@ impl Loop<'_> {
             return Some(Reply::Refused(Refusal::Reset { blockers }));
         }
         if let Err(e) = self.cell.reset() {
-            return Some(Reply::Failed(e.to_string()));
+            return Some(Reply::Failed(match e {
+                RunError::Failed { failure, .. } => *failure,
+                e => Failure::System {
+                    what: e.to_string(),
+                },
+            }));
         }
         tracing::info!("e-stop reset");
         self.pending.push(Pending::Reset {
@@ -848,11 +864,10 @@ impl Loop<'_> {
                     )));
                 }
                 (since.elapsed() > ESTOP_PATIENCE).then(|| {
-                    Reply::Failed(format!(
-                        "no process of instance {} reported the e-stop latched within {} s",
-                        self.cell.instance,
-                        ESTOP_PATIENCE.as_secs()
-                    ))
+                    Reply::Failed(Failure::EstopNotLatched {
+                        instance: self.cell.instance.to_string(),
+                        within_s: ESTOP_PATIENCE.as_secs_f64(),
+                    })
                 })
             }
             Pending::Reset { since, .. } => {
@@ -886,10 +901,7 @@ impl Loop<'_> {
                     )),
                     None => {}
                 }
-                Some(Reply::Failed(format!(
-                    "reset did not clear everything:\n  {}",
-                    left.join("\n  ")
-                )))
+                Some(Reply::Failed(Failure::ResetIncomplete { left }))
             }
             Pending::Control {
                 seq, kind, since, ..
@@ -917,10 +929,10 @@ impl Loop<'_> {
                 }
                 let limit = Duration::from_secs_f64(self.cfg.motion.t_acc + 2.0);
                 (since.elapsed() > limit).then(|| {
-                    Reply::Failed(format!(
-                        "trajgen did not complete the {kind:?} within {:.1} s",
-                        limit.as_secs_f64()
-                    ))
+                    Reply::Failed(Failure::ControlNotTaken {
+                        control: format!("{kind:?}"),
+                        within_s: limit.as_secs_f64(),
+                    })
                 })
             }
         }
@@ -1003,7 +1015,7 @@ impl Loop<'_> {
                 });
                 None
             }
-            Err(e) => Some(Reply::Failed(e)),
+            Err(what) => Some(Reply::Failed(Failure::Swap { what })),
         }
     }
 
@@ -1029,13 +1041,14 @@ impl Loop<'_> {
                 }
                 Reply::Replaced(Box::new(replaced))
             }
-            Step::Failed(e) => Reply::Failed(e),
-            Step::ProgramLost(e) => {
+            Step::Failed(what) => Reply::Failed(Failure::Swap { what }),
+            Step::ProgramLost(what) => {
+                let failure = Failure::Swap { what };
                 if let Some(r) = self.running.take() {
-                    let err = self.with_events(RunError::failed(&e), r.events_from);
+                    let err = self.with_events(RunError::failed(failure.clone()), r.events_from);
                     self.finish(&r, &Err(err));
                 }
-                Reply::Failed(e)
+                Reply::Failed(failure)
             }
         };
         if let Some(s) = self.swapping.take() {

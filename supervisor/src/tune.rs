@@ -17,6 +17,8 @@ use crate::cell::{Cell, Incident, Mode, open_cell};
 use crate::error::RunError;
 use crate::serve::{End, First, serve};
 use cell_config::Config;
+use control_plane::Failure;
+use control_plane::failure::TuningStage;
 use plot::{Panel, series_png};
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;
@@ -196,9 +198,9 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     let measured = match end {
         End::Tuned(m) => *m,
         End::Interrupted => Err(RunError::Interrupted),
-        End::Down | End::Program(_) => Err(RunError::failed(
-            "`supervisor down` stopped the cell before the tuning ended",
-        )),
+        End::Down | End::Program(_) => Err(RunError::failed(Failure::Down {
+            job: "the tuning".into(),
+        })),
     };
     let Measured {
         samples,
@@ -207,9 +209,9 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     } = match measured {
         Ok(m) => m,
         // A failed session still reports its events.
-        Err(RunError::Failed { message, .. }) => {
+        Err(RunError::Failed { failure, .. }) => {
             return Err(RunError::Failed {
-                message,
+                failure,
                 events: closed.events,
                 figures: None,
             });
@@ -342,8 +344,10 @@ impl Tuning {
             return Some(Err(i.error()));
         }
         if cell.estop.is_some() && !cell.reactions_pending() {
-            let text = cell.estop_text().unwrap_or_else(|| "e-stop".into());
-            return Some(Err(RunError::failed(text)));
+            let estop = cell.estop_failure().unwrap_or_else(|| Failure::System {
+                what: "e-stop".into(),
+            });
+            return Some(Err(RunError::failed(estop)));
         }
         self.tick(cell, cfg).transpose()
     }
@@ -368,7 +372,7 @@ impl Tuning {
             cell.last_servo = Some(s);
             if s.status & st::FAULT_LATCHED != 0 {
                 cell.take_events();
-                return Err(RunError::failed(cell.fault_text(&s)));
+                return Err(RunError::failed(cell.fault(&s)));
             }
             if let Some(done) = self.see(cell, cfg, &s)? {
                 return Ok(Some(done));
@@ -376,14 +380,10 @@ impl Tuning {
         }
         let waited = self.since.elapsed();
         match self.stage {
-            Stage::Settling if waited > PATIENCE => {
-                Err(RunError::failed("the axes did not settle after enabling"))
-            }
+            Stage::Settling if waited > PATIENCE => Err(tuning(TuningStage::Settling)),
             Stage::Stepping if waited > PATIENCE => {
                 cell.take_events();
-                Err(RunError::failed(
-                    "servo did not take the step (see the request-refused event)",
-                ))
+                Err(tuning(TuningStage::Step))
             }
             // A response that does not settle is measured all the same (its figures say so).
             Stage::Responding if waited > PATIENCE => {
@@ -394,15 +394,9 @@ impl Tuning {
                 self.step_back(cell)?;
                 Ok(None)
             }
-            Stage::Returning if waited > PATIENCE => {
-                Err(RunError::failed("servo did not take the step back"))
-            }
-            Stage::SettlingBack if waited > PATIENCE => Err(RunError::failed(
-                "the axis did not settle after the step back",
-            )),
-            Stage::Ramping { limit, .. } if waited > limit => {
-                Err(RunError::failed("the ramp did not end"))
-            }
+            Stage::Returning if waited > PATIENCE => Err(tuning(TuningStage::StepBack)),
+            Stage::SettlingBack if waited > PATIENCE => Err(tuning(TuningStage::SettlingBack)),
+            Stage::Ramping { limit, .. } if waited > limit => Err(tuning(TuningStage::Ramp)),
             Stage::RampSettling { end_ns, peak } if waited > PATIENCE => {
                 Ok(Some(self.measured(cfg, end_ns, peak, None)))
             }
@@ -492,9 +486,7 @@ impl Tuning {
     /// own whatever the kinematics.
     fn send_ramp(&mut self, cell: &mut Cell, cfg: &Config, d: f64) -> Result<(), RunError> {
         let (i, n) = (self.axis, cfg.axis.len());
-        let sp = cell
-            .last_sp
-            .ok_or_else(|| RunError::failed("trajgen publishes no setpoint"))?;
+        let sp = cell.last_sp.ok_or_else(|| tuning(TuningStage::Setpoint))?;
         let mut home = [0.0; MAX_AXES];
         home[..n].copy_from_slice(&sp.position[..n]);
         let mut out = home;
@@ -515,9 +507,10 @@ impl Tuning {
             cmd(3, CommandKind::End, home),
         ] {
             if !cell.command_pub.send(&c) {
-                return Err(RunError::failed(
-                    "trajgen's command service refused a command",
-                ));
+                return Err(RunError::failed(Failure::ServiceRefused {
+                    service: "trajgen's command service".into(),
+                    sample: "a command".into(),
+                }));
             }
         }
         let limit = Duration::from_secs_f64(
@@ -617,6 +610,11 @@ impl TuneReport {
             ],
         )
     }
+}
+
+/// The tuning session did not get through `stage`.
+fn tuning(stage: TuningStage) -> RunError {
+    RunError::failed(Failure::Tuning { stage })
 }
 
 #[cfg(test)]

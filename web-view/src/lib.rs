@@ -515,7 +515,7 @@ async fn action(
         match control_plane::channel::call(&instance, &req) {
             Ok(Reply::Done(m)) => Ok(m),
             Ok(Reply::Refused(m)) => Err((StatusCode::CONFLICT, m.to_string())),
-            Ok(Reply::Failed(m)) => Err((StatusCode::CONFLICT, m)),
+            Ok(Reply::Failed(failure)) => Err((StatusCode::CONFLICT, failure.to_string())),
             Ok(other) => Ok(format!("{other:?}")),
             Err(e) => Err((StatusCode::SERVICE_UNAVAILABLE, e.to_string())),
         }

@@ -134,9 +134,13 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         );
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(
-            err.contains("servo cut power: drive-reports-fault on axis y"),
-            "{err}"
+        // Why, as data: servo cut power on the drive's fault, on axis y.
+        let j = integration_tests::json_of(&out);
+        let cause = &j["cause"]["servo-fault"];
+        assert_eq!(
+            (cause["fault"].as_str(), cause["axis"].as_str()),
+            (Some("drive-reports-fault"), Some("y")),
+            "{j}"
         );
         // The figures up to the failure: x's first 2 s of motion, the processes' latency.
         assert!(

@@ -43,6 +43,20 @@ fn address(up: &Up) -> SocketAddr {
     a
 }
 
+/// A client of the server at `a` whose first read was answered: connects again while the
+/// server closes it (its connections all taken), under the watchdog.
+fn served(a: SocketAddr) -> Raw {
+    let start = Instant::now();
+    loop {
+        let mut c = Raw::connect(a);
+        if let Some(Ok(_)) = c.ask(&[4, 0, 0, 0, 4]) {
+            return c;
+        }
+        assert!(start.elapsed() < WATCHDOG, "never served");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// A Modbus TCP client written from the specification, for frames no library would send.
 struct Raw {
     s: TcpStream,
@@ -439,10 +453,10 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
             "MOVE(90, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
         );
         let job = up.exec_in_background(&short);
-        let mut c1 = Raw::connect(a);
-        let mut c2 = Raw::connect(a);
-        assert!(c1.registers(4, 0, 4).is_ok());
-        assert!(c2.registers(4, 0, 4).is_ok());
+        // The two places (the probe of `address` gives its place back once the server has
+        // seen it close: until then a second client is one too many).
+        let mut c1 = served(a);
+        let mut c2 = served(a);
         // A third client is closed at once; so is a flood of them.
         for _ in 0..50 {
             let mut c = Raw::connect(a);
@@ -467,15 +481,7 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
         assert!(c4.closed(), "a short coil write was not refused");
         let refused_in = t.elapsed();
         // Their places are free again; an idle client is closed after idle_timeout.
-        let start = Instant::now();
-        let mut c3 = loop {
-            let mut c = Raw::connect(a);
-            if let Some(Ok(_)) = c.ask(&[4, 0, 0, 0, 4]) {
-                break c;
-            }
-            assert!(start.elapsed() < WATCHDOG, "never served again");
-            std::thread::sleep(Duration::from_millis(50));
-        };
+        let mut c3 = served(a);
         // The short coil write would have aborted the server without the frame check.
         assert_eq!(
             process_in(&up.status(), "modbus")["restarts"],

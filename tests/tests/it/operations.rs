@@ -608,8 +608,13 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
         assert_eq!(out.status.code(), Some(1));
         let j = integration_tests::json_of(&out);
         assert_eq!(j["ok"], false);
-        let error = j["error"].as_str().unwrap_or("");
-        assert!(error.contains("servo"), "{j}");
+        // Ended by servo's loss: its exit, or the host e-stop its loss raised.
+        let c = &j["cause"];
+        let servo_lost = c["exited"]["process"] == "servo"
+            || c["estop"]["reason"]
+                .as_str()
+                .is_some_and(|r| r.contains("servo"));
+        assert!(servo_lost, "{j}");
         assert_clean(&inst);
     });
 }
@@ -668,7 +673,11 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
         .into_iter()
         .flatten()
         .any(|e| e["name"] == "estop-safe" && e["source"] == "servo");
-    assert_eq!(err.contains("the motion completed"), !external, "{err}");
+    assert_eq!(
+        report["cause"]["latched-after-motion"].is_object(),
+        !external,
+        "{err}\n{report}"
+    );
     assert_eq!(servo_safe, external, "{report}");
     // Reset fails at once while the input is open, and says which and why.
     let out = up.ctl(&["reset"]);
