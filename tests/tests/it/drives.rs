@@ -39,12 +39,8 @@ fn on_target(j: &serde_json::Value) {
     }
 }
 
-/// `supervisor run` of the triangle on `inst`, in the background, its stderr captured.
-fn triangle_in_background(inst: &str) -> std::process::Child {
-    triangle_in_background_with(inst, None)
-}
-
-/// The same with a configuration file.
+/// `supervisor run` of the triangle on `inst` with a configuration file, in the background,
+/// its stderr captured.
 pub(crate) fn triangle_in_background_with(inst: &str, cfg: Option<&Path>) -> std::process::Child {
     triangle_in_background_as(inst, cfg, false)
 }
@@ -182,7 +178,7 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
 fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
     integration_tests::attributable(|| {
         let inst = instance("inject-cmd");
-        let run = triangle_in_background(&inst);
+        let run = triangle_in_background_as(&inst, None, true);
         // Wait until the arm is enabled, reading the instance's events from this shell.
         let start = Instant::now();
         loop {
@@ -224,9 +220,12 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
         let out = wait_for(run);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(
-            err.contains("servo cut power: feedback-not-finite on axis x"),
-            "{err}"
+        let j = integration_tests::json_of(&out);
+        let cause = &j["cause"]["servo-fault"];
+        assert_eq!(
+            (cause["fault"].as_str(), cause["axis"].as_str()),
+            (Some("feedback-not-finite"), Some("x")),
+            "{err}\n{j}"
         );
         // The drives acknowledged it (the tool waits for their event before it says so).
         assert!(err.contains("fault-injected axis x: 0x7320"), "{err}");
@@ -439,7 +438,7 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
         use runtime::ipc::{self, Pub, Sub};
         use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV3};
         let inst = instance("disable");
-        let run = triangle_in_background(&inst);
+        let run = triangle_in_background_as(&inst, None, true);
         // Connect once the cell is up (an instance with a live client is refused by `run`).
         let name = InstanceName::new(&inst).expect("instance");
         let start = Instant::now();
@@ -480,10 +479,8 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
         let out = wait_for(run);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(
-            err.contains("the arm is no longer enabled") && err.contains("disabling"),
-            "{err}"
-        );
+        let j = integration_tests::json_of(&out);
+        assert_eq!(j["cause"]["disabled"]["power"], "disabling", "{err}\n{j}");
         // This test's node outlived the run: the files of the instance go with the last client.
         drop((requests, state));
         drop(node);
@@ -591,7 +588,8 @@ pub(crate) fn client_of(
 fn servo_cuts_power_when_the_drives_process_stalls() {
     integration_tests::attributable(|| {
         let inst = instance("stall-machine");
-        let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-machine")));
+        let mut run =
+            triangle_in_background_as(&inst, Some(&patient_config("stall-machine")), true);
         let (name, node) = client_of(&inst);
         let state = until_moving(&node, &name, &mut run);
         // The drives' process stops (as a hung fieldbus would): its feedback stops coming.
@@ -614,7 +612,11 @@ fn servo_cuts_power_when_the_drives_process_stalls() {
         let out = wait_for(run);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(err.contains("servo cut power: feedback-stale"), "{err}");
+        let j = integration_tests::json_of(&out);
+        assert_eq!(
+            j["cause"]["servo-fault"]["fault"], "feedback-stale",
+            "{err}\n{j}"
+        );
         drop(state);
         drop(node);
         runtime::ipc::cleanup_after_client(&name);

@@ -148,7 +148,7 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
         let cfg = integration_tests::default_cell_toml()
             .set("supervisor.heartbeat_timeout", 30.0)
             .write("estop-stall", "cell.toml");
-        let mut run = triangle_in_background_as(&inst, Some(&cfg), false);
+        let mut run = triangle_in_background_as(&inst, Some(&cfg), true);
         let (name, node) = client_of(&inst);
         let state = until_moving(&node, &name, &mut run);
         let trajgen = pid_of("trajgen", &inst);
@@ -162,11 +162,16 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
         runtime::ipc::cleanup_after_client(&name);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(
-            err.contains(
-                "e-stop (host) raised by servo: pending_sequence_overrun expired in servo"
+        let j = integration_tests::json_of(&out);
+        let e = &j["cause"]["estop"];
+        assert_eq!(
+            (e["origin"].as_str(), e["by"].as_str(), e["reason"].as_str()),
+            (
+                Some("host"),
+                Some("servo"),
+                Some("pending_sequence_overrun expired in servo")
             ),
-            "{err}"
+            "{err}\n{j}"
         );
         assert_clean(&inst);
     });
