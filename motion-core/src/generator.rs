@@ -49,6 +49,10 @@ pub const MIN_SPEED: f64 = 0.01;
 /// wait a whole period.
 const REACHED_S: f64 = 1e-9;
 
+/// Phase changes at most in one step: holds that end at once (a WAIT met, a DELAY(0)) and
+/// what they start.
+const PHASE_CHANGES: usize = 64;
+
 /// Per-cell parameters of the generator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params {
@@ -705,18 +709,21 @@ impl Generator {
         );
     }
 
-    /// The resting point (the joints of the latest setpoint) in `space`'s coordinates.
+    /// The resting point in `space`'s coordinates, from the exact resting point in the
+    /// current space (`rest`, the stopping segment's target): the joints of the latest
+    /// setpoint would do only if it had been computed at the instant of the rest, and a cycle
+    /// before it they differ from it by a hair, which made a move to where the axes rest one
+    /// that does not stop on its target (an extra stopping segment of `2 t_acc`, one run in
+    /// a few, and always in the prediction).
     fn convert_rest(&self, space: Space) -> Result<Axes, KinError> {
-        match (space, &self.kin) {
-            (Space::Joint, _) | (_, None) => Ok(self.joints),
-            (Space::Cartesian, Some(k)) => {
-                let q = joints_of(&self.joints);
-                let p = k.0.axes_to_cartesian(&q)?;
-                let mut c = Axes::zeros();
-                c.as_mut_slice()[..MAX_COORDS].copy_from_slice(&p);
-                Ok(c)
-            }
+        if self.kin.is_none() {
+            return Ok(self.rest);
         }
+        let (q, _, _, cartesian, _) = self.map(&self.rest, &Axes::zeros(), &Axes::zeros())?;
+        Ok(match space {
+            Space::Joint => q,
+            Space::Cartesian => cartesian,
+        })
     }
 
     /// The kinematics cannot follow (a target or a path out of reach, a singularity): the
@@ -875,10 +882,18 @@ impl Generator {
     /// No allocation, no system call: arithmetic on stack vectors and the fixed queue.
     pub fn step(&mut self, now_ns: u64, inputs: Option<u64>) -> SetpointV2 {
         let mut mt = self.path_time(now_ns);
-        // At most a few phase changes per cycle (a hold that ends starts the next move).
-        for _ in 0..4 {
+        // Instructions that take no time (a WAIT met, a DELAY(0), an OUT) follow each other in
+        // the same cycle, at most `PHASE_CHANGES` of them (a loop of them that never moves
+        // goes on in the next cycle: bounded work).
+        for _ in 0..PHASE_CHANGES {
             match self.phase {
-                Phase::AtRest => self.take_at_rest(now_ns, None),
+                Phase::AtRest => {
+                    self.take_at_rest(now_ns, None);
+                    if !matches!(self.phase, Phase::AtRest | Phase::Moving(_)) {
+                        mt = self.path_time(now_ns);
+                        continue;
+                    }
+                }
                 Phase::Waiting {
                     io,
                     value,

@@ -128,6 +128,40 @@ fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
 }
 
 #[test]
+fn the_prediction_is_the_generators_own_timing_exactly() {
+    integration_tests::attributable(|| {
+        // A move to where the axes rest, after a move in the other space: its 2 t_acc, no
+        // extra stop (the prediction said 15.825 s, a run 14.775 s or, one in a few, 15.825).
+        let j = run_as_predicted(
+            "prog-rest",
+            &default_cell(),
+            "MOVE(140, 40, 0)\nMOVEJ(140, 40, 0)\nMOVE(90, 126, 0)\nEND\n",
+        );
+        let f = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} in {j}"));
+        assert!((f("predicted_s") - 14.775).abs() < 1e-9, "{j}");
+        assert!((f("theoretical_s") - f("predicted_s")).abs() < 1e-9, "{j}");
+        // Holds that end at once take no time: 20 WAITs met and DELAY(0)s, then the OUT at
+        // motion time 0 (it was predicted at 0.020 s, a cycle each).
+        let program = "REPEAT 20\n  WAIT(estop_ok, 1)\n  DELAY(0)\nENDREPEAT\nOUT(gripper, 1)\nMOVE(60, 40, 0)\nEND\n";
+        let prog = scratch("prog-zero", "p.prog", program);
+        let out = run_with_watchdog(supervisor().arg("check").arg(&prog), WATCHDOG);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.lines()
+                .any(|l| l.split_whitespace().collect::<Vec<_>>()
+                    == ["0.000", "s", "line", "5", "gripper", "=", "1"]),
+            "{text}"
+        );
+        let j = run_as_predicted("prog-zero", &default_cell(), program);
+        assert!(
+            (j["theoretical_s"].as_f64().expect("t") - j["predicted_s"].as_f64().expect("p")).abs()
+                < 1e-9,
+            "{j}"
+        );
+    });
+}
+
+#[test]
 fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
     integration_tests::attributable(|| {
         let test = "prog-check";
