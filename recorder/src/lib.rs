@@ -498,7 +498,7 @@ impl Out {
             .compression(Some(mcap::Compression::Lz4))
             .profile("")
             .create(BufWriter::new(file))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
+            .map_err(|e| mcap_error(&path, e))?;
         let mut ids = Vec::new();
         let mut schemas: HashMap<&'static str, u16> = HashMap::new();
         for (topic, name, schema) in topics {
@@ -508,7 +508,7 @@ impl Out {
                     let text = serde_json::to_vec(schema).map_err(|e| e.to_string())?;
                     let id = writer
                         .add_schema(name, "jsonschema", &text)
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| mcap_error(&path, e))?;
                     schemas.insert(name, id);
                     id
                 }
@@ -516,7 +516,7 @@ impl Out {
             ids.push(
                 writer
                     .add_channel(schema_id, topic, "json", &BTreeMap::new())
-                    .map_err(|e| e.to_string())?,
+                    .map_err(|e| mcap_error(&path, e))?,
             );
         }
         Ok(Self {
@@ -544,7 +544,7 @@ impl Out {
                 },
                 data,
             )
-            .map_err(|e| format!("{}: {e}", self.path.display()))
+            .map_err(|e| mcap_error(&self.path, e))
     }
 
     /// Starts the next file when this one is full or old enough.
@@ -573,7 +573,7 @@ impl Out {
         self.writer
             .finish()
             .map(|_| ())
-            .map_err(|e| format!("{}: {e}", self.path.display()))
+            .map_err(|e| mcap_error(&self.path, e))
     }
 }
 
@@ -718,6 +718,9 @@ pub enum RecordError {
     Spawn(std::io::Error),
     /// The recorder's process started but did not begin recording (its words, if any).
     NotStarted(String),
+    /// The recorder's process failed while recording (a disk full, its file removed): its
+    /// exit status; its own error went to stderr.
+    Failed(String),
 }
 
 impl RecordError {
@@ -739,6 +742,11 @@ impl std::fmt::Display for RecordError {
             Self::Spawn(e) => write!(f, "record: {e}"),
             Self::NotStarted(why) if why.is_empty() => f.write_str("the recorder did not start"),
             Self::NotStarted(why) => write!(f, "the recorder did not start: {why}"),
+            Self::Failed(status) => write!(
+                f,
+                "the recording failed ({status}; the recorder's error above says why): its file \
+                 is incomplete"
+            ),
         }
     }
 }
@@ -837,6 +845,15 @@ pub fn record(
     })
 }
 
+/// `e` on the file at `path`, in words: an I/O error's own (mcap's hides it behind "I/O error
+/// from writing": a full disk must say "No space left on device").
+fn mcap_error(path: &Path, e: mcap::McapError) -> String {
+    match e {
+        mcap::McapError::Io(io) => format!("{}: {io}", path.display()),
+        e => format!("{}: {e}", path.display()),
+    }
+}
+
 /// `supervisor record` in a process of its own, for `run`, `up` and `exec --wait` with
 /// `--record FILE`: an observer, so nothing the cell does waits for it.
 #[derive(Debug)]
@@ -899,17 +916,19 @@ impl Background {
             out,
         };
         if line.is_empty() {
-            let why = me.stop();
+            let why = me.stop().unwrap_or_default();
             return Err(RecordError::NotStarted(why.trim().to_string()));
         }
         Ok(me)
     }
 
-    /// Ends the recording (SIGTERM: the recorder finishes its file); its summary.
-    pub fn stop(&mut self) -> String {
+    /// Ends the recording (SIGTERM: the recorder finishes its file); its summary, or
+    /// [`RecordError::Failed`] when the recorder did not end well (it failed while recording,
+    /// or had to be killed).
+    pub fn stop(&mut self) -> Result<String, RecordError> {
         use std::io::Read;
         let Some(mut child) = self.child.take() else {
-            return String::new();
+            return Ok(String::new());
         };
         let _ = nix::sys::signal::kill(
             nix::unistd::Pid::from_raw(child.id() as i32),
@@ -924,12 +943,16 @@ impl Background {
         if child.try_wait().ok().flatten().is_none() {
             let _ = child.kill();
         }
-        let _ = child.wait();
+        let status = child.wait();
         let mut text = String::new();
         if let Some(o) = self.out.as_mut() {
             let _ = o.read_to_string(&mut text);
         }
-        text
+        match status {
+            Ok(s) if s.success() => Ok(text),
+            Ok(s) => Err(RecordError::Failed(s.to_string())),
+            Err(e) => Err(RecordError::Failed(e.to_string())),
+        }
     }
 }
 

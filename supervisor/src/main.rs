@@ -683,8 +683,14 @@ fn main() -> ExitCode {
                     ExitCode::from(e.exit_code())
                 }
             };
-            if let Some(r) = recorder.as_mut() {
-                eprint!("{}", r.stop());
+            match recorder.as_mut().map(|r| r.stop()) {
+                Some(Ok(summary)) => eprint!("{summary}"),
+                // The program ran; its recording did not: the command fails (exit 1).
+                Some(Err(e)) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::FAILURE;
+                }
+                None => {}
             }
             code
         }

@@ -101,8 +101,9 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let processes = serve::process_reports(&cell);
     let latency_figures = serve::latency_figures(&cell);
     let sense_to_command = cell.sense_to_command.take();
-    if let Some(r) = recorder.as_mut() {
-        crate::out::line(r.stop().trim_end());
+    let recorded = recorder.as_mut().map(|r| r.stop()).transpose();
+    if let Ok(Some(summary)) = &recorded {
+        crate::out::line(summary.trim_end());
     }
     let closed = cell.close(server);
     let mut report = match end {
@@ -146,6 +147,8 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     if let Some(e) = closed.problem {
         return Err(e);
     }
+    // The program ran; its recording did not (a disk full): the run fails.
+    recorded?;
     if let Some(path) = &opts.trace {
         std::fs::write(path, trace_csv(&report))
             .map_err(|e| RunError::system(format!("{}: {e}", path.display())))?;

@@ -48,8 +48,10 @@ pub fn up(
         }
     };
     let end = serve(&cfg, &mut cell, &mut server, None);
-    if let Some(r) = recorder.as_mut() {
-        tracing::info!("{}", r.stop().trim_end());
+    match recorder.as_mut().map(|r| r.stop()) {
+        Some(Ok(summary)) => tracing::info!("{}", summary.trim_end()),
+        Some(Err(e)) => tracing::error!("{e}"),
+        None => {}
     }
     let why = match end {
         End::Down => "supervisor down",

@@ -253,3 +253,76 @@ fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behin
         assert_clean(&inst);
     });
 }
+
+/// A tmpfs of `kib` KiB mounted on a directory of the test's own (root), unmounted when
+/// dropped: a full disk, without touching the host's.
+struct SmallDisk(PathBuf);
+
+impl SmallDisk {
+    fn new(test: &str, kib: u32) -> Self {
+        let dir = std::env::temp_dir().join(format!("rtc-{test}-{}-disk", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("mount point");
+        let out = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
+            .arg(&dir)
+            .output()
+            .expect("this test needs mount(8)");
+        assert!(
+            out.status.success(),
+            "mount a tmpfs (this test needs root): {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        Self(dir)
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg("-l").arg(&self.0).status();
+        let _ = std::fs::remove_dir(&self.0);
+    }
+}
+
+#[test]
+fn a_recording_onto_a_full_disk_says_so_and_fails_its_command() {
+    integration_tests::attributable(|| {
+        let test = "rec-full";
+        let up = Up::start(test, &cell(test, &[]));
+        let disk = SmallDisk::new(test, 64);
+        // `exec --wait --record`: the program runs to its end; the recording fills the disk,
+        // which the command says in the system's words, and it exits 1 (it exited 0).
+        let program = scratch(test, "p.prog", "MOVE(60, 40, 0)\nMOVE(40, 40, 0)\nEND\n");
+        let file = disk.0.join("run.mcap");
+        let out = up.ctl(&[
+            "exec",
+            program.to_str().expect("utf-8"),
+            "--wait",
+            "--json",
+            "--record",
+            file.to_str().expect("utf-8"),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains(&format!("{}: No space left on device", file.display())),
+            "{err}"
+        );
+        let report: Value = serde_json::from_slice(&out.stdout).expect("the run's report");
+        assert_eq!(report["ok"], true, "the program itself completed: {report}");
+        // `record` alone: the same words, exit 1.
+        std::fs::remove_file(&file).expect("room again");
+        let filler = disk.0.join("filler");
+        let _ = std::fs::write(&filler, vec![0u8; 60 * 1024]);
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["record", "--instance", &up.inst, "--duration", "2", "--out"])
+                .arg(disk.0.join("alone.mcap")),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("No space left on device"), "{err}");
+        drop(disk);
+        up.down();
+    });
+}
