@@ -171,6 +171,8 @@ pub fn run<T: Task>(
     build: impl FnOnce(&Context) -> Result<T, SetupError>,
 ) -> ExitCode {
     crate::abort_on_panic();
+    // /dev/shm full at start-up: the process says so and exits 1 (it died by signal 7).
+    let _ = crate::signals::explain_sigbus();
     let (instance, name) = match parse_args(default_name, about) {
         Ok(a) => a,
         Err(code) => return code,

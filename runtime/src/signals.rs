@@ -56,3 +56,65 @@ pub fn wake_thread(thread: libc::pthread_t) {
 pub fn stop_requested() -> bool {
     STOP.load(Ordering::SeqCst)
 }
+
+/// Exit code of a process that met [`explain_sigbus`]'s SIGBUS.
+pub const SIGBUS_EXIT: i32 = 1;
+
+/// Makes a SIGBUS say why instead of killing the process silently. In this project's
+/// processes a SIGBUS comes from a page of shared memory that cannot be backed: `/dev/shm` is
+/// full (iceoryx2 maps its segments there; a full tmpfs refuses the page on first touch, not
+/// at mmap). The handler writes `error: shared memory is full (/dev/shm: N MB free)` to stderr
+/// and exits with [`SIGBUS_EXIT`].
+pub fn explain_sigbus() -> nix::Result<()> {
+    use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
+    let action = SigAction::new(
+        SigHandler::Handler(on_sigbus),
+        SaFlags::empty(),
+        SigSet::empty(),
+    );
+    // SAFETY: the handler only makes async-signal-safe calls (statvfs, write, _exit) and
+    // formats into a stack buffer.
+    unsafe { sigaction(Signal::SIGBUS, &action) }.map(|_| ())
+}
+
+/// The SIGBUS handler of [`explain_sigbus`]. Async-signal-safe: raw `statvfs(2)`, `write(2)`
+/// and `_exit(2)` (nix's wrappers may allocate a path), no allocation, no lock.
+extern "C" fn on_sigbus(_: libc::c_int) {
+    let mut buf = [0u8; 160];
+    let mut n = 0;
+    let mut put = |bytes: &[u8]| {
+        let k = bytes.len().min(buf.len() - n);
+        buf[n..n + k].copy_from_slice(&bytes[..k]);
+        n += k;
+    };
+    put(b"error: shared memory is full (/dev/shm: ");
+    // SAFETY: a zeroed statvfs is valid; the path is a NUL-terminated literal.
+    let free_mb = unsafe {
+        let mut st: libc::statvfs = std::mem::zeroed();
+        (libc::statvfs(c"/dev/shm".as_ptr(), &mut st) == 0)
+            .then(|| st.f_bavail as u64 * st.f_frsize as u64 / 1_000_000)
+    };
+    match free_mb {
+        Some(mb) => {
+            let mut digits = [0u8; 20];
+            let mut k = digits.len();
+            let mut v = mb;
+            loop {
+                k -= 1;
+                digits[k] = b'0' + (v % 10) as u8;
+                v /= 10;
+                if v == 0 {
+                    break;
+                }
+            }
+            put(&digits[k..]);
+        }
+        None => put(b"?"),
+    }
+    put(b" MB free): a page of shared memory could not be backed (SIGBUS)\n");
+    // SAFETY: write(2) and _exit(2) are async-signal-safe.
+    unsafe {
+        libc::write(2, buf.as_ptr().cast(), n);
+        libc::_exit(SIGBUS_EXIT);
+    }
+}

@@ -580,6 +580,8 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
 
 fn main() -> ExitCode {
     runtime::abort_on_panic();
+    // /dev/shm full: every command says so and exits 1 (it died by SIGBUS, exit 135).
+    let _ = runtime::signals::explain_sigbus();
     let cli = Cli::parse();
     let watching = matches!(
         cli.cmd,

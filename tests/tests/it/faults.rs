@@ -777,3 +777,46 @@ fn a_client_whose_reader_stops_early_ends_quietly() {
         up.down();
     });
 }
+
+/// `supervisor ARGS` in a mount namespace of its own whose `/dev/shm` is a tmpfs of `kib`
+/// KiB (root, util-linux' `unshare`): shared memory full, without touching the host's.
+fn in_small_shm(kib: u32, args: &[&str]) -> std::process::Output {
+    let exe = integration_tests::bin("supervisor");
+    let mut cmd = Command::new("unshare");
+    cmd.args(["--mount", "--propagation", "private", "sh", "-c"])
+        .arg(format!(
+            "mount -t tmpfs -o size={kib}k tmpfs /dev/shm && exec \"$0\" \"$@\""
+        ))
+        .arg(exe)
+        .args(args);
+    run_with_watchdog(&mut cmd, WATCHDOG)
+}
+
+#[test]
+fn a_full_dev_shm_is_said_in_words_and_exits_1_never_by_sigbus() {
+    // The cell cannot come up; the command that needs shared memory says why and exits 1 (it
+    // died by SIGBUS, exit 135, saying nothing), and the host's /dev/shm is never touched.
+    let inst = instance("shm-full");
+    let cfg =
+        integration_tests::scratch("shm-full", "cell.toml", &integration_tests::default_cell());
+    let out = in_small_shm(
+        64,
+        &[
+            "up",
+            "--instance",
+            &inst,
+            "--config",
+            cfg.to_str().expect("utf-8"),
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("shared memory is full (/dev/shm: 0 MB free)"),
+        "{err}"
+    );
+    // What the dead processes left of the instance outside /dev/shm goes.
+    let name = shm_schema::InstanceName::new(&inst).expect("name");
+    runtime::ipc::purge_instance(&name);
+    integration_tests::assert_clean(&inst);
+}
