@@ -125,13 +125,13 @@ pub enum Refusal {
     Enabling,
     /// The e-stop is latched; `supervisor reset` first.
     EstopLatched {
-        /// The e-stop: who raised it and why.
-        estop: String,
+        /// The e-stop: who raised it and why (a [`Failure::Estop`], or servo's own fault).
+        estop: Box<Failure>,
     },
     /// Servo's fault is latched; `supervisor reset` first.
     FaultLatched {
-        /// The fault: its code, axis and values.
-        fault: String,
+        /// The fault: its name, axis and the event that explains it.
+        fault: Box<Failure>,
     },
     /// The drives are disabled; `supervisor start` enables them.
     Disabled,

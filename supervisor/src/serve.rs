@@ -703,8 +703,10 @@ impl Loop<'_> {
         if self.enabling.is_some() {
             return Some(Refusal::Enabling);
         }
-        if let Some(estop) = self.cell.estop_text() {
-            return Some(Refusal::EstopLatched { estop });
+        if let Some(estop) = self.cell.estop_failure() {
+            return Some(Refusal::EstopLatched {
+                estop: Box::new(estop),
+            });
         }
         let enabled = self
             .cell
@@ -821,13 +823,15 @@ impl Loop<'_> {
     }
 
     fn start(&mut self, conn: ConnId) -> Option<Reply> {
-        if let Some(estop) = self.cell.estop_text() {
-            return Some(Reply::Refused(Refusal::EstopLatched { estop }));
+        if let Some(estop) = self.cell.estop_failure() {
+            return Some(Reply::Refused(Refusal::EstopLatched {
+                estop: Box::new(estop),
+            }));
         }
         if let Some(s) = self.cell.last_servo {
             if s.status & st::FAULT_LATCHED != 0 {
                 return Some(Reply::Refused(Refusal::FaultLatched {
-                    fault: self.cell.fault_text(&s),
+                    fault: Box::new(self.cell.fault(&s)),
                 }));
             }
             if s.status & st::ENABLED != 0 {
