@@ -52,8 +52,7 @@ struct Bus {
     /// What the bus reaching OP is announced as ("in OP", "back in OP").
     announce: &'static str,
     /// Since when the cycle's frames have asked every SubDevice for OP (the bus came up in
-    /// SAFE-OP, at start-up or back from recovery; 0 until the first cycle); `None` once all
-    /// are there.
+    /// SAFE-OP, at start-up or back from recovery); `None` once all are there.
     reaching_op: Option<u64>,
     /// Emergencies sent during start-up (position, code, register), told in the first cycle.
     startup_emergencies: [(usize, u16, u8); STARTUP_EMERGENCIES],
@@ -233,13 +232,13 @@ impl Bus {
     /// Reads of the last reply, copies, events and an atomic store.
     fn reach_op(&mut self, now: u64, since: u64, cx: &mut Cycle<'_>) -> bool {
         let n = self.frame.layout().count;
+        let late = now.saturating_sub(since) > STATE_TRANSITION.as_nanos() as u64;
         let mut all = true;
         for k in 0..n {
             let (status, code) = self.frame.al_status(k);
             let op = status & 0x1F == 0x08;
             self.in_op[k] = op;
             all &= op;
-            let late = now.saturating_sub(since) > STATE_TRANSITION.as_nanos() as u64;
             if !op && (status & 0x10 != 0 || late) {
                 let what = ") did not reach OP";
                 self.tell(
@@ -485,11 +484,6 @@ impl Task for Bus {
         }
         // On the way to OP: nothing is published (servo has no feedback, nothing can be
         // enabled) until every SubDevice is there.
-        if let Some(since) = self.reaching_op.as_mut()
-            && *since == 0
-        {
-            *since = now; // the first cycle's request
-        }
         if let Some(since) = self.reaching_op
             && !self.reach_op(now, since, cx)
         {
@@ -845,13 +839,11 @@ fn main() -> ExitCode {
             for (slot, e) in startup_emergencies.iter_mut().zip(&up.emergencies) {
                 *slot = *e;
             }
-            let mut frame = frame;
-            frame.request_op(true);
-            Ok::<_, SetupError>(Bus {
+            let mut bus = Bus {
                 wire,
                 interface: bus.interface().to_string(),
-                announce: "in OP on ",
-                reaching_op: Some(0),
+                announce: "",
+                reaching_op: None,
                 startup_emergencies,
                 startup_emergency_count: up.emergencies.len().min(STARTUP_EMERGENCIES),
                 wire_owner,
@@ -903,7 +895,10 @@ fn main() -> ExitCode {
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
                 sense_to_command_pub: Pub::new(&ctx.node, i, ServiceId::SenseToCommand)?,
-            })
+            };
+            // In SAFE-OP: the cycle's frames take the bus to OP.
+            bus.ask_for_op(runtime::time::now_ns(), "in OP on ");
+            Ok::<_, SetupError>(bus)
         },
     )
 }

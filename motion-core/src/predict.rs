@@ -85,7 +85,6 @@ pub fn simulate_with(
     let mut free = crate::generator::QUEUE_CAP;
     let mut outputs = Vec::new();
     let mut steps = 0u64;
-    let mut same_instant = 0u32;
     // Inputs as waited for: whatever the running WAIT wants.
     let inputs = |g: &Generator| match g.phase() {
         Phase::Waiting { io, value, .. } => Some(u64::from(value) << io),
@@ -129,16 +128,6 @@ pub fn simulate_with(
                 kin_error: g.kin_error(),
             };
         }
-        // A WAIT is met at once (the inputs it wants): what follows it in the same instant
-        // (another WAIT, a DELAY(0), the next move) is taken in the same instant, as trajgen
-        // does when the inputs are there. Bounded: a loop of such instructions that never
-        // moves goes on in time.
-        let unmet_wait = matches!(g.phase(), Phase::Waiting { .. });
-        if unmet_wait && same_instant < MAX_STEPS_PER_INSTANT {
-            same_instant += 1;
-            continue;
-        }
-        same_instant = 0;
         let next = now + dt_ns;
         now = match g.next_transition_ns() {
             Some(t) if t > now && t < next => t,
@@ -146,6 +135,3 @@ pub fn simulate_with(
         };
     }
 }
-
-/// Steps taken at one instant while a WAIT waits for the inputs it is given at once.
-const MAX_STEPS_PER_INSTANT: u32 = 1_000;

@@ -58,7 +58,7 @@ pub fn stop_requested() -> bool {
 }
 
 /// Exit code of a process that met [`explain_sigbus`]'s SIGBUS.
-pub const SIGBUS_EXIT: i32 = 1;
+const SIGBUS_EXIT: i32 = 1;
 
 /// Makes a SIGBUS say why instead of killing the process silently. In this project's
 /// processes a SIGBUS comes from a page of shared memory that cannot be backed: `/dev/shm` is

@@ -712,11 +712,9 @@ impl Controller {
     /// A setpoint from a new source (the first one, one after a stale spell, or one whose
     /// stamp goes back: trajgen restarted) must start where servo holds: within the
     /// in-position band plus what the axis can move in 1.5 cycles, and at the reference's
-    /// velocity within one velocity step. Returns the offending axis and distance. Setpoints
-    /// of the same source are checked by command validation instead (a step too large cuts
-    /// power).
-    /// The first test a new source's first setpoint fails: its axis, the event code (position
-    /// or velocity), the value and the limit.
+    /// velocity within one velocity step. Returns the first test it fails: its axis, the
+    /// event code (position or velocity), the value and the limit. Setpoints of the same
+    /// source are checked by command validation instead (a step too large cuts power).
     fn jump(&self, sp: &SetpointV2, now_ns: u64, dt: f64) -> Option<(usize, u32, f64, f64)> {
         if self
             .setpoint

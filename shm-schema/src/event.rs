@@ -740,7 +740,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "subdevice-not-op",
         severity: Severity::Error,
         unit: Unit::Number("AL status (limit: AL status code)"),
-        meaning: "A SubDevice did not go from SAFE-OP to OP when the bus process' cycle asked for it (at start-up, or when the bus came back): it refused (its AL status has the error bit; the AL status code says why: 0x001D invalid outputs, 0x0030 invalid DC synchronisation, ...) or was not there 10 s after the first request (AL status code 0). The text names its position and name. Nothing is published to servo meanwhile (no drive can be enabled); the bus process brings the bus up again from the scan (`bus-recovering`), about once a second, until every SubDevice reaches OP (`bus-op`).",
+        meaning: "A SubDevice did not go from SAFE-OP to OP when the bus process' cycle asked for it (at start-up, or when the bus came back): it refused (its AL status has the error bit; the AL status code says why: 0x001D invalid outputs, 0x0030 invalid DC synchronisation, ...) or was not there 10 s after the bus came up in SAFE-OP (AL status code 0). The text names its position and name. Nothing is published to servo meanwhile (no drive can be enabled); the bus process brings the bus up again from the scan (`bus-recovering`), about once a second, until every SubDevice reaches OP (`bus-op`).",
     },
 ];
 

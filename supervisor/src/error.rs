@@ -37,11 +37,14 @@ impl RunError {
         Self::failed(Failure::System { what: what.into() })
     }
 
-    /// Why a started run failed; `None` for bad input or an interruption.
-    pub fn failure(&self) -> Option<&Failure> {
+    /// Why it failed, as the control channel and `run --json` carry it: a started run's
+    /// failure, or (bad input, an interruption) the system's words.
+    pub fn cause(&self) -> Failure {
         match self {
-            Self::Failed { failure, .. } => Some(failure),
-            _ => None,
+            Self::Failed { failure, .. } => (**failure).clone(),
+            _ => Failure::System {
+                what: self.to_string(),
+            },
         }
     }
 
@@ -60,13 +63,7 @@ impl RunError {
         control_plane::report::RunFailure {
             ok: false,
             error: self.to_string(),
-            cause: match self {
-                Self::Failed { failure, .. } => (**failure).clone(),
-                // Not a started run's failure: its words are the system's.
-                _ => Failure::System {
-                    what: self.to_string(),
-                },
-            },
+            cause: self.cause(),
             events: self.events().to_vec(),
         }
     }

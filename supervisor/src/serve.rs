@@ -258,10 +258,7 @@ impl Loop<'_> {
                             RunError::Input(m) => {
                                 Reply::Refused(Refusal::Enable { error: m.clone() })
                             }
-                            RunError::Failed { failure, .. } => Reply::Failed((**failure).clone()),
-                            e => Reply::Failed(Failure::System {
-                                what: e.to_string(),
-                            }),
+                            e => Reply::Failed(e.cause()),
                         };
                         for c in waiters {
                             self.server.reply(c, &reply);
@@ -807,12 +804,7 @@ impl Loop<'_> {
             return Some(Reply::Refused(Refusal::Reset { blockers }));
         }
         if let Err(e) = self.cell.reset() {
-            return Some(Reply::Failed(match e {
-                RunError::Failed { failure, .. } => *failure,
-                e => Failure::System {
-                    what: e.to_string(),
-                },
-            }));
+            return Some(Reply::Failed(e.cause()));
         }
         tracing::info!("e-stop reset");
         self.pending.push(Pending::Reset {
