@@ -52,8 +52,9 @@ fn attached<T>(
     let instance = InstanceName::new(instance)
         .map_err(|e| ControlError::Input(format!("--instance {instance:?}: {e}")))?;
     ipc::quiet_iceoryx2_log();
+    // A listing that fails (out of descriptors) says why, not "not running".
     if ipc::live_node_pids(&instance)
-        .unwrap_or_default()
+        .map_err(|e| ControlError::Input(e.to_string()))?
         .is_empty()
     {
         return Err(ControlError::Input(format!(
@@ -81,8 +82,10 @@ fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV
             return Ok(c);
         }
         if start.elapsed() > PATIENCE {
+            // Out of descriptors, the connection to the publisher is never made.
+            let why = runtime::fds::shortage().map_or(String::new(), |w| format!(": {w}"));
             return Err(ControlError::Failed(format!(
-                "instance {instance} published no cell configuration within {} s",
+                "instance {instance} published no cell configuration within {} s{why}",
                 PATIENCE.as_secs()
             )));
         }
@@ -377,7 +380,7 @@ fn io_table(cell: &CellConfigV6, image: Option<&DigitalIoV1>) -> String {
     if cell.io().is_empty() {
         return "the cell has no named IO (`[[io]]`)".into();
     }
-    let v = crate::status::io_status(cell, image);
+    let v = control_plane::compose::io_status(cell, image);
     let mut out = String::from("name                     direction  value  notes\n");
     for e in &v.entries {
         let (direction, notes) = match e {

@@ -11,7 +11,11 @@ use std::time::Duration;
 /// instance as they happen (with `--follow`, until Ctrl-C; without, for `listen`).
 pub fn follow(instance: &InstanceName, forever: bool, json: bool) -> Result<(), String> {
     ipc::quiet_iceoryx2_log();
-    if ipc::live_node_pids(instance).unwrap_or_default().is_empty() {
+    // A listing that fails (out of descriptors) says why, not "not running".
+    if ipc::live_node_pids(instance)
+        .map_err(|e| e.to_string())?
+        .is_empty()
+    {
         return Err(format!("no process of instance {instance} is running"));
     }
     signals::install().map_err(|e| format!("cannot install signal handlers: {e}"))?;

@@ -1,7 +1,6 @@
 //! A client of a running cell, never its supervisor: what the CLI, the web view and other
 //! tools use to read a cell and to act on it through its shared memory.
 //!
-//! - [`status`]: a snapshot of every service a cell publishes, and `status`'s document from it;
 //! - [`events`]: the cell's events as they happen (`supervisor events`);
 //! - [`control`]: the e-stop, the named IO and injected faults, written straight into the
 //!   cell's shared memory (as a PLC would), with no supervisor in between;
@@ -14,4 +13,3 @@
 pub mod control;
 pub mod events;
 pub mod figures;
-pub mod status;

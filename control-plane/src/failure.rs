@@ -170,6 +170,14 @@ pub enum Failure {
         /// What failed, with the system's error.
         what: String,
     },
+    /// A critical process of a cell that is up was lost for good (its restart policy
+    /// `never`, or its restart limit reached): the cell ran on without it until `down`.
+    LostForGood {
+        /// Its name.
+        process: String,
+        /// Why, in words (its last exit and the policy).
+        why: String,
+    },
 }
 
 /// A value of one axis, with its unit.
@@ -329,6 +337,10 @@ impl fmt::Display for Failure {
             Self::ServiceRefused { service, sample } => write!(f, "{service} refused {sample}"),
             Self::Tuning { stage } => write!(f, "{stage}"),
             Self::Swap { what } | Self::System { what } => f.write_str(what),
+            Self::LostForGood { process, why } => write!(
+                f,
+                "{process} was lost for good and the cell ran without it ({why})"
+            ),
         }
     }
 }

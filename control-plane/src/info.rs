@@ -24,6 +24,8 @@ pub struct Info {
     pub processes: Vec<ProcessInfo>,
     /// The program running now; `null` when none.
     pub job: Option<JobInfo>,
+    /// The program being validated before it starts (`exec`); `null` when none.
+    pub validating: Option<String>,
     /// The last program's end; `null` before the first.
     pub last_job: Option<LastJob>,
     /// The drives are being enabled.
@@ -166,8 +168,9 @@ impl Info {
                 )
             }
         }
-        match &self.job {
-            None => {
+        match (&self.job, &self.validating) {
+            (None, Some(v)) => out += &format!("program: {v} being validated\n"),
+            (None, None) => {
                 out += "program: none";
                 if let Some(l) = &self.last_job {
                     out += &format!(
@@ -178,7 +181,7 @@ impl Info {
                 }
                 out += "\n";
             }
-            Some(j) => {
+            (Some(j), _) => {
                 out += &format!(
                     "program: {} line {} motion {:.2} / {:.2} s{}\n",
                     j.program,

@@ -6,7 +6,7 @@
 //!   and [`channel::call`], the client.
 //! - [`Info`]: the supervisor's own view of its cell (the answer to [`Request::Info`]).
 //! - [`status::Status`]: `supervisor status --json`, the processes' view from shared memory
-//!   with the supervisor's.
+//!   with the supervisor's, as the supervisor composes it ([`Request::Status`]).
 //! - [`report::RunReport`] and [`report::RunFailure`]: a program's end (`run --json`), with its
 //!   [`event::Event`]s.
 //! - [`figures::Figures`]: what `--plot` draws, gathered by the supervisor, drawn by the client.
@@ -17,6 +17,7 @@
 //! generated from them ([`schema`]) and checked in under `docs/schema/`.
 
 pub mod channel;
+pub mod compose;
 pub mod event;
 pub mod failure;
 pub mod figures;

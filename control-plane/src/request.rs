@@ -5,6 +5,7 @@ use crate::Failure;
 use crate::figures::Figures;
 use crate::info::Info;
 use crate::report::Outcome;
+use crate::status::Status;
 use serde::{Deserialize, Serialize};
 
 /// What a client asks a running cell.
@@ -64,6 +65,11 @@ pub enum Request {
         /// Why, in a few words (kept in the e-stop and its events).
         reason: String,
     },
+    /// The whole of `supervisor status --json`: the supervisor's view ([`Request::Info`]) with
+    /// the processes' own (their statuses, latency, servo's axes, the IO), as the supervisor
+    /// last read them from shared memory. Answered with [`Reply::Status`]; a client needs no
+    /// port of its own, so any number of them may ask at once.
+    Status,
 }
 
 /// What the cell answers.
@@ -90,6 +96,8 @@ pub enum Reply {
         /// What `--plot` draws, when asked for and the program completed.
         figures: Option<Box<Figures>>,
     },
+    /// `supervisor status --json` ([`Request::Status`]).
+    Status(Box<Status>),
 }
 
 /// Why the cell refused a request: nothing was changed (the CLI exits 2). A client acts on
@@ -238,6 +246,11 @@ pub enum Refusal {
         /// Its limit.
         limit: usize,
     },
+    /// A program is being validated before it starts.
+    Validating {
+        /// Its name.
+        program: String,
+    },
 }
 
 impl std::fmt::Display for Refusal {
@@ -258,6 +271,10 @@ impl std::fmt::Display for Refusal {
             Self::ProgramRunning { program } => {
                 write!(f, "busy: {program} is running (`supervisor abort` ends it)")
             }
+            Self::Validating { program } => write!(
+                f,
+                "busy: {program} is being validated; it starts once that is done"
+            ),
             Self::Settling { line } => write!(
                 f,
                 "trajgen is still bringing the previous program to rest (line {line}); try again in a moment"

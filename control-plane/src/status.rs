@@ -8,6 +8,50 @@ use indexmap::IndexMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+/// `Serialize` and `Deserialize` for a type whose JSON form has no tag or a tag inside (the
+/// documented `status --json`), which postcard (the control channel: [`crate::Reply::Status`])
+/// cannot read, having no self-description: in JSON with the serde attributes given, in postcard
+/// tagged outside. The variants are written once, as the type's own (serde remotes of it, in a
+/// module of their own).
+macro_rules! two_forms {
+    ($t:ident, $remote:literal, $module:ident, [$($json:meta),*], { $($variants:tt)* }) => {
+        mod $module {
+            use super::*;
+
+            #[allow(dead_code)] // Only its serde code is used.
+            #[derive(Serialize, Deserialize)]
+            #[serde(remote = $remote)]
+            $(#[serde($json)])*
+            pub(super) enum Json { $($variants)* }
+
+            #[allow(dead_code)] // Only its serde code is used.
+            #[derive(Serialize, Deserialize)]
+            #[serde(remote = $remote)]
+            pub(super) enum Tagged { $($variants)* }
+        }
+
+        impl Serialize for $t {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                if s.is_human_readable() {
+                    $module::Json::serialize(self, s)
+                } else {
+                    $module::Tagged::serialize(self, s)
+                }
+            }
+        }
+
+        impl<'de> Deserialize<'de> for $t {
+            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                if d.is_human_readable() {
+                    $module::Json::deserialize(d)
+                } else {
+                    $module::Tagged::deserialize(d)
+                }
+            }
+        }
+    };
+}
+
 /// The document `supervisor status --json` prints.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -130,8 +174,7 @@ pub struct Hold {
     /// `wait` (an input) or `delay`.
     #[serde(rename = "for")]
     pub what: HoldKind,
-    /// The input waited for (`wait` only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// The input waited for (`wait` only; `null` for a `delay`).
     pub input: Option<String>,
 }
 
@@ -346,9 +389,10 @@ pub struct IoStatus {
     pub writes_refused: Option<u64>,
 }
 
-/// One named input or output.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(tag = "direction", rename_all = "lowercase", deny_unknown_fields)]
+/// One named input or output. In JSON tagged inside (`"direction": "output"`); in postcard
+/// (the control channel), which cannot read an inner tag, tagged outside ([`two_forms`]).
+#[derive(Clone, Debug, PartialEq, JsonSchema)]
+#[schemars(tag = "direction", rename_all = "lowercase", deny_unknown_fields)]
 pub enum IoEntry {
     /// An output.
     Output {
@@ -370,6 +414,17 @@ pub enum IoEntry {
     },
 }
 
+two_forms!(
+    IoEntry,
+    "IoEntry",
+    io_entry,
+    [tag = "direction", rename_all = "lowercase", deny_unknown_fields],
+    {
+        Output { name: String, value: Option<u8>, safe: SafeValue },
+        Input { name: String, value: Option<u8>, estop: bool },
+    }
+);
+
 impl IoEntry {
     /// Its name.
     pub fn name(&self) -> &str {
@@ -386,9 +441,11 @@ impl IoEntry {
     }
 }
 
-/// What the e-stop sets an output to: 0, 1, or `"hold"` (as it was).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(untagged)]
+/// What the e-stop sets an output to: 0, 1, or `"hold"` (as it was). In JSON without a tag
+/// (`0`, `1`, `"hold"`); in postcard (the control channel), which cannot read a value without
+/// a tag, tagged ([`two_forms`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, JsonSchema)]
+#[schemars(untagged)]
 pub enum SafeValue {
     /// 0 or 1.
     Level(u8),
@@ -396,10 +453,72 @@ pub enum SafeValue {
     Hold(HoldWord),
 }
 
+two_forms!(SafeValue, "SafeValue", safe_value, [untagged], {
+    Level(u8),
+    Hold(HoldWord),
+});
+
 /// The word `"hold"`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum HoldWord {
     /// `"hold"`.
     Hold,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The IO part of a status crosses the control channel (postcard) whole, and stays
+    /// untagged in JSON: `0`, `1`, `"hold"`.
+    #[test]
+    fn io_entries_cross_postcard_tagged_and_json_as_documented() {
+        let values = [
+            SafeValue::Level(0),
+            SafeValue::Level(1),
+            SafeValue::Hold(HoldWord::Hold),
+        ];
+        for v in values {
+            let bytes = postcard::to_allocvec(&v).expect("postcard");
+            assert_eq!(postcard::from_bytes::<SafeValue>(&bytes).expect("back"), v);
+        }
+        let json: Vec<String> = values
+            .iter()
+            .map(|v| serde_json::to_string(v).expect("json"))
+            .collect();
+        assert_eq!(json, ["0", "1", "\"hold\""]);
+        for (v, j) in values.iter().zip(&json) {
+            assert_eq!(serde_json::from_str::<SafeValue>(j).expect("back"), *v);
+        }
+        let io = IoEntry::Output {
+            name: "gripper".into(),
+            value: Some(1),
+            safe: SafeValue::Hold(HoldWord::Hold),
+        };
+        let bytes = postcard::to_allocvec(&io).expect("postcard");
+        assert_eq!(postcard::from_bytes::<IoEntry>(&bytes).expect("back"), io);
+        let json = serde_json::to_string(&io).expect("json");
+        assert_eq!(
+            json,
+            r#"{"direction":"output","name":"gripper","value":1,"safe":"hold"}"#
+        );
+        assert_eq!(serde_json::from_str::<IoEntry>(&json).expect("back"), io);
+    }
+
+    /// A value that is not finite (a fault's limit) crosses postcard as it is; JSON, which has
+    /// none, says `null` as it always did.
+    #[test]
+    fn a_fault_that_is_not_finite_crosses_postcard() {
+        let fault = ServoFault {
+            code: 1,
+            name: "x".into(),
+            axis: None,
+            value: f64::NAN,
+            limit: f64::INFINITY,
+        };
+        let bytes = postcard::to_allocvec(&fault).expect("postcard");
+        let back: ServoFault = postcard::from_bytes(&bytes).expect("back");
+        assert!(back.value.is_nan() && back.limit == f64::INFINITY);
+    }
 }

@@ -769,7 +769,11 @@ pub fn record(
     ready: &mut dyn FnMut(&Path),
 ) -> Result<Recorded, RecordError> {
     ipc::quiet_iceoryx2_log();
-    if ipc::live_node_pids(instance).unwrap_or_default().is_empty() {
+    // A listing that fails (out of descriptors) says why, not "not running".
+    if ipc::live_node_pids(instance)
+        .map_err(|e| RecordError::Attach(e.to_string()))?
+        .is_empty()
+    {
         return Err(RecordError::NotUp(*instance));
     }
     let f = RecordError::File;

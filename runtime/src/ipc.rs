@@ -18,10 +18,13 @@ use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener as IoxListener;
 use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::port::update_connections::UpdateConnections;
 pub use iceoryx2::prelude::Node;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 pub use shm_schema::{InstanceName, ServiceId};
@@ -102,9 +105,14 @@ impl std::fmt::Display for IpcError {
 impl std::error::Error for IpcError {}
 
 fn err(what: impl Into<String>, reason: impl Debug) -> IpcError {
+    // Out of descriptors, iceoryx2 says only what it could not make.
+    let reason = match crate::fds::shortage() {
+        Some(words) => format!("{words} ({reason:?})"),
+        None => format!("{reason:?}"),
+    };
     IpcError {
         what: what.into(),
-        reason: format!("{reason:?}"),
+        reason,
     }
 }
 
@@ -128,9 +136,11 @@ pub fn config_for(instance: &InstanceName) -> Result<Config, IpcError> {
     Ok(cfg)
 }
 
-/// Quiets iceoryx2's own log to warnings (it logs through `tracing`).
+/// Quiets iceoryx2's own log but for its fatal lines: its error lines dump whole structures
+/// (4-6 KB for one failure), and every failure comes back to us as an error we say in words
+/// ([`IpcError`]).
 pub fn quiet_iceoryx2_log() {
-    set_log_level(LogLevel::Warn);
+    set_log_level(LogLevel::Fatal);
 }
 
 /// Creates the node of one process of `instance`. Signal handling is left to
@@ -278,7 +288,23 @@ where
         .max_nodes(q.max_nodes)
         .enable_safe_overflow(true)
         .open_or_create()
-        .map_err(|e| err(format!("service {name}"), e))
+        .map_err(|e| match e {
+            PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                PublishSubscribeOpenError::ExceedsMaxNumberOfNodes,
+            ) => slots_taken(&name, q.max_nodes, "processes may open it at once"),
+            e => err(format!("service {name}"), e),
+        })
+}
+
+/// A service's slots all taken (too many observers attached at once), in words.
+fn slots_taken(service: &impl std::fmt::Display, max: usize, what: &str) -> IpcError {
+    IpcError {
+        what: format!("service {service}"),
+        reason: format!(
+            "all its slots are taken ({max} {what}): close an observer of the cell \
+             (a `record`, `web`, `events --follow`, a tool) and try again"
+        ),
+    }
 }
 
 struct PubOf<T: Debug + ZeroCopySend + Copy + 'static> {
@@ -346,7 +372,14 @@ pub fn subscriber<T: Debug + ZeroCopySend + Copy + 'static>(
         .subscriber_builder()
         .buffer_size(buffer)
         .create()
-        .map_err(|e| err(format!("subscriber on {}", instance.service(id)), e))?;
+        .map_err(|e| match e {
+            SubscriberCreateError::ExceedsMaxSupportedSubscribers => slots_taken(
+                &instance.service(id),
+                id.qos().max_subscribers,
+                "subscribers at once",
+            ),
+            e => err(format!("subscriber on {}", instance.service(id)), e),
+        })?;
     Ok(Box::new(SubOf {
         port,
         _service: service,
@@ -555,8 +588,18 @@ impl Debug for Listener {
 /// the files of nodes that are not alive and that iceoryx2 cannot clean (see
 /// [`remove_orphan_node_files`]). Returns how many nodes were cleaned.
 pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
+    remove_dead_nodes_older_than(instance, std::time::Duration::from_secs(1))
+}
+
+/// [`remove_dead_nodes`], taking the unfinished files that are `age` old (not a node or
+/// segment being created right now, unless `age` is 0: an instance being removed, whose
+/// clients cannot attach any more).
+fn remove_dead_nodes_older_than(
+    instance: &InstanceName,
+    age: std::time::Duration,
+) -> Result<usize, IpcError> {
     // First what a node killed while it attached left half made: iceoryx2 would wait on it.
-    remove_unfinished_shm(instance, std::time::Duration::from_secs(1));
+    remove_unfinished_shm(instance, age);
     let cfg = config_for(instance)?;
     let mut dead = Vec::new();
     // The nodes whose files the orphan sweep below must leave alone.
@@ -588,7 +631,7 @@ pub fn remove_dead_nodes(instance: &InstanceName) -> Result<usize, IpcError> {
             cleaned += 1;
         }
     }
-    Ok(cleaned + remove_orphan_node_files(instance, &keep, std::time::Duration::from_secs(1)))
+    Ok(cleaned + remove_orphan_node_files(instance, &keep, age))
 }
 
 /// Removes the files under the instance's `nodes/` folder of every node that is not in `keep`
@@ -698,7 +741,9 @@ pub fn remove_instance_segment(instance: &InstanceName) -> Result<bool, IpcError
 /// empty folders) once no node of it is alive, and lists any file that should not be there
 /// (empty when everything was cleaned).
 pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
-    let _ = remove_dead_nodes(instance);
+    // Whatever no live node owns goes, however young: a client that failed to attach a moment
+    // ago (out of descriptors: its node's details written, nothing else) left it.
+    let _ = remove_dead_nodes_older_than(instance, std::time::Duration::ZERO);
     let _ = remove_instance_segment(instance);
     let mut left: Vec<String> = shm_files(instance)
         .iter()

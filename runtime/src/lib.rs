@@ -4,6 +4,7 @@
 //!   `/dev/cpu_dma_latency` held at 0, CPU affinity. Refusals are warned about once.
 //! - [`cycle`]: periodic wake-ups on absolute deadlines (`clock_nanosleep(TIMER_ABSTIME)`),
 //!   the CS9 overrun rule and the cycle statistics every process publishes.
+//! - [`fds`]: the open-files limit raised at start, a shortage said in words.
 //! - [`ipc`]: iceoryx2 nodes and typed ports for the services of `shm-schema`.
 //! - [`events`]: a process' publisher of events.
 //! - [`estop`]: the cell's e-stop as a process sees it in its cycle (seed 002).
@@ -19,6 +20,7 @@ pub mod alloc_count;
 pub mod cycle;
 pub mod estop;
 pub mod events;
+pub mod fds;
 pub mod health;
 pub mod ipc;
 pub mod process;

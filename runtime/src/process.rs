@@ -173,6 +173,7 @@ pub fn run<T: Task>(
     crate::abort_on_panic();
     // /dev/shm full at start-up: the process says so and exits 1 (it died by signal 7).
     let _ = crate::signals::explain_sigbus();
+    crate::fds::raise_limit();
     let (instance, name) = match parse_args(default_name, about) {
         Ok(a) => a,
         Err(code) => return code,

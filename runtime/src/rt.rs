@@ -195,11 +195,5 @@ pub fn sched_of(pid: i32) -> Option<(u32, i32)> {
     }
 }
 
-/// Name of a policy value of [`RtReport::policy`].
-pub fn policy_name(policy: u32) -> &'static str {
-    match policy {
-        1 => "SCHED_FIFO",
-        2 => "SCHED_RR",
-        _ => "SCHED_OTHER",
-    }
-}
+/// Name of a policy value of [`RtReport::policy`] (the numbers of `ProcessStatusV2::policy`).
+pub use shm_schema::status::policy_name;

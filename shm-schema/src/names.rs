@@ -343,8 +343,15 @@ impl ServiceId {
                 max_nodes: 40,
                 ..base
             },
-            // The successor gets the paused motion at once; a tool the IO image.
-            Self::TrajgenHandover | Self::IoState => Qos { history: 1, ..base },
+            // The successor gets the paused motion at once.
+            Self::TrajgenHandover => Qos { history: 1, ..base },
+            // A tool gets the IO image at once. Read by the drives, the Modbus server, the
+            // supervisor, the next iobridge and the user's tools.
+            Self::IoState => Qos {
+                history: 1,
+                max_subscribers: 16,
+                ..base
+            },
             // A process started late gets the latched state at once.
             Self::HostState => Qos {
                 history: 1,

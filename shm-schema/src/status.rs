@@ -175,6 +175,15 @@ pub mod estop_seen {
     pub const RAISED: u32 = 8;
 }
 
+/// The name of a [`ProcessStatusV2::policy`] value.
+pub fn policy_name(policy: u32) -> &'static str {
+    match policy {
+        1 => "SCHED_FIFO",
+        2 => "SCHED_RR",
+        _ => "SCHED_OTHER",
+    }
+}
+
 /// What every real-time process publishes on `<i>/<name>/status` each cycle.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]

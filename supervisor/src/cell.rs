@@ -12,6 +12,7 @@ use crate::stall::StallWatch;
 use cell_config::{Config, RestartPolicy};
 use control_plane::Failure;
 use control_plane::channel as ctl;
+use control_plane::compose::{Seen, Snapshot};
 use control_plane::event::{self as events, Axes};
 use control_plane::info::{self, Info};
 
@@ -25,10 +26,10 @@ use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
 use shm_schema::{
-    CellConfigV6, ControlKind, EstopOrigin, EstopV1, EventV1, FieldbusImageV1, InstanceName,
-    LatencyHistogramV1, MotionCommandV2, MotionControlV2, ProcState, ProcessName, ProcessStatusV2,
-    RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV2, TrajgenHandoverV2,
-    estop_seen, str_of,
+    CellConfigV6, ControlKind, DigitalIoV1, EstopOrigin, EstopV1, EventV1, FieldbusImageV1,
+    InstanceName, LatencyHistogramV1, MotionCommandV2, MotionControlV2, ProcState, ProcessName,
+    ProcessStatusV2, RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV2,
+    TrajgenHandoverV2, estop_seen, str_of,
 };
 use std::time::{Duration, Instant};
 
@@ -298,6 +299,10 @@ pub(crate) struct Cell {
     pub(crate) t0_ns: u64,
     pub(crate) last_sp: Option<SetpointV2>,
     pub(crate) last_servo: Option<ServoStateV3>,
+    /// iobridge's newest image of the named IO (for `status`).
+    io: Option<DigitalIoV1>,
+    /// The configuration as published (for `status`: names, units, the IO table).
+    shm: Box<CellConfigV6>,
     request_seq: u64,
     control_seq: u64,
     event_seq: u64,
@@ -323,6 +328,7 @@ pub(crate) struct Cell {
     /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
     /// its history, die with it).
     handover_pub: Pub<TrajgenHandoverV2>,
+    io_sub: Sub<DigitalIoV1>,
     /// Gaps between heartbeats, and where they went.
     stalls: StallWatch,
     status_subs: Vec<Sub<ProcessStatusV2>>,
@@ -352,6 +358,7 @@ impl Cell {
         let image_sub = Sub::new(&node, i, ServiceId::FieldbusOutput, 256).map_err(f)?;
         let handover_sub = Sub::new(&node, i, ServiceId::TrajgenHandover, 1).map_err(f)?;
         let handover_pub = Pub::new(&node, i, ServiceId::TrajgenHandover).map_err(f)?;
+        let io_sub = Sub::new(&node, i, ServiceId::IoState, 1).map_err(f)?;
         let mut status_subs = Vec::new();
         let mut latency_subs = Vec::new();
         let mut exec_subs = Vec::new();
@@ -410,6 +417,8 @@ impl Cell {
             t0_ns: runtime::time::now_ns(),
             last_sp: None,
             last_servo: None,
+            io: None,
+            shm: Box::new(cell),
             request_seq: 0,
             control_seq: 0,
             event_seq: 0,
@@ -430,6 +439,7 @@ impl Cell {
             image_gaps: None,
             handover_sub,
             handover_pub,
+            io_sub,
             stalls: StallWatch::new(Duration::from_secs_f64(
                 (cfg.supervisor.supervisor_timeout / 4.0).min(STALL_REPORTED_S),
             )),
@@ -489,6 +499,36 @@ impl Cell {
         }
         if let Some(h) = self.sense_sub.latest() {
             self.sense_to_command = Some(Box::new(h));
+        }
+    }
+
+    /// The newest of what the processes publish, for `status`: the processes that run and
+    /// reported (a process lost or restarting is not shown: its last status is old), servo's
+    /// state, the setpoint, the IO image, the histograms (taken now).
+    pub(crate) fn snapshot(&mut self) -> Snapshot {
+        self.refresh_latency();
+        if let Some(io) = self.io_sub.latest() {
+            self.io = Some(io);
+        }
+        let processes = (0..self.names.len())
+            .filter(|&k| matches!(self.life[k], Life::Running))
+            .filter_map(|k| {
+                Some(Seen {
+                    name: self.names[k].clone(),
+                    status: self.statuses[k]?,
+                    latency: self.latencies[k].clone(),
+                    exec_time: self.exec_times[k].clone(),
+                })
+            })
+            .collect();
+        Snapshot {
+            processes,
+            servo: self.last_servo,
+            cell: Some(self.shm.clone()),
+            sense_to_command: self.sense_to_command.clone(),
+            host: Some(self.host),
+            setpoint: self.last_sp,
+            io: self.io,
         }
     }
 
@@ -918,6 +958,15 @@ impl Cell {
         self.critical[k]
     }
 
+    /// The first critical process lost for good (restart policy `never`, or its restart
+    /// limit reached), and why.
+    pub(crate) fn lost_for_good(&self) -> Option<(String, String)> {
+        (0..self.names.len()).find_map(|k| match &self.life[k] {
+            Life::Down(why) if self.critical[k] => Some((self.names[k].clone(), why.clone())),
+            _ => None,
+        })
+    }
+
     /// True when process `k` is cyclic and its cycles advance.
     pub(crate) fn cyclic(&self, k: usize) -> bool {
         self.life[k] == Life::Running
@@ -1098,6 +1147,7 @@ impl Cell {
             arm,
             processes,
             job: None,
+            validating: None,
             last_job: None,
             enabling: false,
             swapping: None,

@@ -81,10 +81,23 @@ impl Children {
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .process_group(0);
-        // SAFETY: between fork and exec only async-signal-safe calls: prctl(PR_SET_PDEATHSIG).
+        // SAFETY: between fork and exec only async-signal-safe calls: prctl(PR_SET_PDEATHSIG)
+        // and close_range(2), both plain system calls.
         unsafe {
             cmd.pre_exec(|| {
-                nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
+                nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)?;
+                // Nothing of the supervisor's but stdio crosses the exec: iceoryx2 opens its
+                // files without close-on-exec, and every process inherited the supervisor's
+                // node (its liveness lock: a killed supervisor's node looked alive while its
+                // processes ran) and a descriptor for each of its ports (about 120 each).
+                // Close-on-exec, not closed: the standard library's exec-error pipe still works.
+                libc::syscall(
+                    libc::SYS_close_range,
+                    3u32,
+                    u32::MAX,
+                    libc::CLOSE_RANGE_CLOEXEC,
+                );
+                Ok(())
             });
         }
         if std::env::var_os("RTC_LOG").is_none() {

@@ -411,6 +411,10 @@ fn ctl_reply(
             println!("{}", serde_json::to_string(&info).unwrap_or_default());
             ExitCode::SUCCESS
         }
+        Reply::Status(status) => {
+            println!("{}", serde_json::to_string(&status).unwrap_or_default());
+            ExitCode::SUCCESS
+        }
         Reply::Refused(m) => {
             eprintln!("error: {m}");
             ExitCode::from(2)
@@ -543,20 +547,20 @@ fn status(instance: &str, json: bool, watch: bool) -> ExitCode {
         Ok(i) => i,
         Err(c) => return c,
     };
+    // One request: the supervisor composes the document from its own ports, so any number of
+    // `status` may run at once and none takes a port of the cell.
     let once = || -> Result<control_plane::status::Status, (u8, String)> {
-        let info = match ctl::call(&instance, &Request::Info) {
-            Ok(Reply::Info(info)) => *info,
-            Ok(Reply::Refused(m)) => return Err((2, m.to_string())),
-            Ok(other) => return Err((1, format!("unexpected answer: {other:?}"))),
-            Err(e) => return Err((2, e.to_string())),
-        };
-        let snap = cell_client::status::read(&instance).map_err(|e| (1, e))?;
-        Ok(cell_client::status::status(&instance, &snap, info))
+        match ctl::call(&instance, &Request::Status) {
+            Ok(Reply::Status(status)) => Ok(*status),
+            Ok(Reply::Refused(m)) => Err((2, m.to_string())),
+            Ok(other) => Err((1, format!("unexpected answer: {other:?}"))),
+            Err(e) => Err((e.exit_code(), e.to_string())),
+        }
     };
     loop {
         match once() {
             Ok(status) => {
-                let text = cell_client::status::human(&status);
+                let text = control_plane::compose::human(&status);
                 if json {
                     println!("{}", serde_json::to_string(&status).unwrap_or_default());
                 } else if watch {
@@ -582,6 +586,8 @@ fn main() -> ExitCode {
     runtime::abort_on_panic();
     // /dev/shm full: every command says so and exits 1 (it died by SIGBUS, exit 135).
     let _ = runtime::signals::explain_sigbus();
+    // A shell's 1024 open files are too few for a cell of many ports (its processes inherit it).
+    runtime::fds::raise_limit();
     let cli = Cli::parse();
     let watching = matches!(
         cli.cmd,

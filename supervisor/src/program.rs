@@ -20,9 +20,6 @@ pub const MAX_PROGRAM_S: f64 = 86_400.0;
 /// The validation samples the path at least this often (s).
 pub const SAMPLE_S: f64 = 0.001;
 
-/// Steps of the prediction between two calls of its keep-alive (a few milliseconds' work).
-const KEEPALIVE_STEPS: u64 = 2000;
-
 /// A parsed program that passed the checks that need no start position.
 #[derive(Clone, Debug)]
 pub struct Checked {
@@ -124,18 +121,13 @@ impl Checked {
 
     /// Runs the program through trajgen's generator from `start` (joint positions): its
     /// motion time, and every reference checked against the joint limits and velocities.
-    /// `keepalive` is called every few thousand steps: a supervisor that predicts a long
-    /// program meanwhile keeps beating (its processes would take its silence for its death).
-    pub fn predict(
-        &self,
-        cfg: &Config,
-        start: &[f64],
-        keepalive: &mut dyn FnMut(),
-    ) -> Result<Predicted, RunError> {
+    /// A long program takes seconds (about one for each hour of motion): a running cell does
+    /// it on a thread of its own ([`Validation`]).
+    pub fn predict(&self, cfg: &Config, start: &[f64]) -> Result<Predicted, RunError> {
         let forever = self.program.forever();
-        let once = self.simulate(cfg, start, forever.then_some(1), keepalive)?;
+        let once = self.simulate(cfg, start, forever.then_some(1))?;
         let iteration_s = if forever {
-            let twice = self.simulate(cfg, start, Some(2), keepalive)?;
+            let twice = self.simulate(cfg, start, Some(2))?;
             Some(twice.duration_s - once.duration_s)
         } else {
             None
@@ -152,7 +144,6 @@ impl Checked {
         cfg: &Config,
         start: &[f64],
         forever_as: Option<u32>,
-        keepalive: &mut dyn FnMut(),
     ) -> Result<Prediction, RunError> {
         let p = params(cfg);
         let generator = Generator::with_kinematics(p, kin(cfg)?, start);
@@ -161,12 +152,7 @@ impl Checked {
         // and at every transition the generator asks for.
         let dt = cfg.period_s("trajgen").clamp(1e-4, SAMPLE_S);
         let mut violation: Option<String> = None;
-        let mut steps = 0u64;
         let mut check = |sp: &shm_schema::SetpointV2| {
-            steps += 1;
-            if steps.is_multiple_of(KEEPALIVE_STEPS) {
-                keepalive();
-            }
             if violation.is_some() {
                 return;
             }
@@ -216,5 +202,45 @@ impl Checked {
                 MAX_PROGRAM_S / 3600.0
             ))),
         }
+    }
+}
+
+/// A program's prediction ([`Checked::predict`]) computed on a thread of its own, so that the
+/// supervisor's loop goes on meanwhile: the heartbeat, the health checks and the control
+/// channel (`status`, `estop`, `down`) are never blind while a long program is validated.
+pub(crate) struct Validation {
+    /// The program.
+    pub(crate) program: Checked,
+    /// The joint positions it is validated from.
+    pub(crate) start: Vec<f64>,
+    thread: Option<std::thread::JoinHandle<Result<Predicted, RunError>>>,
+}
+
+impl Validation {
+    /// Starts validating `program` from `start` (joint positions).
+    pub(crate) fn start(cfg: &Config, program: Checked, start: &[f64]) -> Result<Self, RunError> {
+        let (cfg, p, from) = (cfg.clone(), program.clone(), start.to_vec());
+        let thread = std::thread::Builder::new()
+            .name("validation".into())
+            .spawn(move || p.predict(&cfg, &from))
+            .map_err(|e| RunError::system(format!("cannot start the validation: {e}")))?;
+        Ok(Self {
+            program,
+            start: start.to_vec(),
+            thread: Some(thread),
+        })
+    }
+
+    /// The prediction once it is done (a validation that died says so).
+    pub(crate) fn done(&mut self) -> Option<Result<Predicted, RunError>> {
+        if !self.thread.as_ref()?.is_finished() {
+            return None;
+        }
+        let thread = self.thread.take()?;
+        Some(
+            thread
+                .join()
+                .unwrap_or_else(|_| Err(RunError::system("the validation failed unexpectedly"))),
+        )
     }
 }

@@ -51,7 +51,7 @@ pub fn check_program(
         .map_err(|e| RunError::Input(format!("{}: cannot read: {e}", path.display())))?;
     let program = Checked::new(cfg, &path.display().to_string(), &bytes)?;
     let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
-    let predicted = program.predict(cfg, &start, &mut || {})?;
+    let predicted = program.predict(cfg, &start)?;
     Ok((program, predicted))
 }
 
@@ -129,6 +129,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             Err(e) => return Err(e),
         },
         End::Interrupted => return Err(RunError::Interrupted),
+        End::Failed(e) => return Err(*e),
         End::Down | End::Tuned(_) => {
             return Err(RunError::failed(Failure::Down {
                 job: "the program".into(),

@@ -18,7 +18,7 @@ use crate::cell::{Cell, Incident, Mode};
 use crate::error::RunError;
 use crate::job::{Enabling, Job};
 use crate::launch::cpu_seconds;
-use crate::program::Checked;
+use crate::program::{Checked, Predicted, Validation};
 use crate::report::{Report, process_report};
 use crate::swap::{Step, Swap};
 use crate::tune::{Measured, Tuning};
@@ -66,6 +66,9 @@ pub(crate) enum End {
     Program(Box<Result<Report, RunError>>),
     /// `tune`: the session ended (or the cell failed before it could start).
     Tuned(Box<Result<Measured, RunError>>),
+    /// `up`: the cell could not come up (a critical process exited, stalled or never cycled
+    /// before every one of them had cycled once): a restart would not mend a configuration.
+    Failed(Box<RunError>),
 }
 
 /// How long the user's e-stop waits for a process to report it latched.
@@ -149,6 +152,28 @@ struct Loop<'a> {
     stopping: Option<Stopping>,
     /// A `swap` or `restart` in progress, who asked, and whether the drives were enabled.
     swapping: Option<Swapping>,
+    /// A program being validated (on a thread of its own), and what follows.
+    validating: Option<Validating>,
+    /// Every critical process has cycled once: the cell came up.
+    came_up: bool,
+}
+
+/// A program being validated before it starts ([`Validation`]).
+struct Validating {
+    validation: Validation,
+    then: Then,
+}
+
+/// What starts once a program is validated.
+#[derive(Clone, Copy)]
+enum Then {
+    /// `exec`: answer who asked (at once, or at the program's end with `--wait`).
+    Exec {
+        conn: ConnId,
+        waiter: Option<Waiter>,
+    },
+    /// `run`'s program.
+    Run { progress: bool, plot: bool },
 }
 
 /// A replacement the loop steps ([`crate::swap`]).
@@ -178,6 +203,8 @@ pub(crate) fn serve(
         down: false,
         stopping: None,
         swapping: None,
+        validating: None,
+        came_up: false,
     };
     loop {
         l.wait();
@@ -235,6 +262,17 @@ impl Loop<'_> {
                 self.cell.events.drain(..10_000);
             }
         }
+        if !self.came_up {
+            let cell = &*self.cell;
+            self.came_up = (0..cell.names.len()).all(|k| cell.cyclic(k) || !cell.critical(k));
+            // `run` ends on any incident below; `up` on one before it came up.
+            if !run
+                && !self.came_up
+                && let Some(i) = incidents.first()
+            {
+                return Some(self.failed_to_come_up(i.error()));
+            }
+        }
         if let Some((en, waiters)) = &mut self.enabling {
             let outcome = if run && let Some(i) = incidents.first() {
                 Some(Err(i.error()))
@@ -244,6 +282,15 @@ impl Loop<'_> {
             if let Some(result) = outcome {
                 let waiters = std::mem::take(waiters);
                 self.enabling = None;
+                let result = match result {
+                    Err(e) if !run && !self.came_up => {
+                        for c in waiters {
+                            self.server.reply(c, &Reply::Failed(e.cause()));
+                        }
+                        return Some(self.failed_to_come_up(e));
+                    }
+                    r => r,
+                };
                 match &result {
                     Ok(_) => {
                         tracing::info!("the drives are enabled, holding");
@@ -275,15 +322,15 @@ impl Loop<'_> {
                     }
                     (Ok(sp), Some(First::Program(p))) => {
                         let n = self.cfg.axis.len();
-                        match p
-                            .program
-                            .predict(self.cfg, &sp.position[..n], &mut || self.cell.beat())
-                        {
-                            Ok(predicted) => {
-                                let mut job =
-                                    Job::new(self.cfg, &p.program, predicted, &sp, p.progress);
-                                job.plot = p.plot;
-                                self.begin(job, Vec::new());
+                        match Validation::start(self.cfg, p.program, &sp.position[..n]) {
+                            Ok(validation) => {
+                                self.validating = Some(Validating {
+                                    validation,
+                                    then: Then::Run {
+                                        progress: p.progress,
+                                        plot: p.plot,
+                                    },
+                                });
                             }
                             Err(e) => {
                                 return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
@@ -295,6 +342,14 @@ impl Loop<'_> {
                     }
                     _ => {}
                 }
+            }
+        }
+        if let Some(v) = &mut self.validating
+            && let Some(result) = v.validation.done()
+        {
+            let v = self.validating.take().expect("checked");
+            if let Some(end) = self.validated(v, result) {
+                return Some(end);
             }
         }
         if let Some(t) = &mut self.tuning
@@ -392,6 +447,12 @@ impl Loop<'_> {
         });
     }
 
+    /// `up`'s cell could not come up: how the loop ends, with the events that tell why.
+    fn failed_to_come_up(&mut self, e: RunError) -> End {
+        tracing::error!("the cell did not come up: {e}");
+        End::Failed(Box::new(self.with_events(e, 0)))
+    }
+
     /// Asks servo to disable the drives if they are powered (it brings its reference to rest
     /// along its path, then powers down).
     fn disable(&mut self) {
@@ -457,6 +518,17 @@ impl Loop<'_> {
     /// The cell goes down (`why` of what was under way): whoever waits gets told, not
     /// dropped.
     fn abandon(&mut self, why: impl Fn(&str) -> Failure) {
+        if let Some(v) = self.validating.take()
+            && let Then::Exec { conn, .. } = v.then
+        {
+            self.server.reply(
+                conn,
+                &Reply::Failed(why(&format!(
+                    "the validation of {}",
+                    v.validation.program.name
+                ))),
+            );
+        }
         if let Some(r) = self.running.take() {
             let e = self.with_events(RunError::failed(why(&r.job.name)), r.events_from);
             let e = self.with_figures(e, &r.job);
@@ -588,7 +660,7 @@ impl Loop<'_> {
             }
             return;
         }
-        if self.stopping.is_some() && !matches!(req, Request::Info) {
+        if self.stopping.is_some() && !matches!(req, Request::Info | Request::Status) {
             let reply = match req {
                 Request::Down => Reply::Done(format!(
                     "instance {}: already going down",
@@ -603,7 +675,7 @@ impl Loop<'_> {
         }
         // A tuning session or a swap in progress: what would change the cell waits for its
         // end; `down` ends a tuning session, and is kept for after a swap.
-        if !matches!(req, Request::Info | Request::Down)
+        if !matches!(req, Request::Info | Request::Status | Request::Down)
             && let Some(busy) = self.busy()
         {
             self.server.reply(conn, &Reply::Refused(busy));
@@ -611,6 +683,12 @@ impl Loop<'_> {
         }
         let reply = match req {
             Request::Info => Some(Reply::Info(Box::new(self.info()))),
+            Request::Status => {
+                let info = self.info();
+                let snap = self.cell.snapshot();
+                let status = control_plane::compose::status(&self.cell.instance, &snap, info);
+                Some(Reply::Status(Box::new(status)))
+            }
             Request::Exec {
                 name,
                 source,
@@ -623,7 +701,7 @@ impl Loop<'_> {
                     trace,
                     figures,
                 });
-                self.exec(name, &source, waiter)
+                self.exec(conn, name, &source, waiter)
             }
             Request::Pause => self.control(conn, ControlKind::Pause),
             Request::Resume => self.control(conn, ControlKind::Resume),
@@ -672,6 +750,10 @@ impl Loop<'_> {
                 paused: sp.is_some_and(|s| s.path_speed == 0.0),
             }
         });
+        info.validating = self
+            .validating
+            .as_ref()
+            .map(|v| v.validation.program.name.clone());
         info.last_job = self.last_job.clone();
         info.enabling = self.enabling.is_some();
         info.swapping = self.swapping.as_ref().map(|s| s.swap.process().to_string());
@@ -685,6 +767,11 @@ impl Loop<'_> {
 
     /// Why a program cannot start now, if it cannot.
     fn not_ready(&self) -> Option<Refusal> {
+        if let Some(v) = &self.validating {
+            return Some(Refusal::Validating {
+                program: v.validation.program.name.clone(),
+            });
+        }
         if let Some(r) = &self.running {
             return Some(Refusal::ProgramRunning {
                 program: r.job.name.clone(),
@@ -715,7 +802,16 @@ impl Loop<'_> {
         None
     }
 
-    fn exec(&mut self, name: String, src: &[u8], waiter: Option<Waiter>) -> Option<Reply> {
+    /// `exec`: the program is parsed and checked against the limits at once, then validated
+    /// from where the axes stand on a thread of its own ([`Validation`]); it starts (and `exec`
+    /// is answered) once that is done ([`Loop::validated`]).
+    fn exec(
+        &mut self,
+        conn: ConnId,
+        name: String,
+        src: &[u8],
+        waiter: Option<Waiter>,
+    ) -> Option<Reply> {
         let program = match Checked::new(self.cfg, &name, src) {
             Ok(p) => p,
             Err(e) => {
@@ -730,15 +826,50 @@ impl Loop<'_> {
         let Some(sp) = self.cell.last_sp else {
             return Some(Reply::Refused(Refusal::NoSetpoint));
         };
-        // Validated from where the axes stand, with trajgen's own generator.
         let n = self.cfg.axis.len();
-        let predicted = match program.predict(self.cfg, &sp.position[..n], &mut || self.cell.beat())
-        {
-            Ok(p) => p,
-            Err(e) => {
-                return Some(Reply::Refused(Refusal::Program {
-                    error: e.to_string(),
-                }));
+        match Validation::start(self.cfg, program, &sp.position[..n]) {
+            Ok(validation) => {
+                self.validating = Some(Validating {
+                    validation,
+                    then: Then::Exec { conn, waiter },
+                });
+                None
+            }
+            Err(e) => Some(Reply::Failed(e.cause())),
+        }
+    }
+
+    /// A validation is done: the program starts if the cell is still ready and the axes stand
+    /// where it was validated from; else who asked is told why. `Some` when `run` is over.
+    fn validated(&mut self, v: Validating, result: Result<Predicted, RunError>) -> Option<End> {
+        let name = v.validation.program.name.clone();
+        let n = self.cfg.axis.len();
+        let start = match (result, self.not_ready(), self.cell.last_sp) {
+            (Err(e), ..) => Err(e),
+            (Ok(_), Some(why), _) => Err(RunError::Input(why.to_string())),
+            (Ok(_), None, None) => Err(RunError::Input(Refusal::NoSetpoint.to_string())),
+            (Ok(predicted), None, Some(sp)) => {
+                if sp.position[..n] == v.validation.start[..] {
+                    Ok((predicted, sp))
+                } else {
+                    Err(RunError::Input(format!(
+                        "{name}: the axes moved while it was validated; send it again"
+                    )))
+                }
+            }
+        };
+        let (predicted, sp) = match (start, v.then) {
+            (Ok(ok), _) => ok,
+            (Err(e), Then::Run { .. }) => {
+                return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
+            }
+            (Err(e), Then::Exec { conn, .. }) => {
+                let reply = match e {
+                    RunError::Input(error) => Reply::Refused(Refusal::Program { error }),
+                    e => Reply::Failed(e.cause()),
+                };
+                self.server.reply(conn, &reply);
+                return None;
             }
         };
         let text = match predicted.iteration_s {
@@ -748,12 +879,24 @@ impl Loop<'_> {
             ),
             None => format!("started {name}: predicted {:.2} s", predicted.duration_s),
         };
-        let mut job = Job::new(self.cfg, &program, predicted, &sp, false);
-        job.plot = waiter.is_some_and(|w| w.figures);
-        self.cell.events.clear();
-        let wait = waiter.is_some();
-        self.begin(job, waiter.into_iter().collect());
-        (!wait).then_some(Reply::Done(text))
+        let program = &v.validation.program;
+        match v.then {
+            Then::Run { progress, plot } => {
+                let mut job = Job::new(self.cfg, program, predicted, &sp, progress);
+                job.plot = plot;
+                self.begin(job, Vec::new());
+            }
+            Then::Exec { conn, waiter } => {
+                let mut job = Job::new(self.cfg, program, predicted, &sp, false);
+                job.plot = waiter.is_some_and(|w| w.figures);
+                self.cell.events.clear();
+                self.begin(job, waiter.into_iter().collect());
+                if waiter.is_none() {
+                    self.server.reply(conn, &Reply::Done(text));
+                }
+            }
+        }
+        None
     }
 
     /// The live speed override: taken by trajgen at once, running program or not (it stays

@@ -198,6 +198,7 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     let measured = match end {
         End::Tuned(m) => *m,
         End::Interrupted => Err(RunError::Interrupted),
+        End::Failed(e) => Err(*e),
         End::Down | End::Program(_) => Err(RunError::failed(Failure::Down {
             job: "the tuning".into(),
         })),

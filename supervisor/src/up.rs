@@ -5,6 +5,7 @@ use crate::cell::{Mode, open_cell};
 use crate::error::RunError;
 use crate::serve::{End, serve};
 use cell_config::Config;
+use control_plane::Failure;
 use shm_schema::InstanceName;
 use std::path::Path;
 
@@ -57,10 +58,20 @@ pub fn up(
         End::Down => "supervisor down",
         End::Interrupted => "a signal",
         End::Program(_) | End::Tuned(_) => "the program",
+        End::Failed(e) => {
+            tracing::info!("instance {instance}: going down (it did not come up)");
+            let _ = cell.close(server);
+            return Err(*e);
+        }
     };
+    // A critical process lost for good: the cell ran without it, which `up` says in its exit.
+    let lost = cell.lost_for_good();
     tracing::info!("instance {instance}: going down ({why})");
     if let Some(e) = cell.close(server).problem {
         return Err(e);
+    }
+    if let Some((process, why)) = lost {
+        return Err(RunError::failed(Failure::LostForGood { process, why }));
     }
     Ok(format!("instance {instance} is down ({why})"))
 }

@@ -94,7 +94,7 @@ fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
     });
 }
 
-/// An observer (`supervisor status` here) SIGKILLed at any moment of attaching to a running
+/// An observer (`supervisor events` here) SIGKILLed at any moment of attaching to a running
 /// cell is never blamed on the cell: `down` exits 0 and nothing is left. Before the fix, a node
 /// killed half-created (iceoryx2 cannot clean it: no details) made `down` exit 1, "iceoryx2
 /// resources left behind".
@@ -105,20 +105,328 @@ fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
         for ms in (0..=40).step_by(2) {
-            let mut status = supervisor()
-                .args(["status", "--instance", &up.inst])
+            // `events` attaches to the cell's shared memory (`status` asks the supervisor).
+            let mut observer = supervisor()
+                .args(["events", "--instance", &up.inst])
                 .stdout(Stdio::null())
                 .stderr(Stdio::null())
                 .spawn()
-                .expect("status");
+                .expect("events");
             std::thread::sleep(Duration::from_millis(ms));
-            let _ = status.kill();
-            let _ = status.wait();
+            let _ = observer.kill();
+            let _ = observer.wait();
         }
         // Half-created nodes are cleaned once a second old (not one being created right now).
         std::thread::sleep(Duration::from_millis(1500));
         let log = up.down();
         assert!(!log.contains("left behind"), "{log}");
+    });
+}
+
+/// Item 10: twenty `status` at once, while a program moves, all answer (they ask the
+/// supervisor, which composes the document from its own ports; before, each opened a dozen
+/// ports of the cell and 13 of 20 exited 1 with iceoryx2's `ExceedsMaxSupportedSubscribers`).
+/// An observer that does find every slot of a service taken says so in words and exits 2,
+/// and the cell goes down clean after all of them.
+#[test]
+fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
+    integration_tests::attributable(|| {
+        let test = "many-observers";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        moving(&up);
+        let statuses: Vec<_> = (0..20)
+            .map(|_| {
+                supervisor()
+                    .args(["status", "--json", "--instance", &up.inst])
+                    .stdout(Stdio::piped())
+                    .stderr(Stdio::piped())
+                    .spawn()
+                    .expect("status")
+            })
+            .collect();
+        for child in statuses {
+            let out = child.wait_with_output().expect("status");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(out.status.success(), "status failed: {err}");
+            let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+            assert!(
+                j["processes"]["servo"]["cycles"]
+                    .as_u64()
+                    .is_some_and(|c| c > 0)
+                    && j["supervisor"]["job"]["program"]
+                        .as_str()
+                        .is_some_and(|n| n.contains("triangle"))
+                    && j["program"]["line"].as_u64().is_some_and(|l| l > 0),
+                "status without servo's cycles or the program: {j}"
+            );
+        }
+        // `events --follow` until one finds the events service's subscriber slots all taken
+        // (it has 16: the supervisor holds one).
+        let mut followers = Vec::new();
+        let refused = loop {
+            assert!(followers.len() < 40, "40 followers, none refused");
+            let mut child = supervisor()
+                .args(["events", "--follow", "--instance", &up.inst])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("events");
+            // Attached, or refused: a refused one exits at once; one that is slow to be
+            // refused is counted as attached, and the next one is refused.
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs(2)
+                && child.try_wait().ok().flatten().is_none()
+            {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            match child.try_wait().ok().flatten() {
+                Some(_) => break child.wait_with_output().expect("events"),
+                None => followers.push(child),
+            }
+        };
+        let err = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("/events: all its slots are taken (16 subscribers at once)")
+                && !err.contains("Exceeds"),
+            "not said in words: {err}"
+        );
+        for child in &followers {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(child.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+        for mut child in followers {
+            let _ = child.wait();
+        }
+        let log = up.down();
+        assert!(!log.contains("left behind"), "{log}");
+    });
+}
+
+/// Item 11: while `exec` validates a program of hours (its prediction takes seconds), the
+/// cell's control goes on: `status` answers and shows it being validated, another program is
+/// refused as busy, and `down` ends the validation (its `exec` told so, exit 1) and takes the
+/// cell down clean. Before, the control channel was blind for the whole validation (6 s for a
+/// 23-hour program).
+#[test]
+fn a_long_validation_never_blinds_the_control_channel() {
+    integration_tests::attributable(|| {
+        let test = "long-validation";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        // The triangle 5000 times: 23.6 hours of motion, seconds of validation (ended by
+        // `down` long before it is done).
+        let prog = integration_tests::scratch(
+            test,
+            "long.prog",
+            "MOVE(40,40,0)\nREPEAT 5000\nMOVE(140,40,0)\nMOVE(90,126,0)\nMOVE(40,40,0)\n\
+             ENDREPEAT\nEND\n",
+        );
+        let prog = prog.to_str().expect("path");
+        let exec = supervisor()
+            .args(["exec", prog, "--instance", &up.inst])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("exec");
+        let seen = up.until("the program being validated", |s| {
+            s["supervisor"]["validating"]
+                .as_str()
+                .is_some_and(|p| p.ends_with("long.prog"))
+        });
+        assert!(seen["supervisor"]["job"].is_null(), "{seen}");
+        let busy = up.refused(&[
+            "exec",
+            examples().join("triangle.prog").to_str().expect("path"),
+        ]);
+        assert!(busy.contains("long.prog is being validated"), "{busy}");
+        // Still validating (else this test checks nothing): down ends it.
+        let still = up.status();
+        assert!(
+            still["supervisor"]["validating"].is_string(),
+            "the validation ended before the test could go down: {still}"
+        );
+        let log = up.down();
+        let out = exec.wait_with_output().expect("exec");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "exec: {err}\n{log}");
+        assert!(
+            err.contains("stopped the cell before the validation of") && err.contains("long.prog"),
+            "exec: {err}"
+        );
+        assert!(error_events(&log).is_empty(), "{log}");
+    });
+}
+
+/// Item 13: a configuration `check-config` accepts whose process cannot come up (iobridge's
+/// command is `false`: it exits at once) ends `up` at once, exit 1, naming the process; before,
+/// `up` stayed alive restarting it and exited 0 at `down`. A critical process lost for good
+/// after the cell came up (`restart = "never"`, then killed) makes `up` exit 1 at `down`,
+/// naming it: the cell ran without it.
+#[test]
+fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_down() {
+    integration_tests::attributable(|| {
+        let test = "never-up";
+        let cfg = integration_tests::CellToml::parse(&integration_tests::with_stall_room(
+            &integration_tests::default_cell(),
+        ))
+        .set(
+            "process[iobridge].command",
+            toml_edit::Value::from_iter(["false"]),
+        )
+        .write(test, "cell.toml");
+        let check = run_with_watchdog(supervisor().arg("check-config").arg(&cfg), WATCHDOG);
+        assert!(
+            check.status.success(),
+            "{}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+        let inst = instance(test);
+        let out = run_with_watchdog(
+            supervisor()
+                .args(["up", "--instance", &inst, "--config"])
+                .arg(&cfg),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("the cell did not come up") && err.contains("iobridge"),
+            "{err}"
+        );
+        integration_tests::assert_clean(&inst);
+
+        let test = "lost-for-good";
+        let cfg = integration_tests::CellToml::parse(&integration_tests::with_stall_room(
+            &integration_tests::default_cell(),
+        ))
+        .add("process[iobridge].restart", "never")
+        .write(test, "cell.toml");
+        let up = Up::start(test, &cfg);
+        let pid = up.status()["supervisor"]["processes"]
+            .as_array()
+            .and_then(|ps| ps.iter().find(|p| p["name"] == "iobridge"))
+            .and_then(|p| p["pid"].as_i64())
+            .expect("iobridge's pid");
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid as i32),
+            nix::sys::signal::Signal::SIGKILL,
+        )
+        .expect("kill");
+        up.until("iobridge down for good", |s| {
+            s["supervisor"]["processes"]
+                .as_array()
+                .and_then(|ps| ps.iter().find(|p| p["name"] == "iobridge"))
+                .is_some_and(|p| p["life"] == "down")
+        });
+        let (code, log) = up.down_exit();
+        assert_eq!(code, Some(1), "{log}");
+        assert!(
+            log.contains("iobridge was lost for good and the cell ran without it"),
+            "{log}"
+        );
+    });
+}
+
+/// `cmd` with its soft and hard limit of open files at `n`.
+fn with_open_files(cmd: &mut Command, n: u64) -> &mut Command {
+    // SAFETY: between fork and exec one system call, setrlimit(2).
+    unsafe {
+        cmd.pre_exec(move || {
+            nix::sys::resource::setrlimit(nix::sys::resource::Resource::RLIMIT_NOFILE, n, n)
+                .map_err(std::io::Error::from)
+        })
+    }
+}
+
+/// The node files (`…/nodes/…`) process `pid` holds open.
+fn node_files(pid: u32) -> Vec<String> {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| std::fs::read_link(e.path()).ok())
+        .map(|p| p.display().to_string())
+        .filter(|p| p.contains("/nodes/"))
+        .collect()
+}
+
+/// Item 9: too few open files. `up` under a limit of 64 says "too many open files" in one
+/// short line and exits 1, leaving nothing (it said `UnableToCreateServiceTag` among 4-6 KB of
+/// iceoryx2's dumps); clients under a limit too low say so too (not "not running"), exit 2,
+/// and leave nothing that fails the cell's `down` (they left node files that made every later
+/// `up` and `down` exit 1). The processes of a cell hold none of the supervisor's files (they
+/// inherited its node, liveness lock included, and a descriptor per port of it).
+#[test]
+fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
+    integration_tests::attributable(|| {
+        let test = "few-files-up";
+        let cfg = cell(test, &[]);
+        let inst = instance(test);
+        let out = run_with_watchdog(
+            with_open_files(
+                supervisor()
+                    .args(["up", "--instance", &inst, "--config"])
+                    .arg(&cfg),
+                64,
+            ),
+            WATCHDOG,
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("too many open files"), "{err}");
+        assert!(err.len() < 1024, "more than a line: {err}");
+        integration_tests::assert_clean(&inst);
+
+        let test = "few-files-clients";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        // `events` cannot attach: 2, not up as far as it can tell; `io`: 1, it failed.
+        for (args, limit, code) in [
+            (&["events"][..], 8, 2),
+            (&["events"][..], 12, 2),
+            (&["io"][..], 8, 1),
+        ] {
+            let out = run_with_watchdog(
+                with_open_files(
+                    supervisor().args(args).args(["--instance", &up.inst]),
+                    limit,
+                ),
+                WATCHDOG,
+            );
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(code), "{args:?} at {limit}: {err}");
+            assert!(
+                err.contains("too many open files"),
+                "{args:?} at {limit}: {err}"
+            );
+        }
+        // The supervisor's node files are its own.
+        let supervisor_pid = up.child.as_ref().expect("up").id();
+        let ours = node_files(supervisor_pid);
+        assert!(!ours.is_empty(), "the supervisor holds no node file?");
+        for name in ["trajgen", "servo", "drives", "iobridge"] {
+            let pid = up.status()["supervisor"]["processes"]
+                .as_array()
+                .and_then(|ps| ps.iter().find(|p| p["name"] == name))
+                .and_then(|p| p["pid"].as_u64())
+                .expect("pid") as u32;
+            let shared: Vec<_> = node_files(pid)
+                .into_iter()
+                .filter(|f| ours.contains(f))
+                .collect();
+            assert!(
+                shared.is_empty(),
+                "{name} holds the supervisor's {shared:?}"
+            );
+        }
+        let log = up.down();
+        assert!(!log.contains("left behind"), "{log}");
+        // And the next `up` of the instance works.
+        Up::start(test, &cfg).down();
     });
 }
 

@@ -211,6 +211,17 @@ impl Up {
         self.ended("SIGTERM")
     }
 
+    /// `down`, then `up`'s exit code (whatever it is) and its log; nothing of the instance
+    /// may be left.
+    pub(crate) fn down_exit(mut self) -> (Option<i32>, String) {
+        self.ok(&["down"]);
+        let child = self.child.take().expect("running");
+        let out = wait_child(child);
+        let log = self.log();
+        assert_clean(&self.inst);
+        (out.code(), log)
+    }
+
     fn ended(&mut self, how: &str) -> String {
         let child = self.child.take().expect("running");
         let out = wait_child(child);

@@ -1,30 +1,28 @@
-//! `supervisor status`: what the processes of a running instance report about themselves,
-//! their cycle counts, overruns and wake-up latency percentiles since they started, the
-//! servo layer's state (power, settled, a latched fault, every drive's CiA 402 state) and the
-//! drives' sense-to-command latency.
+//! `supervisor status`'s document composed from what the processes of a running instance
+//! publish about themselves (their cycle counts, overruns and wake-up latency percentiles since
+//! they started, the servo layer's state: power, settled, a latched fault, every drive's CiA 402
+//! state, the drives' sense-to-command latency) with the supervisor's own view ([`Info`]). The
+//! supervisor composes it from the newest samples its own ports took ([`Request::Status`]), so
+//! a client of `status` opens no port of the cell; [`human`] is its text.
+//!
+//! [`Request::Status`]: crate::Request::Status
 
-use control_plane::Info;
-use control_plane::status::{
+use crate::Info;
+use crate::status::{
     AxisStatus, Detector, EstopSeen, EstopStatus, Health, Hold, HoldKind, HoldWord, IoEntry,
     IoStatus, MotionState, Percentiles, Power, ProcState, ProcessStatus, ProgramStatus, SafeValue,
     ServoFault, ServoStatus, Space, Status,
 };
 use indexmap::IndexMap;
-use runtime::ipc::{self, Sub};
-use runtime::rt::policy_name;
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopState, HostStateV1};
+use shm_schema::status::policy_name;
 use shm_schema::{
     CellConfigV6, DetectorV1, DigitalIoV1, InstanceName, IoDirection, LatencyHistogramV1,
-    ProcessName, ProcessStatusV2, ServiceId, ServoStateV3, SetpointV2, estop_seen, str_of,
+    ProcessStatusV2, ServoStateV3, SetpointV2, estop_seen, str_of,
 };
-use std::time::{Duration, Instant};
 
-/// How long `status` listens for the processes' publications (the latency histogram comes
-/// about every 100 ms).
-pub const LISTEN: Duration = Duration::from_millis(600);
-
-/// One process as seen by `status`.
+/// One process as its own ports last said.
 #[derive(Clone, Debug)]
 pub struct Seen {
     /// Its name.
@@ -37,10 +35,10 @@ pub struct Seen {
     pub exec_time: Option<Box<LatencyHistogramV1>>,
 }
 
-/// Everything `status` read.
+/// The newest of everything the processes publish that `status` shows.
 #[derive(Clone, Debug)]
 pub struct Snapshot {
-    /// The processes that published a status.
+    /// The processes that run and published a status, in the table's order.
     pub processes: Vec<Seen>,
     /// Servo's latest state.
     pub servo: Option<ServoStateV3>,
@@ -54,134 +52,6 @@ pub struct Snapshot {
     pub setpoint: Option<SetpointV2>,
     /// iobridge's newest image of the named digital IO.
     pub io: Option<DigitalIoV1>,
-}
-
-/// Reads the status and latency of every process of `instance`. Errors when nothing of the
-/// instance is running.
-pub fn read(instance: &InstanceName) -> Result<Snapshot, String> {
-    ipc::quiet_iceoryx2_log();
-    let live = ipc::live_node_pids(instance).unwrap_or_default();
-    if live.is_empty() {
-        return Err(format!(
-            "no process of instance {instance} is running (start one with `supervisor run --instance {instance} PROGRAM`)"
-        ));
-    }
-    let f = |e: ipc::IpcError| e.to_string();
-    let node = ipc::node(instance, &format!("status-{}", std::process::id())).map_err(f)?;
-    let cell_sub =
-        Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1).map_err(f)?;
-    let start = Instant::now();
-    let cell = loop {
-        if let Some(c) = cell_sub.latest() {
-            break Box::new(c);
-        }
-        if start.elapsed() > LISTEN {
-            drop(cell_sub);
-            drop(node);
-            ipc::cleanup_after_client(instance);
-            return Err(format!(
-                "instance {instance} has live nodes (pids {live:?}) but publishes no cell configuration"
-            ));
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    };
-    let mut ports = Vec::new();
-    let mut seen: Vec<Seen> = Vec::new();
-    for (k, p) in cell.processes().iter().enumerate() {
-        let Some(name) = ProcessName::from_field(&p.name) else {
-            continue;
-        };
-        let status =
-            Sub::<ProcessStatusV2>::new(&node, instance, ServiceId::Status(name), 4).map_err(f)?;
-        let latency = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::Latency(name), 1)
-            .map_err(f)?;
-        let exec = Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::ExecTime(name), 1)
-            .map_err(f)?;
-        ports.push((k, status, latency, exec));
-        seen.push(Seen {
-            name: name.to_string(),
-            status: ProcessStatusV2::default(),
-            latency: None,
-            exec_time: None,
-        });
-    }
-    let servo_sub =
-        Sub::<ServoStateV3>::new(&node, instance, ServiceId::ServoState, 4).map_err(f)?;
-    let sense_sub =
-        Sub::<LatencyHistogramV1>::new(&node, instance, ServiceId::SenseToCommand, 1).map_err(f)?;
-    let host_sub = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(f)?;
-    let setpoint_sub =
-        Sub::<SetpointV2>::new(&node, instance, ServiceId::Setpoint, 4).map_err(f)?;
-    let io_sub = Sub::<DigitalIoV1>::new(&node, instance, ServiceId::IoState, 1).map_err(f)?;
-    let (mut servo, mut sense, mut host, mut setpoint, mut io) = (None, None, None, None, None);
-    let mut heard = vec![false; seen.len()];
-    let start = Instant::now();
-    while start.elapsed() < LISTEN {
-        for (k, ((_, status, latency, exec), p)) in ports.iter().zip(seen.iter_mut()).enumerate() {
-            if let Some(x) = status.latest() {
-                p.status = x;
-                heard[k] = true;
-            }
-            if let Some(x) = latency.latest() {
-                p.latency = Some(Box::new(x));
-            }
-            if let Some(x) = exec.latest() {
-                p.exec_time = Some(Box::new(x));
-            }
-        }
-        if let Some(x) = servo_sub.latest() {
-            servo = Some(x);
-        }
-        if let Some(x) = sense_sub.latest() {
-            sense = Some(Box::new(x));
-        }
-        if let Some(x) = host_sub.latest() {
-            host = Some(x);
-        }
-        if let Some(x) = setpoint_sub.latest() {
-            setpoint = Some(x);
-        }
-        if let Some(x) = io_sub.latest() {
-            io = Some(x);
-        }
-        if heard.iter().all(|h| *h)
-            && seen
-                .iter()
-                .all(|p| p.latency.is_some() && p.exec_time.is_some())
-            && servo.is_some()
-            && sense.is_some()
-            && host.is_some()
-            && setpoint.is_some()
-            && (io.is_some() || cell.io().is_empty())
-        {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    drop((host_sub, setpoint_sub, io_sub));
-    drop((ports, servo_sub, cell_sub, sense_sub));
-    drop(node);
-    ipc::cleanup_after_client(instance);
-    let out: Vec<Seen> = seen
-        .into_iter()
-        .zip(heard)
-        .filter_map(|(p, h)| h.then_some(p))
-        .collect();
-    if out.is_empty() {
-        return Err(format!(
-            "instance {instance} has live nodes (pids {live:?}) but no process published a status within {} ms",
-            LISTEN.as_millis()
-        ));
-    }
-    Ok(Snapshot {
-        processes: out,
-        servo,
-        cell: Some(cell),
-        sense_to_command: sense,
-        host,
-        setpoint,
-        io,
-    })
 }
 
 /// The named digital IO: per entry its name, direction, value (`None` before iobridge's first
@@ -289,7 +159,7 @@ fn estop_status(snap: &Snapshot) -> Option<EstopStatus> {
     let names = snap
         .cell
         .as_deref()
-        .map(control_plane::event::Axes::of_cell)
+        .map(crate::event::Axes::of_cell)
         .unwrap_or_default();
     Some(EstopStatus {
         latched,
@@ -426,7 +296,7 @@ pub fn human(status: &Status) -> String {
             "{:<9}  {:<7}  {:<8}  {:<11}  {:>4}  {:>8}  {:>8}",
             name,
             p.pid,
-            control_plane::word(&p.state),
+            crate::word(&p.state),
             p.policy,
             p.priority,
             p.cycles,
@@ -454,7 +324,7 @@ pub fn human(status: &Status) -> String {
     if let Some(s) = &status.servo {
         out += &format!(
             "arm: {}{}{}\n",
-            control_plane::word(&s.power),
+            crate::word(&s.power),
             if s.settled { ", settled" } else { "" },
             match &s.fault {
                 None => String::new(),
@@ -472,7 +342,7 @@ pub fn human(status: &Status) -> String {
         for (name, a) in &s.axes {
             out += &format!(
                 "  axis {name:<8} {:<10} {:<24} position {:>10.4}  following error {:>8.4}{}\n",
-                control_plane::word(&a.power),
+                crate::word(&a.power),
                 a.drive_state,
                 a.position,
                 a.following_error,
