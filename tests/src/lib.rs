@@ -36,6 +36,20 @@ pub fn bin_dir() -> &'static Path {
     })
 }
 
+/// Fails the test unless `python3` has iceoryx2's bindings, which the processes written in
+/// Python need (from PyPI: `pip install iceoryx2==0.10.0`; `.ci/run` installs them).
+pub fn require_python_iceoryx2() {
+    let probe = Command::new("python3")
+        .args(["-c", "import iceoryx2"])
+        .output()
+        .expect("python3");
+    assert!(
+        probe.status.success(),
+        "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0\n{}",
+        String::from_utf8_lossy(&probe.stderr)
+    );
+}
+
 /// The repository's `examples/` folder.
 pub fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")

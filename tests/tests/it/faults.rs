@@ -430,6 +430,47 @@ fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
     });
 }
 
+/// Item 17: a foreign trajectory generator *process* (Python, written from the documents:
+/// `examples/python/trapezoid.py`) swapped in for trajgen moves x and y with plain trapezoids,
+/// rest to rest, at the cell's own vmax and t_acc, a setpoint every 4 ms but none for 35 ms
+/// twice a second (as a garbage collection or the host stalls one): servo refuses none and
+/// follows each to its target. With servo as it was before it blended out a change of
+/// acceleration as it does a late setpoint (7b663b1), 3 runs of 3 latched
+/// `velocity-step-over-limit` (1.10 against 0.091 mm/s); without the silences none did.
+#[test]
+fn a_foreign_trapezoid_generator_process_is_never_refused() {
+    integration_tests::attributable(|| {
+        integration_tests::require_python_iceoryx2();
+        let test = "foreign-trapezoid";
+        let cfg = cell(test, &[]);
+        let up = Up::start(test, &cfg);
+        let script = examples().join("python/trapezoid.py");
+        let command = format!(
+            "python3 {} --instance {{instance}} --name {{name}} --moves 4 --silence 0.035 0.5",
+            script.display()
+        );
+        up.ok(&["swap", "trajgen", "--command", &command]);
+        // 40 → 60 → 120 → 60 → 120 mm on x and y.
+        let done = up.until("the four trapezoids done", |s| {
+            s["program"]["state"] == "done"
+                && ["x", "y"].iter().all(|a| {
+                    let axis = &s["servo"]["axes"][a];
+                    axis["settled"] == true
+                        && axis["position"]
+                            .as_f64()
+                            .is_some_and(|p| (p - 120.0).abs() < 0.01)
+                })
+                || !s["servo"]["fault"].is_null()
+                || !s["supervisor"]["estop"].is_null()
+        });
+        assert!(done["servo"]["fault"].is_null(), "servo refused: {done}");
+        assert!(done["supervisor"]["estop"].is_null(), "e-stop: {done}");
+        let log = up.down();
+        let errors = error_events(&log);
+        assert!(errors.is_empty(), "{errors:#?}\n{log}");
+    });
+}
+
 /// Event lines of a severity `error` in a supervisor's log (faults, cuts).
 fn error_events(log: &str) -> Vec<&str> {
     log.lines().filter(|l| l.contains("] error ")).collect()

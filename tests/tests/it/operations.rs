@@ -454,16 +454,7 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
 #[test]
 fn a_python_iobridge_written_from_the_documents_takes_the_role() {
     integration_tests::attributable(|| {
-        // The bindings come from PyPI (`pip install iceoryx2==0.10.0`; .ci/run installs them).
-        let probe = std::process::Command::new("python3")
-            .args(["-c", "import iceoryx2"])
-            .output()
-            .expect("python3");
-        assert!(
-            probe.status.success(),
-            "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0\n{}",
-            String::from_utf8_lossy(&probe.stderr)
-        );
+        integration_tests::require_python_iceoryx2();
         let test = "ops-python";
         let script = integration_tests::examples().join("python/iobridge.py");
         let script = script.to_str().expect("utf-8");
