@@ -168,8 +168,10 @@ fn frame(bytes: &[u8]) -> Vec<u8> {
 /// `exec --wait` answers when the program ends).
 pub fn call(instance: &InstanceName, req: &Request) -> Result<Reply, CallError> {
     // Every answer comes within a tick or a bounded wait (a start, a swap, a reset), except
-    // a program's end: a supervisor that does not answer is named, not waited for forever.
-    let waits_for_program = matches!(req, Request::Exec { wait: true, .. });
+    // a program's: its validation (seconds per hour of motion, longer on a slow host) and,
+    // with `--wait`, its end. A supervisor that does not answer is named, not waited for
+    // forever.
+    let waits_for_program = matches!(req, Request::Exec { .. });
     call_within(
         instance,
         req,

@@ -251,6 +251,17 @@ pub enum Refusal {
         /// Its name.
         program: String,
     },
+    /// The axes moved while the program was validated (from where they stood): it did not
+    /// start.
+    MovedMeanwhile {
+        /// Its name.
+        program: String,
+    },
+    /// An e-stop latched (and was reset) while the program was validated: it did not start.
+    StoppedMeanwhile {
+        /// Its name.
+        program: String,
+    },
 }
 
 impl std::fmt::Display for Refusal {
@@ -274,6 +285,14 @@ impl std::fmt::Display for Refusal {
             Self::Validating { program } => write!(
                 f,
                 "busy: {program} is being validated; it starts once that is done"
+            ),
+            Self::MovedMeanwhile { program } => write!(
+                f,
+                "{program}: the axes moved while it was validated; send it again"
+            ),
+            Self::StoppedMeanwhile { program } => write!(
+                f,
+                "{program}: an e-stop came while it was validated; send it again"
             ),
             Self::Settling { line } => write!(
                 f,

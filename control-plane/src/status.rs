@@ -390,7 +390,7 @@ pub struct IoStatus {
 }
 
 /// One named input or output. In JSON tagged inside (`"direction": "output"`); in postcard
-/// (the control channel), which cannot read an inner tag, tagged outside ([`two_forms`]).
+/// (the control channel), which cannot read an inner tag, tagged outside.
 #[derive(Clone, Debug, PartialEq, JsonSchema)]
 #[schemars(tag = "direction", rename_all = "lowercase", deny_unknown_fields)]
 pub enum IoEntry {
@@ -443,7 +443,7 @@ impl IoEntry {
 
 /// What the e-stop sets an output to: 0, 1, or `"hold"` (as it was). In JSON without a tag
 /// (`0`, `1`, `"hold"`); in postcard (the control channel), which cannot read a value without
-/// a tag, tagged ([`two_forms`]).
+/// a tag, tagged.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, JsonSchema)]
 #[schemars(untagged)]
 pub enum SafeValue {

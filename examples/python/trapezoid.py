@@ -80,6 +80,7 @@ class Generator(rtcell.Process):
         super().__init__(instance, name, log)
         self.moves, self.ranges, self.dwell_ns = moves, ranges, int(dwell * 1e9)
         self.silence_ns, self.silence_every_ns = (int(x * 1e9) for x in silence)
+        self.silences, self.was_silent = 0, False
         self.notifier = None
 
     def open_notifier(self):
@@ -214,8 +215,12 @@ class Generator(rtcell.Process):
     def silent(self, t_ns, moving):
         """--silence: during a move, no setpoint for that long once every so often (a stalled
         generator, as a garbage collection or the host makes one now and then)."""
-        return (moving and self.silence_ns > 0
-                and (t_ns - self.sig_t0) % self.silence_every_ns < self.silence_ns)
+        quiet = (moving and self.silence_ns > 0
+                 and (t_ns - self.sig_t0) % self.silence_every_ns < self.silence_ns)
+        if quiet and not self.was_silent:
+            self.silences += 1
+        self.was_silent = quiet
+        return quiet
 
     def start_move(self, t_ns):
         """The next move: every axis of --range to its next target, the others hold."""
@@ -348,7 +353,8 @@ class Generator(rtcell.Process):
                         if self.moves_done >= self.moves:
                             self.motion_end_ns = wake
                             log(f"{self.moves} moves done, holding at "
-                                f"{[round(r, 4) for r in self.rest]}")
+                                f"{[round(r, 4) for r in self.rest]}"
+                                + (f" ({self.silences} silences)" if self.silence_ns else ""))
                     elif (self.profile is not None and (self.aborting or leaving)
                           and self.at_rest(wake)):
                         self.finish_profile(wake)      # at rest on the path: the move ends

@@ -741,9 +741,13 @@ pub fn remove_instance_segment(instance: &InstanceName) -> Result<bool, IpcError
 /// empty folders) once no node of it is alive, and lists any file that should not be there
 /// (empty when everything was cleaned).
 pub fn remove_instance(instance: &InstanceName) -> Vec<String> {
-    // Whatever no live node owns goes, however young: a client that failed to attach a moment
-    // ago (out of descriptors: its node's details written, nothing else) left it.
-    let _ = remove_dead_nodes_older_than(instance, std::time::Duration::ZERO);
+    remove_instance_older_than(instance, std::time::Duration::from_secs(1))
+}
+
+/// [`remove_instance`], taking what no live node owns once it is `age` old (what is younger
+/// may be a node or segment being made right now).
+fn remove_instance_older_than(instance: &InstanceName, age: std::time::Duration) -> Vec<String> {
+    let _ = remove_dead_nodes_older_than(instance, age);
     let _ = remove_instance_segment(instance);
     let mut left: Vec<String> = shm_files(instance)
         .iter()
@@ -871,7 +875,16 @@ pub fn remove_instance_waiting(
     while start.elapsed() < patience && !live_node_pids(instance).unwrap_or_default().is_empty() {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
-    remove_instance(instance)
+    // The supervisor holds the instance and no node of it lives: whatever is left goes, however
+    // young (a client that failed to attach a moment ago, out of descriptors, left its node's
+    // details; one attaching now cannot any more). With clients alive, only what is a second
+    // old.
+    let age = if live_node_pids(instance).is_ok_and(|p| p.is_empty()) {
+        std::time::Duration::ZERO
+    } else {
+        std::time::Duration::from_secs(1)
+    };
+    remove_instance_older_than(instance, age)
 }
 
 /// For a client of an instance (status, events, inject): once its own node is gone, removes

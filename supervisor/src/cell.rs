@@ -958,6 +958,11 @@ impl Cell {
         self.critical[k]
     }
 
+    /// E-stop resets since the cell started.
+    pub(crate) fn resets(&self) -> u64 {
+        self.host.resets
+    }
+
     /// The first critical process lost for good (restart policy `never`, or its restart
     /// limit reached), and why.
     pub(crate) fn lost_for_good(&self) -> Option<(String, String)> {

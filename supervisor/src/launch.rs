@@ -89,7 +89,7 @@ impl Children {
                 // Nothing of the supervisor's but stdio crosses the exec: iceoryx2 opens its
                 // files without close-on-exec, and every process inherited the supervisor's
                 // node (its liveness lock: a killed supervisor's node looked alive while its
-                // processes ran) and a descriptor for each of its ports (about 120 each).
+                // processes ran) and a descriptor for each of its ports.
                 // Close-on-exec, not closed: the standard library's exec-error pipe still works.
                 libc::syscall(
                     libc::SYS_close_range,

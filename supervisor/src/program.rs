@@ -231,7 +231,8 @@ impl Validation {
         })
     }
 
-    /// The prediction once it is done (a validation that died says so).
+    /// The prediction once it is done. (A panic in it aborts the supervisor, as any panic of
+    /// ours does: `runtime::abort_on_panic`.)
     pub(crate) fn done(&mut self) -> Option<Result<Predicted, RunError>> {
         if !self.thread.as_ref()?.is_finished() {
             return None;
@@ -240,7 +241,7 @@ impl Validation {
         Some(
             thread
                 .join()
-                .unwrap_or_else(|_| Err(RunError::system("the validation failed unexpectedly"))),
+                .unwrap_or_else(|_| Err(RunError::system("the validation panicked"))),
         )
     }
 }

@@ -162,6 +162,9 @@ struct Loop<'a> {
 struct Validating {
     validation: Validation,
     then: Then,
+    /// The cell's e-stop resets when it began: an e-stop latched and reset meanwhile drops
+    /// the program (nobody asked for it after the stop).
+    resets: u64,
 }
 
 /// What starts once a program is validated.
@@ -330,6 +333,7 @@ impl Loop<'_> {
                                         progress: p.progress,
                                         plot: p.plot,
                                     },
+                                    resets: self.cell.resets(),
                                 });
                             }
                             Err(e) => {
@@ -342,6 +346,17 @@ impl Loop<'_> {
                     }
                     _ => {}
                 }
+            }
+        }
+        // A process lost, stalled or in fault while a program is validated: it does not
+        // start (a running job would fail on the same incident).
+        if let Some(i) = incidents.first()
+            && let Some(v) = self.validating.take()
+        {
+            let e = self.with_events(i.error(), 0);
+            match v.then {
+                Then::Run { .. } => return Some(End::Program(Box::new(Err(e)))),
+                Then::Exec { conn, .. } => self.server.reply(conn, &Reply::Failed(e.cause())),
             }
         }
         if let Some(v) = &mut self.validating
@@ -450,6 +465,8 @@ impl Loop<'_> {
     /// `up`'s cell could not come up: how the loop ends, with the events that tell why.
     fn failed_to_come_up(&mut self, e: RunError) -> End {
         tracing::error!("the cell did not come up: {e}");
+        let cause = e.cause();
+        self.abandon(|_| cause.clone());
         End::Failed(Box::new(self.with_events(e, 0)))
     }
 
@@ -767,6 +784,14 @@ impl Loop<'_> {
 
     /// Why a program cannot start now, if it cannot.
     fn not_ready(&self) -> Option<Refusal> {
+        if self.down {
+            return Some(Refusal::GoingDown {
+                instance: self.cell.instance.to_string(),
+            });
+        }
+        if let Some(busy) = self.busy() {
+            return Some(busy);
+        }
         if let Some(v) = &self.validating {
             return Some(Refusal::Validating {
                 program: v.validation.program.name.clone(),
@@ -832,6 +857,7 @@ impl Loop<'_> {
                 self.validating = Some(Validating {
                     validation,
                     then: Then::Exec { conn, waiter },
+                    resets: self.cell.resets(),
                 });
                 None
             }
@@ -844,29 +870,43 @@ impl Loop<'_> {
     fn validated(&mut self, v: Validating, result: Result<Predicted, RunError>) -> Option<End> {
         let name = v.validation.program.name.clone();
         let n = self.cfg.axis.len();
-        let start = match (result, self.not_ready(), self.cell.last_sp) {
-            (Err(e), ..) => Err(e),
-            (Ok(_), Some(why), _) => Err(RunError::Input(why.to_string())),
-            (Ok(_), None, None) => Err(RunError::Input(Refusal::NoSetpoint.to_string())),
-            (Ok(predicted), None, Some(sp)) => {
-                if sp.position[..n] == v.validation.start[..] {
-                    Ok((predicted, sp))
-                } else {
-                    Err(RunError::Input(format!(
-                        "{name}: the axes moved while it was validated; send it again"
-                    )))
+        // Why it does not start: the validation's error, or the cell's state now (typed).
+        let start: Result<_, Result<Refusal, RunError>> =
+            match (result, self.not_ready(), self.cell.last_sp) {
+                (Err(RunError::Input(error)), ..) => Err(Ok(Refusal::Program { error })),
+                (Err(e), ..) => Err(Err(e)),
+                (Ok(_), Some(why), _) => Err(Ok(why)),
+                (Ok(_), None, None) => Err(Ok(Refusal::NoSetpoint)),
+                (Ok(_), None, Some(_)) if self.cell.resets() != v.resets => {
+                    Err(Ok(Refusal::StoppedMeanwhile {
+                        program: name.clone(),
+                    }))
                 }
-            }
-        };
+                (Ok(predicted), None, Some(sp)) => {
+                    if sp.position[..n] == v.validation.start[..] {
+                        Ok((predicted, sp))
+                    } else {
+                        Err(Ok(Refusal::MovedMeanwhile {
+                            program: name.clone(),
+                        }))
+                    }
+                }
+            };
         let (predicted, sp) = match (start, v.then) {
             (Ok(ok), _) => ok,
-            (Err(e), Then::Run { .. }) => {
+            (Err(why), Then::Run { .. }) => {
+                let e = match why {
+                    Ok(Refusal::EstopLatched { estop }) => RunError::failed(*estop),
+                    Ok(Refusal::FaultLatched { fault }) => RunError::failed(*fault),
+                    Ok(refusal) => RunError::Input(refusal.to_string()),
+                    Err(e) => e,
+                };
                 return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
             }
-            (Err(e), Then::Exec { conn, .. }) => {
-                let reply = match e {
-                    RunError::Input(error) => Reply::Refused(Refusal::Program { error }),
-                    e => Reply::Failed(e.cause()),
+            (Err(why), Then::Exec { conn, .. }) => {
+                let reply = match why {
+                    Ok(refusal) => Reply::Refused(refusal),
+                    Err(e) => Reply::Failed(e.cause()),
                 };
                 self.server.reply(conn, &reply);
                 return None;
@@ -1086,6 +1126,12 @@ impl Loop<'_> {
         command: Option<Vec<String>>,
         swap: bool,
     ) -> Option<Reply> {
+        // A program being validated starts once it is done: no process is replaced under it.
+        if let Some(v) = &self.validating {
+            return Some(Reply::Refused(Refusal::Validating {
+                program: v.validation.program.name.clone(),
+            }));
+        }
         let Some(k) = self.cell.index_of(process) else {
             return Some(Reply::Refused(Refusal::NoSuchProcess {
                 process: process.to_string(),

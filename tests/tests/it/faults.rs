@@ -207,8 +207,8 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
 }
 
 /// Item 11: while `exec` validates a program of hours (its prediction takes seconds), the
-/// cell's control goes on: `status` answers and shows it being validated, another program is
-/// refused as busy, and `down` ends the validation (its `exec` told so, exit 1) and takes the
+/// cell's control goes on: `status` answers and shows it being validated, another program, a
+/// swap and a restart are refused as busy, and `down` ends the validation (its `exec` told so, exit 1) and takes the
 /// cell down clean. Before, the control channel was blind for the whole validation (6 s for a
 /// 23-hour program).
 #[test]
@@ -243,6 +243,14 @@ fn a_long_validation_never_blinds_the_control_channel() {
             examples().join("triangle.prog").to_str().expect("path"),
         ]);
         assert!(busy.contains("long.prog is being validated"), "{busy}");
+        // Nor is a process replaced under it (the program would start in the middle).
+        for args in [&["swap", "iobridge"][..], &["restart", "servo"][..]] {
+            let busy = up.refused(args);
+            assert!(
+                busy.contains("long.prog is being validated"),
+                "{args:?}: {busy}"
+            );
+        }
         // Still validating (else this test checks nothing): down ends it.
         let still = up.status();
         assert!(
@@ -468,6 +476,17 @@ fn a_foreign_trapezoid_generator_process_is_never_refused() {
         let log = up.down();
         let errors = error_events(&log);
         assert!(errors.is_empty(), "{errors:#?}\n{log}");
+        // The generator did fall silent (the stalls this test is about).
+        let silences = log
+            .split("4 moves done")
+            .nth(1)
+            .and_then(|rest| rest.split(" silences)").next())
+            .and_then(|head| head.rsplit('(').next())
+            .and_then(|n| n.trim().parse::<u32>().ok());
+        assert!(
+            silences.is_some_and(|n| n >= 4),
+            "silences: {silences:?}\n{log}"
+        );
     });
 }
 
