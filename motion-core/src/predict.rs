@@ -25,6 +25,8 @@ pub enum Outcome {
     },
     /// The motion ran past the limit without ending.
     TooLong,
+    /// Its caller stopped it ([`simulate_while`]).
+    Stopped,
 }
 
 /// An output the program sets, and when (motion time, s).
@@ -73,11 +75,27 @@ pub fn simulate(
 
 /// Like [`simulate`], with a generator built by the caller (with the cell's kinematics).
 pub fn simulate_with(
+    g: Generator,
+    commands: impl IntoIterator<Item = MotionCommandV2>,
+    dt_s: f64,
+    max_s: f64,
+    observe: &mut dyn FnMut(&SetpointV2),
+) -> Prediction {
+    simulate_while(g, commands, dt_s, max_s, observe, &|| true)
+}
+
+/// Steps between two asks of [`simulate_while`]'s `go_on` (about a millisecond's work).
+const ASK_EVERY: u64 = 4096;
+
+/// Like [`simulate_with`], asking `go_on` every few thousand steps: once it says no, the
+/// simulation ends ([`Outcome::Stopped`]).
+pub fn simulate_while(
     mut g: Generator,
     commands: impl IntoIterator<Item = MotionCommandV2>,
     dt_s: f64,
     max_s: f64,
     observe: &mut dyn FnMut(&SetpointV2),
+    go_on: &dyn Fn() -> bool,
 ) -> Prediction {
     let mut commands = commands.into_iter().peekable();
     let dt_ns = ((dt_s.max(1e-5)) * 1e9) as u64;
@@ -116,6 +134,7 @@ pub fn simulate_with(
                 line: sp.fault_line,
             }),
             _ if sp.motion_time_s > max_s => Some(Outcome::TooLong),
+            _ if steps.is_multiple_of(ASK_EVERY) && !go_on() => Some(Outcome::Stopped),
             _ => None,
         };
         if let Some(outcome) = outcome {

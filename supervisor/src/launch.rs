@@ -48,6 +48,24 @@ pub use cell_config::find_program;
 impl Children {
     /// No process yet.
     pub fn new(stop_timeout: Duration) -> Self {
+        // What `spawn` relies on to keep the supervisor's files out of its processes: a range
+        // that holds no descriptor, marked close-on-exec, says whether the kernel has it (5.11).
+        // SAFETY: a plain system call on descriptors this process does not use.
+        let probe = unsafe {
+            libc::syscall(
+                libc::SYS_close_range,
+                u32::MAX - 1,
+                u32::MAX,
+                libc::CLOSE_RANGE_CLOEXEC,
+            )
+        };
+        if probe != 0 {
+            tracing::warn!(
+                "close_range(CLOSE_RANGE_CLOEXEC) is not available ({}): the cell's processes \
+                 inherit the supervisor's iceoryx2 files",
+                std::io::Error::last_os_error()
+            );
+        }
         Self {
             procs: Vec::new(),
             stop_timeout,

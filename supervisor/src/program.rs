@@ -8,11 +8,12 @@ use crate::error::RunError;
 use cell_config::Config;
 use motion_core::Params;
 use motion_core::generator::{Generator, Kin};
-use motion_core::predict::{Outcome, Prediction, simulate_with};
+use motion_core::predict::{Outcome, Prediction, simulate_while};
 use motion_program::{Commands, Op, Program, Space};
 use shm_schema::MAX_AXES;
 use shm_schema::motion::trajgen_fault;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The longest a program without `REPEAT` for ever may run (s): 24 h.
 pub const MAX_PROGRAM_S: f64 = 86_400.0;
@@ -124,10 +125,20 @@ impl Checked {
     /// A long program takes seconds (about one for each hour of motion): a running cell does
     /// it on a thread of its own ([`Validation`]).
     pub fn predict(&self, cfg: &Config, start: &[f64]) -> Result<Predicted, RunError> {
+        self.predict_until(cfg, start, &AtomicBool::new(false))
+    }
+
+    /// [`Checked::predict`], cut short once `cancel` is set (its caller has let it go).
+    fn predict_until(
+        &self,
+        cfg: &Config,
+        start: &[f64],
+        cancel: &AtomicBool,
+    ) -> Result<Predicted, RunError> {
         let forever = self.program.forever();
-        let once = self.simulate(cfg, start, forever.then_some(1))?;
+        let once = self.simulate(cfg, start, forever.then_some(1), cancel)?;
         let iteration_s = if forever {
-            let twice = self.simulate(cfg, start, Some(2))?;
+            let twice = self.simulate(cfg, start, Some(2), cancel)?;
             Some(twice.duration_s - once.duration_s)
         } else {
             None
@@ -144,6 +155,7 @@ impl Checked {
         cfg: &Config,
         start: &[f64],
         forever_as: Option<u32>,
+        cancel: &AtomicBool,
     ) -> Result<Prediction, RunError> {
         let p = params(cfg);
         let generator = Generator::with_kinematics(p, kin(cfg)?, start);
@@ -176,7 +188,8 @@ impl Checked {
             }
         };
         let commands = Commands::bounded(self.program.clone(), 1, forever_as);
-        let prediction = simulate_with(generator, commands, dt, MAX_PROGRAM_S, &mut check);
+        let go_on = || !cancel.load(Ordering::Relaxed);
+        let prediction = simulate_while(generator, commands, dt, MAX_PROGRAM_S, &mut check, &go_on);
         if let Some(v) = violation {
             return Err(RunError::Input(v));
         }
@@ -201,6 +214,10 @@ impl Checked {
                 self.name,
                 MAX_PROGRAM_S / 3600.0
             ))),
+            Outcome::Stopped => Err(RunError::system(format!(
+                "{}: the validation was let go",
+                self.name
+            ))),
         }
     }
 }
@@ -214,20 +231,32 @@ pub(crate) struct Validation {
     /// The joint positions it is validated from.
     pub(crate) start: Vec<f64>,
     thread: Option<std::thread::JoinHandle<Result<Predicted, RunError>>>,
+    /// Set when it is let go (dropped: the cell goes down, an incident): the thread stops
+    /// within a few commands instead of running on to the program's end, a core busy.
+    cancel: Arc<AtomicBool>,
+}
+
+impl Drop for Validation {
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
 }
 
 impl Validation {
     /// Starts validating `program` from `start` (joint positions).
     pub(crate) fn start(cfg: &Config, program: Checked, start: &[f64]) -> Result<Self, RunError> {
         let (cfg, p, from) = (cfg.clone(), program.clone(), start.to_vec());
+        let cancel = Arc::new(AtomicBool::new(false));
+        let stop = cancel.clone();
         let thread = std::thread::Builder::new()
             .name("validation".into())
-            .spawn(move || p.predict(&cfg, &from))
+            .spawn(move || p.predict_until(&cfg, &from, &stop))
             .map_err(|e| RunError::system(format!("cannot start the validation: {e}")))?;
         Ok(Self {
             program,
             start: start.to_vec(),
             thread: Some(thread),
+            cancel,
         })
     }
 
