@@ -972,6 +972,12 @@ impl Cell {
         })
     }
 
+    /// Every critical process is cyclic (one that is not critical, the Modbus server, is not
+    /// waited for).
+    pub(crate) fn critical_cyclic(&self) -> bool {
+        (0..self.names.len()).all(|k| self.cyclic(k) || !self.critical[k])
+    }
+
     /// True when process `k` is cyclic and its cycles advance.
     pub(crate) fn cyclic(&self, k: usize) -> bool {
         self.life[k] == Life::Running

@@ -75,9 +75,8 @@ impl Enabling {
         let initialized = cell
             .last_servo
             .is_some_and(|s| s.status & st::INITIALIZED != 0);
-        // A process that is not critical (the Modbus server) is not waited for.
-        let all_cyclic = (0..cell.names.len()).all(|k| cell.cyclic(k) || !cell.critical(k));
-        if all_cyclic && initialized && cell.last_sp.is_some() && self.sent_ns.is_none() {
+        if cell.critical_cyclic() && initialized && cell.last_sp.is_some() && self.sent_ns.is_none()
+        {
             self.sent_ns = Some(runtime::time::now_ns());
             if let Err(e) = cell.request(RequestKind::Enable) {
                 return Some(Err(e));

@@ -50,16 +50,7 @@ impl Children {
     pub fn new(stop_timeout: Duration) -> Self {
         // What `spawn` relies on to keep the supervisor's files out of its processes: a range
         // that holds no descriptor, marked close-on-exec, says whether the kernel has it (5.11).
-        // SAFETY: a plain system call on descriptors this process does not use.
-        let probe = unsafe {
-            libc::syscall(
-                libc::SYS_close_range,
-                u32::MAX - 1,
-                u32::MAX,
-                libc::CLOSE_RANGE_CLOEXEC,
-            )
-        };
-        if probe != 0 {
+        if cloexec_from(u32::MAX - 1) != 0 {
             tracing::warn!(
                 "close_range(CLOSE_RANGE_CLOEXEC) is not available ({}): the cell's processes \
                  inherit the supervisor's iceoryx2 files",
@@ -109,12 +100,7 @@ impl Children {
                 // node (its liveness lock: a killed supervisor's node looked alive while its
                 // processes ran) and a descriptor for each of its ports.
                 // Close-on-exec, not closed: the standard library's exec-error pipe still works.
-                libc::syscall(
-                    libc::SYS_close_range,
-                    3u32,
-                    u32::MAX,
-                    libc::CLOSE_RANGE_CLOEXEC,
-                );
+                cloexec_from(3);
                 Ok(())
             });
         }
@@ -263,4 +249,19 @@ pub fn cpu_seconds(pid: u32) -> Option<f64> {
     // SAFETY: sysconf has no preconditions.
     let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
     Some((utime + stime) / hz)
+}
+
+/// Marks every descriptor from `first` on close-on-exec (`close_range(2)` with
+/// `CLOSE_RANGE_CLOEXEC`, Linux 5.11): 0, or -1 where the kernel does not have it. A plain
+/// system call, async-signal-safe (no allocation): fit for between fork and exec.
+fn cloexec_from(first: u32) -> libc::c_long {
+    // SAFETY: a system call on this process' own descriptor table; nothing is closed.
+    unsafe {
+        libc::syscall(
+            libc::SYS_close_range,
+            first,
+            u32::MAX,
+            libc::CLOSE_RANGE_CLOEXEC,
+        )
+    }
 }

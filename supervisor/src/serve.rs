@@ -266,8 +266,7 @@ impl Loop<'_> {
             }
         }
         if !self.came_up {
-            let cell = &*self.cell;
-            self.came_up = (0..cell.names.len()).all(|k| cell.cyclic(k) || !cell.critical(k));
+            self.came_up = self.cell.critical_cyclic();
             // `run` ends on any incident below; `up` on one before it came up.
             if !run
                 && !self.came_up
@@ -325,20 +324,12 @@ impl Loop<'_> {
                     }
                     (Ok(sp), Some(First::Program(p))) => {
                         let n = self.cfg.axis.len();
-                        match Validation::start(self.cfg, p.program, &sp.position[..n]) {
-                            Ok(validation) => {
-                                self.validating = Some(Validating {
-                                    validation,
-                                    then: Then::Run {
-                                        progress: p.progress,
-                                        plot: p.plot,
-                                    },
-                                    resets: self.cell.resets(),
-                                });
-                            }
-                            Err(e) => {
-                                return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
-                            }
+                        let then = Then::Run {
+                            progress: p.progress,
+                            plot: p.plot,
+                        };
+                        if let Err(e) = self.validate(p.program, &sp.position[..n], then) {
+                            return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
                         }
                     }
                     (Err(e), Some(_)) => {
@@ -352,12 +343,9 @@ impl Loop<'_> {
         // start (a running job would fail on the same incident).
         if let Some(i) = incidents.first()
             && let Some(v) = self.validating.take()
+            && let Some(end) = self.not_started(v.then, Err(i.error()))
         {
-            let e = self.with_events(i.error(), 0);
-            match v.then {
-                Then::Run { .. } => return Some(End::Program(Box::new(Err(e)))),
-                Then::Exec { conn, .. } => self.server.reply(conn, &Reply::Failed(e.cause())),
-            }
+            return Some(end);
         }
         if let Some(v) = &mut self.validating
             && let Some(result) = v.validation.done()
@@ -852,16 +840,43 @@ impl Loop<'_> {
             return Some(Reply::Refused(Refusal::NoSetpoint));
         };
         let n = self.cfg.axis.len();
-        match Validation::start(self.cfg, program, &sp.position[..n]) {
-            Ok(validation) => {
-                self.validating = Some(Validating {
-                    validation,
-                    then: Then::Exec { conn, waiter },
-                    resets: self.cell.resets(),
-                });
+        match self.validate(program, &sp.position[..n], Then::Exec { conn, waiter }) {
+            Ok(()) => None,
+            Err(e) => Some(Reply::Failed(e.cause())),
+        }
+    }
+
+    /// Starts validating `program` from `start` (joint positions); `then` follows when done.
+    fn validate(&mut self, program: Checked, start: &[f64], then: Then) -> Result<(), RunError> {
+        self.validating = Some(Validating {
+            validation: Validation::start(self.cfg, program, start)?,
+            then,
+            resets: self.cell.resets(),
+        });
+        Ok(())
+    }
+
+    /// A program being validated does not start: `run` ends with `why`, `exec` is answered
+    /// with it (a refusal, or the failure). `Some` when `run` is over.
+    fn not_started(&mut self, then: Then, why: Result<Refusal, RunError>) -> Option<End> {
+        match then {
+            Then::Run { .. } => {
+                let e = match why {
+                    Ok(Refusal::EstopLatched { estop }) => RunError::failed(*estop),
+                    Ok(Refusal::FaultLatched { fault }) => RunError::failed(*fault),
+                    Ok(refusal) => RunError::Input(refusal.to_string()),
+                    Err(e) => e,
+                };
+                Some(End::Program(Box::new(Err(self.with_events(e, 0)))))
+            }
+            Then::Exec { conn, .. } => {
+                let reply = match why {
+                    Ok(refusal) => Reply::Refused(refusal),
+                    Err(e) => Reply::Failed(e.cause()),
+                };
+                self.server.reply(conn, &reply);
                 None
             }
-            Err(e) => Some(Reply::Failed(e.cause())),
         }
     }
 
@@ -892,25 +907,9 @@ impl Loop<'_> {
                     }
                 }
             };
-        let (predicted, sp) = match (start, v.then) {
-            (Ok(ok), _) => ok,
-            (Err(why), Then::Run { .. }) => {
-                let e = match why {
-                    Ok(Refusal::EstopLatched { estop }) => RunError::failed(*estop),
-                    Ok(Refusal::FaultLatched { fault }) => RunError::failed(*fault),
-                    Ok(refusal) => RunError::Input(refusal.to_string()),
-                    Err(e) => e,
-                };
-                return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
-            }
-            (Err(why), Then::Exec { conn, .. }) => {
-                let reply = match why {
-                    Ok(refusal) => Reply::Refused(refusal),
-                    Err(e) => Reply::Failed(e.cause()),
-                };
-                self.server.reply(conn, &reply);
-                return None;
-            }
+        let (predicted, sp) = match start {
+            Ok(ok) => ok,
+            Err(why) => return self.not_started(v.then, why),
         };
         let text = match predicted.iteration_s {
             Some(i) => format!(
