@@ -210,6 +210,25 @@ pub struct Outputs {
     pub line: u32,
 }
 
+/// One period of a loop whose iterations are alike ([`Generator::period_since`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Period {
+    /// Path time one iteration takes (s).
+    pub path_s: f64,
+    /// The segment and delay times it adds (s).
+    pub theoretical_s: f64,
+    /// Time lost to the speed override in it (s).
+    pub lost_s: f64,
+    /// Time spent in `WAIT`s in it (s).
+    pub waited_s: f64,
+    /// Times it ran out of commands.
+    pub starved: u32,
+    /// The largest difference of the joint positions the two states were taken at: the
+    /// inverse kinematics starts from them, so a caller checks they are no further apart than
+    /// the states' sampling instants allow.
+    pub joints_apart: f64,
+}
+
 /// The generator. Construct once at set-up; [`Generator::step`] runs every cycle.
 #[derive(Clone, Debug)]
 pub struct Generator {
@@ -1009,6 +1028,147 @@ impl Generator {
         sp.cartesian.copy_from_slice(cp.as_slice());
         sp.cartesian_velocity.copy_from_slice(cv.as_slice());
         sp
+    }
+
+    /// The parameters it was built with.
+    pub fn params(&self) -> Params {
+        self.p
+    }
+
+    /// Commands read from the queue so far (the `seq` of the last one taken).
+    pub fn commands_read(&self) -> u64 {
+        self.commands_taken - self.queue.len as u64
+    }
+
+    /// How this generator is `earlier` moved on by one period of a loop of `commands`
+    /// commands: `Some` when every part of its state that decides what it does next is
+    /// `earlier`'s, but for the time (everything ahead by [`Period::path_s`]), the sequence
+    /// numbers (ahead by `commands`) and the sums it keeps (motion time, time waited). Then
+    /// what it does next is what `earlier` did, that much later: the prediction of a loop
+    /// whose iterations are alike need not run them all ([`Generator::fast_forward`]).
+    ///
+    /// At rest, waiting or with the speed ramping, `None`: only a moving or delaying
+    /// generator's time is its segment's (or its delay's) own.
+    pub fn period_since(&self, earlier: &Generator, commands: u64) -> Option<Period> {
+        // Every field named, so that a new one must be placed here: compared, or shifted.
+        let Generator {
+            p,
+            queue,
+            phase,
+            space,
+            origin_s,
+            rest,
+            state,
+            motion_start_ns,
+            motion_end_ns,
+            end_motion_s,
+            theoretical_s,
+            program_id,
+            line,
+            fault,
+            fault_line,
+            commands_taken,
+            starved,
+            seq: _,
+            speed,
+            target_speed,
+            speed_override,
+            program_speed,
+            aborting,
+            lost_s,
+            waited_s,
+            path_ns: _,
+            control_seq,
+            exec_seq,
+            outputs,
+            kin: _,
+            limits,
+            joints,
+            kin_error,
+        } = self;
+        let e = earlier;
+        let path_s = match (phase, e.phase) {
+            (Phase::Moving(s), Phase::Moving(t)) if *s == t => origin_s - e.origin_s,
+            (Phase::Delaying { until_s }, Phase::Delaying { until_s: u }) => until_s - u,
+            _ => return None,
+        };
+        let same = *p == e.p
+            && *space == e.space
+            && *rest == e.rest
+            && *state == MotionState::Moving
+            && e.state == MotionState::Moving
+            && (*motion_start_ns, *motion_end_ns, *end_motion_s)
+                == (e.motion_start_ns, e.motion_end_ns, e.end_motion_s)
+            && (*program_id, *line, *fault, *fault_line)
+                == (e.program_id, e.line, e.fault, e.fault_line)
+            && *fault == fault::NONE
+            && *commands_taken == e.commands_taken + commands
+            && *exec_seq == e.exec_seq + commands
+            && (*speed, *target_speed) == (1.0, 1.0)
+            && (
+                *speed,
+                *target_speed,
+                *speed_override,
+                *program_speed,
+                *aborting,
+            ) == (
+                e.speed,
+                e.target_speed,
+                e.speed_override,
+                e.program_speed,
+                e.aborting,
+            )
+            && *control_seq == e.control_seq
+            && *outputs == e.outputs
+            && *limits == e.limits
+            && kin_error.is_none()
+            && e.kin_error.is_none()
+            && queue.len == e.queue.len
+            && (0..queue.len).all(|k| {
+                let (mut a, b) = (
+                    queue.items[(queue.head + k) % QUEUE_CAP],
+                    e.queue.items[(e.queue.head + k) % QUEUE_CAP],
+                );
+                a.seq = a.seq.wrapping_sub(commands);
+                a == b
+            });
+        let mut joints_apart: f64 = 0.0;
+        for i in 0..p.axes {
+            joints_apart = joints_apart.max((joints[i] - e.joints[i]).abs());
+        }
+        (same && path_s.is_finite() && path_s > 0.0).then_some(Period {
+            path_s,
+            theoretical_s: theoretical_s - e.theoretical_s,
+            lost_s: lost_s - e.lost_s,
+            waited_s: waited_s - e.waited_s,
+            starved: starved.saturating_sub(e.starved),
+            joints_apart,
+        })
+    }
+
+    /// Moves the generator on by `n` periods of a loop of `commands` commands each
+    /// ([`Generator::period_since`]), the time by `path_ns` (`n` times the period, to the
+    /// nanosecond): as if it had run them. The caller's clock moves on by `path_ns` too, and
+    /// the commands it sends next are numbered after the ones passed over.
+    pub fn fast_forward(&mut self, period: &Period, n: u32, commands: u64, path_ns: u64) {
+        let k = f64::from(n);
+        let dt = path_ns as f64 * 1e-9;
+        for i in 0..self.queue.len {
+            self.queue.items[(self.queue.head + i) % QUEUE_CAP].seq += commands;
+        }
+        self.commands_taken += commands;
+        self.exec_seq += commands;
+        self.origin_s += dt;
+        if let Phase::Delaying { until_s } = &mut self.phase {
+            *until_s += dt;
+        }
+        self.path_ns += path_ns;
+        self.theoretical_s += k * period.theoretical_s;
+        self.lost_s += k * period.lost_s;
+        self.waited_s += k * period.waited_s;
+        self.starved = self
+            .starved
+            .saturating_add(period.starved.saturating_mul(n));
     }
 
     /// Executes the commands that take effect at once (`OUT`, `SPEED`) at the front of the

@@ -8,9 +8,7 @@ use motion_core::generator::{Generator, Params};
 use motion_core::predict::{Outcome, simulate};
 use motion_program::CellSpec;
 use shm_schema::motion::{hold, trajgen_fault};
-use shm_schema::{
-    ControlKind, MAX_AXES, MotionCommandV2, MotionControlV2, MotionState, SetpointV2,
-};
+use shm_schema::{ControlKind, MotionCommandV2, MotionControlV2, MotionState, SetpointV2};
 
 const START: [f64; 3] = [40.0, 40.0, 0.0];
 const T0: u64 = 1_000_000_000_000;
@@ -351,28 +349,9 @@ fn the_prediction_is_the_generators_own_run() {
     assert_eq!(long.outcome, Outcome::TooLong);
 }
 
-/// The five-bar of seed 004 with its joints limited to ±40°, 30°/s.
-fn five_bar() -> (Params, motion_core::generator::Kin) {
-    let mut p = Params {
-        axes: 2,
-        coords: 2,
-        vmax: [1.0; MAX_AXES],
-        coord_vmax: [1.0; MAX_AXES],
-        min: [0.0; MAX_AXES],
-        max: [0.0; MAX_AXES],
-        t_acc: T_ACC,
-    };
-    p.vmax[..2].copy_from_slice(&[30.0, 30.0]);
-    p.coord_vmax[..2].copy_from_slice(&[40.0, 40.0]);
-    p.min[..2].copy_from_slice(&[-40.0, -40.0]);
-    p.max[..2].copy_from_slice(&[40.0, 40.0]);
-    let k = kinematics::FiveBar::seed();
-    (p, motion_core::generator::Kin(std::sync::Arc::new(k)))
-}
-
 #[test]
 fn a_cartesian_blend_maps_to_continuous_joints_through_the_five_bar() {
-    let (p, kin) = five_bar();
+    let (p, kin) = common::five_bar();
     let cell = CellSpec {
         coords: vec![("x".into(), "mm".into()), ("y".into(), "mm".into())],
         joints: vec![("a0".into(), "deg".into()), ("a1".into(), "deg".into())],
@@ -426,7 +405,7 @@ fn a_cartesian_blend_maps_to_continuous_joints_through_the_five_bar() {
 
 #[test]
 fn a_path_that_leaves_the_workspace_is_refused_by_the_prediction_with_its_reason() {
-    let (p, kin) = five_bar();
+    let (p, kin) = common::five_bar();
     let cell = CellSpec {
         coords: vec![("x".into(), "mm".into()), ("y".into(), "mm".into())],
         joints: vec![("a0".into(), "deg".into()), ("a1".into(), "deg".into())],

@@ -17,6 +17,8 @@ pub struct Commands {
     /// for ever) and the iteration running (from 1).
     stack: Vec<Frame>,
     forever_as: Option<u32>,
+    /// Loop instances entered so far (each frame's identity).
+    instances: u64,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -25,6 +27,22 @@ struct Frame {
     next: usize,
     left: Option<u32>,
     iteration: u64,
+    /// Which run of its `REPEAT` this is (unique within the iterator).
+    instance: u64,
+    /// The `seq` of its iteration's first command, once drawn.
+    first_seq: Option<u64>,
+}
+
+/// A loop iteration a command begins ([`Commands::iterations_begun`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IterationStart {
+    /// Nesting level of the loop (1: a `REPEAT` of the program's own body).
+    pub depth: usize,
+    /// Which run of that `REPEAT` (a loop inside another is run again in each of the outer
+    /// one's iterations): unique within the iterator.
+    pub instance: u64,
+    /// The iteration, from 1.
+    pub iteration: u64,
 }
 
 impl Commands {
@@ -46,8 +64,74 @@ impl Commands {
                 next: 0,
                 left: Some(0),
                 iteration: 1,
+                instance: 0,
+                first_seq: None,
             }],
+            instances: 0,
         }
+    }
+
+    /// The loop iterations the command drawn last begins (outermost first): a command can
+    /// begin an iteration of several nested loops at once.
+    pub fn iterations_begun(&self) -> impl Iterator<Item = IterationStart> + '_ {
+        self.stack
+            .iter()
+            .enumerate()
+            .skip(1)
+            .filter(|(_, f)| f.first_seq == Some(self.seq))
+            .map(|(depth, f)| IterationStart {
+                depth,
+                instance: f.instance,
+                iteration: f.iteration,
+            })
+    }
+
+    /// Iterations of the loop at `depth` not drawn yet, if the iterator is still within its
+    /// run `instance` (`None` otherwise, or for a loop that runs for ever).
+    pub fn iterations_left(&self, depth: usize, instance: u64) -> Option<u32> {
+        let f = self.stack.get(depth).filter(|_| depth > 0)?;
+        (f.instance == instance).then_some(f.left).flatten()
+    }
+
+    /// Passes over `n` iterations of the loop at `depth` without drawing them, as if they had
+    /// been: the commands after keep their `seq`. For a prediction that has found the loop's
+    /// iterations alike. Returns the commands passed over; `None` (and nothing done) when
+    /// fewer than `n` are left or their count overflows.
+    pub fn skip_iterations(&mut self, depth: usize, n: u32) -> Option<u64> {
+        let f = *self.stack.get(depth).filter(|_| depth > 0)?;
+        if f.left? < n {
+            return None;
+        }
+        let per = self.per_iteration(depth)?;
+        let skipped = per.checked_mul(u64::from(n))?;
+        let f = &mut self.stack[depth];
+        f.left = f.left.map(|l| l - n);
+        f.iteration += u64::from(n);
+        self.seq += skipped;
+        if let Some(first) = &mut f.first_seq {
+            *first += skipped;
+        }
+        Some(skipped)
+    }
+
+    /// Commands in one iteration of the loop the iterator is in at `depth`, its inner loops
+    /// unrolled; `None` for ever or past `u64`.
+    pub fn per_iteration(&self, depth: usize) -> Option<u64> {
+        (depth > 0 && depth < self.stack.len()).then(|| self.count(self.body(depth)))?
+    }
+
+    /// Commands in one pass of `body`, its loops unrolled; `None` for ever or past `u64`.
+    fn count(&self, body: &[Instruction]) -> Option<u64> {
+        body.iter().try_fold(0u64, |sum, i| {
+            let n = match &i.op {
+                Op::Repeat { count, body } => {
+                    let times = count.or(self.forever_as)?;
+                    self.count(body)?.checked_mul(u64::from(times))?
+                }
+                _ => 1,
+            };
+            sum.checked_add(n)
+        })
     }
 
     /// The body of nesting level `depth` (0: the program's).
@@ -75,6 +159,9 @@ impl Commands {
     fn command(&mut self, ins: &Instruction) -> MotionCommandV2 {
         let (coords, joints) = (self.program.coords as u32, self.program.joints as u32);
         self.seq += 1;
+        for f in &mut self.stack {
+            f.first_seq.get_or_insert(self.seq);
+        }
         let mut c = MotionCommandV2 {
             seq: self.seq,
             program_id: self.program_id,
@@ -147,6 +234,7 @@ impl Iterator for Commands {
                         f.left = left.map(|n| n - 1);
                         f.next = 0;
                         f.iteration += 1;
+                        f.first_seq = None;
                     }
                 }
                 continue;
@@ -156,11 +244,14 @@ impl Iterator for Commands {
                 Op::Repeat { count, body } => {
                     let count = count.or(self.forever_as);
                     if count != Some(0) && !body.is_empty() {
+                        self.instances += 1;
                         self.stack.push(Frame {
                             at: Some(frame.next),
                             next: 0,
                             left: count.map(|n| n - 1),
                             iteration: 1,
+                            instance: self.instances,
+                            first_seq: None,
                         });
                     }
                 }

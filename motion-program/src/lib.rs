@@ -26,7 +26,7 @@ mod commands;
 mod parse;
 pub mod timing;
 
-pub use commands::Commands;
+pub use commands::{Commands, IterationStart};
 pub use parse::parse;
 pub use timing::segment_time;
 

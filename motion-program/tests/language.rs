@@ -143,6 +143,54 @@ fn loops_unroll_into_numbered_commands_as_they_are_drawn() {
     // A count of zero never comes from the parser; an empty body never either.
 }
 
+#[test]
+fn iterations_begun_and_passed_over_keep_the_stream_as_drawn_whole() {
+    use motion_program::IterationStart;
+    let src = "MOVE(1,1,0)\nREPEAT 4\n MOVE(2,1,0)\n REPEAT 5\n  DELAY(1)\n  MOVE(3,1,0)\n ENDREPEAT\n \
+               OUT(gripper, 1)\nENDREPEAT\nMOVE(4,1,0)\nEND";
+    let p = std::sync::Arc::new(ok(src));
+    let whole: Vec<MotionCommandV2> = motion_program::Commands::new(p.clone(), 1).collect();
+    assert_eq!(whole.len(), 1 + 4 * (1 + 5 * 2 + 1) + 2);
+    // The commands that begin an iteration say which: the outer loop's with its MOVE, the
+    // inner loop's (run again in each outer iteration: another instance) with its DELAY.
+    let mut it = motion_program::Commands::new(p.clone(), 1);
+    let mut begun = Vec::new();
+    for _ in 0..15 {
+        let c = it.next().expect("a command");
+        begun.extend(it.iterations_begun().map(|b| (c.seq, b)));
+    }
+    let at = |depth, instance, iteration| IterationStart {
+        depth,
+        instance,
+        iteration,
+    };
+    assert_eq!(
+        begun,
+        [
+            (2, at(1, 1, 1)),
+            (3, at(2, 2, 1)),
+            (5, at(2, 2, 2)),
+            (7, at(2, 2, 3)),
+            (9, at(2, 2, 4)),
+            (11, at(2, 2, 5)),
+            (14, at(1, 1, 2)),
+            (15, at(2, 3, 1)),
+        ]
+    );
+    assert_eq!(it.per_iteration(1), Some(12));
+    assert_eq!(it.per_iteration(2), Some(2));
+    // Passing over iterations: what follows is what drawing them would have given next.
+    assert_eq!(it.iterations_left(1, 1), Some(2));
+    assert_eq!(it.iterations_left(1, 7), None, "another run of the loop");
+    assert_eq!(it.iterations_left(2, 3), Some(4));
+    assert_eq!(it.skip_iterations(2, 5), None, "only 4 are left");
+    assert_eq!(it.skip_iterations(2, 3), Some(6));
+    assert_eq!(it.skip_iterations(1, 2), Some(24));
+    assert_eq!(it.iterations_left(1, 1), Some(0));
+    let rest: Vec<MotionCommandV2> = it.collect();
+    assert_eq!(rest[..], whole[15 + 6 + 24..]);
+}
+
 /// The program and the `line:column: message` start it must fail with.
 fn check(src: &str, expected: &str) {
     let e = parse(src.as_bytes(), &gantry()).expect_err(src);

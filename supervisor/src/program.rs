@@ -8,7 +8,7 @@ use crate::error::RunError;
 use cell_config::Config;
 use motion_core::Params;
 use motion_core::generator::{Generator, Kin};
-use motion_core::predict::{Outcome, Prediction, simulate_while};
+use motion_core::predict::{Outcome, Prediction, simulate_program};
 use motion_program::{Commands, Op, Program, Space};
 use shm_schema::MAX_AXES;
 use shm_schema::motion::trajgen_fault;
@@ -122,8 +122,10 @@ impl Checked {
 
     /// Runs the program through trajgen's generator from `start` (joint positions): its
     /// motion time, and every reference checked against the joint limits and velocities.
-    /// A long program takes seconds (about one for each hour of motion): a running cell does
-    /// it on a thread of its own ([`Validation`]).
+    /// A loop runs until two of its iterations begin alike, and the rest are passed over
+    /// ([`motion_core::predict::simulate_program`]); a long program without loops takes
+    /// seconds (about one for each hour of motion): a running cell validates on a thread of
+    /// its own ([`Validation`]).
     pub fn predict(&self, cfg: &Config, start: &[f64]) -> Result<Predicted, RunError> {
         self.predict_until(cfg, start, &AtomicBool::new(false))
     }
@@ -189,7 +191,8 @@ impl Checked {
         };
         let commands = Commands::bounded(self.program.clone(), 1, forever_as);
         let go_on = || !cancel.load(Ordering::Relaxed);
-        let prediction = simulate_while(generator, commands, dt, MAX_PROGRAM_S, &mut check, &go_on);
+        let prediction =
+            simulate_program(generator, commands, dt, MAX_PROGRAM_S, &mut check, &go_on);
         if let Some(v) = violation {
             return Err(RunError::Input(v));
         }

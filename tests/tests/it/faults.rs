@@ -217,14 +217,14 @@ fn a_long_validation_never_blinds_the_control_channel() {
         let test = "long-validation";
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
-        // The triangle 5000 times: 23.6 hours of motion, seconds of validation (ended by
-        // `down` long before it is done).
-        let prog = integration_tests::scratch(
-            test,
-            "long.prog",
-            "MOVE(40,40,0)\nREPEAT 5000\nMOVE(140,40,0)\nMOVE(90,126,0)\nMOVE(40,40,0)\n\
-             ENDREPEAT\nEND\n",
-        );
+        // 23 hours of motion without a loop (a loop's alike iterations are passed over):
+        // seconds of validation, ended by `down` long before it is done.
+        let mut src = String::from("MOVE(40,40,0)\n");
+        for k in 0..23 {
+            src += &format!("MOVE({},40,0,T=3600)\n", if k % 2 == 0 { 140 } else { 40 });
+        }
+        src += "END\n";
+        let prog = integration_tests::scratch(test, "long.prog", &src);
         let prog = prog.to_str().expect("path");
         let exec = supervisor()
             .args(["exec", prog, "--instance", &up.inst])
