@@ -513,9 +513,13 @@ fn check(program: &std::path::Path, config: Option<&std::path::Path>) -> ExitCod
                 ),
                 None => writeln!(
                     out,
-                    "ok: {}: predicted motion time {:.3} s (WAITs excluded)",
+                    "ok: {}: predicted motion time {:.3} s (WAITs excluded{})",
                     program.display(),
-                    p.duration_s
+                    p.duration_s,
+                    match p.passed_over {
+                        0 => String::new(),
+                        n => format!("; {n} loop iterations alike to the one before, passed over"),
+                    }
                 ),
             }
             .ok();

@@ -42,6 +42,8 @@ pub struct Predicted {
     pub iteration_s: Option<f64>,
     /// The outputs the program sets, and when (motion time): the IO timeline.
     pub outputs: Vec<motion_core::predict::OutputEvent>,
+    /// Loop iterations that began as the one before and were passed over, not simulated.
+    pub passed_over: u64,
 }
 
 /// The generator's parameters for this cell (trajgen builds the same from the shared
@@ -149,6 +151,7 @@ impl Checked {
             duration_s: once.duration_s,
             iteration_s,
             outputs: once.outputs,
+            passed_over: once.passed_over,
         })
     }
 
