@@ -30,23 +30,36 @@ MOVE(40, 40, 0)
 END
 ";
 
-/// The predicted motion time `supervisor check` prints.
-fn predicted(cfg: &std::path::Path, prog: &std::path::Path) -> f64 {
-    let out = run_with_watchdog(
+/// `supervisor check PROG --config CFG`, its output.
+fn check(cfg: &std::path::Path, prog: &std::path::Path) -> std::process::Output {
+    run_with_watchdog(
         supervisor().arg("check").arg(prog).arg("--config").arg(cfg),
         WATCHDOG,
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
+    )
+}
+
+/// What `supervisor check` prints of a program it accepts: the predicted motion time and
+/// its text.
+fn predicted_with_text(cfg: &std::path::Path, prog: &std::path::Path) -> (f64, String) {
+    let out = check(cfg, prog);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
         "{text}{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    text.split("predicted motion time ")
+    let t = text
+        .split("predicted motion time ")
         .nth(1)
         .and_then(|r| r.split(' ').next())
         .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no prediction in {text}"))
+        .unwrap_or_else(|| panic!("no prediction in {text}"));
+    (t, text)
+}
+
+/// The predicted motion time `supervisor check` prints.
+fn predicted(cfg: &std::path::Path, prog: &std::path::Path) -> f64 {
+    predicted_with_text(cfg, prog).0
 }
 
 /// Runs `program` on the cell `cell` (with room for the host's stalls) with `run --json`,
@@ -168,7 +181,7 @@ fn the_prediction_is_the_generators_own_timing_exactly() {
 #[test]
 fn a_long_loop_is_checked_from_its_first_iterations_alike() {
     let cfg = scratch("prog-loop", "cell.toml", &default_cell());
-    let check = |n: u32| {
+    let at = |n: u32| {
         let prog = scratch(
             "prog-loop",
             &format!("t{n}.prog"),
@@ -177,25 +190,11 @@ fn a_long_loop_is_checked_from_its_first_iterations_alike() {
                  ENDREPEAT\nEND\n"
             ),
         );
-        let out = run_with_watchdog(
-            supervisor()
-                .arg("check")
-                .arg(&prog)
-                .arg("--config")
-                .arg(&cfg),
-            WATCHDOG,
-        );
-        let text = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(
-            out.status.success(),
-            "{text}{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        (predicted(&cfg, &prog), text)
+        predicted_with_text(&cfg, &prog)
     };
-    let ((four, text4), (five, _)) = (check(4), check(5));
+    let ((four, text4), (five, _)) = (at(4), at(5));
     assert!(!text4.contains("passed over"), "{text4}");
-    let (all, text) = check(5000);
+    let (all, text) = at(5000);
     assert!(
         (all - (four + 4996.0 * (five - four))).abs() < 0.01,
         "{four} {five} {all}"
@@ -252,14 +251,7 @@ fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
             "polar.prog",
             "MOVE(120, 90)\nMOVE(60, 160)\nMOVE(150, 0)\nEND\n",
         );
-        let out = run_with_watchdog(
-            supervisor()
-                .arg("check")
-                .arg(&prog)
-                .arg("--config")
-                .arg(&cfg),
-            WATCHDOG,
-        );
+        let out = check(&cfg, &prog);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{err}");
         assert!(
