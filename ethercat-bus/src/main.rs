@@ -7,6 +7,7 @@ use ethercat_wire::{Received, Wire};
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
+use runtime::snapshot::{MAX_SLICES, Snapshot};
 use shm_schema::ethercat::MAX_SUBDEVICES;
 use shm_schema::event::code;
 use shm_schema::{
@@ -102,7 +103,6 @@ struct Bus {
     /// From sending the cycle's frame to taking its reply, every cycle that had one; told in
     /// the log when the process stops.
     round_trip: Box<LatencyHistogramV1>,
-    last_published_ns: u64,
     /// The `[[io]]` entries on the bus.
     io: BusIo,
     /// iobridge's newest IO image: its values and when it was written.
@@ -128,7 +128,7 @@ struct Bus {
     field_inputs: Pub<IoWriteV1>,
     commands: Sub<DriveCommandV2>,
     feedback: Pub<DriveFeedbackV2>,
-    sense_to_command_pub: Pub<LatencyHistogramV1>,
+    sense_to_command_out: Snapshot,
 }
 
 impl Bus {
@@ -362,12 +362,6 @@ impl Bus {
         ))
     }
 
-    fn publish_latency(&mut self, now_ns: u64) {
-        self.sense_to_command.stamp_ns = now_ns;
-        self.sense_to_command_pub.send(&self.sense_to_command);
-        self.last_published_ns = now_ns;
-    }
-
     /// Waits for the reply to the frame just sent, until `deadline_ns`.
     ///
     /// # Real-time
@@ -584,13 +578,18 @@ impl Task for Bus {
         }
         cx.set_safe(!self.drives.powered());
         self.feedback.send(&fb);
-        if now.saturating_sub(self.last_published_ns) >= LATENCY_PUBLISH_INTERVAL_NS {
-            self.publish_latency(now);
-        }
+        self.sense_to_command.stamp_ns = now;
+        self.sense_to_command_out.step_every(
+            now,
+            LATENCY_PUBLISH_INTERVAL_NS,
+            &self.sense_to_command,
+            fb.sense_to_command_ns,
+        );
     }
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
-        self.publish_latency(now_ns);
+        self.sense_to_command.stamp_ns = now_ns;
+        self.sense_to_command_out.send_whole(&self.sense_to_command);
         // A percentile of a histogram, in µs.
         let us_of = |h: &LatencyHistogramV1, q: u64| {
             h.percentile(q, 1000).map_or(f64::NAN, |v| v as f64 / 1e3)
@@ -878,7 +877,6 @@ fn main() -> ExitCode {
                 last_applied_seq: 0,
                 sense_to_command: Box::default(),
                 round_trip: Box::default(),
-                last_published_ns: 0,
                 io,
                 io_image: None,
                 io_reported: None,
@@ -894,7 +892,12 @@ fn main() -> ExitCode {
                 field_inputs: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-                sense_to_command_pub: Pub::new(&ctx.node, i, ServiceId::SenseToCommand)?,
+                sense_to_command_out: Snapshot::new(
+                    &ctx.node,
+                    i,
+                    ServiceId::SenseToCommand,
+                    MAX_SLICES,
+                )?,
             };
             // In SAFE-OP: the cycle's frames take the bus to OP.
             bus.ask_for_op(runtime::time::now_ns(), "in OP on ");

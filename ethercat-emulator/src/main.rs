@@ -87,14 +87,7 @@ fn main() -> ExitCode {
     if std::env::args().any(|a| a == "--instance" || a.starts_with("--instance=")) {
         return ethercat_emulator::cell::main();
     }
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
+    runtime::process::init_logging();
     let args = Args::parse();
     let mut line = Vec::new();
     let mut drives = 0;

@@ -5,6 +5,7 @@ use machine_sim::field::Field;
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
 use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
+use runtime::snapshot::{MAX_SLICES, Snapshot};
 use shm_schema::{
     DigitalIoV1, DriveCommandV2, DriveFeedbackV2, EventQueue, FaultInjectionV1, IoWriteV1,
     LatencyHistogramV1, ServiceId,
@@ -15,26 +16,17 @@ struct Sim {
     machine: Machine,
     /// Sense-to-command latency of every applied command since start.
     sense_to_command: Box<LatencyHistogramV1>,
-    last_published_ns: u64,
     /// Servo's commands arrive every servo period.
     command_fresh: Freshness,
     last_command_ns: Option<u64>,
     commands: Sub<DriveCommandV2>,
     injections: Sub<FaultInjectionV1>,
     feedback: Pub<DriveFeedbackV2>,
-    sense_to_command_pub: Pub<LatencyHistogramV1>,
+    sense_to_command_out: Snapshot,
     /// The simulated two-position devices (the gripper) and their sensors.
     field: Field,
     io_state: Sub<DigitalIoV1>,
     sensors: Pub<IoWriteV1>,
-}
-
-impl Sim {
-    fn publish_latency(&mut self, now_ns: u64) {
-        self.sense_to_command.stamp_ns = now_ns;
-        self.sense_to_command_pub.send(&self.sense_to_command);
-        self.last_published_ns = now_ns;
-    }
 }
 
 impl Task for Sim {
@@ -58,19 +50,24 @@ impl Task for Sim {
         if fb.sense_to_command_ns > 0 {
             self.sense_to_command.record(fb.sense_to_command_ns);
         }
+        self.sense_to_command.stamp_ns = now;
         if !self.field.is_empty() {
             let outputs = self.io_state.latest().map(|s| s.values);
             if let Some(w) = self.field.step(now, outputs) {
                 self.sensors.send(&w);
             }
         }
-        if now.saturating_sub(self.last_published_ns) >= LATENCY_PUBLISH_INTERVAL_NS {
-            self.publish_latency(now);
-        }
+        self.sense_to_command_out.step_every(
+            now,
+            LATENCY_PUBLISH_INTERVAL_NS,
+            &self.sense_to_command,
+            fb.sense_to_command_ns,
+        );
     }
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
-        self.publish_latency(now_ns);
+        self.sense_to_command.stamp_ns = now_ns;
+        self.sense_to_command_out.send_whole(&self.sense_to_command);
     }
 }
 
@@ -83,15 +80,17 @@ fn main() -> ExitCode {
             Ok::<_, SetupError>(Sim {
                 machine: Machine::new(&ctx.cell, ctx.own.period_ns),
                 sense_to_command: Box::default(),
-                last_published_ns: 0,
-                command_fresh: Freshness::new(
-                    ctx.cell.period_of("servo").unwrap_or(ctx.own.period_ns),
-                ),
+                command_fresh: Freshness::new(ctx.period_of("servo")?),
                 last_command_ns: None,
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-                sense_to_command_pub: Pub::new(&ctx.node, i, ServiceId::SenseToCommand)?,
+                sense_to_command_out: Snapshot::new(
+                    &ctx.node,
+                    i,
+                    ServiceId::SenseToCommand,
+                    MAX_SLICES,
+                )?,
                 field: Field::new(&ctx.cell, ctx.index as u32),
                 io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
                 sensors: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,

@@ -22,6 +22,7 @@ use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::port::update_connections::UpdateConnections;
 pub use iceoryx2::prelude::Node;
 use iceoryx2::prelude::*;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
 };
@@ -198,6 +199,15 @@ pub trait Payload: Debug + ZeroCopySend + Copy + 'static {
 pub trait PubPort<T> {
     /// One loan, one copy of `value` into it, one send. False if iceoryx2 refused.
     fn send(&self, value: &T) -> bool;
+    /// The payload of a sample loaned and kept until [`PubPort::send_staged`] (loaned by the
+    /// first call, the same one after), not initialised: to be written over several calls.
+    /// `None` if iceoryx2 refused the loan.
+    fn staged(&mut self) -> Option<&mut core::mem::MaybeUninit<T>>;
+    /// Sends the staged sample; false if there is none or iceoryx2 refused.
+    ///
+    /// # Safety
+    /// Every byte of the staged payload has been written.
+    unsafe fn send_staged(&mut self) -> bool;
     /// Delivers history to subscribers that connected since the last send.
     fn update_connections(&self);
 }
@@ -308,6 +318,7 @@ fn slots_taken(service: &impl std::fmt::Display, max: usize, what: &str) -> IpcE
 }
 
 struct PubOf<T: Debug + ZeroCopySend + Copy + 'static> {
+    staged: Option<SampleMutUninit<Ipc, core::mem::MaybeUninit<T>, ()>>,
     port: Publisher<Ipc, T, ()>,
     _service: PubSubFactory<Ipc, T, ()>,
 }
@@ -315,9 +326,31 @@ struct PubOf<T: Debug + ZeroCopySend + Copy + 'static> {
 impl<T: Debug + ZeroCopySend + Copy + 'static> PubPort<T> for PubOf<T> {
     fn send(&self, value: &T) -> bool {
         match self.port.loan_uninit() {
-            Ok(sample) => sample.write_payload(*value).send().is_ok(),
+            Ok(mut sample) => {
+                // One copy, straight into shared memory (`write_payload` takes the value: a
+                // copy onto the stack first).
+                // SAFETY: `value` is a whole `T`, copied over the whole payload.
+                unsafe {
+                    core::ptr::copy_nonoverlapping(value, sample.payload_mut().as_mut_ptr(), 1);
+                    sample.assume_init().send().is_ok()
+                }
+            }
             Err(_) => false,
         }
+    }
+
+    fn staged(&mut self) -> Option<&mut core::mem::MaybeUninit<T>> {
+        if self.staged.is_none() {
+            self.staged = Some(self.port.loan_uninit().ok()?);
+        }
+        self.staged.as_mut().map(|s| s.payload_mut())
+    }
+
+    unsafe fn send_staged(&mut self) -> bool {
+        // SAFETY: the caller wrote every byte of the payload.
+        self.staged
+            .take()
+            .is_some_and(|s| unsafe { s.assume_init() }.send().is_ok())
     }
 
     fn update_connections(&self) {
@@ -339,6 +372,7 @@ pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(
         .create()
         .map_err(|e| err(format!("publisher on {}", instance.service(id)), e))?;
     Ok(Box::new(PubOf {
+        staged: None,
         port,
         _service: service,
     }))
@@ -416,6 +450,35 @@ impl<T: Payload> Pub<T> {
     /// Delivers history to subscribers that connected since the last send.
     pub fn update_connections(&self) {
         self.port.update_connections();
+    }
+
+    /// The payload of a sample kept loaned until [`Pub::send_staged`], not initialised, to
+    /// be written over several cycles ([`PubPort::staged`]). `None` if iceoryx2 refused.
+    ///
+    /// # Real-time
+    /// IPC call: the first call loans (one allocation inside iceoryx2).
+    pub fn staged(&mut self) -> Option<&mut core::mem::MaybeUninit<T>> {
+        let p = self.port.staged();
+        if p.is_none() {
+            transport_error();
+        }
+        p
+    }
+
+    /// Sends the staged sample. False if there is none or iceoryx2 refused.
+    ///
+    /// # Safety
+    /// Every byte of the staged payload has been written.
+    ///
+    /// # Real-time
+    /// IPC call.
+    pub unsafe fn send_staged(&mut self) -> bool {
+        // SAFETY: the caller's promise.
+        let ok = unsafe { self.port.send_staged() };
+        if !ok {
+            transport_error();
+        }
+        ok
     }
 }
 

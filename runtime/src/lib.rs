@@ -26,6 +26,7 @@ pub mod ipc;
 pub mod process;
 pub mod rt;
 pub mod signals;
+pub mod snapshot;
 pub mod time;
 
 /// Makes every panic of this process abort it once the panic's message is written, as

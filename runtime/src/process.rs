@@ -12,8 +12,9 @@
 //! 6. the cycle ([`Runner::cycle`], one per wake-up of the process' clock; a test drives it
 //!    cycle by cycle): read the e-stop ([`EstopWatch::poll`]); [`Task::cycle`]; the health
 //!    detectors ([`Health`]); publish [`ProcessStatusV2`]; about every 100 ms the wake-up
-//!    latency and execution-time histograms, half an interval apart (30 KB each: about 2 µs
-//!    from cold caches, `cargo bench -p runtime --bench publish`; one per cycle at most);
+//!    latency and execution-time histograms, half an interval apart, each copied into shared
+//!    memory a slice per cycle ([`Snapshot`]: 30 KB whole cost about 2 µs from cold caches,
+//!    `cargo bench -p runtime --bench publish`);
 //! 7. on SIGTERM, or when the supervisor stops beating: the cycle goes on with an e-stop
 //!    reaction until the task is safe (servo: axes at rest, drives disabled), at most the
 //!    cell's e-stop stop time and a second; then a clean exit that removes the process'
@@ -26,12 +27,13 @@ use crate::health::Health;
 use crate::ipc::{self, Ipc, Pub, Sub};
 use crate::rt::{self, RtRequest};
 use crate::signals;
+use crate::snapshot::Snapshot;
 use crate::time::now_ns;
 use iceoryx2::prelude::Node;
 use shm_schema::event::code;
 use shm_schema::{
-    CellConfigV6, EstopOrigin, EventQueue, EventV1, InstanceName, LatencyHistogramV1, ProcState,
-    ProcessConfigV2, ProcessName, ProcessStatusV2, ServiceId, estop_seen,
+    CellConfigV6, EstopOrigin, EventQueue, EventV1, InstanceName, ProcState, ProcessConfigV2,
+    ProcessName, ProcessStatusV2, ServiceId, estop_seen,
 };
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -235,15 +237,33 @@ fn init_logging_to<W>(writer: W)
 where
     W: for<'w> tracing_subscriber::fmt::MakeWriter<'w> + Send + Sync + 'static,
 {
-    let filter = tracing_subscriber::EnvFilter::try_from_env("RTC_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(writer)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_target(false)
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    let _ = tracing_subscriber::registry()
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(writer)
+                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+                .with_target(false),
+        )
+        .with(log_filter())
         .try_init();
     ipc::quiet_iceoryx2_log();
+}
+
+/// What the log shows: `RTC_LOG` (`info` when unset), a level (`debug`) or a default level
+/// and targets with their own (`info,supervisor=debug`), as `tracing_subscriber`'s
+/// [`Targets`](tracing_subscriber::filter::Targets) reads it. A value it cannot read is said
+/// on stderr, and `info` used.
+pub fn log_filter() -> tracing_subscriber::filter::Targets {
+    let info = || tracing_subscriber::filter::Targets::new().with_default(tracing::Level::INFO);
+    match std::env::var("RTC_LOG") {
+        Ok(v) => v.parse().unwrap_or_else(|e| {
+            eprintln!("RTC_LOG={v:?} is not a level nor targets with levels ({e}): info");
+            info()
+        }),
+        Err(_) => info(),
+    }
 }
 
 /// The command line of every process of a cell; its name and words are the process' own.
@@ -385,8 +405,8 @@ pub struct Runner<T: Task> {
     pub clock: CycleClock,
     status: ProcessStatusV2,
     status_pub: Pub<ProcessStatusV2>,
-    latency_pub: Pub<LatencyHistogramV1>,
-    exec_pub: Pub<LatencyHistogramV1>,
+    latency: Snapshot,
+    exec: Snapshot,
     events: EventSink,
     estop: EstopWatch,
     queue: EventQueue,
@@ -420,10 +440,11 @@ impl<T: Task> Runner<T> {
         let (instance, name, own) = (ctx.instance, ctx.name, ctx.own);
         let status_pub =
             Pub::<ProcessStatusV2>::new(&ctx.node, &instance, ServiceId::Status(name))?;
-        let latency_pub =
-            Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::Latency(name))?;
-        let exec_pub =
-            Pub::<LatencyHistogramV1>::new(&ctx.node, &instance, ServiceId::ExecTime(name))?;
+        let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
+        // Each histogram's snapshot done within half an interval: the two never overlap.
+        let slices = (latency_every / 2).max(1) as usize;
+        let latency = Snapshot::new(&ctx.node, &instance, ServiceId::Latency(name), slices)?;
+        let exec = Snapshot::new(&ctx.node, &instance, ServiceId::ExecTime(name), slices)?;
         let events = EventSink::new(&ctx.node, &instance, ctx.index as u32)?;
         let estop = EstopWatch::new(&ctx.node, &instance, &ctx.cell, ctx.index, now_ns())?;
         let task = build(&ctx)?;
@@ -439,7 +460,6 @@ impl<T: Task> Runner<T> {
             ..ProcessStatusV2::default()
         };
         let start_ns = now_ns();
-        let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
         Ok(Self {
             clock: CycleClock::new(own.period_ns, own.phase_ns, start_ns),
             health: Health::new(&ctx.cell.health, own.period_ns, start_ns),
@@ -451,8 +471,8 @@ impl<T: Task> Runner<T> {
             task,
             status,
             status_pub,
-            latency_pub,
-            exec_pub,
+            latency,
+            exec,
             events,
             estop,
             queue: EventQueue::default(),
@@ -628,8 +648,8 @@ impl<T: Task> Runner<T> {
         }
     }
 
-    /// The status every cycle; the two histograms (30 KB each) half an interval apart, one
-    /// copy per cycle at most.
+    /// The status every cycle; the two histograms (30 KB each) half an interval apart, each
+    /// a slice per cycle ([`Snapshot`]: at most 1/16 of it, 1.9 KB, in a cycle).
     ///
     /// # Real-time
     /// Copies and the IPC calls only.
@@ -650,11 +670,14 @@ impl<T: Task> Runner<T> {
         self.status_pub.send(st);
         let phase = st.stats.cycles % self.latency_every;
         if phase == 0 {
-            self.latency_pub.send(self.clock.histogram());
+            self.latency.begin();
         }
         if phase == self.exec_phase {
-            self.exec_pub.send(self.clock.exec_histogram());
+            self.exec.begin();
         }
+        let (latency, exec) = (st.stats.wakeup_latency_ns, st.stats.exec_ns);
+        self.latency.step(self.clock.histogram(), latency);
+        self.exec.step(self.clock.exec_histogram(), exec);
     }
 
     /// After the loop: the task's stop, its last events, the last status and histograms, and
@@ -665,8 +688,8 @@ impl<T: Task> Runner<T> {
         self.events.drain(&mut self.queue);
         self.status.state = ProcState::Stopping as u32;
         self.status_pub.send(&self.status);
-        self.latency_pub.send(self.clock.histogram());
-        self.exec_pub.send(self.clock.exec_histogram());
+        self.latency.send_whole(self.clock.histogram());
+        self.exec.send_whole(self.clock.exec_histogram());
         let h = self.clock.histogram();
         let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
         tracing::info!(

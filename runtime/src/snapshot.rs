@@ -1,0 +1,201 @@
+//! A histogram published without copying all of it in one cycle.
+//!
+//! A [`LatencyHistogramV1`] is 30 KB. Copied whole into shared memory at each publication,
+//! it cost its cycle about 2 µs from cold caches (`cargo bench -p runtime --bench publish`),
+//! a periodic spike of the execution time. A [`Snapshot`] loans its sample once and copies a
+//! slice of the buckets into it per cycle; a sample the histogram records meanwhile into a
+//! bucket already copied is added to the copy as well, and the header (count, sum, minimum,
+//! maximum, overflows, stamp) is written last: the sample sent is the histogram exactly as it
+//! stood in the cycle that sends it.
+
+use crate::ipc::{InstanceName, Ipc, ServiceId};
+use crate::ipc::{IpcError, Node, Pub};
+use shm_schema::LatencyHistogramV1;
+use shm_schema::latency::{BUCKETS, bucket_of};
+
+// Every byte of the structure is one of the fields written (no padding).
+const _: () = assert!(core::mem::size_of::<LatencyHistogramV1>() == 8 * (6 + BUCKETS));
+
+/// At most this many slices per snapshot (a slice of 232 buckets: 1.9 KB).
+pub const MAX_SLICES: usize = 16;
+
+/// A histogram's publisher, one slice per cycle.
+#[derive(Debug)]
+pub struct Snapshot {
+    port: Pub<LatencyHistogramV1>,
+    /// Buckets copied per cycle.
+    slice: usize,
+    /// Buckets copied into the staged sample so far; `None`: no snapshot under way.
+    copied: Option<usize>,
+    /// The histogram's count when the last slice was copied.
+    seen: u64,
+    /// When [`Snapshot::step_every`] last began one (ns).
+    begun_ns: u64,
+}
+
+impl Snapshot {
+    /// A publisher of `id` whose snapshot takes `slices` cycles (1..=[`MAX_SLICES`]).
+    pub fn new(
+        node: &Node<Ipc>,
+        instance: &InstanceName,
+        id: ServiceId,
+        slices: usize,
+    ) -> Result<Self, IpcError> {
+        Ok(Self {
+            port: Pub::new(node, instance, id)?,
+            slice: BUCKETS.div_ceil(slices.clamp(1, MAX_SLICES)),
+            copied: None,
+            seen: 0,
+            begun_ns: 0,
+        })
+    }
+
+    /// Starts a snapshot, unless one is under way.
+    pub fn begin(&mut self) {
+        if self.copied.is_none() {
+            self.copied = Some(0);
+        }
+    }
+
+    /// True while a snapshot is under way.
+    pub fn busy(&self) -> bool {
+        self.copied.is_some()
+    }
+
+    /// A cycle's share of a snapshot under way of `h`, whose latest sample is `last` (ns):
+    /// the next slice, and the snapshot sent once whole (returns true then).
+    ///
+    /// # Real-time
+    /// A copy of one slice and, at the end, the IPC send (the first slice's loan allocates
+    /// once inside iceoryx2).
+    pub fn step(&mut self, h: &LatencyHistogramV1, last: u64) -> bool {
+        let Some(mut copied) = self.copied else {
+            return false;
+        };
+        let Some(payload) = self.port.staged() else {
+            // No sample to fill: the next publication tries again.
+            self.copied = None;
+            return false;
+        };
+        let dst = payload.as_mut_ptr();
+        // SAFETY: `dst` points to a loaned payload we alone write; every bucket read back
+        // (below `copied`) was written by an earlier slice.
+        let buckets = unsafe { core::ptr::addr_of_mut!((*dst).buckets) }.cast::<u64>();
+        match h.count - self.seen {
+            0 => {}
+            // The one sample recorded since the last slice, in a bucket already copied.
+            1 => {
+                if let Some(b) = bucket_of(last).filter(|&b| b < copied) {
+                    unsafe { *buckets.add(b) += 1 };
+                }
+            }
+            // More than one (a slice missed): start the copy again.
+            _ => copied = 0,
+        }
+        let end = (copied + self.slice).min(BUCKETS);
+        // SAFETY: both ranges lie within `buckets` of their structure.
+        unsafe {
+            core::ptr::copy_nonoverlapping(
+                h.buckets.as_ptr().add(copied),
+                buckets.add(copied),
+                end - copied,
+            );
+        }
+        self.seen = h.count;
+        if end < BUCKETS {
+            self.copied = Some(end);
+            return false;
+        }
+        // SAFETY: the header's fields written one by one; with the buckets, every byte
+        // (the structure has no padding: `repr(C)`, all `u64`).
+        unsafe {
+            (*dst).count = h.count;
+            (*dst).sum_ns = h.sum_ns;
+            (*dst).min_ns = h.min_ns;
+            (*dst).max_ns = h.max_ns;
+            (*dst).overflows = h.overflows;
+            (*dst).stamp_ns = h.stamp_ns;
+        }
+        self.copied = None;
+        // SAFETY: every byte written above.
+        unsafe { self.port.send_staged() }
+    }
+
+    /// [`Snapshot::step`], a snapshot begun at `now_ns` when `interval_ns` have passed since
+    /// the last one began (the first at once).
+    ///
+    /// # Real-time
+    /// As [`Snapshot::step`].
+    pub fn step_every(
+        &mut self,
+        now_ns: u64,
+        interval_ns: u64,
+        h: &LatencyHistogramV1,
+        last: u64,
+    ) -> bool {
+        if self.begun_ns == 0 || now_ns.saturating_sub(self.begun_ns) >= interval_ns {
+            self.begin();
+            self.begun_ns = now_ns;
+        }
+        self.step(h, last)
+    }
+
+    /// Publishes `h` whole at once (the last publication, out of the cycle).
+    pub fn send_whole(&mut self, h: &LatencyHistogramV1) -> bool {
+        self.copied = None;
+        self.port.send(h)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ipc::{self, Sub};
+    use shm_schema::ProcessName;
+
+    /// Samples recorded while a snapshot is copied, into buckets copied before and after:
+    /// what is sent is the histogram as it stood in the cycle that sent it, to the bucket.
+    #[test]
+    fn a_snapshot_sent_is_the_histogram_as_it_stood_when_sent() {
+        let instance = InstanceName::new(&format!("snap{}", std::process::id())).expect("name");
+        {
+            let node = ipc::node(&instance, "snapshot").expect("node");
+            let id = ServiceId::Latency(ProcessName::new("servo").expect("name"));
+            let sub = Sub::<LatencyHistogramV1>::new(&node, &instance, id, 1).expect("sub");
+            let mut snap = Snapshot::new(&node, &instance, id, 5).expect("snapshot");
+            let mut h = LatencyHistogramV1::new();
+            // Low, high and overflowing values, so slices before and after each are hit.
+            let mut x: u64 = 12345;
+            let mut sample = || {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                match x >> 60 {
+                    0 => 1 << 36,
+                    k => (x >> 30) % (1 << (k + 20)),
+                }
+            };
+            for round in 0..3 {
+                // Samples before the snapshot, one per cycle during it (the first with it).
+                for _ in 0..100 {
+                    h.record(sample());
+                }
+                snap.begin();
+                let mut sent = false;
+                let mut cycles = 0;
+                while !sent {
+                    let v = sample();
+                    h.record(v);
+                    h.stamp_ns = 1000 + cycles;
+                    sent = snap.step(&h, v);
+                    cycles += 1;
+                }
+                assert_eq!(cycles, 5, "round {round}: a slice a cycle");
+                let got = sub.latest().expect("a snapshot");
+                assert_eq!(got, h, "round {round}");
+                assert!(!snap.busy());
+            }
+        }
+        ipc::remove_instance(&instance);
+    }
+}
