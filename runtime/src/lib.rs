@@ -27,6 +27,7 @@ pub mod process;
 pub mod rt;
 pub mod signals;
 pub mod snapshot;
+pub mod stall;
 pub mod time;
 
 /// Makes every panic of this process abort it once the panic's message is written, as

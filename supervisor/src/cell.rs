@@ -8,13 +8,13 @@
 
 use crate::error::RunError;
 use crate::launch::Children;
-use crate::stall::StallWatch;
 use cell_config::{Config, RestartPolicy};
 use control_plane::Failure;
 use control_plane::channel as ctl;
 use control_plane::compose::{Seen, Snapshot};
 use control_plane::event::{self as events, Axes};
 use control_plane::info::{self, Info};
+use runtime::stall::StallWatch;
 
 /// A heartbeat gap this long (s) is reported, whatever room `supervisor_timeout` gives: the
 /// processes' own timing suffers from such a stall (a following error of vmax times it).
@@ -633,7 +633,7 @@ impl Cell {
 
     /// The heartbeat: the host state with the latched e-stop, every tick.
     /// A gap since the last one of over 100 ms (or a quarter of `supervisor_timeout`, if
-    /// that is shorter) is an event that says where the time went (see [`crate::stall`]).
+    /// that is shorter) is an event that says where the time went (see [`runtime::stall`]).
     pub(crate) fn beat(&mut self) {
         self.host.beat += 1;
         self.host.stamp_ns = runtime::time::now_ns();

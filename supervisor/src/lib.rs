@@ -10,7 +10,6 @@ pub mod program;
 pub mod report;
 pub mod run;
 pub mod serve;
-pub mod stall;
 pub mod swap;
 pub mod tune;
 pub mod up;

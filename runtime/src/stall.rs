@@ -1,15 +1,17 @@
-//! The supervisor's own stalls: a heartbeat that did not go out for a while, and where that
-//! time went, so that a process's `supervisor-lost` can be told apart from a bug.
+//! A thread's stalls: a beat that did not come for a while, and where that time went. The
+//! supervisor's heartbeat (so that a process's `supervisor-lost` can be told apart from a
+//! bug), and the integration tests' watch of the machine (a failure while the machine held
+//! real-time work off the CPUs is the machine's, not the test's).
 //!
 //! The supervisor runs under `SCHED_OTHER`; its heartbeat is what every process of the cell
-//! watches (`supervisor_timeout`). When two beats are further apart than the threshold the
-//! cell gives it (100 ms, or a quarter of that timeout if shorter), [`StallWatch::beat`]
+//! watches (`supervisor_timeout`). When two beats are further apart than the threshold (for
+//! the supervisor, 100 ms, or a quarter of that timeout if shorter), [`StallWatch::beat`]
 //! returns a [`Stall`] that splits the gap four ways, from the kernel's own accounting:
 //!
-//! - **running**: the main thread itself was on a CPU (`/proc/thread-self/schedstat`, its
-//!   run time): the supervisor's own work held the beat back;
-//! - **waiting for a CPU**: the main thread was runnable but another task ran (its run
-//!   delay): a real-time process or another load took the CPUs;
+//! - **running**: the thread itself was on a CPU (`/proc/thread-self/schedstat`, its run
+//!   time, of the thread that made the watch): its own work held the beat back;
+//! - **waiting for a CPU**: the thread was runnable but another task ran (its run delay): a
+//!   real-time process or another load took the CPUs;
 //! - **taken by the host**: the vCPUs were not running at all (`/proc/stat`, steal);
 //! - **blocked**: the rest, the thread slept in a call (a file, a pipe, a lock).
 
@@ -19,6 +21,7 @@ use std::time::{Duration, Instant};
 
 /// The main thread's run time and run-queue delay and the host's steal time, read without
 /// opening a file.
+#[derive(Debug)]
 struct Counters {
     schedstat: Option<File>,
     stat: Option<File>,
@@ -61,7 +64,7 @@ impl Counters {
 
 /// A gap between two heartbeats and where it went.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Stall {
+pub struct Stall {
     /// Time between the two beats.
     pub gap: Duration,
     /// Of it, on a CPU (`None`: the kernel does not say).
@@ -73,9 +76,15 @@ pub(crate) struct Stall {
 }
 
 impl Stall {
+    /// The machine's share of the gap: waiting for a CPU and taken by the host (what the
+    /// kernel does not say counts as none).
+    pub fn machine_share(&self) -> Duration {
+        self.waiting_for_cpu.unwrap_or_default() + self.host_steal.unwrap_or_default()
+    }
+
     /// Where the time went, in words: `"412 ms waiting for a CPU, 0 ms taken by the host,
     /// 3 ms running, the rest blocked in a call"`.
-    pub(crate) fn cause(&self) -> String {
+    pub fn cause(&self) -> String {
         let ms = |d: Option<Duration>| {
             d.map_or("? ms".into(), |d| {
                 format!("{:.0} ms", d.as_secs_f64() * 1e3)
@@ -91,7 +100,8 @@ impl Stall {
 }
 
 /// Watches the gaps between heartbeats.
-pub(crate) struct StallWatch {
+#[derive(Debug)]
+pub struct StallWatch {
     threshold: Duration,
     last: Instant,
     schedstat_ns: Option<(u64, u64)>,
@@ -101,7 +111,7 @@ pub(crate) struct StallWatch {
 
 impl StallWatch {
     /// Reports gaps longer than `threshold`.
-    pub(crate) fn new(threshold: Duration) -> Self {
+    pub fn new(threshold: Duration) -> Self {
         let mut counters = Counters::open();
         Self {
             threshold,
@@ -114,7 +124,7 @@ impl StallWatch {
 
     /// A heartbeat goes out now: the stall before it, if the gap since the last one is over
     /// the threshold. Two small reads of `/proc` files kept open.
-    pub(crate) fn beat(&mut self) -> Option<Stall> {
+    pub fn beat(&mut self) -> Option<Stall> {
         let now = Instant::now();
         let gap = now - self.last;
         self.last = now;
