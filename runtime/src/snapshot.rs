@@ -81,7 +81,8 @@ impl Snapshot {
         // SAFETY: `dst` points to a loaned payload we alone write; every bucket read back
         // (below `copied`) was written by an earlier slice.
         let buckets = unsafe { core::ptr::addr_of_mut!((*dst).buckets) }.cast::<u64>();
-        match h.count - self.seen {
+        // Wrapping: a histogram started afresh (fewer samples) restarts the copy below.
+        match h.count.wrapping_sub(self.seen) {
             0 => {}
             // The one sample recorded since the last slice, in a bucket already copied.
             1 => {
