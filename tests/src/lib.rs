@@ -391,11 +391,13 @@ impl MachineWatch {
     fn start() -> Self {
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = stop.clone();
+        let (running, started) = std::sync::mpsc::channel();
         let thread = std::thread::spawn(move || {
             let param = libc::sched_param { sched_priority: 1 };
             // SAFETY: plain system call on the calling thread with a valid parameter block.
             let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
             let mut watch = runtime::stall::StallWatch::new(STALL_GAP);
+            let _ = running.send(());
             let mut stalls = Vec::new();
             while !stopped.load(Ordering::Relaxed) {
                 std::thread::sleep(Duration::from_millis(5));
@@ -405,6 +407,8 @@ impl MachineWatch {
             }
             stalls
         });
+        // Watching before the test starts: a stall from its first moment is seen.
+        let _ = started.recv();
         Self { stop, thread }
     }
 
