@@ -1104,20 +1104,10 @@ impl Generator {
             && *fault == fault::NONE
             && *commands_taken == e.commands_taken + commands
             && *exec_seq == e.exec_seq + commands
-            && (*speed, *target_speed) == (1.0, 1.0)
-            && (
-                *speed,
-                *target_speed,
-                *speed_override,
-                *program_speed,
-                *aborting,
-            ) == (
-                e.speed,
-                e.target_speed,
-                e.speed_override,
-                e.program_speed,
-                e.aborting,
-            )
+            // Path time is real time only at full speed, not ramping.
+            && [*speed, *target_speed, e.speed, e.target_speed] == [1.0; 4]
+            && (*speed_override, *program_speed, *aborting)
+                == (e.speed_override, e.program_speed, e.aborting)
             && *control_seq == e.control_seq
             && *outputs == e.outputs
             && *limits == e.limits

@@ -57,11 +57,6 @@ impl Snapshot {
         }
     }
 
-    /// True while a snapshot is under way.
-    pub fn busy(&self) -> bool {
-        self.copied.is_some()
-    }
-
     /// A cycle's share of a snapshot under way of `h`, whose latest sample is `last` (ns):
     /// the next slice, and the snapshot sent once whole (returns true then).
     ///
@@ -194,7 +189,7 @@ mod tests {
                 assert_eq!(cycles, 5, "round {round}: a slice a cycle");
                 let got = sub.latest().expect("a snapshot");
                 assert_eq!(got, h, "round {round}");
-                assert!(!snap.busy());
+                assert!(snap.copied.is_none(), "round {round}: done");
             }
         }
         ipc::remove_instance(&instance);

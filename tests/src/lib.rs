@@ -419,15 +419,15 @@ impl MachineWatch {
         let stalls = self.thread.join().unwrap_or_default();
         let share = |s: &runtime::stall::Stall| s.machine_share().as_secs_f64() * 1e3;
         let mut worst = (0.0, 0, Duration::ZERO);
+        let mut first = 0;
         for (k, (end, _)) in stalls.iter().enumerate() {
-            let window: Vec<_> = stalls[..=k]
-                .iter()
-                .filter(|(t, _)| *end - *t <= STALL_WINDOW)
-                .map(|(_, s)| s)
-                .collect();
-            let total: f64 = window.iter().map(|s| share(s)).sum();
+            while *end - stalls[first].0 > STALL_WINDOW {
+                first += 1;
+            }
+            let window = &stalls[first..=k];
+            let total: f64 = window.iter().map(|(_, s)| share(s)).sum();
             if total > worst.0 {
-                let longest = window.iter().map(|s| s.gap).max().unwrap_or_default();
+                let longest = window.iter().map(|(_, s)| s.gap).max().unwrap_or_default();
                 worst = (total, window.len(), longest);
             }
         }
