@@ -528,11 +528,25 @@ mod tests {
     #[test]
     fn a_failure_is_attributed_only_to_stalls_the_run_measured() {
         // Every CPU held at SCHED_FIFO 50 (above the watch) for 400 ms: the machine stalled.
+        // One holder pinned to each CPU this test may use, all starting together (unpinned,
+        // a holder could wait behind another on one CPU until that one was done, and the
+        // CPUs would be held one after the other: CI saw it).
         attributable(|| {
-            let hold = || {
+            let allowed = nix::sched::sched_getaffinity(nix::unistd::Pid::from_raw(0))
+                .expect("this thread's CPUs");
+            let cpus: Vec<usize> = (0..nix::sched::CpuSet::count())
+                .filter(|&c| allowed.is_set(c).unwrap_or(false))
+                .collect();
+            let together = Arc::new(std::sync::Barrier::new(cpus.len()));
+            let hold = move |cpu: usize, together: Arc<std::sync::Barrier>| {
+                let mut only = nix::sched::CpuSet::new();
+                let pinned = only.set(cpu).is_ok()
+                    && nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &only).is_ok();
                 let param = libc::sched_param { sched_priority: 50 };
                 // SAFETY: as in MachineWatch::start.
-                if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } != 0 {
+                let fifo = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0;
+                together.wait();
+                if !(pinned && fifo) {
                     return false;
                 }
                 let t = Instant::now();
@@ -541,10 +555,14 @@ mod tests {
                 }
                 true
             };
-            let cpus = std::thread::available_parallelism().map_or(2, |n| n.get());
-            let others: Vec<_> = (1..cpus).map(|_| std::thread::spawn(hold)).collect();
-            let mine = hold();
-            let held = others.into_iter().all(|t| t.join().unwrap_or(false)) && mine;
+            let holders: Vec<_> = cpus
+                .iter()
+                .map(|&cpu| {
+                    let together = together.clone();
+                    std::thread::spawn(move || hold(cpu, together))
+                })
+                .collect();
+            let held = holders.into_iter().all(|t| t.join().unwrap_or(false));
             assert!(
                 !held,
                 "a failure while the machine stalled (every CPU held)"
