@@ -13,9 +13,9 @@ use std::time::Duration;
 const WATCHDOG: Duration = Duration::from_secs(180);
 
 /// A network namespace of the test's own, removed when dropped (with whatever is in it).
-struct Netns(String);
+pub(crate) struct Netns(pub(crate) String);
 
-fn ip(args: &[&str]) {
+pub(crate) fn ip(args: &[&str]) {
     let out = Command::new("ip")
         .args(args)
         .output()
@@ -28,7 +28,7 @@ fn ip(args: &[&str]) {
 }
 
 impl Netns {
-    fn new(test: &str) -> Self {
+    pub(crate) fn new(test: &str) -> Self {
         let name = format!("rtc-{}-{test}", std::process::id());
         ip(&["netns", "add", &name]);
         ip(&["-n", &name, "link", "set", "lo", "up"]);
@@ -36,7 +36,7 @@ impl Netns {
     }
 
     /// `program` run inside the namespace.
-    fn command(&self, program: &str) -> Command {
+    pub(crate) fn command(&self, program: &str) -> Command {
         let mut c = Command::new("ip");
         c.args(["netns", "exec", &self.0]).arg(bin(program));
         c

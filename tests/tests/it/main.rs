@@ -13,6 +13,7 @@ mod faults;
 mod fieldbus;
 mod latency;
 mod loop_sim;
+mod masters;
 mod no_alloc;
 mod operations;
 mod programs;

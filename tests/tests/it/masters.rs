@@ -1,0 +1,229 @@
+//! The `ethercat-emulator` process checked by two EtherCAT masters we did not write, from
+//! PyPI: SOEM (pysoem) and kickcat (`tests/python/masters.py`), each on one end of a veth pair
+//! in a network namespace of its own, the emulator on the other. Here rather than in the
+//! emulator's crate so that they run beside the other tests: kickcat's scan waits out its
+//! link timeout after every frame (about 14 s of the test, idle). Needs root (CI is).
+
+use super::ethercat::{Netns, ip};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The emulator on `s0` of a veth pair in a namespace of the test's own, the master's end
+/// `m0`; the emulator stopped and the namespace removed when dropped.
+struct Line {
+    emulator: Child,
+    ns: Netns,
+}
+
+impl Line {
+    fn up(test: &str, args: &[&str]) -> Self {
+        let ns = Netns::new(test);
+        ip(&[
+            "-n", &ns.0, "link", "add", "m0", "type", "veth", "peer", "name", "s0",
+        ]);
+        ip(&["-n", &ns.0, "link", "set", "m0", "up"]);
+        ip(&["-n", &ns.0, "link", "set", "s0", "up"]);
+        let mut emulator = ns
+            .command("ethercat-emulator")
+            .args(["--interface", "s0"])
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the emulator");
+        // Ready once it says it answers; the rest of its log goes to the test's stderr.
+        let (ready, waiting) = std::sync::mpsc::channel();
+        let mut log = std::io::BufReader::new(emulator.stderr.take().expect("stderr"));
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            let mut text = String::new();
+            while log.read_line(&mut text).is_ok_and(|n| n > 0) {
+                eprint!("emulator: {text}");
+                if text.contains("answering on") {
+                    let _ = ready.send(());
+                }
+                text.clear();
+            }
+        });
+        let line = Self { emulator, ns };
+        waiting
+            .recv_timeout(Duration::from_secs(120))
+            .expect("the emulator never said it answers");
+        line
+    }
+}
+
+impl Drop for Line {
+    fn drop(&mut self) {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(self.emulator.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+        let start = Instant::now();
+        while matches!(self.emulator.try_wait(), Ok(None))
+            && start.elapsed() < Duration::from_secs(10)
+        {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.emulator.kill();
+        let _ = self.emulator.wait();
+    }
+}
+
+/// Runs `tests/python/masters.py MASTER m0` in the line's namespace; its JSON (the last line
+/// of its stdout).
+fn master(line: &Line, name: &str) -> serde_json::Value {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/masters.py");
+    let out = Command::new("ip")
+        .args([
+            "netns", "exec", &line.ns.0, "timeout", "120", "python3", script, name, "m0",
+        ])
+        .output()
+        .expect("python3");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{name} failed (pip install pysoem==1.1.13 kickcat==2.5; .ci/run does):\n{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let last = stdout.lines().last().unwrap_or("");
+    serde_json::from_str(last).unwrap_or_else(|e| {
+        panic!(
+            "{name}'s output is not JSON ({e}): {}\n{stderr}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })
+}
+
+fn every_pattern_came_back(name: &str, r: &serde_json::Value) {
+    let ex = r["exchanges"].as_array().expect("exchanges");
+    assert_eq!(ex.len(), 20, "{name}: {r}");
+    for e in ex {
+        assert_eq!(
+            e["read"], e["wrote"],
+            "{name}: an output that did not come back: {r}"
+        );
+    }
+}
+
+/// The line the masters check: the IO terminals and a drive.
+/// The ESCs' process data watchdog at 2 s: room for the host's stalls between two exchanges
+/// of a master (this VM stalls a process for tens of ms now and then, rarely for a second).
+const LINE: &[&str] = &[
+    "--loopback",
+    "--line",
+    "ek1100,el1008,el2008,drive",
+    "--pd-watchdog-ms",
+    "2000",
+];
+
+/// What a master read of the drive by SDO before OP, and the CiA 402 states it took it
+/// through in OP.
+fn the_drive_answered_and_enabled(name: &str, r: &serde_json::Value) {
+    let sdo = &r["sdo"];
+    assert_eq!(
+        sdo["vendor"],
+        ethercat_emulator::drive::VENDOR,
+        "{name}: {r}"
+    );
+    assert_eq!(
+        sdo["product"],
+        ethercat_emulator::drive::PRODUCT,
+        "{name}: {r}"
+    );
+    assert_eq!(sdo["modes"], 0x0380, "{name}: CSP, CSV, CST: {r}");
+    assert_eq!(
+        sdo["statusword"].as_u64().map(|s| s & 0x4F),
+        Some(0x40),
+        "{name}: Switch on disabled before OP: {r}"
+    );
+    assert_eq!(sdo["mode_display"], 8, "{name}: CSP: {r}");
+    let d = &r["drive"];
+    assert_eq!(
+        d["states"],
+        serde_json::json!([0x21, 0x23, 0x27]),
+        "{name}: Ready to switch on, Switched on, Operation enabled: {r}"
+    );
+    assert_eq!(d["mode_display"], 8, "{name}: {r}");
+    assert_eq!(
+        d["position"], 40_000,
+        "{name}: the axis where it started: {r}"
+    );
+}
+
+#[test]
+fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
+    integration_tests::attributable(|| {
+        let line = Line::up("masters-soem", LINE);
+        let r = master(&line, "pysoem");
+        assert_eq!(r["found"], 4, "{r}");
+        let expected = [
+            ("EK1100", 2, 0x044C_2C52u32),
+            ("EL1008", 2, 0x03F0_3052),
+            ("EL2008", 2, 0x07D8_3052),
+            (
+                "RTC-EMU-402",
+                ethercat_emulator::drive::VENDOR,
+                ethercat_emulator::drive::PRODUCT,
+            ),
+        ];
+        for (d, (name, vendor, product)) in r["devices"]
+            .as_array()
+            .expect("devices")
+            .iter()
+            .zip(expected)
+        {
+            assert_eq!(d["name"], name, "{r}");
+            assert_eq!(d["vendor"], vendor, "{r}");
+            assert_eq!(d["product"], product, "{r}");
+        }
+        assert_eq!(
+            r["iomap"],
+            2 + 19 + 19,
+            "a byte each way for the IO, 19 for the drive: {r}"
+        );
+        // LRW: the EL2008 and the drive written (2 each), the EL1008 and the drive read (1 each).
+        assert_eq!(r["expected_wkc"], 6, "{r}");
+        assert_eq!(r["safe_op"], 4, "{r}");
+        assert_eq!(r["op"], serde_json::json!([8, 8, 8, 8]), "{r}");
+        for e in r["exchanges"].as_array().expect("exchanges") {
+            assert_eq!(e["wkc"], 6, "{r}");
+        }
+        every_pattern_came_back("pysoem", &r);
+        the_drive_answered_and_enabled("pysoem", &r);
+        assert_eq!(r["drive"]["wkc"], serde_json::json!([6]), "{r}");
+        // On SYNC0 (SOEM's DC set-up and SYNC0 start), enabled through outputs taken at SYNC0;
+        // the line's DC time, which SOEM reads with every exchange, went on.
+        let dc = &r["dc"];
+        assert_eq!(dc["found"], true, "{r}");
+        assert_eq!(dc["sync_mode"], 2, "{r}");
+        let t = |k: usize| dc["time"][k].as_u64().unwrap_or(0);
+        assert!(t(0) > 0 && t(1) > t(0), "{r}");
+    });
+}
+
+#[test]
+fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
+    integration_tests::attributable(|| {
+        let line = Line::up("masters-kickcat", LINE);
+        let r = master(&line, "kickcat");
+        assert_eq!(r["found"], 4, "{r}");
+        assert_eq!(
+            r["sizes"],
+            serde_json::json!([[0, 0], [1, 0], [0, 1], [19, 19]]),
+            "{r}"
+        );
+        assert_eq!(
+            r["op"],
+            serde_json::json!([
+                "State.OPERATIONAL",
+                "State.OPERATIONAL",
+                "State.OPERATIONAL",
+                "State.OPERATIONAL"
+            ]),
+            "{r}"
+        );
+        every_pattern_came_back("kickcat", &r);
+        the_drive_answered_and_enabled("kickcat", &r);
+    });
+}
