@@ -44,7 +44,7 @@ impl Line {
         ]);
         ip(&["-n", &ns, "link", "set", "m0", "up"]);
         ip(&["-n", &ns, "link", "set", "s0", "up"]);
-        let mut emulator = Command::new("ip")
+        let emulator = Command::new("ip")
             .args([
                 "netns",
                 "exec",
@@ -57,24 +57,15 @@ impl Line {
             .stderr(Stdio::piped())
             .spawn()
             .expect("the emulator");
-        // Ready once it says it answers; the rest of its log goes to the test's stderr.
-        let (ready, waiting) = std::sync::mpsc::channel();
-        let mut log = std::io::BufReader::new(emulator.stderr.take().expect("stderr"));
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            let mut text = String::new();
-            while log.read_line(&mut text).is_ok_and(|n| n > 0) {
-                eprint!("emulator: {text}");
-                if text.contains("answering on") {
-                    let _ = ready.send(());
-                }
-                text.clear();
-            }
-        });
-        line.emulator = Some(emulator);
-        waiting
-            .recv_timeout(Duration::from_secs(120))
-            .expect("the emulator never said it answers");
+        // Ready once it says it answers; the rest of its log goes to the test's stderr. (Kept
+        // first: stopped by the line's drop if it never says so.)
+        let emulator = line.emulator.insert(emulator);
+        integration_tests::until_it_says(
+            emulator,
+            "emulator",
+            "answering on",
+            Duration::from_secs(120),
+        );
         line
     }
 }

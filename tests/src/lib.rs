@@ -475,6 +475,29 @@ pub fn attributable(test: impl FnOnce()) {
     std::panic::resume_unwind(panic);
 }
 
+/// Waits until `child` (spawned with its stderr piped) says `words` on a line of its stderr,
+/// for at most `watchdog` (a panic then); every line of it goes on to the test's stderr, after
+/// `name: `, for as long as it writes.
+pub fn until_it_says(child: &mut std::process::Child, name: &str, words: &str, watchdog: Duration) {
+    let (said, waiting) = std::sync::mpsc::channel();
+    let mut log = std::io::BufReader::new(child.stderr.take().expect("its stderr piped"));
+    let (name, wanted) = (name.to_string(), words.to_string());
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        let mut text = String::new();
+        while log.read_line(&mut text).is_ok_and(|n| n > 0) {
+            eprint!("{name}: {text}");
+            if text.contains(&wanted) {
+                let _ = said.send(());
+            }
+            text.clear();
+        }
+    });
+    waiting
+        .recv_timeout(watchdog)
+        .unwrap_or_else(|_| panic!("it never said {words:?} in {watchdog:?}"));
+}
+
 /// The command line of a cell's process (`exe`, its program, named `name`): `--help` names it
 /// and its two arguments and exits 0; an unknown argument, a bad `--instance` or `--name` is
 /// refused naming the argument, exit 2, before it touches anything of an instance. For each

@@ -23,7 +23,7 @@ impl Line {
         ]);
         ip(&["-n", &ns.0, "link", "set", "m0", "up"]);
         ip(&["-n", &ns.0, "link", "set", "s0", "up"]);
-        let mut emulator = ns
+        let emulator = ns
             .command("ethercat-emulator")
             .args(["--interface", "s0"])
             .args(args)
@@ -31,24 +31,15 @@ impl Line {
             .stderr(Stdio::piped())
             .spawn()
             .expect("the emulator");
-        // Ready once it says it answers; the rest of its log goes to the test's stderr.
-        let (ready, waiting) = std::sync::mpsc::channel();
-        let mut log = std::io::BufReader::new(emulator.stderr.take().expect("stderr"));
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            let mut text = String::new();
-            while log.read_line(&mut text).is_ok_and(|n| n > 0) {
-                eprint!("emulator: {text}");
-                if text.contains("answering on") {
-                    let _ = ready.send(());
-                }
-                text.clear();
-            }
-        });
-        let line = Self { emulator, ns };
-        waiting
-            .recv_timeout(Duration::from_secs(120))
-            .expect("the emulator never said it answers");
+        // Ready once it says it answers; the rest of its log goes to the test's stderr. (Kept
+        // first: stopped by the line's drop if it never says so.)
+        let mut line = Self { emulator, ns };
+        integration_tests::until_it_says(
+            &mut line.emulator,
+            "emulator",
+            "answering on",
+            Duration::from_secs(120),
+        );
         line
     }
 }
