@@ -337,7 +337,7 @@ fn run_inner<T: Task>(
     let (priority, cpu) = (ctx.own.priority, usize::try_from(ctx.own.cpu).ok());
     let mut runner = Runner::new(ctx, build)?;
     // The real-time set-up after the task's own (a bus' bring-up runs under SCHED_OTHER).
-    let (rt, _rt_guard) = rt::setup(RtRequest { priority, cpu });
+    let (rt, rt_guard) = rt::setup(RtRequest { priority, cpu });
     runner.start(rt);
     // The cycle. Nothing in it allocates, locks or logs (see `Task::cycle`, `Runner::cycle`).
     loop {
@@ -352,6 +352,9 @@ fn run_inner<T: Task>(
             break;
         }
     }
+    // Out of the cycle, out of real time: what follows (the task's stop, the last status,
+    // the log's flush) runs under SCHED_OTHER (see `RtGuard`).
+    drop(rt_guard);
     Ok(runner.finish())
 }
 

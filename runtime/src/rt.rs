@@ -38,16 +38,42 @@ pub struct RtReport {
     pub flags: u32,
 }
 
-/// Keeps what must live as long as the cycle: the `/dev/cpu_dma_latency` file.
+/// Keeps what must live as long as the cycle: the `/dev/cpu_dma_latency` file; from
+/// [`setup`], the calling thread's `SCHED_FIFO` priority, which ends with the guard (dropped
+/// on the thread that made it: it is not `Send`).
+///
+/// A process that leaves its cycle is no longer real-time: what it does then (its last
+/// status, its log's flush) must never spin at its priority while a thread under
+/// `SCHED_OTHER` is to do the work. tracing-appender's guard waits up to a second for its
+/// worker thread by `sched_yield`, which yields to nothing below a `SCHED_FIFO` caller: two
+/// processes leaving at once after the supervisor was killed held both CPUs for 0.95 s each
+/// time (until the kernel's real-time throttling let the workers run), and every real-time
+/// process of every other cell on the machine with them.
 #[derive(Debug)]
 pub struct RtGuard {
     _dma_latency: Option<File>,
+    /// The thread's priority to give back (it was put under `SCHED_FIFO` by [`setup`]).
+    fifo: bool,
+    _same_thread: std::marker::PhantomData<*const ()>,
+}
+
+impl Drop for RtGuard {
+    fn drop(&mut self) {
+        if self.fifo {
+            let param = libc::sched_param { sched_priority: 0 };
+            // SAFETY: plain system call with a valid parameter block; 0 is the calling
+            // thread, the one `setup` put under SCHED_FIFO.
+            let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+        }
+    }
 }
 
 /// Applies `req` to the calling thread and process: [`setup_process`] then [`setup_thread`].
+/// The thread's `SCHED_FIFO` priority lasts as long as the guard.
 pub fn setup(req: RtRequest) -> (RtReport, RtGuard) {
-    let (process, guard) = setup_process();
+    let (process, mut guard) = setup_process();
     let thread = setup_thread(req);
+    guard.fifo = thread.policy == 1;
     (
         RtReport {
             flags: process.flags | thread.flags,
@@ -86,7 +112,14 @@ pub fn setup_process() -> (RtReport, RtGuard) {
     if dma.is_some() {
         report.flags |= rt_flags::DMA_LATENCY;
     }
-    (report, RtGuard { _dma_latency: dma })
+    (
+        report,
+        RtGuard {
+            _dma_latency: dma,
+            fifo: false,
+            _same_thread: std::marker::PhantomData,
+        },
+    )
 }
 
 /// The calling thread's half: a prefaulted stack, the CPU affinity and `SCHED_FIFO` priority
@@ -197,3 +230,31 @@ pub fn sched_of(pid: i32) -> Option<(u32, i32)> {
 
 /// Name of a policy value of [`RtReport::policy`] (the numbers of `ProcessStatusV2::policy`).
 pub use shm_schema::status::policy_name;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A process out of its cycle is out of real time: the guard's drop gives the thread back
+    /// to `SCHED_OTHER` (a leaving process at its priority starved its own log worker, and
+    /// with it both CPUs, for 0.95 s).
+    #[test]
+    fn the_guard_gives_the_thread_back_to_sched_other() {
+        std::thread::spawn(|| {
+            let (report, guard) = setup(RtRequest {
+                priority: 10,
+                cpu: None,
+            });
+            if report.policy != 1 {
+                eprintln!("no right to SCHED_FIFO here: nothing to give back");
+                return;
+            }
+            // SAFETY: plain system calls about the calling thread.
+            assert_eq!(unsafe { libc::sched_getscheduler(0) }, libc::SCHED_FIFO);
+            drop(guard);
+            assert_eq!(unsafe { libc::sched_getscheduler(0) }, libc::SCHED_OTHER);
+        })
+        .join()
+        .expect("the thread");
+    }
+}

@@ -376,6 +376,11 @@ pub const STALL_WINDOW: Duration = Duration::from_secs(2);
 /// A gap of the watch's beat this long or longer is a stall (its beat is 5 ms).
 const STALL_GAP: Duration = Duration::from_millis(10);
 
+/// Set (to anything), every test of the real cell prints what its machine watch measured,
+/// passed or failed (`WATCH test: …`), and each stall of 100 ms or more with where the time
+/// went (`STALL …`): how a leaving process that starved both CPUs for 0.95 s was found.
+pub const WATCH_REPORT: &str = "RTC_WATCH_REPORT";
+
 /// The machine's stalls while a test runs, as a real-time process would suffer them: a thread
 /// of the test at `SCHED_FIFO` 1 (below every process of a cell, above all ordinary work)
 /// wakes every 5 ms; each gap of [`STALL_GAP`] or more is split by the kernel's accounting
@@ -397,11 +402,19 @@ impl MachineWatch {
             // SAFETY: plain system call on the calling thread with a valid parameter block.
             let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
             let mut watch = runtime::stall::StallWatch::new(STALL_GAP);
+            let report = std::env::var_os(WATCH_REPORT).is_some();
             let _ = running.send(());
             let mut stalls = Vec::new();
             while !stopped.load(Ordering::Relaxed) {
                 std::thread::sleep(Duration::from_millis(5));
                 if let Some(s) = watch.beat() {
+                    if report && s.gap >= Duration::from_millis(100) {
+                        eprintln!(
+                            "STALL of the machine watch: {:.0} ms, {}",
+                            s.gap.as_secs_f64() * 1e3,
+                            s.cause()
+                        );
+                    }
                     stalls.push((Instant::now(), s));
                 }
             }
@@ -446,6 +459,17 @@ pub fn attributable(test: impl FnOnce()) {
     let watch = MachineWatch::start();
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(test));
     let (stalled_ms, stalls, longest) = watch.worst();
+    if std::env::var_os(WATCH_REPORT).is_some() {
+        use std::io::Write;
+        let _ = writeln!(
+            std::io::stderr(),
+            "WATCH {}: real-time work held off a CPU {stalled_ms:.0} ms in the worst {} s \
+             ({stalls} stalls, the longest {:.0} ms)",
+            std::thread::current().name().unwrap_or("a test"),
+            STALL_WINDOW.as_secs(),
+            longest.as_secs_f64() * 1e3
+        );
+    }
     let Err(panic) = result else {
         return;
     };
