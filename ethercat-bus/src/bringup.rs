@@ -19,7 +19,7 @@ use cia402::pdo::{RX_DEFAULT, TX_DEFAULT, mapping, obj, sync};
 use ethercat_wire::{Received, Wire};
 use ethercrab::{MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, Timeouts};
 use shm_schema::ethercat::{MAX_SUBDEVICES, subdevice_flags};
-use shm_schema::{AxisConfigV2, EthercatConfigV1};
+use shm_schema::{AxisConfigV2, EthercatConfigV1, EthercatSubDeviceV1};
 use std::future::Future;
 use std::pin::pin;
 use std::task::{Context, Poll, Waker};
@@ -33,6 +33,9 @@ const MAX_FRAMES: usize = 16;
 const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
 /// Bytes of the process image ethercrab may lay out.
 const MAX_PDI: usize = 1100;
+
+/// The line's one group, as scanned (PRE-OP).
+type PreOpGroup = ethercrab::SubDeviceGroup<MAX_SUBDEVICES, MAX_PDI>;
 
 static PDU_STORAGE: PduStorage<MAX_FRAMES, MAX_PDU_DATA> = PduStorage::new();
 
@@ -403,48 +406,7 @@ fn bring_up(
             )
         })
         .collect();
-    for (k, w) in want.iter().enumerate() {
-        let expected = if w.flags & subdevice_flags::CHECK_REVISION != 0 {
-            format!(
-                "{} ({})",
-                w.name(),
-                identity(w.vendor, w.product, w.revision)
-            )
-        } else {
-            format!(
-                "{} (vendor {:#010x}, product {:#010x}, any revision)",
-                w.name(),
-                w.vendor,
-                w.product
-            )
-        };
-        let Some((id, name, _)) = found.get(k) else {
-            return Err(BringUpError::Refused(format!(
-                "the bus on {} has {} SubDevice(s): position {k} should be {expected}, and nothing answers there",
-                cfg.interface(),
-                found.len()
-            )));
-        };
-        let revision_ok =
-            w.flags & subdevice_flags::CHECK_REVISION == 0 || id.revision == w.revision;
-        if id.vendor_id != w.vendor || id.product_id != w.product || !revision_ok {
-            return Err(BringUpError::Refused(format!(
-                "position {k} of the bus on {} should be {expected}, and {name} ({}) is there",
-                cfg.interface(),
-                identity(id.vendor_id, id.product_id, id.revision)
-            )));
-        }
-    }
-    if let Some((id, name, _)) = found.get(want.len()) {
-        return Err(BringUpError::Refused(format!(
-            "the bus on {} has {} SubDevice(s) where the configuration names {}: position {} is {name} ({}), which it does not name",
-            cfg.interface(),
-            found.len(),
-            want.len(),
-            want.len(),
-            identity(id.vendor_id, id.product_id, id.revision)
-        )));
-    }
+    check_line(cfg, want, &found)?;
 
     // Each SubDevice's send mailbox (SM1 in mailbox mode, written by the SubDevice): its
     // emergencies are taken out of ethercrab's way from here on (`Pump::guard`), and the
@@ -552,14 +514,139 @@ fn bring_up(
         }
     }
 
-    // Distributed Clocks for the SubDevices on SYNC0 (the module documentation of `Dc`):
-    // each must have DC; the first SubDevice with DC is the reference clock; the host's
-    // clock is measured against it (the read with the shortest round trip of eight); a
-    // drive gets sync mode 2 and the cycle time in 0x1C32; each SYNC0 starts at a wake-up
-    // of the bus process 300 ms on plus its shift, every period (0x0981, 0x0990, 0x09A0:
-    // the sequence of ethercrab's `configure_dc_sync`, whose start time would not be on the
-    // bus process' grid).
-    let timing = line.timing;
+    let dc = configure_dc(md, pump, line, &group, want, &found)?;
+
+    // SAFE-OP only: OP is asked for by the cycle's own frames (`CyclicFrame::request_op`),
+    // so that no SubDevice is ever in OP without the cycle running (its process data
+    // watchdog would take it out of OP again in the set-up's gap before the first cycle).
+    let group = pump
+        .run(wire, group.into_safe_op(md), long, stop)?
+        .map_err(|e| format!("bringing the bus on {} to SAFE-OP: {e}", cfg.interface()))?;
+    // The process data once, in SAFE-OP (a SubDevice takes them, and ignores its outputs).
+    let wkc = pump
+        .run(wire, group.tx_rx(md), long, stop)?
+        .map_err(|e| format!("exchanging process data on {}: {e}", cfg.interface()))?
+        .working_counter;
+
+    // Where ethercrab put each SubDevice's data: its FMMUs, read back.
+    let mut fmmus = Vec::new();
+    for (k, sd) in group.iter(md).enumerate() {
+        let count: u8 = pump
+            .run(wire, sd.register_read(0x0004u16), long, stop)?
+            .map_err(|e| format!("position {k}: FMMU count: {e}"))?;
+        for f in 0..u16::from(count).min(16) {
+            let base = 0x0600 + 16 * f;
+            let active: u8 = pump
+                .run(wire, sd.register_read(base + 0x0C), long, stop)?
+                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
+            if active & 1 == 0 {
+                continue;
+            }
+            let logical: u32 = pump
+                .run(wire, sd.register_read(base), long, stop)?
+                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
+            let len: u16 = pump
+                .run(wire, sd.register_read(base + 4), long, stop)?
+                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
+            let kind: u8 = pump
+                .run(wire, sd.register_read(base + 0x0B), long, stop)?
+                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
+            fmmus.push((k, logical, len, kind));
+        }
+    }
+    let layout = layout_of(&found.iter().map(|f| f.2).collect::<Vec<_>>(), &fmmus)?;
+    if layout.expected_wkc != wkc {
+        return Err(BringUpError::Failed(format!(
+            "the bus on {} answers with working counter {wkc} where its FMMUs make {}",
+            cfg.interface(),
+            layout.expected_wkc
+        )));
+    }
+    let mut layout = layout;
+    for (slot, mailbox) in layout.slots.iter_mut().zip(&mailboxes) {
+        slot.mailbox_in = *mailbox;
+    }
+    Ok(Up {
+        layout,
+        names: found.into_iter().map(|f| f.1).collect(),
+        emergencies: Vec::new(),
+        dc,
+    })
+}
+
+/// The line as scanned (`found`: identity, name, station address, in wire order) against the
+/// configuration's `[[ethercat.subdevice]]` (`want`): refused, naming the position and both
+/// identities, unless they are the same SubDevices in the same order.
+fn check_line(
+    cfg: &EthercatConfigV1,
+    want: &[EthercatSubDeviceV1],
+    found: &[(ethercrab::SubDeviceIdentity, String, u16)],
+) -> Result<(), BringUpError> {
+    for (k, w) in want.iter().enumerate() {
+        let expected = if w.flags & subdevice_flags::CHECK_REVISION != 0 {
+            format!(
+                "{} ({})",
+                w.name(),
+                identity(w.vendor, w.product, w.revision)
+            )
+        } else {
+            format!(
+                "{} (vendor {:#010x}, product {:#010x}, any revision)",
+                w.name(),
+                w.vendor,
+                w.product
+            )
+        };
+        let Some((id, name, _)) = found.get(k) else {
+            return Err(BringUpError::Refused(format!(
+                "the bus on {} has {} SubDevice(s): position {k} should be {expected}, and nothing answers there",
+                cfg.interface(),
+                found.len()
+            )));
+        };
+        let revision_ok =
+            w.flags & subdevice_flags::CHECK_REVISION == 0 || id.revision == w.revision;
+        if id.vendor_id != w.vendor || id.product_id != w.product || !revision_ok {
+            return Err(BringUpError::Refused(format!(
+                "position {k} of the bus on {} should be {expected}, and {name} ({}) is there",
+                cfg.interface(),
+                identity(id.vendor_id, id.product_id, id.revision)
+            )));
+        }
+    }
+    if let Some((id, name, _)) = found.get(want.len()) {
+        return Err(BringUpError::Refused(format!(
+            "the bus on {} has {} SubDevice(s) where the configuration names {}: position {} is {name} ({}), which it does not name",
+            cfg.interface(),
+            found.len(),
+            want.len(),
+            want.len(),
+            identity(id.vendor_id, id.product_id, id.revision)
+        )));
+    }
+    Ok(())
+}
+
+/// Distributed Clocks for the SubDevices on SYNC0 (the module documentation of `Dc`):
+/// each must have DC; the first SubDevice with DC is the reference clock; the host's
+/// clock is measured against it (the read with the shortest round trip of eight); a
+/// drive gets sync mode 2 and the cycle time in 0x1C32; each SYNC0 starts at a wake-up
+/// of the bus process 300 ms on plus its shift, every period (0x0981, 0x0990, 0x09A0:
+/// the sequence of ethercrab's `configure_dc_sync`, whose start time would not be on the
+/// bus process' grid).
+/// `None` when no SubDevice is on SYNC0.
+fn configure_dc(
+    md: &MainDevice<'static>,
+    pump: &mut Pump,
+    line: &Line<'_>,
+    group: &PreOpGroup,
+    want: &[EthercatSubDeviceV1],
+    found: &[(ethercrab::SubDeviceIdentity, String, u16)],
+) -> Result<Option<Dc>, BringUpError> {
+    let Line {
+        wire, stop, timing, ..
+    } = *line;
+    let long = Duration::from_secs(30);
     let on_sync0: Vec<usize> = want
         .iter()
         .enumerate()
@@ -589,7 +676,7 @@ fn bring_up(
         .iter()
         .find(|&&k| want[k].axis().is_some())
         .or(on_sync0.first());
-    let dc = match (stamped, has_dc.iter().position(|d| *d)) {
+    Ok(match (stamped, has_dc.iter().position(|d| *d)) {
         (Some(&first), Some(reference)) => {
             let station = found[reference].2;
             let sd_ref = group
@@ -692,63 +779,6 @@ fn bring_up(
             })
         }
         _ => None,
-    };
-
-    // SAFE-OP only: OP is asked for by the cycle's own frames (`CyclicFrame::request_op`),
-    // so that no SubDevice is ever in OP without the cycle running (its process data
-    // watchdog would take it out of OP again in the set-up's gap before the first cycle).
-    let group = pump
-        .run(wire, group.into_safe_op(md), long, stop)?
-        .map_err(|e| format!("bringing the bus on {} to SAFE-OP: {e}", cfg.interface()))?;
-    // The process data once, in SAFE-OP (a SubDevice takes them, and ignores its outputs).
-    let wkc = pump
-        .run(wire, group.tx_rx(md), long, stop)?
-        .map_err(|e| format!("exchanging process data on {}: {e}", cfg.interface()))?
-        .working_counter;
-
-    // Where ethercrab put each SubDevice's data: its FMMUs, read back.
-    let mut fmmus = Vec::new();
-    for (k, sd) in group.iter(md).enumerate() {
-        let count: u8 = pump
-            .run(wire, sd.register_read(0x0004u16), long, stop)?
-            .map_err(|e| format!("position {k}: FMMU count: {e}"))?;
-        for f in 0..u16::from(count).min(16) {
-            let base = 0x0600 + 16 * f;
-            let active: u8 = pump
-                .run(wire, sd.register_read(base + 0x0C), long, stop)?
-                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
-            if active & 1 == 0 {
-                continue;
-            }
-            let logical: u32 = pump
-                .run(wire, sd.register_read(base), long, stop)?
-                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
-            let len: u16 = pump
-                .run(wire, sd.register_read(base + 4), long, stop)?
-                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
-            let kind: u8 = pump
-                .run(wire, sd.register_read(base + 0x0B), long, stop)?
-                .map_err(|e| format!("position {k}: FMMU {f}: {e}"))?;
-            fmmus.push((k, logical, len, kind));
-        }
-    }
-    let layout = layout_of(&found.iter().map(|f| f.2).collect::<Vec<_>>(), &fmmus)?;
-    if layout.expected_wkc != wkc {
-        return Err(BringUpError::Failed(format!(
-            "the bus on {} answers with working counter {wkc} where its FMMUs make {}",
-            cfg.interface(),
-            layout.expected_wkc
-        )));
-    }
-    let mut layout = layout;
-    for (slot, mailbox) in layout.slots.iter_mut().zip(&mailboxes) {
-        slot.mailbox_in = *mailbox;
-    }
-    Ok(Up {
-        layout,
-        names: found.into_iter().map(|f| f.1).collect(),
-        emergencies: Vec::new(),
-        dc,
     })
 }
 
