@@ -28,6 +28,15 @@ fn generator(cell: &shm_schema::CellConfigV6, program: &str) -> Generator {
     g
 }
 
+/// `cell`'s servo and machine, enabled, and trajgen with `program` queued: the loop, the
+/// generator, and trajgen's period in servo cycles.
+fn enabled_with(cell: &shm_schema::CellConfigV6, program: &str) -> (Loop, Generator, u64) {
+    let mut lp = Loop::new(cell);
+    lp.enable();
+    let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+    (lp, generator(cell, program), tg)
+}
+
 fn states(lp: &Loop) -> Vec<State> {
     let fb = lp.fb.expect("feedback");
     (0..3)
@@ -418,10 +427,7 @@ fn servo_notices_stale_feedback_and_cuts_power() {
 fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     integration_tests::attributable(|| {
         let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
         // 2 s of motion at full speed, then trajgen dies.
         for k in 0..2000 {
             let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
@@ -474,10 +480,7 @@ fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
         // servo's extrapolation; the command must not step.
         let cfg = crate::closed_loop::at_rate(250);
         let cell = cfg.to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
         let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
         let mut prev = lp.state;
         for k in 0..8000u64 {
@@ -514,10 +517,7 @@ fn a_late_servo_cycle_is_not_a_step() {
         // Servo itself stalls 3 ms (12 periods at 4 kHz) with the axes at full speed: the command
         // moves 48 µm in one cycle, which the real elapsed time explains; nothing is refused.
         let cell = crate::closed_loop::at_rate(250).to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
         for k in 0..6000u64 {
             if k == 4000 {
                 assert!(lp.state.cmd_velocity[0] > 15.0);
@@ -702,10 +702,7 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
         // the command 0.1 mm in one cycle (found at 4 kHz on this VM); servo evaluates it back at
         // its own time instead.
         let cell = crate::closed_loop::at_rate(250).to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-        let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
+        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,40,0)\nEND");
         for k in 0..12_000u64 {
             // One setpoint from the future of servo's cycle, at full speed.
             let ahead = if k == 10_000 { 6_000_000 } else { 0 };
