@@ -1,4 +1,4 @@
-//! The cell's gateway to a line of cells (issue 20, `docs/network.md` as it grows): what
+//! The cell's gateway to a line of cells (issue 20, under way: no process yet): what
 //! crosses the network and how a command from it is judged, apart from the transport.
 //!
 //! - [`keys`]: the versioned key space, everything of a cell under `rtc/v1/<cell>/`;
