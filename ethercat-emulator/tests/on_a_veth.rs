@@ -7,90 +7,17 @@
 mod common;
 
 use common::{MAX_PDI, MAX_SUBDEVICES, Storage};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 static PDU_STORAGE: Storage = Storage::new();
 
-/// A network namespace with a veth pair `m0` (the MainDevice's) and `s0` (the SubDevices'),
-/// and the emulator on `s0`; all removed when dropped.
-struct Line {
-    ns: String,
-    emulator: Option<Child>,
-}
-
-fn ip(args: &[&str]) {
-    let out = Command::new("ip").args(args).output().unwrap_or_else(|e| {
-        panic!("this test needs iproute2's `ip` (apt-get install iproute2): {e}")
-    });
-    assert!(
-        out.status.success(),
-        "ip {args:?} failed (this test makes a network namespace: it needs root): {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-impl Line {
-    /// The line in namespace `rtc-ecat-<pid>-<name>` (each test its own).
-    fn up(name: &str, extra: &[&str]) -> Self {
-        let ns = format!("rtc-ecat-{}-{name}", std::process::id());
-        ip(&["netns", "add", &ns]);
-        let mut line = Self {
-            ns: ns.clone(),
-            emulator: None,
-        };
-        ip(&[
-            "-n", &ns, "link", "add", "m0", "type", "veth", "peer", "name", "s0",
-        ]);
-        ip(&["-n", &ns, "link", "set", "m0", "up"]);
-        ip(&["-n", &ns, "link", "set", "s0", "up"]);
-        let emulator = Command::new("ip")
-            .args([
-                "netns",
-                "exec",
-                &ns,
-                env!("CARGO_BIN_EXE_ethercat-emulator"),
-            ])
-            .args(["--interface", "s0"])
-            .args(extra)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("the emulator");
-        // Ready once it says it answers; the rest of its log goes to the test's stderr. (Kept
-        // first: stopped by the line's drop if it never says so.)
-        let emulator = line.emulator.insert(emulator);
-        integration_tests::until_it_says(
-            emulator,
-            "emulator",
-            "answering on",
-            Duration::from_secs(120),
-        );
-        line
-    }
-}
-
-impl Drop for Line {
-    fn drop(&mut self) {
-        if let Some(mut e) = self.emulator.take() {
-            let _ = nix::sys::signal::kill(
-                nix::unistd::Pid::from_raw(e.id() as i32),
-                nix::sys::signal::Signal::SIGTERM,
-            );
-            let start = Instant::now();
-            while matches!(e.try_wait(), Ok(None)) && start.elapsed() < Duration::from_secs(10) {
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            let _ = e.kill();
-            let _ = e.wait();
-        }
-        let _ = Command::new("ip").args(["netns", "del", &self.ns]).status();
-    }
-}
-
 #[test]
 fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_back() {
-    let line = Line::up("ethercrab", &["--loopback", "--pd-watchdog-ms", "2000"]);
+    let line = integration_tests::EmulatedLine::up(
+        std::path::Path::new(env!("CARGO_BIN_EXE_ethercat-emulator")),
+        "ethercrab",
+        &["--loopback", "--pd-watchdog-ms", "2000"],
+    );
     let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
     // ethercrab's raw socket is opened in the namespace: by a thread that entered it.
     let ns = line.ns.clone();

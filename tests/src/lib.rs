@@ -522,6 +522,82 @@ pub fn until_it_says(child: &mut std::process::Child, name: &str, words: &str, w
         .unwrap_or_else(|_| panic!("it never said {words:?} in {watchdog:?}"));
 }
 
+/// The `ethercat-emulator` process alone on a line of its own: a network namespace
+/// `rtc-ecat-<pid>-<test>` with a veth pair, the emulator on `s0` (with `args`), the
+/// MainDevice's end `m0`; up once the emulator says it answers (its log goes on to the test's
+/// stderr). Dropped: the emulator stopped (SIGTERM, then SIGKILL after 10 s) and the namespace
+/// removed. Needs root and iproute2.
+#[derive(Debug)]
+pub struct EmulatedLine {
+    /// The namespace's name.
+    pub ns: String,
+    emulator: Option<std::process::Child>,
+}
+
+/// `ip ARGS` (iproute2), which must succeed: for tests that make network namespaces.
+pub fn ip(args: &[&str]) {
+    let out = Command::new("ip").args(args).output().unwrap_or_else(|e| {
+        panic!("this test needs iproute2's `ip` (apt-get install iproute2): {e}")
+    });
+    assert!(
+        out.status.success(),
+        "ip {args:?} failed (this test makes a network namespace: it needs root): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+impl EmulatedLine {
+    /// The line of `test`, the emulator (its program at `emulator`) started with `args`
+    /// after `--interface s0`.
+    pub fn up(emulator: &Path, test: &str, args: &[&str]) -> Self {
+        let ns = format!("rtc-ecat-{}-{test}", std::process::id());
+        ip(&["netns", "add", &ns]);
+        // Kept first: whatever fails below, the drop removes what was made.
+        let mut line = Self {
+            ns: ns.clone(),
+            emulator: None,
+        };
+        ip(&[
+            "-n", &ns, "link", "add", "m0", "type", "veth", "peer", "name", "s0",
+        ]);
+        ip(&["-n", &ns, "link", "set", "m0", "up"]);
+        ip(&["-n", &ns, "link", "set", "s0", "up"]);
+        let emulator = Command::new("ip")
+            .args(["netns", "exec", &ns])
+            .arg(emulator)
+            .args(["--interface", "s0"])
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the emulator");
+        let emulator = line.emulator.insert(emulator);
+        until_it_says(
+            emulator,
+            "emulator",
+            "answering on",
+            Duration::from_secs(120),
+        );
+        line
+    }
+}
+
+impl Drop for EmulatedLine {
+    fn drop(&mut self) {
+        if let Some(mut e) = self.emulator.take() {
+            // SAFETY: plain system call; the pid is our own child's, not yet waited for.
+            let _ = unsafe { libc::kill(e.id() as libc::pid_t, libc::SIGTERM) };
+            let start = Instant::now();
+            while matches!(e.try_wait(), Ok(None)) && start.elapsed() < Duration::from_secs(10) {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = e.kill();
+            let _ = e.wait();
+        }
+        let _ = Command::new("ip").args(["netns", "del", &self.ns]).status();
+    }
+}
+
 /// The command line of a cell's process (`exe`, its program, named `name`): `--help` names it
 /// and its two arguments and exits 0; an unknown argument, a bad `--instance` or `--name` is
 /// refused naming the argument, exit 2, before it touches anything of an instance. For each

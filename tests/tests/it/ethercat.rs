@@ -5,7 +5,7 @@
 
 use crate::up::Up;
 use integration_tests::{
-    assert_clean, bin, examples, instance, json_of, run_with_watchdog, scratch,
+    assert_clean, bin, examples, instance, ip, json_of, run_with_watchdog, scratch,
 };
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -13,22 +13,10 @@ use std::time::Duration;
 const WATCHDOG: Duration = Duration::from_secs(180);
 
 /// A network namespace of the test's own, removed when dropped (with whatever is in it).
-pub(crate) struct Netns(pub(crate) String);
-
-pub(crate) fn ip(args: &[&str]) {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("these tests need iproute2's `ip`: {e}"));
-    assert!(
-        out.status.success(),
-        "ip {args:?} (these tests make network namespaces: they need root): {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+struct Netns(String);
 
 impl Netns {
-    pub(crate) fn new(test: &str) -> Self {
+    fn new(test: &str) -> Self {
         let name = format!("rtc-{}-{test}", std::process::id());
         ip(&["netns", "add", &name]);
         ip(&["-n", &name, "link", "set", "lo", "up"]);
@@ -36,7 +24,7 @@ impl Netns {
     }
 
     /// `program` run inside the namespace.
-    pub(crate) fn command(&self, program: &str) -> Command {
+    fn command(&self, program: &str) -> Command {
         let mut c = Command::new("ip");
         c.args(["netns", "exec", &self.0]).arg(bin(program));
         c

@@ -4,70 +4,16 @@
 //! emulator's crate so that they run beside the other tests: kickcat's scan waits out its
 //! link timeout after every frame (about 14 s of the test, idle). Needs root (CI is).
 
-use super::ethercat::{Netns, ip};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
-
-/// The emulator on `s0` of a veth pair in a namespace of the test's own, the master's end
-/// `m0`; the emulator stopped and the namespace removed when dropped.
-struct Line {
-    emulator: Child,
-    ns: Netns,
-}
-
-impl Line {
-    fn up(test: &str, args: &[&str]) -> Self {
-        let ns = Netns::new(test);
-        ip(&[
-            "-n", &ns.0, "link", "add", "m0", "type", "veth", "peer", "name", "s0",
-        ]);
-        ip(&["-n", &ns.0, "link", "set", "m0", "up"]);
-        ip(&["-n", &ns.0, "link", "set", "s0", "up"]);
-        let emulator = ns
-            .command("ethercat-emulator")
-            .args(["--interface", "s0"])
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("the emulator");
-        // Ready once it says it answers; the rest of its log goes to the test's stderr. (Kept
-        // first: stopped by the line's drop if it never says so.)
-        let mut line = Self { emulator, ns };
-        integration_tests::until_it_says(
-            &mut line.emulator,
-            "emulator",
-            "answering on",
-            Duration::from_secs(120),
-        );
-        line
-    }
-}
-
-impl Drop for Line {
-    fn drop(&mut self) {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(self.emulator.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
-        let start = Instant::now();
-        while matches!(self.emulator.try_wait(), Ok(None))
-            && start.elapsed() < Duration::from_secs(10)
-        {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.emulator.kill();
-        let _ = self.emulator.wait();
-    }
-}
+use integration_tests::{EmulatedLine, bin};
+use std::process::Command;
 
 /// Runs `tests/python/masters.py MASTER m0` in the line's namespace; its JSON (the last line
 /// of its stdout).
-fn master(line: &Line, name: &str) -> serde_json::Value {
+fn master(line: &EmulatedLine, name: &str) -> serde_json::Value {
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/masters.py");
     let out = Command::new("ip")
         .args([
-            "netns", "exec", &line.ns.0, "timeout", "120", "python3", script, name, "m0",
+            "netns", "exec", &line.ns, "timeout", "120", "python3", script, name, "m0",
         ])
         .output()
         .expect("python3");
@@ -145,7 +91,7 @@ fn the_drive_answered_and_enabled(name: &str, r: &serde_json::Value) {
 #[test]
 fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
     integration_tests::attributable(|| {
-        let line = Line::up("masters-soem", LINE);
+        let line = EmulatedLine::up(&bin("ethercat-emulator"), "masters-soem", LINE);
         let r = master(&line, "pysoem");
         assert_eq!(r["found"], 4, "{r}");
         let expected = [
@@ -196,7 +142,7 @@ fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data(
 #[test]
 fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
     integration_tests::attributable(|| {
-        let line = Line::up("masters-kickcat", LINE);
+        let line = EmulatedLine::up(&bin("ethercat-emulator"), "masters-kickcat", LINE);
         let r = master(&line, "kickcat");
         assert_eq!(r["found"], 4, "{r}");
         assert_eq!(
