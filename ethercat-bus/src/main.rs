@@ -6,8 +6,8 @@ use ethercat_bus::{BusIo, Drives};
 use ethercat_wire::{Received, Wire};
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
-use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
-use runtime::snapshot::{MAX_SLICES, Snapshot};
+use runtime::process::{self, Context, Cycle, SetupError, Task};
+use runtime::snapshot::SenseToCommand;
 use shm_schema::ethercat::MAX_SUBDEVICES;
 use shm_schema::event::code;
 use shm_schema::{
@@ -99,7 +99,7 @@ struct Bus {
     /// Servo's newest command.
     command: Option<DriveCommandV2>,
     last_applied_seq: u64,
-    sense_to_command: Box<LatencyHistogramV1>,
+    sense_to_command: SenseToCommand,
     /// From sending the cycle's frame to taking its reply, every cycle that had one; told in
     /// the log when the process stops.
     round_trip: Box<LatencyHistogramV1>,
@@ -128,7 +128,6 @@ struct Bus {
     field_inputs: Pub<IoWriteV1>,
     commands: Sub<DriveCommandV2>,
     feedback: Pub<DriveFeedbackV2>,
-    sense_to_command_out: Snapshot,
 }
 
 impl Bus {
@@ -569,27 +568,21 @@ impl Task for Bus {
         let mut fb = self
             .drives
             .read(latched_ns, self.seq, valid, &self.frame, cx.events);
+        let mut sample = None;
         if let Some(c) = command.filter(|c| c.seq != self.last_applied_seq) {
             self.last_applied_seq = c.seq;
             if c.feedback_stamp_ns > 0 {
                 fb.sense_to_command_ns = applied_ns.saturating_sub(c.feedback_stamp_ns);
-                self.sense_to_command.record(fb.sense_to_command_ns);
+                sample = Some(fb.sense_to_command_ns);
             }
         }
         cx.set_safe(!self.drives.powered());
         self.feedback.send(&fb);
-        self.sense_to_command.stamp_ns = now;
-        self.sense_to_command_out.step_every(
-            now,
-            LATENCY_PUBLISH_INTERVAL_NS,
-            &self.sense_to_command,
-            fb.sense_to_command_ns,
-        );
+        self.sense_to_command.step(now, sample);
     }
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
-        self.sense_to_command.stamp_ns = now_ns;
-        self.sense_to_command_out.send_whole(&self.sense_to_command);
+        self.sense_to_command.finish(now_ns);
         // A percentile of a histogram, in µs.
         let us_of = |h: &LatencyHistogramV1, q: u64| {
             h.percentile(q, 1000).map_or(f64::NAN, |v| v as f64 / 1e3)
@@ -875,7 +868,7 @@ fn main() -> ExitCode {
                 last_command_ns: None,
                 command: None,
                 last_applied_seq: 0,
-                sense_to_command: Box::default(),
+                sense_to_command: SenseToCommand::new(&ctx.node, i)?,
                 round_trip: Box::default(),
                 io,
                 io_image: None,
@@ -892,12 +885,6 @@ fn main() -> ExitCode {
                 field_inputs: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-                sense_to_command_out: Snapshot::new(
-                    &ctx.node,
-                    i,
-                    ServiceId::SenseToCommand,
-                    MAX_SLICES,
-                )?,
             };
             // In SAFE-OP: the cycle's frames take the bus to OP.
             bus.ask_for_op(runtime::time::now_ns(), "in OP on ");

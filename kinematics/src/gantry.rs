@@ -84,15 +84,8 @@ impl Kinematics for Gantry {
         "gantry"
     }
 
-    fn joints(&self) -> usize {
-        self.axes
-    }
-
-    fn joint(&self, i: usize) -> JointInfo {
-        match JOINTS.get(i) {
-            Some(info) if i < self.axes => *info,
-            _ => JointInfo::UNKNOWN,
-        }
+    fn joint_infos(&self) -> &[JointInfo] {
+        JOINTS.get(..self.axes).unwrap_or(&JOINTS)
     }
 
     fn coords(&self) -> &'static [Coord] {

@@ -154,28 +154,22 @@ pub struct Coord {
     pub unit: Unit,
 }
 
+const X: Coord = Coord {
+    name: "x",
+    unit: Unit::Millimetre,
+};
+const Y: Coord = Coord {
+    name: "y",
+    unit: Unit::Millimetre,
+};
+
 /// The Cartesian coordinates x and y (mm).
-pub const XY: &[Coord] = &[
-    Coord {
-        name: "x",
-        unit: Unit::Millimetre,
-    },
-    Coord {
-        name: "y",
-        unit: Unit::Millimetre,
-    },
-];
+pub const XY: &[Coord] = &[X, Y];
 
 /// The Cartesian coordinates x, y (mm) and θ (degrees).
 pub const XY_THETA: &[Coord] = &[
-    Coord {
-        name: "x",
-        unit: Unit::Millimetre,
-    },
-    Coord {
-        name: "y",
-        unit: Unit::Millimetre,
-    },
+    X,
+    Y,
     Coord {
         name: "theta",
         unit: Unit::Degree,
@@ -291,12 +285,22 @@ pub trait Kinematics {
     /// The kinematics' name, as a configuration selects it (seed 004's `GetKinematicsName`).
     fn name(&self) -> &str;
 
-    /// The number of joints (axes) it drives, at most [`MAX_JOINTS`] (seed 004's `NumAxes`).
-    fn joints(&self) -> usize;
+    /// The joints (axes) it drives, in order, each one's properties; at most [`MAX_JOINTS`].
+    fn joint_infos(&self) -> &[JointInfo];
+
+    /// The number of joints (seed 004's `NumAxes`).
+    fn joints(&self) -> usize {
+        self.joint_infos().len()
+    }
 
     /// Joint `i`'s properties, for `i < joints()` (seed 004's `GetAxisProperties`); past the
     /// last joint, [`JointInfo::UNKNOWN`].
-    fn joint(&self, i: usize) -> JointInfo;
+    fn joint(&self, i: usize) -> JointInfo {
+        self.joint_infos()
+            .get(i)
+            .copied()
+            .unwrap_or(JointInfo::UNKNOWN)
+    }
 
     /// The Cartesian coordinates, in the order of a [`Pose`]; at most [`MAX_COORDS`].
     fn coords(&self) -> &'static [Coord];
@@ -359,11 +363,8 @@ impl<K: Kinematics + ?Sized> Kinematics for alloc::boxed::Box<K> {
     fn name(&self) -> &str {
         (**self).name()
     }
-    fn joints(&self) -> usize {
-        (**self).joints()
-    }
-    fn joint(&self, i: usize) -> JointInfo {
-        (**self).joint(i)
+    fn joint_infos(&self) -> &[JointInfo] {
+        (**self).joint_infos()
     }
     fn coords(&self) -> &'static [Coord] {
         (**self).coords()

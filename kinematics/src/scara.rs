@@ -103,12 +103,8 @@ impl Kinematics for Scara {
         "scara"
     }
 
-    fn joints(&self) -> usize {
-        JOINTS.len()
-    }
-
-    fn joint(&self, i: usize) -> JointInfo {
-        JOINTS.get(i).copied().unwrap_or(JointInfo::UNKNOWN)
+    fn joint_infos(&self) -> &[JointInfo] {
+        &JOINTS
     }
 
     fn coords(&self) -> &'static [Coord] {

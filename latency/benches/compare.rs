@@ -13,43 +13,31 @@
 //!
 //! Options: `--rounds N` (3), `--duration S` (10), `--interval-us N` (1000), `--priority P` (80).
 
+use integration_tests::median;
 use latency::histfile;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// The latency benchmark: ours against cyclictest and a raw pipe, alternating.
+#[derive(clap::Parser)]
+#[command(name = "compare")]
 struct Args {
-    rounds: usize,
+    /// Rounds, each one pair of runs per comparison.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    rounds: u32,
+    /// Each run's length (s).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     duration: u64,
+    /// The timer's interval (µs).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(50..))]
     interval_us: u64,
+    /// The SCHED_FIFO priority of both.
+    #[arg(long, default_value_t = 80, value_parser = clap::value_parser!(i32).range(1..=99))]
     priority: i32,
-}
-
-fn args() -> Result<Args, String> {
-    let mut a = Args {
-        rounds: 3,
-        duration: 10,
-        interval_us: 1000,
-        priority: 80,
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || {
-            it.next()
-                .ok_or_else(|| format!("{flag} needs a value"))?
-                .parse::<u64>()
-                .map_err(|_| format!("{flag}: a number expected"))
-        };
-        match flag.as_str() {
-            "--rounds" => a.rounds = value()?.max(1) as usize,
-            "--duration" => a.duration = value()?.max(1),
-            "--interval-us" => a.interval_us = value()?.max(50),
-            "--priority" => a.priority = value()?.min(99) as i32,
-            "--bench" => {} // cargo bench passes it
-            other => return Err(format!("unknown argument {other:?}")),
-        }
-    }
-    Ok(a)
+    // `cargo bench` passes it.
+    #[arg(long, hide = true)]
+    bench: bool,
 }
 
 /// Median, p99, p99.9 (µs).
@@ -120,16 +108,6 @@ fn ratios(ours: &Figures, base: &Figures) -> Figures {
     [0, 1, 2].map(|i| ours[i] / base[i].max(1e-9))
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
 fn hop_figures(json: &str, test: &str) -> Result<Vec<(String, Figures)>, String> {
     let v: Value = serde_json::from_str(json).map_err(|e| format!("latency JSON: {e}"))?;
     let series = v["tests"][test]["series"]
@@ -150,7 +128,7 @@ fn hop_figures(json: &str, test: &str) -> Result<Vec<(String, Figures)>, String>
 }
 
 fn bench() -> Result<(), String> {
-    let a = args()?;
+    let a = <Args as clap::Parser>::parse();
     let sup = supervisor();
     if !sup.is_file() {
         return Err(format!(
@@ -204,41 +182,20 @@ fn bench() -> Result<(), String> {
         println!("round {round}");
         let ct_file = dir.join("cyclictest.hist");
         let ours_file = dir.join("ours.hist");
+        // Quiet, the same priority, interval and duration for both.
+        let same = ["-q", "-p", &p, "-i", &i, "-D", &d];
         let cyclictest = || {
             run(Command::new("cyclictest")
-                .args([
-                    "-m",
-                    "-S",
-                    "-d",
-                    "0",
-                    "-q",
-                    "-p",
-                    &p,
-                    "-i",
-                    &i,
-                    "-D",
-                    &d,
-                    "-h",
-                    &RANGE_US.to_string(),
-                ])
+                .args(["-m", "-S", "-d", "0"])
+                .args(same)
+                .args(["-h", &RANGE_US.to_string()])
                 .arg(format!("--histfile={}", ct_file.display())))
         };
         let ours = || {
             run(Command::new(&sup)
-                .args([
-                    "latency",
-                    "--test",
-                    "timer",
-                    "-q",
-                    "-p",
-                    &p,
-                    "-i",
-                    &i,
-                    "-D",
-                    &d,
-                    "--histogram-us",
-                    &RANGE_US.to_string(),
-                ])
+                .args(["latency", "--test", "timer"])
+                .args(same)
+                .args(["--histogram-us", &RANGE_US.to_string()])
                 .arg("--histfile")
                 .arg(&ours_file))
         };

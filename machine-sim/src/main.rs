@@ -4,25 +4,23 @@ use machine_sim::Machine;
 use machine_sim::field::Field;
 use runtime::health::Freshness;
 use runtime::ipc::{Pub, Sub};
-use runtime::process::{self, Context, Cycle, LATENCY_PUBLISH_INTERVAL_NS, SetupError, Task};
-use runtime::snapshot::{MAX_SLICES, Snapshot};
+use runtime::process::{self, Context, Cycle, SetupError, Task};
+use runtime::snapshot::SenseToCommand;
 use shm_schema::{
     DigitalIoV1, DriveCommandV2, DriveFeedbackV2, EventQueue, FaultInjectionV1, IoWriteV1,
-    LatencyHistogramV1, ServiceId,
+    ServiceId,
 };
 use std::process::ExitCode;
 
 struct Sim {
     machine: Machine,
-    /// Sense-to-command latency of every applied command since start.
-    sense_to_command: Box<LatencyHistogramV1>,
+    sense_to_command: SenseToCommand,
     /// Servo's commands arrive every servo period.
     command_fresh: Freshness,
     last_command_ns: Option<u64>,
     commands: Sub<DriveCommandV2>,
     injections: Sub<FaultInjectionV1>,
     feedback: Pub<DriveFeedbackV2>,
-    sense_to_command_out: Snapshot,
     /// The simulated two-position devices (the gripper) and their sensors.
     field: Field,
     io_state: Sub<DigitalIoV1>,
@@ -47,27 +45,18 @@ impl Task for Sim {
         // disabled them, or their watchdog did.
         cx.set_safe(!self.machine.powered());
         self.feedback.send(&fb);
-        if fb.sense_to_command_ns > 0 {
-            self.sense_to_command.record(fb.sense_to_command_ns);
-        }
-        self.sense_to_command.stamp_ns = now;
+        self.sense_to_command
+            .step(now, Some(fb.sense_to_command_ns).filter(|&ns| ns > 0));
         if !self.field.is_empty() {
             let outputs = self.io_state.latest().map(|s| s.values);
             if let Some(w) = self.field.step(now, outputs) {
                 self.sensors.send(&w);
             }
         }
-        self.sense_to_command_out.step_every(
-            now,
-            LATENCY_PUBLISH_INTERVAL_NS,
-            &self.sense_to_command,
-            fb.sense_to_command_ns,
-        );
     }
 
     fn stop(&mut self, now_ns: u64, _events: &mut EventQueue) {
-        self.sense_to_command.stamp_ns = now_ns;
-        self.sense_to_command_out.send_whole(&self.sense_to_command);
+        self.sense_to_command.finish(now_ns);
     }
 }
 
@@ -79,18 +68,12 @@ fn main() -> ExitCode {
             let i = &ctx.instance;
             Ok::<_, SetupError>(Sim {
                 machine: Machine::new(&ctx.cell, ctx.own.period_ns),
-                sense_to_command: Box::default(),
+                sense_to_command: SenseToCommand::new(&ctx.node, i)?,
                 command_fresh: Freshness::new(ctx.period_of("servo")?),
                 last_command_ns: None,
                 commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
                 injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
                 feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-                sense_to_command_out: Snapshot::new(
-                    &ctx.node,
-                    i,
-                    ServiceId::SenseToCommand,
-                    MAX_SLICES,
-                )?,
                 field: Field::new(&ctx.cell, ctx.index as u32),
                 io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
                 sensors: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,

@@ -14,6 +14,7 @@
 //! [--interval-ms N]` (root, for `SCHED_FIFO`, as a controller runs); `--interval-ms` paces
 //! each client as an HMI polls (0, the default: back to back, the worst a client can do).
 
+use integration_tests::median;
 use runtime::ipc::Sub;
 use shm_schema::{InstanceName, LatencyHistogramV1, ProcessName, ServiceId};
 use std::io::{Read, Write};
@@ -26,40 +27,25 @@ use std::time::{Duration, Instant};
 
 const PROCESSES: [&str; 4] = ["drives", "servo", "trajgen", "iobridge"];
 
+/// The Modbus load benchmark: the real-time processes' wake-up latency with and without clients.
+#[derive(clap::Parser)]
+#[command(name = "load")]
 struct Args {
-    rounds: usize,
+    /// Rounds, each a quiet and a loaded window.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    rounds: u32,
+    /// Each window's length (s).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     duration: u64,
-    clients: usize,
+    /// Client threads reading back to back (or paced by --interval-ms).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(1..=64))]
+    clients: u16,
     /// Between a client's requests (ms); 0: back to back.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(..=10_000))]
     interval_ms: u64,
-}
-
-fn args() -> Result<Args, String> {
-    let mut a = Args {
-        rounds: 3,
-        duration: 10,
-        clients: 8,
-        interval_ms: 0,
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        if flag == "--bench" {
-            continue;
-        }
-        let v: u64 = it
-            .next()
-            .ok_or_else(|| format!("{flag} needs a value"))?
-            .parse()
-            .map_err(|_| format!("{flag} needs a number"))?;
-        match flag.as_str() {
-            "--rounds" => a.rounds = v.max(1) as usize,
-            "--duration" => a.duration = v.max(1),
-            "--clients" => a.clients = v.clamp(1, 64) as usize,
-            "--interval-ms" => a.interval_ms = v.min(10_000),
-            other => return Err(format!("unknown option {other}")),
-        }
-    }
-    Ok(a)
+    // `cargo bench` passes it.
+    #[arg(long, hide = true)]
+    bench: bool,
 }
 
 fn bin_dir() -> PathBuf {
@@ -231,22 +217,9 @@ fn figures(h: &LatencyHistogramV1) -> [f64; 3] {
     ]
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() {
-    let a = match args() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!(
-                "{e}\nusage: load [--rounds N] [--duration S] [--clients N] [--interval-ms N]"
-            );
-            std::process::exit(2);
-        }
-    };
-    let (cell, addr) = bring_up(a.clients);
+    let a = <Args as clap::Parser>::parse();
+    let (cell, addr) = bring_up(a.clients.into());
     let subs = Subs::new(&cell.inst);
     println!(
         "Modbus load: {} rounds of {} s quiet and {} s with {} clients on {addr}, each {} (and connections beyond the limit)",

@@ -143,6 +143,50 @@ impl Snapshot {
     }
 }
 
+/// A drives process' sense-to-command latency (from the feedback a command was computed from
+/// to the command's application): the histogram of every command applied since start and
+/// its publisher on `ServiceId::SenseToCommand`, a slice per cycle.
+#[derive(Debug)]
+pub struct SenseToCommand {
+    histogram: Box<LatencyHistogramV1>,
+    out: Snapshot,
+}
+
+impl SenseToCommand {
+    /// The publisher of `instance`'s sense-to-command latency (every drives process has one).
+    pub fn new(node: &Node<Ipc>, instance: &InstanceName) -> Result<Self, IpcError> {
+        Ok(Self {
+            histogram: Box::default(),
+            out: Snapshot::new(node, instance, ServiceId::SenseToCommand, MAX_SLICES)?,
+        })
+    }
+
+    /// A cycle at `now_ns` that applied a command whose latency was `sample_ns` (`None`: no
+    /// new command, or one not computed from feedback): recorded, and the histogram's
+    /// publication stepped (one begun every `LATENCY_PUBLISH_INTERVAL_NS`).
+    ///
+    /// # Real-time
+    /// A histogram record and [`Snapshot::step_every`].
+    pub fn step(&mut self, now_ns: u64, sample_ns: Option<u64>) {
+        if let Some(ns) = sample_ns {
+            self.histogram.record(ns);
+        }
+        self.histogram.stamp_ns = now_ns;
+        self.out.step_every(
+            now_ns,
+            crate::process::LATENCY_PUBLISH_INTERVAL_NS,
+            &self.histogram,
+            sample_ns.unwrap_or(0),
+        );
+    }
+
+    /// The last publication, whole, as the process stops at `now_ns`.
+    pub fn finish(&mut self, now_ns: u64) {
+        self.histogram.stamp_ns = now_ns;
+        self.out.send_whole(&self.histogram);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

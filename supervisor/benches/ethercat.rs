@@ -14,6 +14,8 @@
 //!
 //! Run it with `bash bench/ethercat.sh [--rounds N]` (root: network namespaces, `SCHED_FIFO`).
 
+mod common;
+
 use integration_tests::median;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -221,23 +223,10 @@ fn show(label: &str, r: &Run) {
 }
 
 fn main() {
-    let mut rounds = 3usize;
-    let mut it = std::env::args().skip(1);
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--rounds" => {
-                rounds = it.next().and_then(|v| v.parse().ok()).unwrap_or_else(|| {
-                    eprintln!("--rounds needs a number");
-                    std::process::exit(2)
-                })
-            }
-            "--bench" => {}
-            other => {
-                eprintln!("unknown argument {other:?}; usage: ethercat [--rounds N]");
-                std::process::exit(2);
-            }
-        }
-    }
+    let rounds = common::rounds(
+        "ethercat",
+        "The EtherCAT benchmark: the triangle with its drives in shared memory and on the bus.",
+    );
     let dir = std::env::temp_dir().join(format!("rtc-ecat-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let rates = [(1000u64, "1 kHz"), (250, "4 kHz")];

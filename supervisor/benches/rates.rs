@@ -11,6 +11,8 @@
 //! Run it with `bash bench/rates.sh [--rounds N]` (it builds the supervisor first; root for
 //! `SCHED_FIFO`).
 
+mod common;
+
 use integration_tests::median;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -122,23 +124,10 @@ fn median_run(runs: &[Run]) -> Run {
 }
 
 fn main() {
-    let mut rounds = 3usize;
-    let mut it = std::env::args().skip(1);
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--rounds" => {
-                rounds = it.next().and_then(|v| v.parse().ok()).unwrap_or_else(|| {
-                    eprintln!("--rounds needs a number");
-                    std::process::exit(2)
-                })
-            }
-            "--bench" => {}
-            other => {
-                eprintln!("unknown argument {other:?}; usage: rates [--rounds N]");
-                std::process::exit(2);
-            }
-        }
-    }
+    let rounds = common::rounds(
+        "rates",
+        "The servo-rate benchmark: the triangle at 1 kHz and at 4 kHz, alternating.",
+    );
     let dir = std::env::temp_dir().join(format!("rtc-rates-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let rates = [(1000u64, "1 kHz"), (250, "4 kHz")];

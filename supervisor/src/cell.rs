@@ -146,6 +146,27 @@ pub(crate) struct Closed {
     pub(crate) problem: Option<RunError>,
 }
 
+/// [`open_cell`], and a recording of the cell into `record` started in the background when
+/// one is asked for; a recorder that cannot start closes the cell again.
+pub(crate) fn open_recorded(
+    cfg: &Config,
+    instance: InstanceName,
+    mode: Mode,
+    record: Option<&std::path::Path>,
+) -> Result<(Cell, ctl::Server, Option<recorder::Background>), RunError> {
+    let (mut cell, server) = open_cell(cfg, instance, mode)?;
+    let recorder = record
+        .map(|f| recorder::Background::start(&instance, f, &mut || cell.keep_alive()))
+        .transpose();
+    match recorder {
+        Ok(r) => Ok((cell, server, r)),
+        Err(e) => {
+            let _ = cell.close(server);
+            Err(RunError::from(e))
+        }
+    }
+}
+
 /// Starts the cell of `cfg` on `instance`: takes the instance's control channel (refused if
 /// another supervisor serves it), waits for the processes a killed supervisor left to leave,
 /// removes what is left of the instance, creates the services, publishes the configuration,

@@ -320,6 +320,20 @@ fn control_done(r: Result<String, cell_client::control::ControlError>) -> ExitCo
     }
 }
 
+/// Prints a finished `run`'s or `tune`'s report, as JSON with `--json`, else for people.
+fn printed(
+    json: bool,
+    as_json: impl FnOnce() -> String,
+    human: impl FnOnce() -> String,
+) -> ExitCode {
+    if json {
+        println!("{}", as_json());
+    } else {
+        print!("{}", human());
+    }
+    ExitCode::SUCCESS
+}
+
 /// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
 /// status: 2 bad input, 1 failed, 130 interrupted.
 fn run_failed(e: &RunError, json: bool) -> ExitCode {
@@ -768,12 +782,7 @@ fn main() -> ExitCode {
                             }
                         }
                     }
-                    if json {
-                        println!("{}", report.to_json());
-                    } else {
-                        print!("{}", report.human());
-                    }
-                    ExitCode::SUCCESS
+                    printed(json, || report.to_json().to_string(), || report.human())
                 }
                 Err(e) => run_failed(&e, json),
             }
@@ -853,14 +862,7 @@ fn main() -> ExitCode {
                 progress: true,
             };
             match run(&opts) {
-                Ok(report) => {
-                    if json {
-                        println!("{}", report.to_json());
-                    } else {
-                        print!("{}", report.human());
-                    }
-                    ExitCode::SUCCESS
-                }
+                Ok(report) => printed(json, || report.to_json(), || report.human()),
                 Err(e) => run_failed(&e, json),
             }
         }

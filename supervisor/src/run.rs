@@ -9,7 +9,7 @@
 //! 4. Stop every process (SIGTERM, then SIGKILL), drop our ports, check that no iceoryx2
 //!    resource of the instance is left, and report.
 
-use crate::cell::{Mode, open_cell};
+use crate::cell::{Mode, open_recorded};
 use crate::error::RunError;
 use crate::out::writable;
 use crate::program::{Checked, Predicted};
@@ -70,22 +70,8 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             writable(p, flag).map_err(RunError::Input)?;
         }
     }
-    let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
-    let mut recorder = match opts
-        .record
-        .as_deref()
-        .map(|f| {
-            recorder::Background::start(&instance, f, &mut || cell.keep_alive())
-                .map_err(RunError::from)
-        })
-        .transpose()
-    {
-        Ok(r) => r,
-        Err(e) => {
-            let _ = cell.close(server);
-            return Err(e);
-        }
-    };
+    let (mut cell, mut server, mut recorder) =
+        open_recorded(&cfg, instance, Mode::Run, opts.record.as_deref())?;
     let first = ProgramJob {
         program,
         progress: opts.progress,

@@ -1,7 +1,7 @@
 //! `supervisor up`: a cell kept up until `supervisor down`, SIGTERM or SIGINT, with the
 //! control channel open to the user's other shells (docs/operations.md).
 
-use crate::cell::{Mode, open_cell};
+use crate::cell::{Mode, open_recorded};
 use crate::error::RunError;
 use crate::serve::{End, serve};
 use cell_config::Config;
@@ -24,7 +24,7 @@ pub fn up(
     if let Some(f) = record {
         crate::out::writable(f, "--record").map_err(RunError::Input)?;
     }
-    let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Up)?;
+    let (mut cell, mut server, mut recorder) = open_recorded(&cfg, instance, Mode::Up, record)?;
     tracing::info!(
         "instance {instance} up: {} ({} processes: {}); control it with `supervisor <command> --instance {instance}`",
         cfg.cell.name,
@@ -35,19 +35,6 @@ pub fn up(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let mut recorder = match record
-        .map(|f| {
-            recorder::Background::start(&instance, f, &mut || cell.keep_alive())
-                .map_err(RunError::from)
-        })
-        .transpose()
-    {
-        Ok(r) => r,
-        Err(e) => {
-            let _ = cell.close(server);
-            return Err(e);
-        }
-    };
     let end = serve(&cfg, &mut cell, &mut server, None);
     match recorder.as_mut().map(|r| r.stop()) {
         Some(Ok(summary)) => tracing::info!("{}", summary.trim_end()),

@@ -83,12 +83,8 @@ impl Kinematics for Polar {
         "polar"
     }
 
-    fn joints(&self) -> usize {
-        JOINTS.len()
-    }
-
-    fn joint(&self, i: usize) -> JointInfo {
-        JOINTS.get(i).copied().unwrap_or(JointInfo::UNKNOWN)
+    fn joint_infos(&self) -> &[JointInfo] {
+        &JOINTS
     }
 
     fn coords(&self) -> &'static [Coord] {
