@@ -16,6 +16,7 @@ pub mod ethercat;
 pub mod io;
 pub mod kinematics;
 pub mod modbus;
+pub mod network;
 mod program;
 mod stability;
 
@@ -632,6 +633,10 @@ pub struct Config {
     /// `[ethercat]`: the cell's EtherCAT bus, when its drives are real (or emulated) ones.
     #[serde(default)]
     pub ethercat: Option<ethercat::EthercatSettings>,
+    /// `[network]`: the cell on a line of cells (served by the `gateway` process); none, off
+    /// the network.
+    #[serde(default)]
+    pub network: Option<network::NetworkSettings>,
 }
 
 /// One step of a key path, to find where a value is written.
@@ -799,6 +804,15 @@ impl Config {
                 found.extend(ethercat::validate(bus, &self.axis, &self.io, drives_period));
             }
             None => found.extend(ethercat::io_without_bus(&self.io)),
+        }
+        let gateway = self.process_named("gateway").is_some();
+        match &self.network {
+            Some(n) => found.extend(network::validate(n, &self.cell.name, gateway)),
+            None if gateway => found.push((
+                vec![Seg::Key("process")],
+                "a process named \"gateway\" serves [network], which the cell does not have".into(),
+            )),
+            None => {}
         }
         let table = self.validate_processes();
         let table_sound = table.is_empty();

@@ -70,6 +70,8 @@ pub enum Request {
     /// last read them from shared memory. Answered with [`Reply::Status`]; a client needs no
     /// port of its own, so any number of them may ask at once.
     Status,
+    /// The cell's `[network]` section, as its gateway needs it ([`Reply::Network`]).
+    Network,
 }
 
 /// What the cell answers.
@@ -98,6 +100,9 @@ pub enum Reply {
     },
     /// `supervisor status --json` ([`Request::Status`]).
     Status(Box<Status>),
+    /// The cell's `[network]` section with its name on the line resolved (`name` always
+    /// given); `None`: the cell is not on the network ([`Request::Network`]).
+    Network(Option<Box<cell_config::network::NetworkSettings>>),
 }
 
 /// Why the cell refused a request: nothing was changed (the CLI exits 2). A client acts on

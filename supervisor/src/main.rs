@@ -429,6 +429,10 @@ fn ctl_reply(
             println!("{}", serde_json::to_string(&status).unwrap_or_default());
             ExitCode::SUCCESS
         }
+        Reply::Network(network) => {
+            println!("{}", serde_json::to_string(&network).unwrap_or_default());
+            ExitCode::SUCCESS
+        }
         Reply::Refused(m) => {
             eprintln!("error: {m}");
             ExitCode::from(2)

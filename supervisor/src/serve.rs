@@ -665,7 +665,9 @@ impl Loop<'_> {
             }
             return;
         }
-        if self.stopping.is_some() && !matches!(req, Request::Info | Request::Status) {
+        if self.stopping.is_some()
+            && !matches!(req, Request::Info | Request::Status | Request::Network)
+        {
             let reply = match req {
                 Request::Down => Reply::Done(format!(
                     "instance {}: already going down",
@@ -680,14 +682,21 @@ impl Loop<'_> {
         }
         // A tuning session or a swap in progress: what would change the cell waits for its
         // end; `down` ends a tuning session, and is kept for after a swap.
-        if !matches!(req, Request::Info | Request::Status | Request::Down)
-            && let Some(busy) = self.busy()
+        if !matches!(
+            req,
+            Request::Info | Request::Status | Request::Network | Request::Down
+        ) && let Some(busy) = self.busy()
         {
             self.server.reply(conn, &Reply::Refused(busy));
             return;
         }
         let reply = match req {
             Request::Info => Some(Reply::Info(Box::new(self.info()))),
+            Request::Network => Some(Reply::Network(self.cfg.network.as_ref().map(|n| {
+                let mut n = n.clone();
+                n.name = n.line_name(&self.cfg.cell.name).ok();
+                Box::new(n)
+            }))),
             Request::Status => {
                 let info = self.info();
                 let snap = self.cell.snapshot();

@@ -1,0 +1,464 @@
+//! `gateway line ...`: a control room's client of the line (what `supervisor cells` and the
+//! commands' `--remote CELL` run): lists the cells, reads one's status and events, and sends
+//! it a signed command.
+
+use cell_config::network::{Login, Mode, Tls};
+use clap::{Parser, Subcommand};
+use gateway::auth::{Envelope, sign};
+use gateway::command::Command;
+use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
+use gateway::link::{Link, secret_file};
+use gateway::wire::{Answer, EventMessage, StatusMessage};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, SystemTime};
+use zenoh::Wait;
+use zenoh::query::QueryTarget;
+
+/// A control room's line file (TOML): how to join the line, and who this user is.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LineFile {
+    /// Endpoints of the line to connect to (the cells' or a router's).
+    #[serde(default)]
+    connect: Vec<String>,
+    /// UDP multicast discovery of the line's peers.
+    #[serde(default)]
+    multicast: bool,
+    /// `tcp/` endpoints (in the clear) allowed.
+    #[serde(default)]
+    plain: bool,
+    /// A silent link is gone after this (s).
+    #[serde(default = "default_lease")]
+    lease: f64,
+    /// The user commands are signed as.
+    #[serde(default)]
+    user: Option<String>,
+    /// The file holding the user's secret (one line, its owner's alone).
+    #[serde(default)]
+    secret_file: Option<PathBuf>,
+    /// Certificates for `tls/` endpoints.
+    #[serde(default)]
+    tls: Option<Tls>,
+    /// The links' user and password.
+    #[serde(default)]
+    login: Option<Login>,
+}
+
+fn default_lease() -> f64 {
+    3.0
+}
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "gateway line",
+    about = "A control room's client of a line of cells (docs/network.md)"
+)]
+struct Cli {
+    /// The line file: endpoints, certificates, the user and their secret (default: the
+    /// environment's RTC_LINE).
+    #[arg(long, global = true)]
+    line: Option<PathBuf>,
+    /// JSON instead of text.
+    #[arg(long, global = true)]
+    json: bool,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Lists the cells on the line: name, host, state, program, e-stop.
+    Cells,
+    /// A cell's status.
+    Status {
+        /// The cell's name on the line.
+        cell: String,
+    },
+    /// A cell's events as they happen (until Ctrl-C), any loss said.
+    Events {
+        /// The cell's name on the line.
+        cell: String,
+        /// Stop after this many (s); default: never.
+        #[arg(long)]
+        seconds: Option<f64>,
+    },
+    /// Sends a cell a command (pause, resume, abort, reset, start, speed, estop, exec).
+    #[command(flatten)]
+    Command(Remote),
+}
+
+#[derive(Subcommand, Debug)]
+enum Remote {
+    /// Decelerate along the path to rest and hold.
+    Pause { cell: String },
+    /// Go on along the path.
+    Resume { cell: String },
+    /// Come to rest along the path and drop the rest of the program.
+    Abort { cell: String },
+    /// Clear the e-stop and what can be cleared.
+    Reset { cell: String },
+    /// Enable the drives, holding where they stand.
+    Start { cell: String },
+    /// The live speed override, 1..=100 %.
+    Speed { cell: String, percent: f64 },
+    /// The user's e-stop (a convenience: the cell's own e-stop circuit is its safety function).
+    Estop {
+        cell: String,
+        /// Why, in a few words.
+        #[arg(long, default_value = "remote e-stop")]
+        reason: String,
+    },
+    /// Runs a program file on the cell.
+    Exec { cell: String, program: PathBuf },
+}
+
+impl Remote {
+    fn split(self) -> Result<(String, Command), String> {
+        Ok(match self {
+            Self::Pause { cell } => (cell, Command::Pause {}),
+            Self::Resume { cell } => (cell, Command::Resume {}),
+            Self::Abort { cell } => (cell, Command::Abort {}),
+            Self::Reset { cell } => (cell, Command::Reset {}),
+            Self::Start { cell } => (cell, Command::Start {}),
+            Self::Speed { cell, percent } => (cell, Command::Speed { percent }),
+            Self::Estop { cell, reason } => (cell, Command::Estop { reason }),
+            Self::Exec { cell, program } => {
+                let source = std::fs::read_to_string(&program)
+                    .map_err(|e| format!("{}: {e}", program.display()))?;
+                let name = program.file_name().map_or_else(
+                    || program.display().to_string(),
+                    |n| n.to_string_lossy().into_owned(),
+                );
+                (cell, Command::Exec { name, source })
+            }
+        })
+    }
+}
+
+/// A cell as `cells` lists it (`null` where its status did not come).
+#[derive(Debug, serde::Serialize)]
+struct Row {
+    cell: String,
+    host: Option<String>,
+    /// `enabled`, `disabled` or `fault`.
+    state: Option<String>,
+    /// The program running, if one is.
+    program: Option<String>,
+    /// The e-stop latched.
+    estop: Option<bool>,
+}
+
+impl Row {
+    fn of(cell: &str, m: Option<&StatusMessage>) -> Self {
+        let s = m.map(|m| &m.status);
+        let arm = s.and_then(|s| s.supervisor.arm.as_ref());
+        Self {
+            cell: cell.into(),
+            host: m.map(|m| m.host.clone()),
+            state: arm.map(|a| {
+                if a.fault_latched {
+                    "fault"
+                } else if a.enabled {
+                    "enabled"
+                } else {
+                    "disabled"
+                }
+                .into()
+            }),
+            program: s.and_then(|s| s.supervisor.job.as_ref().map(|j| j.program.clone())),
+            estop: s.and_then(|s| s.estop.as_ref().map(|e| e.latched)),
+        }
+    }
+}
+
+/// How long a `get` waits for the line's answers.
+const PATIENCE: Duration = Duration::from_secs(3);
+
+pub fn main(args: impl Iterator<Item = OsString>) -> ExitCode {
+    let cli = Cli::parse_from(std::iter::once(OsString::from("gateway line")).chain(args));
+    match run(cli) {
+        Ok(code) => ExitCode::from(code),
+        Err((code, e)) => {
+            eprintln!("error: {e}");
+            ExitCode::from(code)
+        }
+    }
+}
+
+type Failure = (u8, String);
+
+fn input(e: impl std::fmt::Display) -> Failure {
+    (2, e.to_string())
+}
+
+fn load(path: Option<&Path>) -> Result<LineFile, Failure> {
+    let path = path.ok_or_else(|| input("no line file: give --line FILE (or RTC_LINE)"))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| input(format!("{}: {e}", path.display())))?;
+    let file: LineFile =
+        toml::from_str(&text).map_err(|e| input(format!("{}: {e}", path.display())))?;
+    for e in &file.connect {
+        let clear = e.starts_with("tcp/");
+        if clear && !file.plain {
+            return Err(input(format!(
+                "{}: connect {e:?} is in the clear: use tls/, or allow it with plain = true",
+                path.display()
+            )));
+        }
+        if e.starts_with("tls/") && file.tls.is_none() {
+            return Err(input(format!(
+                "{}: connect {e:?} needs [tls] certificates",
+                path.display()
+            )));
+        }
+    }
+    Ok(file)
+}
+
+fn join(file: &LineFile) -> Result<zenoh::Session, Failure> {
+    Link {
+        mode: Mode::Peer,
+        listen: &[],
+        connect: &file.connect,
+        multicast: file.multicast,
+        lease_s: file.lease,
+        tls: file.tls.as_ref(),
+        login: file.login.as_ref(),
+    }
+    .open()
+    .map_err(|e| (1, e))
+}
+
+fn cell_name(cell: &str) -> Result<CellName, Failure> {
+    CellName::new(cell).map_err(input)
+}
+
+fn run(cli: Cli) -> Result<u8, Failure> {
+    let line = cli
+        .line
+        .or_else(|| std::env::var_os("RTC_LINE").map(PathBuf::from));
+    let file = load(line.as_deref())?;
+    let json = cli.json;
+    // A command is checked (its program read) before the line is joined.
+    let ask = match cli.cmd {
+        Cmd::Command(r) => Ask::Command(r.split().map_err(input)?),
+        Cmd::Cells => Ask::Cells,
+        Cmd::Status { cell } => Ask::Status(cell_name(&cell)?),
+        Cmd::Events { cell, seconds } => Ask::Events(cell_name(&cell)?, seconds),
+    };
+    let session = join(&file)?;
+    // Let the links come up before asking (a get on a line not yet joined hears nothing).
+    std::thread::sleep(Duration::from_millis(500));
+    match ask {
+        Ask::Command((cell, command)) => send(&session, &file, &cell_name(&cell)?, command, json),
+        Ask::Cells => cells(&session, json),
+        Ask::Status(cell) => status(&session, &cell, json),
+        Ask::Events(cell, seconds) => events(&session, &cell, seconds, json),
+    }
+}
+
+/// What the command line asks, checked.
+enum Ask {
+    Command((String, Command)),
+    Cells,
+    Status(CellName),
+    Events(CellName, Option<f64>),
+}
+
+/// The statuses of every cell that answers, by name.
+fn statuses(
+    session: &zenoh::Session,
+    key: &str,
+) -> Result<BTreeMap<String, StatusMessage>, Failure> {
+    let replies = session
+        .get(key)
+        .target(QueryTarget::All)
+        .timeout(PATIENCE)
+        .wait()
+        .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
+    let mut out = BTreeMap::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(sample) = reply.result()
+            && let Ok(m) = serde_json::from_slice::<StatusMessage>(&sample.payload().to_bytes())
+        {
+            out.insert(m.cell.clone(), m);
+        }
+    }
+    Ok(out)
+}
+
+fn cells(session: &zenoh::Session, json: bool) -> Result<u8, Failure> {
+    let tokens = session
+        .liveliness()
+        .get(EVERY_CELL_ALIVE)
+        .timeout(PATIENCE)
+        .wait()
+        .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
+    let mut alive = Vec::new();
+    while let Ok(reply) = tokens.recv() {
+        if let Ok(sample) = reply.result()
+            && let Some(cell) = cell_of(sample.key_expr().as_str())
+        {
+            alive.push(cell.to_string());
+        }
+    }
+    alive.sort();
+    alive.dedup();
+    let statuses = statuses(session, &format!("{ROOT}/*/status"))?;
+    let rows: Vec<Row> = alive
+        .iter()
+        .map(|name| Row::of(name, statuses.get(name)))
+        .collect();
+    if json {
+        println!("{}", serde_json::to_string(&rows).unwrap_or_default());
+    } else {
+        println!(
+            "{:<16} {:<16} {:<10} {:<24} e-stop",
+            "cell", "host", "state", "program"
+        );
+        let dash = |o: &Option<String>| o.clone().unwrap_or_else(|| "-".into());
+        for r in &rows {
+            println!(
+                "{:<16} {:<16} {:<10} {:<24} {}",
+                r.cell,
+                dash(&r.host),
+                dash(&r.state),
+                dash(&r.program),
+                match r.estop {
+                    Some(true) => "latched",
+                    Some(false) => "clear",
+                    None => "-",
+                }
+            );
+        }
+    }
+    Ok(0)
+}
+
+fn status(session: &zenoh::Session, cell: &CellName, json: bool) -> Result<u8, Failure> {
+    let mut found = statuses(session, &cell.status())?;
+    let m = found
+        .remove(cell.as_str())
+        .ok_or_else(|| (1, format!("cell {cell} does not answer on the line")))?;
+    if json {
+        println!("{}", serde_json::to_string(&m.status).unwrap_or_default());
+    } else {
+        print!("{}", control_plane::compose::human(&m.status));
+    }
+    Ok(0)
+}
+
+fn events(
+    session: &zenoh::Session,
+    cell: &CellName,
+    seconds: Option<f64>,
+    json: bool,
+) -> Result<u8, Failure> {
+    let sub = session
+        .declare_subscriber(cell.events())
+        .wait()
+        .map_err(|e| (1, format!("cannot subscribe: {e}")))?;
+    let end = seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+    let mut last: Option<u64> = None;
+    loop {
+        let wait = match end {
+            Some(e) => match e.checked_duration_since(std::time::Instant::now()) {
+                Some(d) => d,
+                None => return Ok(0),
+            },
+            None => Duration::from_millis(500),
+        };
+        let Ok(Some(sample)) = sub.recv_timeout(wait) else {
+            continue;
+        };
+        let Ok(m) = serde_json::from_slice::<EventMessage>(&sample.payload().to_bytes()) else {
+            continue;
+        };
+        // Publications missed on the network, and events the gateway could not forward.
+        let missed = last.map_or(0, |l| m.seq.saturating_sub(l + 1)) + m.lost;
+        if missed > 0 {
+            if json {
+                println!("{}", serde_json::json!({ "lost": missed }));
+            } else {
+                println!("... {missed} events lost");
+            }
+        }
+        last = Some(m.seq);
+        if json {
+            println!("{}", serde_json::to_string(&m.event).unwrap_or_default());
+        } else {
+            let e = &m.event;
+            println!(
+                "{:>9.3} s  {:<10} {:<8} {} {}",
+                e.t_s,
+                e.source,
+                format!("{:?}", e.severity).to_lowercase(),
+                e.name,
+                e.text
+            );
+        }
+    }
+}
+
+fn send(
+    session: &zenoh::Session,
+    file: &LineFile,
+    cell: &CellName,
+    command: Command,
+    json: bool,
+) -> Result<u8, Failure> {
+    let user = file
+        .user
+        .clone()
+        .ok_or_else(|| input("the line file names no user: commands are signed by one"))?;
+    let secret_path = file
+        .secret_file
+        .as_deref()
+        .ok_or_else(|| input("the line file has no secret_file for its user"))?;
+    let secret = secret_file(secret_path).map_err(input)?;
+    let time_ms = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64);
+    let envelope = Envelope {
+        user,
+        cell: cell.to_string(),
+        time_ms,
+        nonce: u64::from(std::process::id()) << 32 ^ time_ms,
+        command,
+    };
+    let payload = serde_json::to_vec(&envelope).map_err(|e| (1, e.to_string()))?;
+    let signature = sign(secret.as_bytes(), &payload);
+    let replies = session
+        .get(cell.control())
+        .payload(payload)
+        .attachment(signature)
+        .timeout(Duration::from_secs(60))
+        .wait()
+        .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
+    let Ok(reply) = replies.recv() else {
+        return Err((
+            1,
+            format!("cell {cell} did not answer (not on the line, or the line refused the query)"),
+        ));
+    };
+    let sample = reply
+        .result()
+        .map_err(|e| (1, format!("cell {cell}: {:?}", e.payload().try_to_string())))?;
+    let answer: Answer = serde_json::from_slice(&sample.payload().to_bytes())
+        .map_err(|e| (1, format!("cell {cell} answered something else: {e}")))?;
+    if json {
+        println!("{}", serde_json::to_string(&answer).unwrap_or_default());
+    } else {
+        match &answer {
+            Answer::Done { message } => println!("{message}"),
+            Answer::Refused { by, reason } => eprintln!("refused ({by}): {reason}"),
+            Answer::Failed { reason } => eprintln!("failed: {reason}"),
+            Answer::Status { status } => print!("{}", control_plane::compose::human(status)),
+        }
+    }
+    Ok(answer.exit_code())
+}

@@ -1,0 +1,293 @@
+//! `gateway`: the cell on a line of cells (`docs/network.md`).
+//!
+//! As a process of the cell (`gateway --instance NAME`, the `gateway` entry of the process
+//! table, switched on by `[network]`), it shows the cell on Zenoh under `rtc/v1/<cell>/`:
+//! its presence, its status, its events, and a control queryable whose every command is
+//! judged by [`gateway::auth::Gate`] before it goes to the cell's control channel.
+//!
+//! As a control room's client (`gateway line ...`, which `supervisor cells` and `--remote`
+//! run), it lists the line's cells and reads or commands one of them.
+//!
+//! # Not real-time
+//! The process runs under `SCHED_OTHER` and is not critical. Its cycle only takes the cell's
+//! events from shared memory and hands them to the network thread through a bounded queue
+//! (an event it cannot hand over is counted, and the count published with the next one);
+//! Zenoh's own threads, the status and the commands run beside it, and reach the real-time
+//! processes only through the control channel, as `supervisor pause` does.
+
+use cell_config::network::NetworkSettings;
+use control_plane::event::Axes;
+use control_plane::{Reply, Request, channel};
+use gateway::auth::{Gate, Users};
+use gateway::command::Command;
+use gateway::keys::{CellKeys, CellName};
+use gateway::link::Link;
+use gateway::wire::{Answer, EventMessage, RefusedBy, StatusMessage};
+use runtime::ipc::Sub;
+use runtime::process::{self, Context, Cycle, SetupError, Task};
+use shm_schema::{EventV1, InstanceName, ServiceId};
+use std::process::ExitCode;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+use zenoh::Wait;
+use zenoh::qos::CongestionControl;
+
+mod client;
+
+/// Events queued between the cycle and the network at most.
+const EVENT_QUEUE: usize = 1024;
+
+/// How often the network thread asks the supervisor again for `[network]` before it answers.
+const ASK_AGAIN: Duration = Duration::from_millis(500);
+
+/// How long a failed join of the line waits before the next.
+const JOIN_AGAIN: Duration = Duration::from_secs(2);
+
+struct Bridge {
+    events: Sub<EventV1>,
+    tx: SyncSender<(EventV1, u64)>,
+    /// Events not handed over since the last one that was.
+    lost: u64,
+}
+
+impl Task for Bridge {
+    fn cycle(&mut self, _cx: &mut Cycle<'_>) {
+        while let Some(e) = self.events.next() {
+            match self.tx.try_send((e, self.lost)) {
+                Ok(()) => self.lost = 0,
+                Err(TrySendError::Full(_)) => self.lost += 1,
+                // The network thread ended (it said why).
+                Err(TrySendError::Disconnected(_)) => {}
+            }
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let mut args = std::env::args_os();
+    if args.nth(1).is_some_and(|a| a == "line") {
+        return client::main(std::env::args_os().skip(2));
+    }
+    process::run(
+        "gateway",
+        "the cell on a line of cells: its presence, status, events and commands on Zenoh",
+        |ctx: &Context| {
+            let (tx, rx) = sync_channel(EVENT_QUEUE);
+            let instance = ctx.instance;
+            let axes = Axes::of_cell(&ctx.cell);
+            std::thread::Builder::new()
+                .name("line".into())
+                .spawn(move || line(instance, axes, rx))
+                .map_err(|e| SetupError::from(format!("cannot start the network thread: {e}")))?;
+            Ok::<_, SetupError>(Bridge {
+                events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
+                tx,
+                lost: 0,
+            })
+        },
+    )
+}
+
+/// The cell's `[network]`, from the supervisor (asked until it answers: it serves its
+/// control channel once every process of the cell has started).
+fn settings(instance: &InstanceName) -> Option<NetworkSettings> {
+    loop {
+        match channel::call(instance, &Request::Network) {
+            Ok(Reply::Network(Some(n))) => return Some(*n),
+            Ok(Reply::Network(None)) => {
+                tracing::error!(
+                    "the cell has no [network] section: the gateway stays off the network"
+                );
+                return None;
+            }
+            Ok(other) => {
+                tracing::error!("the supervisor answered [network] with {other:?}");
+                return None;
+            }
+            Err(e) => {
+                tracing::debug!("[network] not yet: {e}");
+                std::thread::sleep(ASK_AGAIN);
+            }
+        }
+        if runtime::signals::stop_requested() {
+            return None;
+        }
+    }
+}
+
+fn now_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// The network thread: joins the line and serves the cell on it until the process ends.
+fn line(instance: InstanceName, axes: Axes, events: Receiver<(EventV1, u64)>) {
+    let Some(net) = settings(&instance) else {
+        return;
+    };
+    let Some(name) = net.name.clone() else {
+        tracing::error!("[network] came without the cell's name");
+        return;
+    };
+    let users = match Users::load(&net.users) {
+        Ok(u) => u,
+        Err(e) => {
+            tracing::error!("{e}: the gateway stays off the network");
+            return;
+        }
+    };
+    let link = Link {
+        mode: net.mode,
+        listen: &net.listen,
+        connect: &net.connect,
+        multicast: net.multicast,
+        lease_s: net.lease,
+        tls: net.tls.as_ref(),
+        login: net.login.as_ref(),
+    };
+    let session = loop {
+        match link.open() {
+            Ok(s) => break s,
+            Err(e) => {
+                tracing::error!("{e}; trying again in {} s", JOIN_AGAIN.as_secs());
+                std::thread::sleep(JOIN_AGAIN);
+                if runtime::signals::stop_requested() {
+                    return;
+                }
+            }
+        }
+    };
+    if let Err(e) = serve(&session, &instance, &name, &net, users, &axes, &events) {
+        tracing::error!("the gateway left the line: {e}");
+    }
+}
+
+/// The cell on the line: presence, status, events, control.
+fn serve(
+    session: &zenoh::Session,
+    instance: &InstanceName,
+    name: &CellName,
+    net: &NetworkSettings,
+    users: Users,
+    axes: &Axes,
+    events: &Receiver<(EventV1, u64)>,
+) -> zenoh::Result<()> {
+    let host = nix::unistd::gethostname()
+        .ok()
+        .and_then(|h| h.into_string().ok())
+        .unwrap_or_default();
+    let _alive = session.liveliness().declare_token(name.alive()).wait()?;
+    let latest: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+    let status_pub = session
+        .declare_publisher(name.status())
+        .congestion_control(CongestionControl::Drop)
+        .wait()?;
+    let for_query = latest.clone();
+    let status_key = name.status();
+    let _status_queryable = session
+        .declare_queryable(name.status())
+        .callback(move |q| {
+            let bytes = for_query.lock().map(|g| g.clone()).unwrap_or_default();
+            if let Some(b) = bytes {
+                let _ = q.reply(&status_key, b).wait();
+            }
+        })
+        .wait()?;
+    let event_pub = session
+        .declare_publisher(name.events())
+        .congestion_control(CongestionControl::Block)
+        .wait()?;
+    let control = session.declare_queryable(name.control()).wait()?;
+    let gate = Mutex::new(Gate::new(users, name.as_str()));
+    let control_instance = *instance;
+    std::thread::Builder::new()
+        .name("control".into())
+        .spawn(move || {
+            while let Ok(q) = control.recv() {
+                let payload = q
+                    .payload()
+                    .map(|p| p.to_bytes().to_vec())
+                    .unwrap_or_default();
+                let signature = q
+                    .attachment()
+                    .and_then(|a| a.try_to_string().ok().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                let admitted = gate
+                    .lock()
+                    .map_err(|_| "the gate broke".to_string())
+                    .map(|mut g| g.admit(&payload, &signature, now_ms()));
+                let answer = match admitted {
+                    Ok(Ok(a)) => {
+                        tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
+                        ask(&control_instance, &a.command)
+                    }
+                    Ok(Err(refusal)) => {
+                        tracing::warn!("a command refused: {refusal}");
+                        Answer::Refused {
+                            by: RefusedBy::Gateway,
+                            reason: refusal.to_string(),
+                        }
+                    }
+                    Err(e) => Answer::Failed { reason: e },
+                };
+                let bytes = serde_json::to_vec(&answer).unwrap_or_default();
+                let _ = q.reply(q.key_expr().clone(), bytes).wait();
+            }
+        })
+        .map_err(|e| format!("cannot start the control thread: {e}"))?;
+    tracing::info!(
+        "on the line as {name} ({} listening, {} connecting)",
+        net.listen.join(", "),
+        net.connect.join(", ")
+    );
+    let period = Duration::from_secs_f64(net.status_period);
+    let mut next_status = Instant::now();
+    let mut seq = 0u64;
+    let t0 = runtime::time::now_ns();
+    loop {
+        if runtime::signals::stop_requested() {
+            return Ok(());
+        }
+        let wait = next_status.saturating_duration_since(Instant::now());
+        match events.recv_timeout(wait) {
+            Ok((e, lost)) => {
+                seq += 1;
+                let m = EventMessage {
+                    seq,
+                    lost,
+                    event: control_plane::event::event(&e, axes, t0),
+                };
+                event_pub
+                    .put(serde_json::to_vec(&m).unwrap_or_default())
+                    .wait()?;
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => return Ok(()),
+        }
+        if Instant::now() >= next_status {
+            next_status += period;
+            if next_status < Instant::now() {
+                next_status = Instant::now() + period;
+            }
+            if let Ok(Reply::Status(s)) = channel::call(instance, &Request::Status) {
+                let m = StatusMessage {
+                    cell: name.to_string(),
+                    host: host.clone(),
+                    status: s,
+                };
+                let bytes = serde_json::to_vec(&m).unwrap_or_default();
+                if let Ok(mut g) = latest.lock() {
+                    *g = Some(bytes.clone());
+                }
+                status_pub.put(bytes).wait()?;
+            }
+        }
+    }
+}
+
+/// An admitted command, asked of the cell.
+fn ask(instance: &InstanceName, command: &Command) -> Answer {
+    Answer::of_reply(channel::call(instance, &command.request()))
+}

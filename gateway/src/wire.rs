@@ -1,0 +1,121 @@
+//! What the gateway publishes and answers, as JSON on the network (version 1 of the key space,
+//! `docs/network.md`): a foreign client needs only these shapes.
+//!
+//! ```text
+//! rtc/v1/<cell>/status   {"cell": "press-1", "host": "hostname", "status": {...status --json...}}
+//! rtc/v1/<cell>/events   {"seq": 7, "lost": 0, "event": {...one event of events --json...}}
+//! rtc/v1/<cell>/control  the answer: {"answer": "done", "message": "..."}
+//!                                    {"answer": "refused", "by": "gateway" | "cell", "reason": "..."}
+//!                                    {"answer": "failed", "reason": "..."}
+//!                                    {"answer": "status", "status": {...}}
+//! ```
+
+use control_plane::event::Event;
+use control_plane::status::Status;
+use control_plane::{Reply, channel::CallError};
+use serde::{Deserialize, Serialize};
+
+/// A cell's status on the network, published every `status_period` and answered to a `get`
+/// of its key (the latest: a late joiner needs not wait).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StatusMessage {
+    /// The cell's name on the line.
+    pub cell: String,
+    /// The host its gateway runs on.
+    pub host: String,
+    /// `supervisor status --json` of the cell.
+    pub status: Box<Status>,
+}
+
+/// One event of a cell, numbered: a subscriber that sees `seq` jump has missed the
+/// publications between (the network lost them); `lost` counts the events the gateway itself
+/// could not forward just before this one (the cell's events came faster than the network
+/// took them). Neither loss is silent.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct EventMessage {
+    /// This publication's number, from 1 as the gateway starts.
+    pub seq: u64,
+    /// Events lost before this one, on the gateway's side.
+    pub lost: u64,
+    /// The event, as `supervisor events --json` prints it.
+    pub event: Event,
+}
+
+/// Who refused a command.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RefusedBy {
+    /// The gateway: who asked, or how (the signature, the role, the time).
+    Gateway,
+    /// The cell: its state does not allow it (as `supervisor pause` would be refused).
+    Cell,
+}
+
+impl std::fmt::Display for RefusedBy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Gateway => "by the gateway",
+            Self::Cell => "by the cell",
+        })
+    }
+}
+
+/// The answer to a command.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "answer", rename_all = "lowercase")]
+pub enum Answer {
+    /// Done; the cell's words.
+    Done {
+        /// What the cell says.
+        message: String,
+    },
+    /// Not done, nothing changed.
+    Refused {
+        /// The gateway or the cell.
+        by: RefusedBy,
+        /// Why, in words.
+        reason: String,
+    },
+    /// Tried and failed.
+    Failed {
+        /// Why, in words.
+        reason: String,
+    },
+    /// The status asked for.
+    Status {
+        /// `supervisor status --json`.
+        status: Box<Status>,
+    },
+}
+
+impl Answer {
+    /// The cell's reply to a command, or why none came, as the network's answer.
+    pub fn of_reply(reply: Result<Reply, CallError>) -> Self {
+        match reply {
+            Ok(Reply::Done(message)) => Self::Done { message },
+            Ok(Reply::Refused(r)) => Self::Refused {
+                by: RefusedBy::Cell,
+                reason: r.to_string(),
+            },
+            Ok(Reply::Failed(f)) => Self::Failed {
+                reason: f.to_string(),
+            },
+            Ok(Reply::Status(status)) => Self::Status { status },
+            Ok(other) => Self::Failed {
+                reason: format!("the cell answered out of turn: {other:?}"),
+            },
+            Err(e) => Self::Failed {
+                reason: e.to_string(),
+            },
+        }
+    }
+
+    /// A command-line client's exit status: 0 done, 2 refused, 1 failed.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            Self::Done { .. } | Self::Status { .. } => 0,
+            Self::Refused { .. } => 2,
+            Self::Failed { .. } => 1,
+        }
+    }
+}
