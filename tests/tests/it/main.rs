@@ -12,6 +12,7 @@ mod ethercat;
 mod faults;
 mod fieldbus;
 mod latency;
+mod line;
 mod loop_sim;
 mod masters;
 mod no_alloc;

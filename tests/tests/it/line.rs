@@ -1,0 +1,368 @@
+//! A line of cells on one machine (issue 20): two cells and a control room, each "host" a
+//! network namespace of its own, the room joined to each cell by a veth pair it made (no
+//! interface of the machine's own is touched). Each cell is its own instance (its own
+//! iceoryx2 prefix: no shared memory in common) and Zenoh has no shared-memory transport, so
+//! everything the room sees crossed a link. The real binaries: `supervisor up` in each cell's
+//! namespace with its `gateway`, `gateway line` in the room's.
+
+use crate::drives::WATCHDOG;
+use crate::up::{Up, process_in};
+use integration_tests::{CellToml, ip, run_with_watchdog, scratch, with_stall_room};
+use serde_json::Value;
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+use toml_edit::{Table, value};
+
+/// The line's users: an operator and a viewer.
+const USERS: &str = "[[user]]\nname = \"olga\"\nrole = \"operator\"\nsecret = \"olga-secret-0123456789\"\n\n\
+                     [[user]]\nname = \"victor\"\nrole = \"viewer\"\nsecret = \"victor-secret-0123456789\"\n";
+
+/// A link's lease (s): how long a silent cell stays listed.
+const LEASE_S: f64 = 3.0;
+
+/// The namespaces of one test: the room and its cells, removed on drop.
+struct Hosts {
+    room: String,
+    cells: Vec<String>,
+}
+
+impl Hosts {
+    /// The room and `n` cells, cell `k` at 10.77.<k+1>.2, the room's end of its link
+    /// `v<k>` at 10.77.<k+1>.1.
+    fn new(test: &str, n: usize) -> Self {
+        let base = format!("rtc-l{}-{test}", std::process::id());
+        let hosts = Self {
+            room: format!("{base}-r"),
+            cells: (0..n).map(|k| format!("{base}-{k}")).collect(),
+        };
+        ip(&["netns", "add", &hosts.room]);
+        ip(&["-n", &hosts.room, "link", "set", "lo", "up"]);
+        for (k, ns) in hosts.cells.iter().enumerate() {
+            ip(&["netns", "add", ns]);
+            ip(&["-n", ns, "link", "set", "lo", "up"]);
+            let v = format!("v{k}");
+            ip(&[
+                "-n",
+                &hosts.room,
+                "link",
+                "add",
+                &v,
+                "type",
+                "veth",
+                "peer",
+                "name",
+                "eth0",
+                "netns",
+                ns,
+            ]);
+            ip(&[
+                "-n",
+                &hosts.room,
+                "addr",
+                "add",
+                &format!("10.77.{}.1/24", k + 1),
+                "dev",
+                &v,
+            ]);
+            ip(&[
+                "-n",
+                ns,
+                "addr",
+                "add",
+                &format!("10.77.{}.2/24", k + 1),
+                "dev",
+                "eth0",
+            ]);
+            ip(&["-n", &hosts.room, "link", "set", &v, "up"]);
+            ip(&["-n", ns, "link", "set", "eth0", "up"]);
+        }
+        hosts
+    }
+
+    /// Cell `k`'s link, as the room sees it, brought `state` (`up`, `down`).
+    fn link(&self, k: usize, state: &str) {
+        ip(&["-n", &self.room, "link", "set", &format!("v{k}"), state]);
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        for ns in self.cells.iter().chain([&self.room]) {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// A file only its owner may read (the users file, a secret).
+fn private(test: &str, name: &str, text: &str) -> PathBuf {
+    let p = scratch(test, name, text);
+    std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+    p
+}
+
+/// Cell `k` of the line, `press-<k>`: the default cell with room for stalls, its gateway
+/// listening on its link.
+fn cell_config(test: &str, k: usize, users: &Path) -> PathBuf {
+    let mut gateway = Table::new();
+    gateway.insert("name", value("gateway"));
+    gateway.insert(
+        "command",
+        value(integration_tests::toml::strings(&[
+            "gateway",
+            "--instance",
+            "{instance}",
+        ])),
+    );
+    gateway.insert("period_us", value(20_000));
+    gateway.insert("priority", value(0));
+    gateway.insert("critical", value(false));
+    gateway.insert("network_estop_config", value("ignore"));
+    let mut network = Table::new();
+    network.insert("name", value(format!("press-{k}")));
+    network.insert(
+        "listen",
+        value(integration_tests::toml::strings(&[&format!(
+            "tcp/10.77.{}.2:7447",
+            k + 1
+        )])),
+    );
+    network.insert("plain", value(true));
+    network.insert("users", value(users.display().to_string()));
+    network.insert("lease", value(LEASE_S));
+    let src = CellToml::parse(&with_stall_room(&integration_tests::default_cell()))
+        .push("process", gateway)
+        .to_string();
+    let src = format!("{src}\n[network]\n{network}");
+    scratch(test, &format!("cell-{k}.toml"), &src)
+}
+
+/// The room's line file `file` for `user` (secret `secret`), connecting to `cells` cells.
+fn line_file(test: &str, file: &str, user: &str, secret: &str, cells: usize) -> PathBuf {
+    let secret_file = private(test, &format!("{file}.secret"), &format!("{secret}\n"));
+    let connect: Vec<String> = (0..cells)
+        .map(|k| format!("\"tcp/10.77.{}.2:7447\"", k + 1))
+        .collect();
+    scratch(
+        test,
+        &format!("{file}.line.toml"),
+        &format!(
+            "connect = [{}]\nplain = true\nlease = {LEASE_S}\nuser = \"{user}\"\nsecret_file = \"{}\"\n",
+            connect.join(", "),
+            secret_file.display()
+        ),
+    )
+}
+
+/// `gateway line --line <file> <args>` in the room.
+fn room(hosts: &Hosts, file: &Path, args: &[&str]) -> Output {
+    let mut cmd = Command::new("ip");
+    cmd.args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("gateway"))
+        .arg("line")
+        .arg("--line")
+        .arg(file)
+        .args(args);
+    run_with_watchdog(&mut cmd, WATCHDOG)
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "exit {:?}\n{}{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// The cells the room lists, as `cells --json` gives them.
+fn cells(hosts: &Hosts, file: &Path) -> Vec<Value> {
+    let out = room(hosts, file, &["cells", "--json"]);
+    assert!(out.status.success(), "cells: {}", text(&out));
+    serde_json::from_slice::<Value>(&out.stdout)
+        .unwrap_or_else(|e| panic!("cells --json: {e}: {}", text(&out)))
+        .as_array()
+        .cloned()
+        .unwrap_or_default()
+}
+
+fn names(rows: &[Value]) -> Vec<String> {
+    rows.iter()
+        .filter_map(|r| r["cell"].as_str().map(str::to_string))
+        .collect()
+}
+
+/// Waits (at most `patience`, a panic then) until the room lists exactly `want`; returns the
+/// rows and how long it took.
+fn until_listed(
+    hosts: &Hosts,
+    file: &Path,
+    want: &[&str],
+    patience: Duration,
+) -> (Vec<Value>, Duration) {
+    let start = Instant::now();
+    loop {
+        let rows = cells(hosts, file);
+        if names(&rows) == want {
+            return (rows, start.elapsed());
+        }
+        assert!(
+            start.elapsed() < patience,
+            "the room lists {:?}, not {want:?}, after {patience:?}",
+            names(&rows)
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+#[test]
+fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_only() {
+    let test = "line_two";
+    let hosts = Hosts::new(test, 2);
+    let users = private(test, "users.toml", USERS);
+    let a = Up::start_in(
+        &format!("{test}-a"),
+        &cell_config(test, 0, &users),
+        Some(&hosts.cells[0]),
+    );
+    let b = Up::start_in(
+        &format!("{test}-b"),
+        &cell_config(test, 1, &users),
+        Some(&hosts.cells[1]),
+    );
+    let olga = line_file(test, "olga", "olga", "olga-secret-0123456789", 2);
+    let victor = line_file(test, "victor", "victor", "victor-secret-0123456789", 2);
+    let mallory = line_file(test, "mallory", "olga", "not-olgas-secret-at-all", 2);
+
+    // Both cells listed, with their state.
+    let patience = Duration::from_secs(30);
+    let (rows, _) = until_listed(&hosts, &victor, &["press-0", "press-1"], patience);
+    for r in &rows {
+        assert_eq!(r["state"], "enabled", "{r}");
+        assert_eq!(r["estop"], false, "{r}");
+    }
+
+    // A cell's status crossed the link: its instance, its processes.
+    let out = room(&hosts, &victor, &["status", "press-1", "--json"]);
+    assert!(out.status.success(), "status: {}", text(&out));
+    let s: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
+    assert_eq!(s["instance"], b.inst.as_str());
+    assert!(!process_in(&s, "gateway").is_null(), "{s}");
+
+    // A viewer may read, not command: refused by the gateway, with why; the cell untouched.
+    let out = room(&hosts, &victor, &["pause", "press-0"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("\"victor\" is a viewer and may not pause"),
+        "{}",
+        text(&out)
+    );
+    // A wrong secret is not the operator's.
+    let out = room(&hosts, &mallory, &["estop", "press-0"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("the signature is not \"olga\"'s"),
+        "{}",
+        text(&out)
+    );
+    assert_eq!(
+        a.until("still clear", |s| s["estop"]["latched"] == false)["estop"]["latched"],
+        false
+    );
+
+    // The operator's commands reach the right cell and are acknowledged: a program on press-0
+    // paused, resumed and aborted there; press-1 e-stopped, press-0 not.
+    let program = integration_tests::small_triangle(test);
+    let out = room(
+        &hosts,
+        &olga,
+        &["exec", "press-0", program.to_str().expect("path")],
+    );
+    assert!(out.status.success(), "exec: {}", text(&out));
+    a.until("the program moving", crate::up::moving);
+    let out = room(&hosts, &olga, &["pause", "press-0"]);
+    assert!(out.status.success(), "pause: {}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("paused"),
+        "{}",
+        text(&out)
+    );
+    a.until("paused", |s| s["supervisor"]["job"]["paused"] == true);
+    let out = room(&hosts, &olga, &["resume", "press-0"]);
+    assert!(out.status.success(), "resume: {}", text(&out));
+    a.until("resumed", |s| s["supervisor"]["job"]["paused"] == false);
+    let out = room(&hosts, &olga, &["abort", "press-0"]);
+    assert!(out.status.success(), "abort: {}", text(&out));
+    a.until("aborted", |s| s["supervisor"]["job"].is_null());
+
+    // press-1's events as they happen, across its link: its e-stop's among them.
+    let mut follow = Command::new("ip");
+    follow
+        .args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("gateway"))
+        .args(["line", "--json", "--line"])
+        .arg(&victor)
+        .args(["events", "press-1", "--seconds", "8"]);
+    let follower = std::thread::spawn(move || run_with_watchdog(&mut follow, WATCHDOG));
+    // The follower joins the line and subscribes (it waits half a second before it listens).
+    std::thread::sleep(Duration::from_secs(3));
+    let out = room(
+        &hosts,
+        &olga,
+        &["estop", "press-1", "--reason", "from the room"],
+    );
+    assert!(out.status.success(), "estop: {}", text(&out));
+    let s = b.until("the e-stop latched", |s| s["estop"]["latched"] == true);
+    assert!(
+        s["estop"]["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("from the room")),
+        "{}",
+        s["estop"]
+    );
+    let followed = follower.join().expect("the follower");
+    let lines = String::from_utf8_lossy(&followed.stdout).to_string();
+    assert!(
+        lines
+            .lines()
+            .any(|l| l.contains("\"source\":\"servo\"") && l.contains("\"name\":\"estop-safe\"")),
+        "press-1's events in the room: {}",
+        text(&followed)
+    );
+    assert!(
+        !lines.contains("\"lost\""),
+        "nothing lost on a quiet line: {lines}"
+    );
+    assert_eq!(
+        a.until("press-0 clear", |s| !s.is_null())["estop"]["latched"],
+        false
+    );
+
+    // press-1's gateway killed: gone from the list once its session closes; back when the
+    // supervisor has started it again (a non-critical process, restarted on failure).
+    let s = b.until("the gateway running", |s| {
+        process_in(s, "gateway")["pid"].is_u64()
+    });
+    let pid = process_in(&s, "gateway")["pid"].as_u64().expect("pid") as i32;
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(pid),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .expect("kill the gateway");
+    let limit = Duration::from_secs_f64(LEASE_S * 2.0 + 10.0);
+    until_listed(&hosts, &victor, &["press-0"], limit);
+    until_listed(&hosts, &victor, &["press-0", "press-1"], patience);
+
+    // press-0's link cut: the room sees it go within the lease (and some), the cell runs on;
+    // the link restored, it comes back.
+    hosts.link(0, "down");
+    let (_, gone_after) = until_listed(&hosts, &victor, &["press-1"], limit);
+    eprintln!("press-0 left the room's list {gone_after:?} after its link went down");
+    a.until("press-0 running on", |s| {
+        process_in(s, "gateway")["life"] == "running"
+    });
+    hosts.link(0, "up");
+    until_listed(&hosts, &victor, &["press-0", "press-1"], patience);
+    drop((a, b));
+}
