@@ -45,6 +45,18 @@ impl std::fmt::Display for Instance {
     }
 }
 
+/// `--remote CELL`: a cell of the line (docs/network.md) instead of this host's instance; the
+/// command goes to the cell's gateway through `gateway line`.
+#[derive(clap::Args, Clone, Debug)]
+struct Remote {
+    /// A cell on the line, by its name there, instead of an instance of this host.
+    #[arg(long, value_name = "CELL", conflicts_with = "instance")]
+    remote: Option<String>,
+    /// With --remote: the line file (endpoints, user, secret); default: $RTC_LINE.
+    #[arg(long, value_name = "FILE", requires = "remote")]
+    line: Option<PathBuf>,
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Run a motion program: start the cell, move, settle, stop everything, report.
@@ -125,6 +137,8 @@ enum Cmd {
         program: PathBuf,
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
         /// Wait until the program ends and print the report `run` prints.
         #[arg(long)]
         wait: bool,
@@ -149,6 +163,8 @@ enum Cmd {
         percent: f64,
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Check a program without starting anything: the same validation `run` and `exec` make
     /// (syntax, names, limits, the whole blended path through trajgen's generator) and its
@@ -164,27 +180,37 @@ enum Cmd {
     Pause {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Go on along the path after a pause.
     Resume {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Come to rest along the path and drop the rest of the program (not an e-stop).
     Abort {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Clear the e-stop and servo's latched faults where their cause is gone; says what
     /// cannot be cleared and why. The drives stay disabled until `start`.
     Reset {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Enable the drives, holding where the axes stand (bumpless).
     Start {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Stop one process of the cell and start it again.
     Restart {
@@ -212,11 +238,22 @@ enum Cmd {
     },
     /// Print the embedded default configuration.
     DefaultConfig,
+    /// List the cells on the line (docs/network.md): name, host, state, program, e-stop.
+    Cells {
+        /// The line file (endpoints, user, secret); default: $RTC_LINE.
+        #[arg(long, value_name = "FILE")]
+        line: Option<PathBuf>,
+        /// One JSON array instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Show the processes of a running instance: state, cycles, overruns and wake-up latency
     /// percentiles since they started.
     Status {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
         /// Print one JSON object instead of the table.
         #[arg(long)]
         json: bool,
@@ -261,6 +298,8 @@ enum Cmd {
     Events {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
         /// Keep printing until Ctrl-C (without it: what arrives within half a second).
         #[arg(long, short = 'f')]
         follow: bool,
@@ -286,6 +325,8 @@ enum Cmd {
     Estop {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
         /// Why, in a few words (kept in the e-stop and its events).
         #[arg(long, default_value = "operator e-stop")]
         reason: String,
@@ -303,6 +344,103 @@ enum Cmd {
     /// The sending side of a latency hop (started by `supervisor latency`).
     #[command(hide = true, name = "latency-peer")]
     LatencyPeer(latency::peer::Args),
+}
+
+/// A command for a cell of the line: `gateway line`'s line file and arguments; `None` for a
+/// command on this host.
+type OnTheLine = Result<(Option<PathBuf>, Vec<String>), String>;
+
+fn remote_of(cmd: &Cmd) -> Option<OnTheLine> {
+    let at = |r: &Remote, args: &[&str]| {
+        let cell = r.remote.as_ref()?;
+        let mut v: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+        v.insert(1, cell.clone());
+        Some(Ok((r.line.clone(), v)))
+    };
+    match cmd {
+        Cmd::Pause { remote, .. } => at(remote, &["pause"]),
+        Cmd::Resume { remote, .. } => at(remote, &["resume"]),
+        Cmd::Abort { remote, .. } => at(remote, &["abort"]),
+        Cmd::Reset { remote, .. } => at(remote, &["reset"]),
+        Cmd::Start { remote, .. } => at(remote, &["start"]),
+        Cmd::Speed {
+            remote, percent, ..
+        } => at(remote, &["speed", &percent.to_string()]),
+        Cmd::Estop { remote, reason, .. } => at(remote, &["estop", "--reason", reason]),
+        Cmd::Status {
+            remote,
+            json,
+            watch,
+            ..
+        } => {
+            remote.remote.as_ref()?;
+            if *watch {
+                return Some(Err(
+                    "--watch is for an instance of this host, not --remote".into()
+                ));
+            }
+            at(
+                remote,
+                if *json {
+                    &["status", "--json"]
+                } else {
+                    &["status"]
+                },
+            )
+        }
+        Cmd::Events {
+            remote,
+            follow,
+            json,
+            ..
+        } => {
+            let mut args = vec!["events"];
+            if !*follow {
+                // As on this host: what arrives within half a second.
+                args.extend(["--seconds", "0.5"]);
+            }
+            if *json {
+                args.push("--json");
+            }
+            at(remote, &args)
+        }
+        Cmd::Exec {
+            remote,
+            program,
+            wait,
+            ..
+        } => {
+            remote.remote.as_ref()?;
+            if *wait {
+                return Some(Err(
+                    "exec --wait (and its report, trace, recording, plot) is for an instance of this host, not --remote".into(),
+                ));
+            }
+            at(remote, &["exec", &program.display().to_string()])
+        }
+        _ => None,
+    }
+}
+
+/// Runs `gateway line [--line FILE] ARGS` (next to this program, or on PATH) in this
+/// process' place.
+fn on_the_line(line: Option<&std::path::Path>, args: &[String]) -> ExitCode {
+    use std::os::unix::process::CommandExt;
+    let gateway = match cell_config::find_program("gateway") {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: the line's client: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut cmd = std::process::Command::new(gateway);
+    cmd.arg("line");
+    if let Some(l) = line {
+        cmd.arg("--line").arg(l);
+    }
+    let e = cmd.args(args).exec();
+    eprintln!("error: cannot run the line's client: {e}");
+    ExitCode::FAILURE
 }
 
 /// Reports a one-shot command to a running instance (`inject`, `estop`): its message on
@@ -619,11 +757,28 @@ fn main() -> ExitCode {
         quiet_on_a_closed_pipe();
     }
     let _log = init_logging(watching);
+    if let Some(remote) = remote_of(&cli.cmd) {
+        return match remote {
+            Ok((line, args)) => on_the_line(line.as_deref(), &args),
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
     match cli.cmd {
+        Cmd::Cells { line, json } => {
+            let mut args = vec!["cells".to_string()];
+            if json {
+                args.push("--json".into());
+            }
+            on_the_line(line.as_deref(), &args)
+        }
         Cmd::Status {
             instance,
             json,
             watch,
+            ..
         } => status(&instance, json, watch),
         Cmd::Web {
             instance,
@@ -669,6 +824,7 @@ fn main() -> ExitCode {
             trace,
             record,
             plot,
+            ..
         } => {
             let i = match instance_of(&instance) {
                 Ok(i) => i,
@@ -724,13 +880,15 @@ fn main() -> ExitCode {
             }
             code
         }
-        Cmd::Pause { instance } => ctl_call(&instance, Request::Pause),
-        Cmd::Speed { percent, instance } => ctl_call(&instance, Request::Speed { percent }),
+        Cmd::Pause { instance, .. } => ctl_call(&instance, Request::Pause),
+        Cmd::Speed {
+            percent, instance, ..
+        } => ctl_call(&instance, Request::Speed { percent }),
         Cmd::Check { program, config } => check(&program, config.as_deref()),
-        Cmd::Resume { instance } => ctl_call(&instance, Request::Resume),
-        Cmd::Abort { instance } => ctl_call(&instance, Request::Abort),
-        Cmd::Reset { instance } => ctl_call(&instance, Request::Reset),
-        Cmd::Start { instance } => ctl_call(&instance, Request::Start),
+        Cmd::Resume { instance, .. } => ctl_call(&instance, Request::Resume),
+        Cmd::Abort { instance, .. } => ctl_call(&instance, Request::Abort),
+        Cmd::Reset { instance, .. } => ctl_call(&instance, Request::Reset),
+        Cmd::Start { instance, .. } => ctl_call(&instance, Request::Start),
         Cmd::Restart { process, instance } => ctl_call(&instance, Request::Restart { process }),
         Cmd::Swap {
             process,
@@ -795,6 +953,7 @@ fn main() -> ExitCode {
             instance,
             follow,
             json,
+            ..
         } => match shm_schema::InstanceName::new(&instance)
             .map_err(|e| format!("--instance {instance:?}: {e}"))
             .and_then(|i| cell_client::events::follow(&i, follow, json))
@@ -813,9 +972,9 @@ fn main() -> ExitCode {
         } => control_done(cell_client::control::inject(
             &instance, &axis, &fault, clear,
         )),
-        Cmd::Estop { instance, reason } => {
-            control_done(cell_client::control::estop(&instance, &reason))
-        }
+        Cmd::Estop {
+            instance, reason, ..
+        } => control_done(cell_client::control::estop(&instance, &reason)),
         Cmd::Io {
             instance,
             name,
