@@ -4,7 +4,7 @@
 pub mod toml;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
@@ -40,15 +40,92 @@ pub fn bin_dir() -> &'static Path {
 /// Fails the test unless `python3` has iceoryx2's bindings, which the processes written in
 /// Python need (from PyPI: `pip install iceoryx2==0.10.0`; `.ci/run` installs them).
 pub fn require_python_iceoryx2() {
-    let probe = Command::new("python3")
-        .args(["-c", "import iceoryx2"])
-        .output()
-        .expect("python3");
-    assert!(
-        probe.status.success(),
-        "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0\n{}",
-        String::from_utf8_lossy(&probe.stderr)
+    needed(
+        Command::new("python3").args(["-c", "import iceoryx2"]),
+        "this test needs Python's iceoryx2 bindings: pip install iceoryx2==0.10.0",
     );
+}
+
+/// `out`, which must show a success: else a panic naming `what` (the command line, or what
+/// ran), its exit status and its stderr.
+pub fn success(out: Output, what: &str) -> Output {
+    assert!(
+        out.status.success(),
+        "{what} failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Runs `cmd` to its end; it must succeed ([`success`], naming its command line): its output.
+pub fn succeeded(cmd: &mut Command) -> Output {
+    let what = format!("{cmd:?}");
+    output_of(cmd, what)
+}
+
+/// Runs `cmd`, a tool the test needs of the machine, which must succeed: as [`succeeded`],
+/// and a failure also says `needs` (what the test needs, and how to get it).
+pub fn needed(cmd: &mut Command, needs: &str) -> Output {
+    let what = format!("{cmd:?} ({needs})");
+    output_of(cmd, what)
+}
+
+/// `cmd`'s output, which must show a success ([`success`], naming `what`).
+fn output_of(cmd: &mut Command, what: String) -> Output {
+    let out = cmd.output().unwrap_or_else(|e| panic!("{what}: {e}"));
+    success(out, &what)
+}
+
+/// [`run_with_watchdog`], and `cmd` must succeed ([`success`], naming its command line): its
+/// output.
+pub fn succeeded_within(cmd: &mut Command, watchdog: Duration) -> Output {
+    let what = format!("{cmd:?}");
+    success(run_with_watchdog(cmd, watchdog), &what)
+}
+
+/// The stderr of `out`, which must have exited with `code`: else a panic with its exit status
+/// and that stderr.
+pub fn exited(out: &Output, code: i32) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "exit status {}; stderr:\n{err}",
+        out.status
+    );
+    err
+}
+
+/// Waits until `child` ends, for at most `watchdog` (then a panic saying `what`); its output
+/// (what it wrote on the pipes it was given).
+pub fn wait_output(mut child: Child, watchdog: Duration, what: &str) -> Output {
+    let start = Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        assert!(start.elapsed() < watchdog, "{what} (after {watchdog:?})");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
+
+/// The first line `child` writes on its stdout (piped), waiting for it (it must write one).
+pub fn first_line(child: &mut Child) -> String {
+    use std::io::BufRead;
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.as_mut().expect("its stdout piped"))
+        .read_line(&mut line)
+        .expect("its first line");
+    line
+}
+
+/// The rows of a `--trace` file (its header passed over): t_s, then cmd and act per axis.
+pub fn trace_rows(path: &Path) -> Vec<Vec<f64>> {
+    std::fs::read_to_string(path)
+        .expect("trace")
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
+        .collect()
 }
 
 /// The repository's `examples/` folder.
@@ -326,6 +403,16 @@ pub fn assert_clean(instance: &str) {
     assert!(left.is_empty(), "instance {instance} left behind: {left:?}");
 }
 
+/// Asserts that no process of `instance` runs, and that it left nothing behind.
+pub fn assert_gone(instance: &str) {
+    let running = pids_with(&["--instance", instance]);
+    assert!(
+        running.is_empty(),
+        "processes of instance {instance} running: {running:?}"
+    );
+    assert_clean(instance);
+}
+
 /// Pids of processes whose command line has every one of `needles` as a whole argument.
 pub fn pids_with(needles: &[&str]) -> Vec<i32> {
     let mut pids = Vec::new();
@@ -536,13 +623,10 @@ pub struct EmulatedLine {
 
 /// `ip ARGS` (iproute2), which must succeed: for tests that make network namespaces.
 pub fn ip(args: &[&str]) {
-    let out = Command::new("ip").args(args).output().unwrap_or_else(|e| {
-        panic!("this test needs iproute2's `ip` (apt-get install iproute2): {e}")
-    });
-    assert!(
-        out.status.success(),
-        "ip {args:?} failed (this test makes a network namespace: it needs root): {}",
-        String::from_utf8_lossy(&out.stderr)
+    needed(
+        Command::new("ip").args(args),
+        "this test makes a network namespace: it needs root and iproute2's `ip` (apt-get \
+         install iproute2)",
     );
 }
 

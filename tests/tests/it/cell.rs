@@ -1,11 +1,11 @@
 //! The whole cell as separate real-time processes, each test on its own instance.
 
 use integration_tests::{
-    assert_clean, bin, examples, instance, json_of, pids_with, run_with_watchdog, scratch,
-    supervisor,
+    assert_clean, assert_gone, bin, examples, exited, instance, json_of, pids_with,
+    run_with_watchdog, scratch, succeeded_within, success, supervisor,
 };
 use std::path::Path;
-use std::process::Stdio;
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const WATCHDOG: Duration = Duration::from_secs(180);
@@ -139,7 +139,7 @@ fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
         let inst = instance("triangle");
         let trace = std::env::temp_dir().join(format!("{inst}.csv"));
         let plot = std::env::temp_dir().join(format!("{inst}.png"));
-        let out = run_with_watchdog(
+        let out = succeeded_within(
             supervisor()
                 .args(["run", "--json", "--instance", &inst, "--trace"])
                 .arg(&trace)
@@ -147,11 +147,6 @@ fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
                 .arg(&plot)
                 .arg(examples().join("triangle.prog")),
             WATCHDOG,
-        );
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
         );
         let j = json_of(&out);
         assert!(
@@ -237,14 +232,21 @@ fn motion_time_holds_with_both_cores_loaded() {
         for h in hogs {
             let _ = h.join();
         }
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = success(out, "supervisor run");
         check_run(&json_of(&out), [40.0, 40.0, 0.0]);
         assert_clean(&inst);
     });
+}
+
+/// `run` (a `supervisor run` on `inst`), which must be refused with exit code 2 before any
+/// process started: its stderr.
+fn refused_run(inst: &str, run: &mut Command) -> String {
+    let err = exited(&run_with_watchdog(run, WATCHDOG), 2);
+    assert!(
+        pids_with(&["--instance", inst]).is_empty(),
+        "a process was started: {err}"
+    );
+    err
 }
 
 /// Runs `program` on a fresh instance; it must be refused with exit code 2 and `message`,
@@ -252,17 +254,11 @@ fn motion_time_holds_with_both_cores_loaded() {
 fn refused(test: &str, program: &str, message: &str) {
     let inst = instance(test);
     let prog = scratch(test, "p.prog", program);
-    let out = run_with_watchdog(
+    let err = refused_run(
+        &inst,
         supervisor().args(["run", "--instance", &inst]).arg(&prog),
-        WATCHDOG,
     );
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(&format!("p.prog:{message}")), "{err}");
-    assert!(
-        pids_with(&["--instance", &inst]).is_empty(),
-        "a process was started"
-    );
     assert_clean(&inst);
 }
 
@@ -307,19 +303,13 @@ fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
                 "the directory /nonexistent does not exist",
             ),
         ] {
-            let out = run_with_watchdog(
+            let err = refused_run(
+                &inst,
                 supervisor()
                     .args(["run", "--instance", &inst, flag, path])
                     .arg(&tri),
-                WATCHDOG,
             );
-            assert_eq!(out.status.code(), Some(2));
-            let err = String::from_utf8_lossy(&out.stderr);
             assert!(err.contains(&format!("{flag} {path}: {why}")), "{err}");
-            assert!(
-                pids_with(&["--instance", &inst]).is_empty(),
-                "a process was started"
-            );
         }
         assert_clean(&inst);
     });
@@ -338,9 +328,7 @@ fn a_bad_config_names_file_line_and_reason() {
             .position(|l| l.starts_with("t_dec"))
             .expect("t_dec")
             + 1;
-        let out = run_triangle_with(&inst, &cfg);
-        assert_eq!(out.status.code(), Some(2));
-        let err = String::from_utf8_lossy(&out.stderr);
+        let err = exited(&run_triangle_with(&inst, &cfg), 2);
         assert!(
             err.contains(&format!("cell.toml:{line}:1: unknown field `t_dec`")),
             "{err}"
@@ -363,7 +351,7 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
             )
             .write("kill", "cell.toml");
         let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
-        let mut child = supervisor()
+        let child = supervisor()
             .args(["run", "--instance", &inst, "--config"])
             .arg(&cfg)
             .arg(&prog)
@@ -384,28 +372,14 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
         std::thread::sleep(Duration::from_secs(3));
         // SAFETY: kill(2) on a process this test's supervisor started.
         unsafe { libc::kill(servo[0], libc::SIGKILL) };
-        let out = {
-            let start = std::time::Instant::now();
-            while child.try_wait().expect("wait").is_none() {
-                assert!(
-                    start.elapsed() < WATCHDOG,
-                    "supervisor stuck after servo died"
-                );
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            child.wait_with_output().expect("output")
-        };
-        assert_eq!(out.status.code(), Some(1));
-        let err = String::from_utf8_lossy(&out.stderr);
+        let out =
+            integration_tests::wait_output(child, WATCHDOG, "supervisor stuck after servo died");
+        let err = exited(&out, 1);
         assert!(
             err.contains(&format!("servo (pid {}) exited unexpectedly", servo[0])),
             "{err}"
         );
-        assert!(
-            pids_with(&["--instance", &inst]).is_empty(),
-            "processes left running"
-        );
-        assert_clean(&inst);
+        assert_gone(&inst);
     });
 }
 
@@ -419,26 +393,20 @@ fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
                 integration_tests::toml::strings(&["no-such-iobridge", "--instance", "{instance}"]),
             )
             .write("nostart", "cell.toml");
-        let out = run_triangle_with(&inst, &cfg);
         // Refused before anything starts, as `check-config` refuses it.
-        assert_eq!(out.status.code(), Some(2));
-        let err = String::from_utf8_lossy(&out.stderr);
+        let err = exited(&run_triangle_with(&inst, &cfg), 2);
         assert!(
-        err.contains(
-            "process iobridge: \"no-such-iobridge\" is neither next to the supervisor nor in PATH"
-        ),
-        "{err}"
-    );
+            err.contains(
+                "process iobridge: \"no-such-iobridge\" is neither next to the supervisor nor in PATH"
+            ),
+            "{err}"
+        );
         let check = supervisor()
             .arg("check-config")
             .arg(&cfg)
             .output()
             .expect("check-config runs");
         assert_eq!(check.status.code(), Some(2), "check-config refuses it too");
-        assert!(
-            pids_with(&["--instance", &inst]).is_empty(),
-            "processes left running"
-        );
-        assert_clean(&inst);
+        assert_gone(&inst);
     });
 }

@@ -11,8 +11,7 @@ use shm_schema::drive::servo_status as st;
 /// Runs the triangle; returns the largest |following error| per axis.
 fn triangle(cfg: &Config) -> [f64; 3] {
     let cell = cfg.to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
+    let mut lp = Loop::enabled(&cell);
     let start: Vec<f64> = cfg.axis.iter().map(|a| a.start).collect();
     let mut generator = Generator::new(Params::from_cell(&cell), &start);
     let prog = crate::gantry_commands(include_str!("../../../examples/triangle.prog"), 1);
@@ -67,19 +66,24 @@ fn triangle(cfg: &Config) -> [f64; 3] {
     max_fe
 }
 
+/// Runs the triangle ([`triangle`]) on `cfg`: every axis follows within a fifth of its
+/// following-error limit.
+fn follows_the_triangle(cfg: &Config) {
+    let fe = triangle(cfg);
+    for (i, a) in cfg.axis.iter().enumerate() {
+        assert!(
+            fe[i] < a.following_error_limit / 5.0,
+            "{}: {}",
+            a.name,
+            fe[i]
+        );
+    }
+}
+
 #[test]
 fn the_default_gains_follow_the_triangle_and_settle() {
     integration_tests::attributable(|| {
-        let cfg = Config::default_cell();
-        let fe = triangle(&cfg);
-        for (i, a) in cfg.axis.iter().enumerate() {
-            assert!(
-                fe[i] < a.following_error_limit / 5.0,
-                "{}: {}",
-                a.name,
-                fe[i]
-            );
-        }
+        follows_the_triangle(&Config::default_cell());
     });
 }
 
@@ -88,15 +92,7 @@ fn csp_axes_follow_the_triangle_with_the_drives_closing_the_loop() {
     integration_tests::attributable(|| {
         let cfg =
             Config::parse(&integration_tests::cell_in_csp(), "csp").expect("valid csp config");
-        let fe = triangle(&cfg);
-        for (i, a) in cfg.axis.iter().enumerate() {
-            assert!(
-                fe[i] < a.following_error_limit / 5.0,
-                "{}: {}",
-                a.name,
-                fe[i]
-            );
-        }
+        follows_the_triangle(&cfg);
     });
 }
 

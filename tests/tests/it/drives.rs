@@ -2,12 +2,16 @@
 //! the run with its events; a fault injected from another shell is reported as it happens; an
 //! absurd axis is refused before anything starts; CSP axes follow the triangle.
 
+use iceoryx2::prelude::Node;
 use integration_tests::{
-    assert_clean, examples, instance, json_of, pids_with, run_with_watchdog, scratch, supervisor,
+    assert_clean, assert_gone, examples, exited, instance, json_of, pids_with, run_with_watchdog,
+    scratch, succeeded, succeeded_within, success, supervisor,
 };
+use runtime::ipc::{Ipc, Sub};
 use shm_schema::drive::servo_status as st;
+use shm_schema::{InstanceName, ServoStateV3};
 use std::path::Path;
-use std::process::Stdio;
+use std::process::{Child, Output, Stdio};
 use std::time::{Duration, Instant};
 
 pub(crate) const WATCHDOG: Duration = Duration::from_secs(180);
@@ -15,17 +19,12 @@ pub(crate) const WATCHDOG: Duration = Duration::from_secs(180);
 /// Runs the small triangle (a fifth of the seed's: its corners, its blends, 5 s instead of 19)
 /// of `test` with the configuration file `cfg` on `inst`, `--json`; it must succeed.
 fn small_triangle_json(test: &str, inst: &str, cfg: &Path) -> serde_json::Value {
-    let out = run_with_watchdog(
+    let out = succeeded_within(
         supervisor()
             .args(["run", "--json", "--instance", inst, "--config"])
             .arg(cfg)
             .arg(integration_tests::small_triangle(test)),
         WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
     );
     json_of(&out)
 }
@@ -82,13 +81,15 @@ pub(crate) fn program_in_background_as(
 }
 
 /// Waits (under the watchdog) for a background run to end.
-pub(crate) fn wait_for(mut run: std::process::Child) -> std::process::Output {
-    let start = Instant::now();
-    while run.try_wait().expect("wait").is_none() {
-        assert!(start.elapsed() < WATCHDOG, "run did not end");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    run.wait_with_output().expect("output")
+pub(crate) fn wait_for(run: Child) -> Output {
+    integration_tests::wait_output(run, WATCHDOG, "run did not end")
+}
+
+/// Waits (under the watchdog) for a background run `--json`, which must fail (exit 1): its
+/// stderr and its report.
+fn failed_run(run: Child) -> (String, serde_json::Value) {
+    let out = wait_for(run);
+    (exited(&out, 1), json_of(&out))
 }
 
 pub(crate) fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a serde_json::Value> {
@@ -128,10 +129,9 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
                 .arg(examples().join("triangle.prog")),
             WATCHDOG,
         );
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&out, 1);
         // Why, as data: servo cut power on the drive's fault, on axis y.
-        let j = integration_tests::json_of(&out);
+        let j = json_of(&out);
         let cause = &j["cause"]["servo-fault"];
         assert_eq!(
             (cause["fault"].as_str(), cause["axis"].as_str()),
@@ -146,7 +146,6 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         crate::cell::check_figures(&plot, 4);
         // Printed as they happened, and in the report.
         assert!(err.contains("fault-injected axis y"), "{err}");
-        let j = json_of(&out);
         assert_eq!(j["ok"], false);
         let fault = events_named(&j, "drive-fault");
         assert!(
@@ -169,8 +168,7 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
                 "{axis}: transition {number} missing in {transitions:?}"
             );
         }
-        assert!(pids_with(&["--instance", &inst]).is_empty());
-        assert_clean(&inst);
+        assert_gone(&inst);
     });
 }
 
@@ -198,29 +196,24 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
             .args(["inject", "--instance", &inst, "--axis", "w", "over-current"])
             .output()
             .expect("inject");
-        assert_eq!(bad.status.code(), Some(2));
-        let why = String::from_utf8_lossy(&bad.stderr);
+        let why = exited(&bad, 2);
         assert!(
             why.contains("--axis \"w\": the cell has axes x, y, theta"),
             "{why}"
         );
-        let out = supervisor()
-            .args(["inject", "--instance", &inst, "--axis", "x", "encoder-loss"])
-            .output()
-            .expect("inject");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = succeeded(supervisor().args([
+            "inject",
+            "--instance",
+            &inst,
+            "--axis",
+            "x",
+            "encoder-loss",
+        ]));
         assert_eq!(
             String::from_utf8_lossy(&out.stdout).trim(),
             format!("injected encoder-loss on axis x of instance {inst}")
         );
-        let out = wait_for(run);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
-        let j = integration_tests::json_of(&out);
+        let (err, j) = failed_run(run);
         let cause = &j["cause"]["servo-fault"];
         assert_eq!(
             (cause["fault"].as_str(), cause["axis"].as_str()),
@@ -247,16 +240,14 @@ fn an_absurd_inertia_is_refused_before_anything_starts() {
                 .arg(examples().join("triangle.prog")),
             WATCHDOG,
         );
-        assert_eq!(out.status.code(), Some(2));
-        let err = String::from_utf8_lossy(&out.stderr);
+        let err = exited(&out, 2);
         assert!(
             err.contains(
                 "cell.toml:32:9: axis x: sim inertia 1e-300 makes servo's position loop unstable"
             ),
             "{err}"
         );
-        assert!(pids_with(&["--instance", &inst]).is_empty());
-        assert_clean(&inst);
+        assert_gone(&inst);
     });
 }
 
@@ -278,7 +269,7 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
     integration_tests::attributable(|| {
         let inst = instance("tune");
         let png = std::env::temp_dir().join(format!("{inst}.png"));
-        let out = run_with_watchdog(
+        let out = succeeded_within(
             supervisor()
                 .args([
                     "tune",
@@ -295,11 +286,6 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
                 ])
                 .arg(&png),
             WATCHDOG,
-        );
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
         );
         let j = json_of(&out);
         let f = &j["step_response"];
@@ -390,27 +376,12 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
             assert_eq!(j["supervisor"]["arm"]["enabled"], true, "{j}");
             assert_eq!(j["supervisor"]["tuning"], "x", "{j}");
             // `down` ends the session: a controlled stop, not a fault; tune fails saying so.
-            let down = supervisor()
-                .args(["down", "--instance", &inst])
-                .output()
-                .expect("down");
-            assert!(
-                down.status.success(),
-                "{}",
-                String::from_utf8_lossy(&down.stderr)
-            );
-            let out = tune.wait_with_output().expect("tune");
-            let err = String::from_utf8_lossy(&out.stderr);
-            assert_eq!(out.status.code(), Some(1), "{err}");
+            succeeded(supervisor().args(["down", "--instance", &inst]));
+            let err = exited(&tune.wait_with_output().expect("tune"), 1);
             assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
             assert!(!err.contains("] error "), "a fault on the way down: {err}");
         } else {
-            let out = tune.wait_with_output().expect("tune");
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            success(tune.wait_with_output().expect("tune"), "tune");
         }
         assert_clean(&inst);
     });
@@ -435,18 +406,13 @@ fn the_small_triangle_completes_with_servo_and_the_drives_at_4_khz() {
 #[test]
 fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
     integration_tests::attributable(|| {
-        use runtime::ipc::{self, Pub, Sub};
-        use shm_schema::{InstanceName, RequestKind, ServiceId, ServoRequestV1, ServoStateV3};
+        use runtime::ipc::Pub;
+        use shm_schema::{RequestKind, ServiceId, ServoRequestV1};
         let inst = instance("disable");
         let run = triangle_in_background_as(&inst, None, true);
         // Connect once the cell is up (an instance with a live client is refused by `run`).
-        let name = InstanceName::new(&inst).expect("instance");
+        let (name, node) = client_of(&inst);
         let start = Instant::now();
-        while ipc::live_node_pids(&name).unwrap_or_default().len() < 5 {
-            assert!(start.elapsed() < WATCHDOG, "the cell never came up");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let node = ipc::node(&name, "test-client").expect("node");
         let requests =
             Pub::<ServoRequestV1>::new(&node, &name, ServiceId::ServoRequest).expect("pub");
         let state = Sub::<ServoStateV3>::new(&node, &name, ServiceId::ServoState, 64).expect("sub");
@@ -476,15 +442,10 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
             echoed = state.latest().is_some_and(|s| s.request_seq == seq);
             std::thread::sleep(Duration::from_millis(5));
         }
-        let out = wait_for(run);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
-        let j = integration_tests::json_of(&out);
+        let (err, j) = failed_run(run);
         assert_eq!(j["cause"]["disabled"]["power"], "disabling", "{err}\n{j}");
         // This test's node outlived the run: the files of the instance go with the last client.
-        drop((requests, state));
-        drop(node);
-        ipc::cleanup_after_client(&name);
+        leave((requests, state), node, &name);
         assert_clean(&inst);
     });
 }
@@ -532,18 +493,9 @@ pub(crate) fn pid_of(role: &str, inst: &str) -> i32 {
 
 /// Waits until servo of `inst` follows a motion (x faster than 1 mm/s); returns the port.
 /// A run that ends first fails the test with its output.
-pub(crate) fn until_moving(
-    node: &iceoryx2::prelude::Node<runtime::ipc::Ipc>,
-    name: &shm_schema::InstanceName,
-    run: &mut std::process::Child,
-) -> runtime::ipc::Sub<shm_schema::ServoStateV3> {
-    let state = runtime::ipc::Sub::<shm_schema::ServoStateV3>::new(
-        node,
-        name,
-        shm_schema::ServiceId::ServoState,
-        1024,
-    )
-    .expect("sub");
+fn until_moving(node: &Node<Ipc>, name: &InstanceName, run: &mut Child) -> Sub<ServoStateV3> {
+    let state =
+        Sub::<ServoStateV3>::new(node, name, shm_schema::ServiceId::ServoState, 1024).expect("sub");
     let start = Instant::now();
     while !state
         .latest()
@@ -564,13 +516,8 @@ pub(crate) fn until_moving(
 
 /// Connects a node to `inst` once its cell is up (the supervisor and the five processes of
 /// the default cell).
-pub(crate) fn client_of(
-    inst: &str,
-) -> (
-    shm_schema::InstanceName,
-    iceoryx2::prelude::Node<runtime::ipc::Ipc>,
-) {
-    let name = shm_schema::InstanceName::new(inst).expect("instance");
+fn client_of(inst: &str) -> (InstanceName, Node<Ipc>) {
+    let name = InstanceName::new(inst).expect("instance");
     let start = Instant::now();
     while runtime::ipc::live_node_pids(&name)
         .unwrap_or_default()
@@ -584,14 +531,43 @@ pub(crate) fn client_of(
     (name, node)
 }
 
+/// This test's client leaves the instance `name`: its `ports`, then its `node`, then the
+/// files of the instance that go with the last client.
+fn leave<P>(ports: P, node: Node<Ipc>, name: &InstanceName) {
+    drop(ports);
+    drop(node);
+    runtime::ipc::cleanup_after_client(name);
+}
+
+/// A node of this test's own on a running cell, reading servo's state.
+pub(crate) struct Client {
+    pub(crate) state: Sub<ServoStateV3>,
+    node: Node<Ipc>,
+    name: InstanceName,
+}
+
+impl Client {
+    /// Connects once the cell of `inst` is up, then waits until servo follows a motion of
+    /// `run` (which fails the test if it ends first).
+    pub(crate) fn when_moving(inst: &str, run: &mut Child) -> Self {
+        let (name, node) = client_of(inst);
+        let state = until_moving(&node, &name, run);
+        Self { state, node, name }
+    }
+
+    /// Leaves the instance (see [`leave`]).
+    pub(crate) fn leave(self) {
+        leave(self.state, self.node, &self.name);
+    }
+}
+
 #[test]
 fn servo_cuts_power_when_the_drives_process_stalls() {
     integration_tests::attributable(|| {
         let inst = instance("stall-machine");
         let mut run =
             triangle_in_background_as(&inst, Some(&patient_config("stall-machine")), true);
-        let (name, node) = client_of(&inst);
-        let state = until_moving(&node, &name, &mut run);
+        let client = Client::when_moving(&inst, &mut run);
         // The drives' process stops (as a hung fieldbus would): its feedback stops coming.
         let machine = pid_of("machine-sim", &inst);
         // SAFETY: kill(2) on a process this test's supervisor started.
@@ -600,8 +576,8 @@ fn servo_cuts_power_when_the_drives_process_stalls() {
         let mut latched = None;
         while latched.is_none() {
             assert!(start.elapsed() < WATCHDOG, "servo never noticed");
-            latched =
-                std::iter::from_fn(|| state.next()).find(|s| s.status & st::FAULT_LATCHED != 0);
+            latched = std::iter::from_fn(|| client.state.next())
+                .find(|s| s.status & st::FAULT_LATCHED != 0);
             std::thread::sleep(Duration::from_millis(5));
         }
         // SAFETY: as above.
@@ -609,17 +585,12 @@ fn servo_cuts_power_when_the_drives_process_stalls() {
         let s = latched.expect("latched");
         assert_eq!(s.fault_code, shm_schema::event::code::FEEDBACK_STALE);
         assert!(s.fault_value > s.fault_limit, "{s:?}");
-        let out = wait_for(run);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
-        let j = integration_tests::json_of(&out);
+        let (err, j) = failed_run(run);
         assert_eq!(
             j["cause"]["servo-fault"]["fault"], "feedback-stale",
             "{err}\n{j}"
         );
-        drop(state);
-        drop(node);
-        runtime::ipc::cleanup_after_client(&name);
+        client.leave();
         assert_clean(&inst);
     });
 }
@@ -629,8 +600,7 @@ fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
     integration_tests::attributable(|| {
         let inst = instance("stall-trajgen");
         let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
-        let (name, node) = client_of(&inst);
-        let state = until_moving(&node, &name, &mut run);
+        let client = Client::when_moving(&inst, &mut run);
         // trajgen stops publishing in the middle of a move; servo must bring the axes to rest
         // along their path and hold, enabled, with nothing latched. (The supervisor ends the run
         // after its heartbeat timeout, here 5 s.)
@@ -641,7 +611,7 @@ fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
         let mut log = Vec::new();
         loop {
             assert!(start.elapsed() < WATCHDOG, "servo never came to rest");
-            while let Some(s) = state.next() {
+            while let Some(s) = client.state.next() {
                 log.push(s);
             }
             if log.last().is_some_and(|s| {
@@ -662,11 +632,8 @@ fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
         for i in 0..3 {
             assert!(log.iter().all(|s| s.following_error[i].abs() < 1.0));
         }
-        let out = wait_for(run);
-        assert_eq!(out.status.code(), Some(1));
-        drop(state);
-        drop(node);
-        runtime::ipc::cleanup_after_client(&name);
+        exited(&wait_for(run), 1);
+        client.leave();
         assert_clean(&inst);
     });
 }

@@ -3,11 +3,12 @@
 //! killed mid-motion (`docs/operations.md`).
 
 use crate::drives::{
-    WATCHDOG, client_of, events_named, pid_of, program_in_background_as, triangle_in_background_as,
-    until_moving, wait_for,
+    Client, WATCHDOG, events_named, pid_of, program_in_background_as, triangle_in_background_as,
+    wait_for,
 };
 use integration_tests::{
-    assert_clean, default_cell, instance, pids_with, scratch, supervisor, with_stall_room,
+    assert_clean, default_cell, exited, instance, json_of, pids_with, scratch, succeeded,
+    supervisor, with_stall_room,
 };
 use shm_schema::Power;
 use std::time::{Duration, Instant};
@@ -21,36 +22,26 @@ fn cell_with_behaviour(test: &str, propagate: bool, external: bool) -> std::path
         .write(test, "cell.toml")
 }
 
-/// `supervisor estop` on `inst`; it must succeed.
-fn estop(inst: &str, reason: &str) {
-    let out = supervisor()
-        .args(["estop", "--instance", inst, "--reason", reason])
-        .output()
-        .expect("supervisor estop");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-/// Runs the triangle on `inst` with `cfg`, raises the user's e-stop mid-motion; returns the
-/// run's stderr and JSON report.
-fn user_estop_mid_motion(inst: &str, cfg: Option<&std::path::Path>) -> (String, serde_json::Value) {
+/// Runs the small triangle of `test` on its instance, the cell's `[behaviour]` set as given
+/// ([`cell_with_behaviour`]), and raises the user's e-stop (`supervisor estop`) mid-motion;
+/// returns the run's stderr and JSON report.
+fn user_estop_mid_motion(
+    test: &str,
+    propagate: bool,
+    external: bool,
+) -> (String, serde_json::Value) {
+    let inst = &instance(test);
+    let cfg = cell_with_behaviour(test, propagate, external);
     // The e-stop comes as soon as it moves: a small program is enough, and one that is not
     // stopped by it (without propagation) completes in a few seconds.
     let small = integration_tests::small_triangle(inst);
-    let mut run = program_in_background_as(inst, cfg, true, &small);
-    let (name, node) = client_of(inst);
-    let state = until_moving(&node, &name, &mut run);
-    estop(inst, "test e-stop");
+    let mut run = program_in_background_as(inst, Some(&cfg), true, &small);
+    let client = Client::when_moving(inst, &mut run);
+    succeeded(supervisor().args(["estop", "--instance", inst, "--reason", "test e-stop"]));
     let out = wait_for(run);
-    drop(state);
-    drop(node);
-    runtime::ipc::cleanup_after_client(&name);
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON report");
+    client.leave();
+    let err = exited(&out, 1);
+    let j = json_of(&out);
     // The e-stop, whether it stopped the motion or stayed latched after it.
     let cause = match &j["cause"]["latched-after-motion"] {
         serde_json::Value::Null => &j["cause"]["estop"],
@@ -72,9 +63,7 @@ fn user_estop_mid_motion(inst: &str, cfg: Option<&std::path::Path>) -> (String, 
 #[test]
 fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_drives() {
     integration_tests::attributable(|| {
-        let inst = instance("estop-user");
-        let cfg = cell_with_behaviour("estop-user", true, false);
-        let (_, j) = user_estop_mid_motion(&inst, Some(&cfg));
+        let (_, j) = user_estop_mid_motion("estop-user", true, false);
         // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
         // and the drives disabled, after the e-stop was raised.
         let safe = events_named(&j, "estop-safe");
@@ -109,37 +98,6 @@ fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_driv
 }
 
 #[test]
-fn without_propagation_a_user_estop_latches_but_the_motion_goes_on() {
-    integration_tests::attributable(|| {
-        let inst = instance("estop-nopropagate");
-        let cfg = cell_with_behaviour("estop-nopropagate", false, false);
-        let (err, j) = user_estop_mid_motion(&inst, Some(&cfg));
-        assert!(j["cause"]["latched-after-motion"].is_object(), "{err}\n{j}");
-        assert!(
-            events_named(&j, "estop-safe").is_empty(),
-            "no process reacts: {:?}",
-            events_named(&j, "estop-safe")
-        );
-    });
-}
-
-#[test]
-fn propagate_external_estop_stops_the_motion_without_propagate_estop() {
-    integration_tests::attributable(|| {
-        let inst = instance("estop-external");
-        let cfg = cell_with_behaviour("estop-external", false, true);
-        let (err, j) = user_estop_mid_motion(&inst, Some(&cfg));
-        assert!(j["cause"]["estop"].is_object(), "{err}\n{j}");
-        assert!(
-            events_named(&j, "estop-safe")
-                .iter()
-                .any(|e| e["source"] == "servo"),
-            "{j}"
-        );
-    });
-}
-
-#[test]
 fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
     integration_tests::attributable(|| {
         let inst = instance("estop-stall");
@@ -149,20 +107,16 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
             .set("supervisor.heartbeat_timeout", 30.0)
             .write("estop-stall", "cell.toml");
         let mut run = triangle_in_background_as(&inst, Some(&cfg), true);
-        let (name, node) = client_of(&inst);
-        let state = until_moving(&node, &name, &mut run);
+        let client = Client::when_moving(&inst, &mut run);
         let trajgen = pid_of("trajgen", &inst);
         // SAFETY: kill(2) on a process this test's supervisor started.
         unsafe { libc::kill(trajgen, libc::SIGSTOP) };
         let out = wait_for(run);
         // SAFETY: as above (it may be gone already).
         unsafe { libc::kill(trajgen, libc::SIGCONT) };
-        drop(state);
-        drop(node);
-        runtime::ipc::cleanup_after_client(&name);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
-        let j = integration_tests::json_of(&out);
+        client.leave();
+        let err = exited(&out, 1);
+        let j = json_of(&out);
         let e = &j["cause"]["estop"];
         assert_eq!(
             (e["origin"].as_str(), e["by"].as_str(), e["reason"].as_str()),
@@ -188,8 +142,7 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
         );
         let small = integration_tests::small_triangle(&inst);
         let mut run = program_in_background_as(&inst, Some(&cfg), false, &small);
-        let (name, node) = client_of(&inst);
-        let state = until_moving(&node, &name, &mut run);
+        let client = Client::when_moving(&inst, &mut run);
         let cell = pids_with(&["--instance", &inst]);
         run.kill().expect("SIGKILL the supervisor");
         let _ = run.wait();
@@ -197,7 +150,7 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
         let start = Instant::now();
         let mut last = None;
         loop {
-            while let Some(s) = state.next() {
+            while let Some(s) = client.state.next() {
                 last = Some(s);
             }
             if pids_with(&["--instance", &inst]).is_empty() {
@@ -211,7 +164,7 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
         }
         // What servo published between the last read and its exit (its last state, disabled,
         // comes just before it leaves).
-        while let Some(s) = state.next() {
+        while let Some(s) = client.state.next() {
             last = Some(s);
         }
         let last = last.expect("servo published");
@@ -220,21 +173,43 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
             last.act_velocity[..3].iter().all(|v| v.abs() < 0.1),
             "{last:?}"
         );
-        drop(state);
-        drop(node);
-        runtime::ipc::cleanup_after_client(&name);
+        client.leave();
         // The next run of the instance starts, cleaning what the killed supervisor left.
-        let out = supervisor()
-            .args(["run", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(&small)
-            .output()
-            .expect("run");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        succeeded(
+            supervisor()
+                .args(["run", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(&small),
         );
         assert_clean(&inst);
+    });
+}
+
+/// The user's e-stop on a cell that does not propagate it (`propagate_estop = false`): it
+/// stops the motion, servo bringing the axes to rest, only with `propagate_external_estop`;
+/// without, it stays latched after the motion and no process reacts.
+fn a_user_estop_without_propagate_estop(test: &str, external: bool) {
+    let (err, j) = user_estop_mid_motion(test, false, external);
+    let safe = events_named(&j, "estop-safe");
+    if external {
+        assert!(j["cause"]["estop"].is_object(), "{err}\n{j}");
+        assert!(safe.iter().any(|e| e["source"] == "servo"), "{j}");
+    } else {
+        assert!(j["cause"]["latched-after-motion"].is_object(), "{err}\n{j}");
+        assert!(safe.is_empty(), "no process reacts: {safe:?}");
+    }
+}
+
+#[test]
+fn without_propagation_a_user_estop_latches_but_the_motion_goes_on() {
+    integration_tests::attributable(|| {
+        a_user_estop_without_propagate_estop("estop-nopropagate", false);
+    });
+}
+
+#[test]
+fn propagate_external_estop_stops_the_motion_without_propagate_estop() {
+    integration_tests::attributable(|| {
+        a_user_estop_without_propagate_estop("estop-external", true);
     });
 }

@@ -3,11 +3,13 @@
 //! its own (root, iproute2), so its veth pair and its Modbus port meet nothing else; the
 //! namespace goes with the test.
 
-use crate::up::Up;
+use crate::up::{Up, io_value, process_in};
 use integration_tests::{
-    assert_clean, bin, examples, instance, ip, json_of, run_with_watchdog, scratch,
+    assert_clean, bin, examples, exited, instance, ip, json_of, needed, run_with_watchdog, scratch,
+    succeeded_within,
 };
-use std::process::{Child, Command, Stdio};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 const WATCHDOG: Duration = Duration::from_secs(180);
@@ -44,12 +46,42 @@ fn ethercat_cell() -> String {
     integration_tests::with_stall_room(&src)
 }
 
+/// A network namespace of `test`'s own, and the file of the example cell ([`ethercat_cell`]).
+fn bus_cell(test: &str) -> (Netns, PathBuf) {
+    let ns = Netns::new(test);
+    (ns, scratch(test, "cell.toml", &ethercat_cell()))
+}
+
+/// `supervisor run` of the triangle on `inst` with the configuration file `cfg`, in `ns`,
+/// under the watchdog.
+fn triangle_in(ns: &Netns, inst: &str, cfg: &Path) -> Output {
+    run_with_watchdog(
+        ns.command("supervisor")
+            .args(["run", "--instance", inst, "--config"])
+            .arg(cfg)
+            .arg(examples().join("triangle.prog")),
+        WATCHDOG,
+    )
+}
+
+/// `out` of a run whose bus process refused the configuration, saying `says`, as a
+/// configuration is refused (exit 2), before anything was enabled; `what` (the case) in the
+/// messages. Its stderr.
+fn refused_by_the_bus(out: &Output, says: &str, what: &str) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{what}: {err}");
+    assert!(err.contains(says), "{what}: want {says:?} in\n{err}");
+    assert!(err.contains("refused the configuration"), "{what}: {err}");
+    // Nothing was enabled: the bus never reached its cycle.
+    assert!(!err.contains("enabling"), "{what}: {err}");
+    err
+}
+
 #[test]
 fn the_small_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
     integration_tests::attributable(|| {
         let inst = instance("ecat-triangle");
-        let ns = Netns::new("ecat-tri");
-        let cfg = scratch("ecat-triangle", "cell.toml", &ethercat_cell());
+        let (ns, cfg) = bus_cell("ecat-tri");
         let out = run_with_watchdog(
             ns.command("supervisor")
                 .args(["run", "--json", "--instance", &inst, "--config"])
@@ -58,8 +90,7 @@ fn the_small_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
                 .env("RTC_LOG", "warn,ethercat_bus=info,ethercat_emulator=info"),
             WATCHDOG,
         );
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(0), "{err}");
+        let err = exited(&out, 0);
         let j = json_of(&out);
         crate::cell::check_run(&j, [40.0, 40.0, 0.0]);
         // The drives ran on Distributed Clocks (their default): the EK1100 the reference
@@ -160,22 +191,11 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
             let ns = Netns::new(test);
             let mut emulator = standalone_line(&ns, line);
             let cfg = scratch(test, "cell.toml", &cell_on_m0());
-            let out = run_with_watchdog(
-                ns.command("supervisor")
-                    .args(["run", "--instance", &inst, "--config"])
-                    .arg(&cfg)
-                    .arg(examples().join("triangle.prog")),
-                WATCHDOG,
-            );
+            let out = triangle_in(&ns, &inst, &cfg);
             let _ = emulator.kill();
             let _ = emulator.wait();
-            let err = String::from_utf8_lossy(&out.stderr);
             // Refused as a configuration is (exit 2), the bus process' reason in the log.
-            assert_eq!(out.status.code(), Some(2), "{line}: {err}");
-            assert!(err.contains(want), "{line}: want {want:?} in\n{err}");
-            assert!(err.contains("refused the configuration"), "{line}: {err}");
-            // Nothing was enabled: the bus never reached its cycle.
-            assert!(!err.contains("enabling"), "{line}: {err}");
+            let err = refused_by_the_bus(&out, want, line);
             assert!(!err.contains("bus-op"), "{line}: {err}");
             assert_clean(&inst);
         }
@@ -186,8 +206,7 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
 fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
     integration_tests::attributable(|| {
         let inst = instance("ecat-cable");
-        let ns = Netns::new("ecat-cable");
-        let cfg = scratch("ecat-cable", "cell.toml", &ethercat_cell());
+        let (ns, cfg) = bus_cell("ecat-cable");
         // Three seconds after the bus' interface exists (start-up takes well under one on an
         // idle machine; the tests run side by side), the cable goes.
         let pull = {
@@ -210,16 +229,9 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
                     .status();
             })
         };
-        let out = run_with_watchdog(
-            ns.command("supervisor")
-                .args(["run", "--instance", &inst, "--config"])
-                .arg(&cfg)
-                .arg(examples().join("triangle.prog")),
-            WATCHDOG,
-        );
+        let out = triangle_in(&ns, &inst, &cfg);
         pull.join().expect("the cable pulled");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&out, 1);
         // The frames lost, then the bus: 100 of them at 1 kHz (its 100 ms watchdog).
         assert!(err.contains("bus-frames-lost: 1 (limit 100)"), "{err}");
         assert!(err.contains("bus-lost: 100 (limit 100)"), "{err}");
@@ -246,13 +258,11 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
 #[test]
 fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_back() {
     integration_tests::attributable(|| {
-        let ns = Netns::new("ecat-ident");
-        let up = cell_up(&ns, "ecat-ident");
-        let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
+        let (ns, up) = cell_up("ecat-ident");
         // Another product at position 2 (y's drive swapped under power: it leaves OP, and its
         // EEPROM says another identity at the next scan).
-        fault(&["identity", "2", "0x00000999"]);
-        fault(&["leave-op", "2"]);
+        emulator_fault(&ns, &up, &["identity", "2", "0x00000999"]);
+        emulator_fault(&ns, &up, &["leave-op", "2"]);
         until_logged(&up, "position 2 (y) left OP");
         until_logged(&up, "bus-recovering");
         // Every attempt to bring the bus up again is refused, saying what is where.
@@ -264,7 +274,7 @@ fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_ba
         );
         assert!(!log.contains("back in OP"), "{log}");
         // The right drive back: the bus in OP, then reset, start and the triangle.
-        fault(&["identity", "2", "0x00000402"]);
+        emulator_fault(&ns, &up, &["identity", "2", "0x00000402"]);
         until_logged(&up, "back in OP on rtc-ecat0");
         reset_start_and_run(up);
     });
@@ -272,16 +282,11 @@ fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_ba
 
 /// `ethercat-emulator fault --instance <up's> ARGS` in `ns`, which must succeed.
 fn emulator_fault(ns: &Netns, up: &Up, args: &[&str]) {
-    let out = run_with_watchdog(
+    succeeded_within(
         ns.command("ethercat-emulator")
             .args(["fault", "--instance", &up.inst])
             .args(args),
         WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "fault {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
     );
 }
 
@@ -298,17 +303,18 @@ fn until_logged(up: &Up, needle: &str) {
     }
 }
 
-/// The example cell, with room for the host's stalls, up in `ns` (every command of the test
-/// runs there), its drives enabled.
-fn cell_up(ns: &Netns, test: &str) -> Up {
-    let cfg = scratch(test, "cell.toml", &ethercat_cell());
-    Up::start_in(test, &cfg, Some(&ns.0))
+/// The example cell, with room for the host's stalls, up in a network namespace of the
+/// test's own (every command of the test runs there), its drives enabled. (Bound as
+/// `let (ns, up)`, the cell goes down before its namespace goes.)
+fn cell_up(test: &str) -> (Netns, Up) {
+    let (ns, cfg) = bus_cell(test);
+    let up = Up::start_in(test, &cfg, Some(&ns.0));
+    (ns, up)
 }
 
 /// `reset`, `start`, a small triangle to its end on time and on target, then `down`; its log.
 fn reset_start_and_run(up: Up) -> String {
-    up.ok(&["reset"]);
-    up.ok(&["start"]);
+    up.reset_and_start();
     small_triangle_runs(&up);
     up.down()
 }
@@ -316,9 +322,7 @@ fn reset_start_and_run(up: Up) -> String {
 /// The small triangle on the cell, which must run to its end on time and on target; its
 /// report.
 fn small_triangle_runs(up: &Up) -> serde_json::Value {
-    let program = integration_tests::small_triangle(&up.inst);
-    let out = up.ok(&["exec", "--wait", "--json", program.to_str().expect("path")]);
-    let j: serde_json::Value = serde_json::from_str(out.trim()).expect("the run's JSON");
+    let j = up.report(&integration_tests::small_triangle(&up.inst), &[]);
     crate::cell::check_run(&j, [40.0, 40.0, 0.0]);
     j
 }
@@ -326,8 +330,7 @@ fn small_triangle_runs(up: &Up) -> serde_json::Value {
 #[test]
 fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_next_program() {
     integration_tests::attributable(|| {
-        let ns = Netns::new("ecat-back");
-        let up = cell_up(&ns, "ecat-back");
+        let (ns, up) = cell_up("ecat-back");
         let run = up.exec_in_background(examples().join("triangle.prog"));
         // Mid-motion (the triangle takes 19 s), the cable goes.
         std::thread::sleep(Duration::from_secs(3));
@@ -341,18 +344,8 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
             s["supervisor"]["estop"]["code"].is_u64()
         });
         // A reset before the bus is back: the e-stop comes back at once, nothing enabled.
-        let early = up.ctl(&["reset"]);
-        assert_eq!(
-            early.status.code(),
-            Some(1),
-            "{}",
-            String::from_utf8_lossy(&early.stdout)
-        );
-        assert!(
-            String::from_utf8_lossy(&early.stderr).contains("EtherCAT bus not back in OP yet"),
-            "{}",
-            String::from_utf8_lossy(&early.stderr)
-        );
+        let early = up.fails(&["reset"]);
+        assert!(early.contains("EtherCAT bus not back in OP yet"), "{early}");
         assert!(!up.ctl(&["start"]).status.success(), "start on a lost bus");
         // The cable back: the bus process brings the bus up again by itself.
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "up"]);
@@ -365,11 +358,9 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
 #[test]
 fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
     integration_tests::attributable(|| {
-        let ns = Netns::new("ecat-safeop");
-        let up = cell_up(&ns, "ecat-safeop");
-        let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
+        let (ns, up) = cell_up("ecat-safeop");
         // A drive's emergency, read from its mailbox in OP: named, and nothing else happens.
-        fault(&["emergency", "2", "0x8611"]);
+        emulator_fault(&ns, &up, &["emergency", "2", "0x8611"]);
         until_logged(&up, "subdevice-emergency");
         let log = up.log();
         assert!(
@@ -387,7 +378,7 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
         until_logged(&up, "position 1 (x) sent an emergency");
         up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
         // The x drive's SubDevice drops to SAFE-OP (its own fault, AL status code 0x001A).
-        fault(&["leave-op", "1", "0x001A"]);
+        emulator_fault(&ns, &up, &["leave-op", "1", "0x001A"]);
         until_logged(&up, "position 1 (x) left OP");
         // The e-stop latched, the bus is brought up again once the drives have ramped down.
         until_logged(&up, "bus-recovering");
@@ -399,8 +390,7 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
 #[test]
 fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
     integration_tests::attributable(|| {
-        let ns = Netns::new("ecat-kill");
-        let up = cell_up(&ns, "ecat-kill");
+        let (_ns, up) = cell_up("ecat-kill");
         let bus = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
         assert_eq!(bus.len(), 1, "one bus process: {bus:?}");
         // SIGKILL: no goodbye; the drives' SyncManager watchdogs take their outputs down.
@@ -408,12 +398,8 @@ fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
         until_logged(&up, "drives lost (exited: signal: 9 (SIGKILL))");
         // Restarted by its policy: it brings the bus up from the scan.
         up.until("the bus process back", |s| {
-            s["supervisor"]["processes"]
-                .as_array()
-                .and_then(|a| a.iter().find(|p| p["name"] == "drives"))
-                .is_some_and(|p| {
-                    p["restarts"].as_u64().is_some_and(|r| r >= 1) && p["life"] == "running"
-                })
+            let p = process_in(s, "drives");
+            p["restarts"].as_u64().is_some_and(|r| r >= 1) && p["life"] == "running"
         });
         let again = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
         assert!(again.len() == 1 && again[0] != bus[0], "{again:?}");
@@ -429,14 +415,9 @@ fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
 
 /// `tshark` (Debian's Wireshark) with `args`, its stdout.
 fn tshark(args: &[&str]) -> String {
-    let out = Command::new("tshark")
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("this test needs tshark (apt-get install tshark): {e}"));
-    assert!(
-        out.status.success(),
-        "tshark {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = needed(
+        Command::new("tshark").args(args),
+        "this test needs tshark (apt-get install tshark)",
     );
     String::from_utf8_lossy(&out.stdout).to_string()
 }
@@ -444,8 +425,7 @@ fn tshark(args: &[&str]) -> String {
 #[test]
 fn wiresharks_dissector_decodes_a_programs_bus_traffic_with_no_malformed_frame() {
     integration_tests::attributable(|| {
-        let ns = Netns::new("ecat-tshark");
-        let up = cell_up(&ns, "ecat-tshark");
+        let (ns, up) = cell_up("ecat-tshark");
         let capture = integration_tests::scratch("ecat-tshark", "bus.pcapng", "");
         // dumpcap (tshark's capture engine) on the bus' end of the pair, ready once it says
         // which interface it captures on.
@@ -559,20 +539,10 @@ fn wiresharks_dissector_decodes_a_programs_bus_traffic_with_no_malformed_frame()
     });
 }
 
-/// The value of IO entry `name` in a status.
-fn io_value(s: &serde_json::Value, name: &str) -> Option<u64> {
-    s["io"]["entries"]
-        .as_array()?
-        .iter()
-        .find(|e| e["name"] == name)?["value"]
-        .as_u64()
-}
-
 #[test]
 fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() {
     integration_tests::attributable(|| {
-        let ns = Netns::new("ecat-io");
-        let up = cell_up(&ns, "ecat-io");
+        let (ns, up) = cell_up("ecat-io");
         // The inputs as the terminal reads them: the e-stop circuit closed (its sim value).
         let s = up.until("the inputs from the bus", |s| {
             io_value(s, "estop_ok") == Some(1)
@@ -590,14 +560,13 @@ fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() 
         });
         // The e-stop button on the bus pressed (the EL1008's bit 0 at position 4 opens):
         // iobridge raises the e-stop from it.
-        let fault = |args: &[&str]| emulator_fault(&ns, &up, args);
-        fault(&["input", "4", "0", "--bit", "0"]);
+        emulator_fault(&ns, &up, &["input", "4", "0", "--bit", "0"]);
         let s = up.until("the e-stop latched by its circuit", |s| {
             s["supervisor"]["estop"]["code"].is_u64()
         });
         assert_eq!(io_value(&s, "estop_ok"), Some(0), "{s}");
         // Released: reset and start, and the triangle runs.
-        fault(&["input", "4", "1", "--bit", "0"]);
+        emulator_fault(&ns, &up, &["input", "4", "1", "--bit", "0"]);
         up.until("the circuit closed", |s| io_value(s, "estop_ok") == Some(1));
         reset_start_and_run(up);
     });
@@ -635,29 +604,13 @@ fn refused_on_the_bus(
         let ns = Netns::new(test);
         let cfg =
             edit(integration_tests::CellToml::parse(&ethercat_cell())).write(test, "cell.toml");
-        let check = run_with_watchdog(
+        succeeded_within(
             integration_tests::supervisor()
                 .arg("check-config")
                 .arg(&cfg),
             WATCHDOG,
         );
-        assert!(
-            check.status.success(),
-            "{}",
-            String::from_utf8_lossy(&check.stderr)
-        );
-        let out = run_with_watchdog(
-            ns.command("supervisor")
-                .args(["run", "--instance", &inst, "--config"])
-                .arg(&cfg)
-                .arg(examples().join("triangle.prog")),
-            WATCHDOG,
-        );
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{err}");
-        assert!(err.contains(says), "{err}");
-        assert!(err.contains("refused the configuration"), "{err}");
-        assert!(!err.contains("enabling"), "{err}");
+        refused_by_the_bus(&triangle_in(&ns, &inst, &cfg), says, test);
         assert_clean(&inst);
     });
 }

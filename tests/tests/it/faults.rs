@@ -4,10 +4,13 @@
 //! under cross-site and foreign requests.
 
 use crate::drives::WATCHDOG;
-use crate::up::{Up, cell};
+use crate::up::{Up, cell, process_in};
+use crate::web::serve;
 use control_plane::Refusal;
-use integration_tests::{examples, instance, pids_with, run_with_watchdog, supervisor};
-use std::io::{BufRead, BufReader, Read, Write};
+use integration_tests::{
+    examples, exited, instance, pids_with, run_with_watchdog, succeeded_within, success, supervisor,
+};
+use std::io::{Read, Write};
 use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -101,9 +104,7 @@ fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
 #[test]
 fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
     integration_tests::attributable(|| {
-        let test = "killed-observer";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell("killed-observer");
         for ms in (0..=40).step_by(2) {
             // `events` attaches to the cell's shared memory (`status` asks the supervisor).
             let mut observer = supervisor()
@@ -118,8 +119,7 @@ fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
         }
         // Half-created nodes are cleaned once a second old (not one being created right now).
         std::thread::sleep(Duration::from_millis(1500));
-        let log = up.down();
-        assert!(!log.contains("left behind"), "{log}");
+        down_leaving_nothing(up);
     });
 }
 
@@ -131,9 +131,7 @@ fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
 #[test]
 fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
     integration_tests::attributable(|| {
-        let test = "many-observers";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell("many-observers");
         moving(&up);
         // Twenty supervisor commands `args` at once, their output piped.
         let twenty = |args: &[&str]| -> Vec<std::process::Child> {
@@ -151,9 +149,7 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
         };
         let statuses = twenty(&["status", "--json"]);
         for child in statuses {
-            let out = child.wait_with_output().expect("status");
-            let err = String::from_utf8_lossy(&out.stderr);
-            assert!(out.status.success(), "status failed: {err}");
+            let out = success(child.wait_with_output().expect("status"), "status");
             let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
             assert!(
                 j["processes"]["servo"]["cycles"]
@@ -184,8 +180,7 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
             );
             std::thread::sleep(Duration::from_millis(20));
         };
-        let err = String::from_utf8_lossy(&refused.stderr);
-        assert_eq!(refused.status.code(), Some(2), "{err}");
+        let err = exited(&refused, 2);
         // Its subscribers' slots (16: the supervisor holds one) or its nodes' (the cell's
         // processes hold some), whichever ran out first: in words, either way.
         assert!(
@@ -207,9 +202,14 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
                 assert!(err.contains("all its slots are taken ("), "{err}");
             }
         }
-        let log = up.down();
-        assert!(!log.contains("left behind"), "{log}");
+        down_leaving_nothing(up);
     });
+}
+
+/// `down` of `up`, whose log says of nothing that it was left behind.
+fn down_leaving_nothing(up: Up) {
+    let log = up.down();
+    assert!(!log.contains("left behind"), "{log}");
 }
 
 /// Item 11: while `exec` validates a program of hours (its prediction takes seconds), the
@@ -221,8 +221,7 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
 fn a_long_validation_never_blinds_the_control_channel() {
     integration_tests::attributable(|| {
         let test = "long-validation";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell(test);
         // 23 hours of motion without a loop (a loop's alike iterations are passed over):
         // seconds of validation, ended by `down` long before it is done.
         let mut src = String::from("MOVE(40,40,0)\n");
@@ -292,12 +291,7 @@ fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_dow
             toml_edit::Value::from_iter(["false"]),
         )
         .write(test, "cell.toml");
-        let check = run_with_watchdog(supervisor().arg("check-config").arg(&cfg), WATCHDOG);
-        assert!(
-            check.status.success(),
-            "{}",
-            String::from_utf8_lossy(&check.stderr)
-        );
+        succeeded_within(supervisor().arg("check-config").arg(&cfg), WATCHDOG);
         let inst = instance(test);
         let out = run_with_watchdog(
             supervisor()
@@ -305,8 +299,7 @@ fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_dow
                 .arg(&cfg),
             WATCHDOG,
         );
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&out, 1);
         assert!(
             err.contains("the cell did not come up") && err.contains("iobridge"),
             "{err}"
@@ -320,21 +313,9 @@ fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_dow
         .add("process[iobridge].restart", "never")
         .write(test, "cell.toml");
         let up = Up::start(test, &cfg);
-        let pid = up.status()["supervisor"]["processes"]
-            .as_array()
-            .and_then(|ps| ps.iter().find(|p| p["name"] == "iobridge"))
-            .and_then(|p| p["pid"].as_i64())
-            .expect("iobridge's pid");
-        nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(pid as i32),
-            nix::sys::signal::Signal::SIGKILL,
-        )
-        .expect("kill");
+        up.kill("iobridge");
         up.until("iobridge down for good", |s| {
-            s["supervisor"]["processes"]
-                .as_array()
-                .and_then(|ps| ps.iter().find(|p| p["name"] == "iobridge"))
-                .is_some_and(|p| p["life"] == "down")
+            process_in(s, "iobridge")["life"] == "down"
         });
         let (code, log) = up.down_exit();
         assert_eq!(code, Some(1), "{log}");
@@ -389,8 +370,7 @@ fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
             ),
             WATCHDOG,
         );
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&out, 1);
         assert!(err.contains("too many open files"), "{err}");
         assert!(err.len() < 1024, "more than a line: {err}");
         integration_tests::assert_clean(&inst);
@@ -423,11 +403,7 @@ fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
         let ours = node_files(supervisor_pid);
         assert!(!ours.is_empty(), "the supervisor holds no node file?");
         for name in ["trajgen", "servo", "drives", "iobridge"] {
-            let pid = up.status()["supervisor"]["processes"]
-                .as_array()
-                .and_then(|ps| ps.iter().find(|p| p["name"] == name))
-                .and_then(|p| p["pid"].as_u64())
-                .expect("pid") as u32;
+            let pid = process_in(&up.status(), name)["pid"].as_u64().expect("pid") as u32;
             let shared: Vec<_> = node_files(pid)
                 .into_iter()
                 .filter(|f| ours.contains(f))
@@ -437,8 +413,7 @@ fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
                 "{name} holds the supervisor's {shared:?}"
             );
         }
-        let log = up.down();
-        assert!(!log.contains("left behind"), "{log}");
+        down_leaving_nothing(up);
         // And the next `up` of the instance works.
         Up::start(test, &cfg).down();
     });
@@ -456,8 +431,7 @@ fn a_foreign_trapezoid_generator_process_is_never_refused() {
     integration_tests::attributable(|| {
         integration_tests::require_python_iceoryx2();
         let test = "foreign-trapezoid";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell(test);
         let script = examples().join("python/trapezoid.py");
         let command = format!(
             "python3 {} --instance {{instance}} --name {{name}} --moves 4 --silence 0.035 0.5",
@@ -526,8 +500,7 @@ fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() 
     integration_tests::attributable(|| {
         for how in ["down", "sigterm"] {
             let test = &format!("down-moving-{how}");
-            let cfg = cell(test, &[]);
-            let up = Up::start(test, &cfg);
+            let up = Up::default_cell(test);
             moving(&up);
             let log = if how == "down" {
                 up.down()
@@ -559,9 +532,7 @@ fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() 
 #[test]
 fn down_after_the_drives_process_restarted_stops_in_the_graph_order() {
     integration_tests::attributable(|| {
-        let test = "down-after-restart";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell("down-after-restart");
         for how in ["restart", "swap"] {
             let out = up.ok(&[how, "drives"]);
             assert!(out.contains("re-enabling"), "{how}: {out}");
@@ -624,9 +595,7 @@ fn refused_with(
 #[test]
 fn control_frames_are_taken_whole_or_not_at_all() {
     integration_tests::attributable(|| {
-        let test = "ctl-frames";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell("ctl-frames");
         let down = postcard::to_allocvec(&control_plane::Request::Down).expect("encode");
 
         let mut inside = down.clone();
@@ -771,10 +740,7 @@ sys.stdin.read()
             .stderr(Stdio::inherit())
             .spawn()
             .expect("python3 as uid 65534");
-        let mut line = String::new();
-        BufReader::new(attacker.stdout.take().expect("stdout"))
-            .read_line(&mut line)
-            .expect("attacker's report");
+        let line = integration_tests::first_line(&mut attacker);
         assert_eq!(line.trim(), "held 1000", "the attacker could not connect");
 
         // While they are held: the supervisor holds no more descriptors than before (a few for
@@ -786,29 +752,12 @@ sys.stdin.read()
         );
         let st = up.status();
         assert_eq!(st["supervisor"]["arm"]["enabled"], true, "{st}");
-        let iobridge = st["supervisor"]["processes"]
-            .as_array()
-            .expect("processes")
-            .iter()
-            .find(|p| p["name"] == "iobridge")
-            .and_then(|p| p["pid"].as_i64())
-            .expect("iobridge's pid");
-        nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(iobridge as i32),
-            nix::sys::signal::Signal::SIGKILL,
-        )
-        .expect("kill iobridge");
+        let iobridge = up.kill("iobridge");
         up.until("iobridge restarted", |s| {
-            s["supervisor"]["processes"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .any(|p| {
-                    p["name"] == "iobridge"
-                        && p["pid"].as_i64().is_some_and(|pid| pid != iobridge)
-                        && p["life"] == "running"
-                        && p["restarts"] == 1
-                })
+            let p = process_in(s, "iobridge");
+            p["pid"].as_i64().is_some_and(|pid| pid != iobridge)
+                && p["life"] == "running"
+                && p["restarts"] == 1
         });
         assert!(
             up.log()
@@ -845,47 +794,6 @@ fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)]) -> (u16,
     (code, out)
 }
 
-/// A `supervisor web`, stopped as a user stops it (SIGTERM: it lets go of the instance)
-/// when dropped, so a failing test leaves no server behind either.
-struct View(std::process::Child);
-
-impl Drop for View {
-    fn drop(&mut self) {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(self.0.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
-        let start = Instant::now();
-        while matches!(self.0.try_wait(), Ok(None)) && start.elapsed() < WATCHDOG {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// `supervisor web` of `inst` on a free loopback port, with `extra` arguments; its address.
-fn web(inst: &str, extra: &[&str]) -> (View, String) {
-    let mut child = supervisor()
-        .args(["web", "--instance", inst, "--listen", "127.0.0.1:0"])
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("web");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().expect("stdout"))
-        .read_line(&mut line)
-        .expect("its address");
-    let addr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|a| a.strip_suffix("/\n"))
-        .unwrap_or_else(|| panic!("no address in {line:?}"))
-        .to_string();
-    (View(child), addr)
-}
-
 /// Runs a Python `script` as uid 65534 (another local user), under the watchdog.
 fn python_as_nobody(script: &str) -> std::process::Output {
     run_with_watchdog(
@@ -905,10 +813,8 @@ fn python_as_nobody(script: &str) -> std::process::Output {
 #[test]
 fn the_web_view_takes_commands_from_its_own_page_only() {
     integration_tests::attributable(|| {
-        let test = "web-guard";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
-        let (view, addr) = web(&up.inst, &[]);
+        let up = Up::default_cell("web-guard");
+        let (view, addr) = serve(&up.inst, &[], Stdio::null());
         let host = addr.as_str();
         let own = format!("http://{addr}");
         up.ok(&["estop"]);
@@ -997,7 +903,7 @@ except urllib.error.HTTPError as e:
         // With a token: nothing without it, the page included; the page with it sets a cookie
         // that carries it for its script.
         let token = "s3cret-token-42";
-        let (view, addr) = web(&up.inst, &["--token", token]);
+        let (view, addr) = serve(&up.inst, &["--token", token], Stdio::null());
         let host = addr.as_str();
         for path in ["/", "/app.js", "/vendor/three.module.js"] {
             let (code, body) = http(&addr, "GET", path, &[("Host", host)]);
@@ -1064,9 +970,7 @@ fn overruns(s: &serde_json::Value) -> [u64; 2] {
 #[test]
 fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
     integration_tests::attributable(|| {
-        let test = "estop-cost";
-        let cfg = cell(test, &[]);
-        let up = Up::start(test, &cfg);
+        let up = Up::default_cell("estop-cost");
         // The first one latches it; the rest find it latched, as in the campaign.
         let said = up.ok(&["estop", "--reason", "cost 0"]);
         assert!(said.contains("e-stop raised"), "{said}");
@@ -1119,8 +1023,7 @@ fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
 fn a_client_whose_reader_stops_early_ends_quietly() {
     integration_tests::attributable(|| {
         use std::os::unix::process::ExitStatusExt;
-        let test = "closed-pipe";
-        let up = Up::start(test, &cell(test, &[]));
+        let up = Up::default_cell("closed-pipe");
         let mut watch = up
             .command()
             .args(["status", "--watch", "--instance", &up.inst])
@@ -1183,8 +1086,7 @@ fn a_full_dev_shm_is_said_in_words_and_exits_1_never_by_sigbus() {
             cfg.to_str().expect("utf-8"),
         ],
     );
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    let err = exited(&out, 1);
     assert!(
         err.contains("shared memory is full (/dev/shm: 0 MB free)"),
         "{err}"

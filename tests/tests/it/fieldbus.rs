@@ -5,21 +5,14 @@
 //! no e-stop; the register map's document is the code's.
 
 use crate::drives::{WATCHDOG, pid_of};
-use crate::up::{Up, cell};
-use integration_tests::{run_with_watchdog, scratch};
+use crate::up::{Up, cell, process_in};
+use integration_tests::{run_with_watchdog, scratch, trace_rows};
 use serde_json::Value;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn process_in<'a>(s: &'a Value, name: &str) -> &'a Value {
-    s["supervisor"]["processes"]
-        .as_array()
-        .and_then(|p| p.iter().find(|p| p["name"] == name))
-        .unwrap_or(&Value::Null)
-}
 
 /// The address the modbus process announced (it listens on port 0: any free one).
 fn address(up: &Up) -> SocketAddr {
@@ -188,16 +181,6 @@ fn mbpoll_i32(a: SocketAddr, addr: u16, n: u16) -> Vec<i64> {
     values
 }
 
-/// The trace's rows: t_s, then cmd and act per axis.
-fn trace(path: &Path) -> Vec<Vec<f64>> {
-    std::fs::read_to_string(path)
-        .expect("trace")
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
-        .collect()
-}
-
 /// Distance from `p` to the segment `a`-`b` (any dimension).
 fn to_segment(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
     let ab: Vec<f64> = a.iter().zip(b).map(|(a, b)| b - a).collect();
@@ -225,7 +208,7 @@ fn to_segment(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
 fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_them() {
     integration_tests::attributable(|| {
         let test = "mb-read";
-        let up = Up::start(test, &cell(test, &[]));
+        let up = Up::default_cell(test);
         let a = address(&up);
         // At rest, with mbpoll: each axis' block (position, command, following error, velocity).
         let rest = mbpoll_i32(a, 32, 12);
@@ -242,15 +225,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
             .expect("python3");
         let tr = scratch(test, "trace.csv", "");
         let triangle = integration_tests::small_triangle(test);
-        let out = up.ok(&[
-            "exec",
-            triangle.to_str().expect("utf-8"),
-            "--wait",
-            "--json",
-            "--trace",
-            tr.to_str().expect("utf-8"),
-        ]);
-        let report: Value = serde_json::from_str(out.trim()).expect("report");
+        let report = up.report(&triangle, &["--trace", tr.to_str().expect("utf-8")]);
         assert_eq!(report["ok"], true, "{report}");
         let mut poller = poller;
         let _ = poller.kill();
@@ -265,7 +240,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
             .collect();
         // image, measured_us, written_us, motion, line, then (position, command, error) per axis.
         let moving: Vec<&Vec<f64>> = rows.iter().filter(|r| r[3] == 1.0).collect();
-        let trace = trace(&tr);
+        let trace = trace_rows(&tr);
         println!(
             "pymodbus: {} images read, {} while moving; trace {} rows",
             rows.len(),
@@ -331,8 +306,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
 fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost_server_is_no_estop()
  {
     integration_tests::attributable(|| {
-        let test = "mb-write";
-        let up = Up::start(test, &cell(test, &[]));
+        let up = Up::default_cell("mb-write");
         let mut c = Raw::connect(address(&up));
         // Coil 1 is the gripper (an output); the sensor that follows it closes 80 ms later.
         assert_eq!(c.write_coil(1, true), Ok(vec![5, 0, 1, 0xFF, 0]));

@@ -1,7 +1,7 @@
 //! `supervisor latency` and `supervisor status` as a user runs them: real processes, each test
 //! on its own instance, no timing bounds (only a watchdog against a stuck run).
 
-use integration_tests::{assert_clean, bin, instance, json_of, run_with_watchdog};
+use integration_tests::{assert_clean, bin, instance, json_of, run_with_watchdog, wait_output};
 use latency::histfile;
 use serde_json::Value;
 use std::path::Path;
@@ -145,13 +145,7 @@ fn ctrl_c_prints_the_figures_so_far() {
         std::thread::sleep(Duration::from_millis(1500));
         // SAFETY: kill(2) on our own child.
         unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-        let start = Instant::now();
-        let mut child = child;
-        while child.try_wait().expect("wait").is_none() {
-            assert!(start.elapsed() < WATCHDOG, "latency did not stop on SIGINT");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let out = child.wait_with_output().expect("output");
+        let out = wait_output(child, WATCHDOG, "latency did not stop on SIGINT");
         assert!(out.status.success(), "{}", stderr(&out));
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(text.contains("# interrupted: figures so far"), "{text}");

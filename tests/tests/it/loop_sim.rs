@@ -101,6 +101,22 @@ impl Loop {
         self.queue.clear();
     }
 
+    /// Servo's cycle alone, at its phase of this period, with `request` and feedback `fb`
+    /// (the machine does not run, the time does not advance): its state; its events join the
+    /// others.
+    pub fn servo_only(
+        &mut self,
+        request: Option<&ServoRequestV1>,
+        fb: Option<&DriveFeedbackV2>,
+    ) -> ServoStateV3 {
+        let (_, state) =
+            self.servo
+                .cycle(self.now + self.offset, request, None, fb, &mut self.queue);
+        self.events.extend_from_slice(self.queue.as_slice());
+        self.queue.clear();
+        state
+    }
+
     pub fn step(&mut self) -> ServoStateV3 {
         self.step_with(None, None, None)
     }
@@ -124,6 +140,13 @@ impl Loop {
             s.status,
             self.codes()
         );
+    }
+
+    /// [`Loop::new`] of `cell`, the arm enabled.
+    pub fn enabled(cell: &CellConfigV6) -> Self {
+        let mut lp = Self::new(cell);
+        lp.enable();
+        lp
     }
 
     /// Enables the arm.

@@ -4,24 +4,20 @@
 //! emulator's crate so that they run beside the other tests: kickcat's scan waits out its
 //! link timeout after every frame (about 14 s of the test, idle). Needs root (CI is).
 
-use integration_tests::{EmulatedLine, bin};
+use integration_tests::{EmulatedLine, bin, needed};
 use std::process::Command;
 
 /// Runs `tests/python/masters.py MASTER m0` in the line's namespace; its JSON (the last line
 /// of its stdout).
 fn master(line: &EmulatedLine, name: &str) -> serde_json::Value {
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/masters.py");
-    let out = Command::new("ip")
-        .args([
+    let out = needed(
+        Command::new("ip").args([
             "netns", "exec", &line.ns, "timeout", "120", "python3", script, name, "m0",
-        ])
-        .output()
-        .expect("python3");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "{name} failed (pip install pysoem==1.1.13 kickcat==2.5; .ci/run does):\n{stderr}"
+        ]),
+        "pip install pysoem==1.1.13 kickcat==2.5; .ci/run does",
     );
+    let stderr = String::from_utf8_lossy(&out.stderr);
     let stdout = String::from_utf8_lossy(&out.stdout);
     let last = stdout.lines().last().unwrap_or("");
     serde_json::from_str(last).unwrap_or_else(|e| {
@@ -30,6 +26,15 @@ fn master(line: &EmulatedLine, name: &str) -> serde_json::Value {
             String::from_utf8_lossy(&out.stdout)
         )
     })
+}
+
+/// Master `name` on an emulated line of its own ([`LINE`], of test `test`): its JSON; it
+/// found the line's four SubDevices.
+fn scan(test: &str, name: &str) -> serde_json::Value {
+    let line = EmulatedLine::up(&bin("ethercat-emulator"), test, LINE);
+    let r = master(&line, name);
+    assert_eq!(r["found"], 4, "{r}");
+    r
 }
 
 fn every_pattern_came_back(name: &str, r: &serde_json::Value) {
@@ -91,9 +96,7 @@ fn the_drive_answered_and_enabled(name: &str, r: &serde_json::Value) {
 #[test]
 fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
     integration_tests::attributable(|| {
-        let line = EmulatedLine::up(&bin("ethercat-emulator"), "masters-soem", LINE);
-        let r = master(&line, "pysoem");
-        assert_eq!(r["found"], 4, "{r}");
+        let r = scan("masters-soem", "pysoem");
         let expected = [
             ("EK1100", 2, 0x044C_2C52u32),
             ("EL1008", 2, 0x03F0_3052),
@@ -142,9 +145,7 @@ fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data(
 #[test]
 fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
     integration_tests::attributable(|| {
-        let line = EmulatedLine::up(&bin("ethercat-emulator"), "masters-kickcat", LINE);
-        let r = master(&line, "kickcat");
-        assert_eq!(r["found"], 4, "{r}");
+        let r = scan("masters-kickcat", "kickcat");
         assert_eq!(
             r["sizes"],
             serde_json::json!([[0, 0], [1, 0], [0, 1], [19, 19]]),

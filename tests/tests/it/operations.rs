@@ -3,13 +3,12 @@
 //! their policy, hot swap, another user refused, nothing left after `down`.
 
 use crate::drives::{WATCHDOG, pid_of};
-use crate::up::Up;
+use crate::up::{Up, cell, io_value, moving, process_in};
 use integration_tests::{
-    CellToml, assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, toml,
-    with_stall_room,
+    CellToml, assert_clean, default_cell, exited, instance, run_with_watchdog, scratch,
+    succeeded_within, supervisor, toml, wait_output, with_stall_room,
 };
 use serde_json::Value;
-use std::path::PathBuf;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
@@ -22,29 +21,12 @@ const MID: &str = "MOVE(90, 40, 0)\nMOVE(40, 40, 0)\nEND\n";
 /// A brief program (about 3 s from the default start): the cell runs a program again.
 const BRIEF: &str = "MOVE(60, 40, 0)\nMOVE(40, 40, 0)\nEND\n";
 
-fn cell(test: &str) -> PathBuf {
-    scratch(test, "cell.toml", &with_stall_room(&default_cell()))
-}
-
 fn program(test: &str, src: &str) -> String {
     scratch(test, "p.prog", src).display().to_string()
 }
 
-fn moving(s: &Value) -> bool {
-    s["supervisor"]["job"]["motion_time_s"]
-        .as_f64()
-        .is_some_and(|t| t > 1.0)
-}
-
 fn latched(s: &Value) -> bool {
     !s["supervisor"]["estop"].is_null()
-}
-
-/// Process `name` in the supervisor's view of `status --json`.
-fn process_in<'a>(s: &'a Value, name: &str) -> Option<&'a Value> {
-    s["supervisor"]["processes"]
-        .as_array()
-        .and_then(|p| p.iter().find(|p| p["name"] == name))
 }
 
 fn all_running(s: &Value) -> bool {
@@ -58,11 +40,16 @@ fn signal(program: &str, inst: &str, sig: nix::sys::signal::Signal) {
     nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid_of(program, inst)), sig).expect("kill");
 }
 
+/// Runs the brief program of `test` on `up` to its end.
+fn brief(up: &Up, test: &str) {
+    up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+}
+
 #[test]
 fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
     integration_tests::attributable(|| {
         let test = "ops-up";
-        let cfg = cell(test);
+        let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
         // A second supervisor of the instance is refused, whether `up` or `run`.
         let err = up.refused(&["up", "--config", cfg.to_str().expect("utf-8")]);
@@ -82,9 +69,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         let plot = integration_tests::scratch(test, "exec.png", "");
         let plot_arg = plot.to_str().expect("utf-8");
         let small = integration_tests::small_triangle(test);
-        let small = small.to_str().expect("utf-8");
-        let out = up.ok(&["exec", small, "--wait", "--json", "--plot", plot_arg]);
-        let r: Value = serde_json::from_str(out.trim()).expect("report");
+        let r = up.report(&small, &["--plot", plot_arg]);
         assert_eq!(r["ok"], true);
         crate::cell::check_figures(&plot, r["processes"].as_object().expect("processes").len());
         let diff = r["difference_s"].as_f64().expect("difference");
@@ -135,7 +120,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         );
         assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
         // The next program starts where the abort left the axes.
-        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+        brief(&up, test);
         // `down` while a client waits for a program: the client is told, not dropped.
         let waiting = supervisor()
             .args(["exec", "--wait", "--instance", &up.inst])
@@ -147,9 +132,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         up.until("moving", moving);
         let inst = up.inst.clone();
         up.down();
-        let out = waiting.wait_with_output().expect("exec");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&waiting.wait_with_output().expect("exec"), 1);
         assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
         assert_clean(&inst);
         // A command to an instance that is not up says so.
@@ -157,8 +140,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
             .args(["status", "--instance", &instance(test)])
             .output()
             .expect("status");
-        assert_eq!(out.status.code(), Some(2));
-        assert!(String::from_utf8_lossy(&out.stderr).contains("is not up"));
+        assert!(exited(&out, 2).contains("is not up"));
     });
 }
 
@@ -166,7 +148,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
 fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named() {
     integration_tests::attributable(|| {
         let test = "ops-reset";
-        let up = Up::start(test, &cell(test));
+        let up = Up::default_cell(test);
         up.ok(&["estop", "--reason", "ops test"]);
         let s = up.until("latched and safe", |s| {
             latched(s) && s["supervisor"]["arm"]["enabled"] == false
@@ -188,20 +170,17 @@ fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named()
         std::thread::sleep(Duration::from_millis(500));
         assert_eq!(up.status()["supervisor"]["arm"]["enabled"], false);
         up.ok(&["start"]);
-        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+        brief(&up, test);
         // A fault whose cause is still there: reset clears the e-stop and says what stays.
         up.ok(&["inject", "--axis", "x", "encoder-loss"]);
         up.until("servo's fault", |s| {
             latched(s) && s["supervisor"]["arm"]["fault_latched"] == true
         });
-        let out = up.ctl(&["reset"]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = up.fails(&["reset"]);
         assert!(err.contains("its cause is still present"), "{err}");
         up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
-        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+        up.reset_and_start();
+        brief(&up, test);
         up.down();
     });
 }
@@ -210,7 +189,7 @@ fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named()
 fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_recovers() {
     integration_tests::attributable(|| {
         let test = "ops-kill";
-        let up = Up::start(test, &cell(test));
+        let up = Up::default_cell(test);
         let long = program(
             test,
             "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nMOVE(140, 40, 0)\nEND\n",
@@ -230,18 +209,17 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
                 latched(s)
                     && s["supervisor"]["job"].is_null()
                     && s["supervisor"]["arm"]["enabled"] == false
-                    && process_in(s, victim)
-                        .is_some_and(|p| p["life"] == "running" && p["restarts"] == 1)
+                    && process_in(s, victim)["life"] == "running"
+                    && process_in(s, victim)["restarts"] == 1
             });
             let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
             assert!(reason.contains(victim), "{victim}: {s}");
             assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
             assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
             up.until("all cyclic", all_running);
-            up.ok(&["reset"]);
-            up.ok(&["start"]);
+            up.reset_and_start();
         }
-        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+        brief(&up, test);
         up.down();
     });
 }
@@ -250,12 +228,12 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
 fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
     integration_tests::attributable(|| {
         let test = "ops-stall";
-        let up = Up::start(test, &cell(test));
+        let up = Up::default_cell(test);
         signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
         let s = up.until("stall found, iobridge restarted", |s| {
             latched(s)
-                && process_in(s, "iobridge")
-                    .is_some_and(|p| p["restarts"] == 1 && p["life"] == "running")
+                && process_in(s, "iobridge")["restarts"] == 1
+                && process_in(s, "iobridge")["life"] == "running"
         });
         assert!(
             s["supervisor"]["estop"]["reason"]
@@ -265,8 +243,7 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
         );
         assert!(up.log().contains("stalled"), "{}", up.log());
         up.until("cyclic", all_running);
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
+        up.reset_and_start();
         up.down();
     });
 }
@@ -275,11 +252,11 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
 fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     integration_tests::attributable(|| {
         let test = "ops-swap";
-        let up = Up::start(test, &cell(test));
+        let up = Up::default_cell(test);
         // The gripper holds a part: no swap may open it.
         up.ok(&["io", "gripper", "1"]);
         // Two swaps while it moves: the program lasts 13 s.
-        let mut run = up.exec_in_background(program(test, SHORT));
+        let run = up.exec_in_background(program(test, SHORT));
         up.until("moving", moving);
         let out = up.ok(&["swap", "iobridge"]);
         println!("{}", out.trim());
@@ -306,17 +283,9 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         // servo cannot be swapped under a moving arm.
         let err = up.refused(&["swap", "servo"]);
         assert!(err.contains("only while no program runs"), "{err}");
-        let start = Instant::now();
-        while run.try_wait().expect("wait").is_none() {
-            assert!(start.elapsed() < WATCHDOG, "the program did not end");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let out = run.wait_with_output().expect("output");
-        assert!(
-            out.status.success(),
-            "{}\nlog:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            up.log()
+        let out = up.succeeded(
+            wait_output(run, WATCHDOG, "the program did not end"),
+            "exec --wait",
         );
         // No e-stop, the following error within its limit (or servo would have cut power), and
         // the motion time grew by about what the swap took (the pause's ramps included).
@@ -364,13 +333,7 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
             ),
             other => panic!("start during a swap: {other:?}"),
         }
-        let out = swap.wait_with_output().expect("swap");
-        assert!(
-            out.status.success(),
-            "{}\nlog:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            up.log()
-        );
+        let out = up.succeeded(swap.wait_with_output().expect("swap"), "swap trajgen");
         let out = String::from_utf8_lossy(&out.stdout).to_string();
         println!("{}", out.trim());
         up.until("enabled again", |s| {
@@ -378,7 +341,7 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         });
         let s = up.status();
         assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
-        up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+        brief(&up, test);
         // A bad command changes nothing.
         let err = up.refused(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
         assert!(err.contains("nothing was changed"), "{err}");
@@ -395,15 +358,14 @@ fn another_user_is_refused_by_the_control_channel() {
             return;
         }
         let test = "ops-user";
-        let up = Up::start(test, &cell(test));
+        let up = Up::default_cell(test);
         let out = std::process::Command::new("setpriv")
             .args(["--reuid", "65534", "--regid", "65534", "--clear-groups"])
             .arg(integration_tests::bin("supervisor"))
             .args(["down", "--instance", &up.inst])
             .output()
             .expect("setpriv");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{err}");
+        let err = exited(&out, 2);
         assert!(err.contains("uid 65534 may not control it"), "{err}");
         // Nothing changed: the cell is still up.
         assert_eq!(up.status()["supervisor"]["arm"]["enabled"], true);
@@ -415,7 +377,7 @@ fn another_user_is_refused_by_the_control_channel() {
 fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
     integration_tests::attributable(|| {
         let test = "ops-sigkill";
-        let cfg = cell(test);
+        let cfg = cell(test, &[]);
         let mut up = Up::start(test, &cfg);
         // A client waits for a program's end: told that the supervisor broke off, exit 1 (its
         // request was taken).
@@ -424,9 +386,7 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
         let mut child = up.child.take().expect("running");
         child.kill().expect("SIGKILL");
         let _ = child.wait();
-        let out = waiting.wait_with_output().expect("exec");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&waiting.wait_with_output().expect("exec"), 1);
         assert!(err.contains("control channel broke"), "{err}");
         let inst = up.inst.clone();
         drop(up);
@@ -437,15 +397,12 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
             std::thread::sleep(Duration::from_millis(50));
         }
         // The same instance comes up again and works.
-        let mut cmd = supervisor();
-        cmd.args(["run", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(program(test, BRIEF));
-        let out = run_with_watchdog(&mut cmd, WATCHDOG);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        succeeded_within(
+            supervisor()
+                .args(["run", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(program(test, BRIEF)),
+            WATCHDOG,
         );
         assert_clean(&inst);
     });
@@ -472,15 +429,12 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
             )
             .write(test, "cell.toml");
         let inst = instance(test);
-        let mut cmd = supervisor();
-        cmd.args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(&cfg)
-            .arg(program(test, BRIEF));
-        let out = run_with_watchdog(&mut cmd, WATCHDOG);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeeded_within(
+            supervisor()
+                .args(["run", "--json", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(program(test, BRIEF)),
+            WATCHDOG,
         );
         let r = integration_tests::json_of(&out);
         // The Python process was cyclic, and its fieldbus images reached the supervisor.
@@ -541,8 +495,7 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
         up.until("at rest, drives off", |s| {
             s["supervisor"]["arm"]["enabled"] == false
         });
-        up.ok(&["reset"]);
-        up.ok(&["start"]);
+        up.reset_and_start();
         up.down();
     });
 }
@@ -570,7 +523,7 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
         let triangle = integration_tests::examples().join("triangle.prog");
         let run = supervisor()
             .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(cell(test))
+            .arg(cell(test, &[]))
             .arg(&triangle)
             .stdout(Stdio::piped())
             .stderr(Stdio::from(w))
@@ -589,13 +542,7 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
             std::thread::sleep(Duration::from_millis(50));
         }
         signal("servo", &inst, nix::sys::signal::Signal::SIGKILL);
-        let start = Instant::now();
-        let mut run = run;
-        while run.try_wait().expect("wait").is_none() {
-            assert!(start.elapsed() < WATCHDOG, "the supervisor is stuck");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let out = run.wait_with_output().expect("output");
+        let out = wait_output(run, WATCHDOG, "the supervisor is stuck");
         assert_eq!(out.status.code(), Some(1));
         let j = integration_tests::json_of(&out);
         assert_eq!(j["ok"], false);
@@ -608,14 +555,6 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
         assert!(servo_lost, "{j}");
         assert_clean(&inst);
     });
-}
-
-/// The value of IO `name` in `status --json`.
-fn io_value(s: &Value, name: &str) -> Option<u64> {
-    s["io"]["entries"]
-        .as_array()
-        .and_then(|e| e.iter().find(|e| e["name"] == name))
-        .and_then(|e| e["value"].as_u64())
 }
 
 /// An e-stop input opened mid-motion on a cell whose devices' own e-stops are not propagated
@@ -655,8 +594,7 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
     let err = String::from_utf8_lossy(&up.ctl(&["io", "cycle_lamp", "1"]).stderr).to_string();
     assert!(err.contains("safe values"), "{err}");
     let out = run.wait_with_output().expect("exec");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    let err = exited(&out, 1);
     let report: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim())
         .unwrap_or_else(|e| panic!("{e}: {err}"));
     let servo_safe = report["events"]
@@ -671,9 +609,7 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
     );
     assert_eq!(servo_safe, external, "{report}");
     // Reset fails at once while the input is open, and says which and why.
-    let out = up.ctl(&["reset"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    let err = up.fails(&["reset"]);
     assert!(err.contains("e-stop input estop_ok is open"), "{err}");
     up.ok(&["io", "estop_ok", "1"]);
     up.ok(&["reset"]);
@@ -682,7 +618,7 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
     assert_eq!(io_value(&s, "cycle_lamp"), Some(0), "{s}");
     up.ok(&["io", "cycle_lamp", "1"]);
     up.ok(&["start"]);
-    up.ok(&["exec", &program(test, BRIEF), "--wait"]);
+    brief(&up, test);
     up.down();
 }
 

@@ -5,7 +5,10 @@
 
 use crate::drives::WATCHDOG;
 use crate::up::{Up, cell};
-use integration_tests::{assert_clean, instance, json_of, run_with_watchdog, scratch, supervisor};
+use integration_tests::{
+    assert_clean, exited, first_line, instance, json_of, needed, run_with_watchdog, scratch,
+    succeeded_within, success, supervisor, trace_rows,
+};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -13,16 +16,11 @@ use std::time::{Duration, Instant};
 
 /// `tests/python/mcap_read.py` over `files`: topics and setpoints.
 fn read_back(files: &[PathBuf]) -> Value {
-    let out = run_with_watchdog(
+    let out = succeeded_within(
         Command::new("python3")
             .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/mcap_read.py"))
             .args(files),
         WATCHDOG,
-    );
-    assert!(
-        out.status.success(),
-        "mcap_read.py: {}",
-        String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).expect("JSON")
 }
@@ -79,12 +77,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
             }
         }
         // Every setpoint of the program, as the trace has it (one trace row per setpoint).
-        let rows: Vec<Vec<f64>> = std::fs::read_to_string(&trace)
-            .expect("trace")
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
-            .collect();
+        let rows = trace_rows(&trace);
         let setpoints = file["setpoints"].as_array().expect("setpoints");
         let program = setpoints
             .iter()
@@ -127,9 +120,9 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
 fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
     integration_tests::attributable(|| {
         let test = "rec-up";
-        let up = Up::start(test, &cell(test, &[]));
+        let up = Up::default_cell(test);
         let base = scratch(test, "cell.mcap", "");
-        let out = run_with_watchdog(
+        let out = succeeded_within(
             supervisor()
                 .args(["record", "--instance", &up.inst, "--out"])
                 .arg(&base)
@@ -137,11 +130,6 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
             WATCHDOG,
         );
         let text = String::from_utf8_lossy(&out.stdout).to_string();
-        assert!(
-            out.status.success(),
-            "{text}{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
         assert!(text.contains("its duration is over"), "{text}");
         let files: Vec<PathBuf> = (0..10)
             .map(|k| base.with_file_name(format!("cell-{k:03}.mcap")))
@@ -163,8 +151,7 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
                 .arg(&base),
             WATCHDOG,
         );
-        assert_eq!(gone.status.code(), Some(2));
-        assert!(String::from_utf8_lossy(&gone.stderr).contains("is not up"));
+        assert!(exited(&gone, 2).contains("is not up"));
         let inst = up.inst.clone();
         up.down();
         // `up --record` where no file can be written: refused before anything starts (exit 2,
@@ -182,8 +169,7 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
                 .arg(cell(test, &[])),
             WATCHDOG,
         );
-        let err = String::from_utf8_lossy(&refused.stderr);
-        assert_eq!(refused.status.code(), Some(2), "{err}");
+        let err = exited(&refused, 2);
         assert!(err.contains("--record /nonexistent/dir/c.mcap"), "{err}");
         integration_tests::assert_clean(&inst);
     });
@@ -225,30 +211,19 @@ fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behin
             .spawn()
             .expect("record");
         // The program waits for the part until the observer records.
-        let mut first = String::new();
-        std::io::BufRead::read_line(
-            &mut std::io::BufReader::new(observer.stdout.as_mut().expect("stdout")),
-            &mut first,
-        )
-        .expect("read");
+        let first = first_line(&mut observer);
         assert!(first.starts_with("recording"), "{first}");
-        let released = run_with_watchdog(
+        succeeded_within(
             supervisor().args(["io", "part_present", "1", "--instance", &inst]),
             WATCHDOG,
         );
-        assert!(released.status.success(), "{released:?}");
         let out = run.wait_with_output().expect("run");
         let report = json_of(&out);
         assert_eq!(out.status.code(), Some(0), "{report}");
         assert_eq!(report["ok"], true, "{report}");
         // The observer ends by itself once the cell is gone, and leaves nothing.
-        let obs = observer.wait_with_output().expect("record");
+        let obs = success(observer.wait_with_output().expect("record"), "record");
         let text = String::from_utf8_lossy(&obs.stdout);
-        assert!(
-            obs.status.success(),
-            "{text}{}",
-            String::from_utf8_lossy(&obs.stderr)
-        );
         assert!(text.contains("went down"), "{text}");
         assert_clean(&inst);
     });
@@ -262,15 +237,11 @@ impl SmallDisk {
     fn new(test: &str, kib: u32) -> Self {
         let dir = std::env::temp_dir().join(format!("rtc-{test}-{}-disk", std::process::id()));
         std::fs::create_dir_all(&dir).expect("mount point");
-        let out = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
-            .arg(&dir)
-            .output()
-            .expect("this test needs mount(8)");
-        assert!(
-            out.status.success(),
-            "mount a tmpfs (this test needs root): {}",
-            String::from_utf8_lossy(&out.stderr)
+        needed(
+            Command::new("mount")
+                .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
+                .arg(&dir),
+            "this test mounts a tmpfs: it needs root and mount(8)",
         );
         Self(dir)
     }
@@ -287,22 +258,14 @@ impl Drop for SmallDisk {
 fn a_recording_onto_a_full_disk_says_so_and_fails_its_command() {
     integration_tests::attributable(|| {
         let test = "rec-full";
-        let up = Up::start(test, &cell(test, &[]));
+        let up = Up::default_cell(test);
         let disk = SmallDisk::new(test, 64);
         // `exec --wait --record`: the program runs to its end; the recording fills the disk,
         // which the command says in the system's words, and it exits 1 (it exited 0).
         let program = scratch(test, "p.prog", "MOVE(60, 40, 0)\nMOVE(40, 40, 0)\nEND\n");
         let file = disk.0.join("run.mcap");
-        let out = up.ctl(&[
-            "exec",
-            program.to_str().expect("utf-8"),
-            "--wait",
-            "--json",
-            "--record",
-            file.to_str().expect("utf-8"),
-        ]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let out = up.exec_wait(&program, &["--record", file.to_str().expect("utf-8")]);
+        let err = exited(&out, 1);
         assert!(
             err.contains(&format!("{}: No space left on device", file.display())),
             "{err}"
@@ -319,8 +282,7 @@ fn a_recording_onto_a_full_disk_says_so_and_fails_its_command() {
                 .arg(disk.0.join("alone.mcap")),
             WATCHDOG,
         );
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{err}");
+        let err = exited(&out, 1);
         assert!(err.contains("No space left on device"), "{err}");
         drop(disk);
         up.down();

@@ -9,7 +9,7 @@ use cia402::{State, cw};
 use motion_core::generator::{Generator, Params};
 use shm_schema::drive::{injected, servo_status as st};
 use shm_schema::event::code;
-use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, SetpointV2};
+use shm_schema::{FaultInjectionV1, MotionState, Power, RequestKind, ServoStateV3, SetpointV2};
 
 /// The default cell with the key at `path` set to `value`.
 fn cfg_with(path: &str, value: f64) -> Config {
@@ -31,10 +31,64 @@ fn generator(cell: &shm_schema::CellConfigV6, program: &str) -> Generator {
 /// `cell`'s servo and machine, enabled, and trajgen with `program` queued: the loop, the
 /// generator, and trajgen's period in servo cycles.
 fn enabled_with(cell: &shm_schema::CellConfigV6, program: &str) -> (Loop, Generator, u64) {
-    let mut lp = Loop::new(cell);
-    lp.enable();
+    let lp = Loop::enabled(cell);
     let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     (lp, generator(cell, program), tg)
+}
+
+/// [`enabled_with`] on the default cell with the drives and servo at 4 kHz; the cell too.
+fn at_4_khz_with(program: &str) -> (shm_schema::CellConfigV6, Loop, Generator, u64) {
+    let cell = crate::closed_loop::at_rate(250).to_shm();
+    let (lp, g, tg) = enabled_with(&cell, program);
+    (cell, lp, g, tg)
+}
+
+/// One period of `lp`, with `g`'s next setpoint if `due` (stamped 100 µs after the machine's
+/// phase, as trajgen's are): servo's state.
+fn follow(lp: &mut Loop, g: &mut Generator, due: bool) -> ServoStateV3 {
+    let sp = due.then(|| g.step(lp.now + 100_000, None));
+    lp.step_with(None, sp.as_ref(), None)
+}
+
+/// The default cell, enabled, two seconds into a move of every axis (`MOVE(140,90,90)`), x
+/// at full speed: the loop and the generator.
+fn two_seconds_into_a_move() -> (Loop, Generator) {
+    let cell = Config::default_cell().to_shm();
+    let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
+    for k in 0..2000 {
+        follow(&mut lp, &mut g, k % tg == 0);
+    }
+    let v = lp.state.cmd_velocity[0];
+    assert!(v > 10.0, "moving at {v}");
+    (lp, g)
+}
+
+/// The default cell whose x cannot produce the force to follow (its effort barely beats
+/// friction), moving x until servo latches: the loop and the state that latched.
+fn an_axis_that_cannot_follow() -> (Loop, ServoStateV3) {
+    let cell = cfg_with("axis[x].sim.effort_limit", 3.1).to_shm();
+    let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,40,0)\nEND");
+    for k in 0..20_000u64 {
+        let s = follow(&mut lp, &mut g, k % tg == 0);
+        if s.status & st::FAULT_LATCHED != 0 {
+            return (lp, s);
+        }
+    }
+    panic!("no fault: {:?}", lp.codes());
+}
+
+/// Every drive of `s` without power.
+fn powered_off(s: &ServoStateV3) -> bool {
+    (0..3).all(|i| State::from_statusword(s.statusword[i]).is_some_and(|s| !s.power_stage_on()))
+}
+
+/// The CiA 402 transitions the drives reported (of axis `axis` only, if given), in order.
+fn transitions(lp: &Loop, axis: Option<i32>) -> Vec<f64> {
+    lp.events
+        .iter()
+        .filter(|e| e.code == code::DRIVE_TRANSITION && axis.is_none_or(|a| e.axis == a))
+        .map(|e| e.value)
+        .collect()
 }
 
 fn states(lp: &Loop) -> Vec<State> {
@@ -67,19 +121,12 @@ fn check_latched_then_recover(lp: &mut Loop, want: u32) {
     assert!(lp.codes().contains(&want));
     assert!(lp.codes().contains(&code::POWER_CUT));
     // Quick stop first (11), then disable voltage: every drive ends without power.
-    let transitions: Vec<f64> = lp
-        .events
-        .iter()
-        .filter(|e| e.code == code::DRIVE_TRANSITION)
-        .map(|e| e.value)
-        .collect();
+    let transitions = transitions(lp, None);
     assert!(
         transitions.contains(&11.0) || transitions.contains(&13.0),
         "quick stop or fault reaction: {transitions:?}"
     );
-    lp.until(None, 500, |s| {
-        (0..3).all(|i| State::from_statusword(s.statusword[i]).is_some_and(|s| !s.power_stage_on()))
-    });
+    lp.until(None, 500, powered_off);
     // Latched: enable is refused, for as long as we wait.
     let before = lp.events.len();
     lp.step_with(Some(RequestKind::Enable), None, None);
@@ -195,8 +242,7 @@ fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
                 None => Config::default_cell(),
                 Some((path, value)) => cfg_with(path, value),
             };
-            let mut lp = Loop::new(&cfg.to_shm());
-            lp.enable();
+            let mut lp = Loop::enabled(&cfg.to_shm());
             // Hold with a valid setpoint for a while, then the bad one.
             for k in 1..50 {
                 let sp = setpoint(&lp, k, 40.0, 0.0);
@@ -230,25 +276,10 @@ fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
 #[test]
 fn a_following_error_latches_like_a_device_estop() {
     integration_tests::attributable(|| {
-        // x cannot produce the force to follow (its effort barely beats friction).
-        let cfg = cfg_with("axis[x].sim.effort_limit", 3.1);
-        let cell = cfg.to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-        let mut latched = false;
-        for k in 0..20_000u64 {
-            let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
-            let s = lp.step_with(None, sp.as_ref(), None);
-            if s.status & st::FAULT_LATCHED != 0 {
-                latched = true;
-                assert_eq!(s.fault_code, code::FOLLOWING_ERROR);
-                assert_eq!(s.fault_axis, 0);
-                assert!(s.fault_value.abs() > 1.0 && s.fault_limit == 1.0);
-                break;
-            }
-        }
-        assert!(latched, "no following error: {:?}", lp.codes());
+        let (mut lp, s) = an_axis_that_cannot_follow();
+        assert_eq!(s.fault_code, code::FOLLOWING_ERROR, "{:?}", lp.codes());
+        assert_eq!(s.fault_axis, 0);
+        assert!(s.fault_value.abs() > 1.0 && s.fault_limit == 1.0);
         check_latched_then_recover(&mut lp, code::FOLLOWING_ERROR);
     });
 }
@@ -256,9 +287,7 @@ fn a_following_error_latches_like_a_device_estop() {
 #[test]
 fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
     integration_tests::attributable(|| {
-        let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
+        let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         let inject = |seq, active| FaultInjectionV1 {
             seq,
             axis: 1,
@@ -308,9 +337,7 @@ fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
 #[test]
 fn a_lost_encoder_is_a_fault_at_once_and_never_a_believable_number() {
     integration_tests::attributable(|| {
-        let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
+        let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         let f = FaultInjectionV1 {
             seq: 1,
             axis: 0,
@@ -332,9 +359,7 @@ fn a_lost_encoder_is_a_fault_at_once_and_never_a_believable_number() {
 #[test]
 fn no_drive_re_enables_after_a_command_timeout_without_reset() {
     integration_tests::attributable(|| {
-        let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
+        let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         // Servo goes silent for longer than the drives' watchdog (0.1 s): the machine runs alone.
         let mut q = shm_schema::EventQueue::default();
         for _ in 0..150 {
@@ -367,8 +392,7 @@ fn no_drive_re_enables_after_a_command_timeout_without_reset() {
 fn servo_notices_stale_feedback_and_cuts_power() {
     integration_tests::attributable(|| {
         let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
+        let mut lp = Loop::enabled(&cell);
         // The drives' feedback stops (the machine process stalls or died); servo keeps cycling.
         let fb = lp.fb;
         let mut q = shm_schema::EventQueue::default();
@@ -426,18 +450,8 @@ fn servo_notices_stale_feedback_and_cuts_power() {
 #[test]
 fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
     integration_tests::attributable(|| {
-        let cell = Config::default_cell().to_shm();
-        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
         // 2 s of motion at full speed, then trajgen dies.
-        for k in 0..2000 {
-            let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
-            lp.step_with(None, sp.as_ref(), None);
-        }
-        assert!(
-            lp.state.cmd_velocity[0] > 10.0,
-            "moving at {}",
-            lp.state.cmd_velocity[0]
-        );
+        let (mut lp, _) = two_seconds_into_a_move();
         let mut max_fe = [0.0f64; 3];
         for _ in 0..2000 {
             let s = lp.step();
@@ -478,15 +492,12 @@ fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
         // trajgen silent for 30 ms in the middle of an acceleration and for 40 ms later (host
         // stalls of its CPU, below the 50 ms setpoint timeout): the next setpoint differs from
         // servo's extrapolation; the command must not step.
-        let cfg = crate::closed_loop::at_rate(250);
-        let cell = cfg.to_shm();
-        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
+        let (cell, mut lp, mut g, tg) = at_4_khz_with("MOVE(140,90,90)\nEND");
         let (mut max_dp, mut max_dv) = ([0.0f64; 3], [0.0f64; 3]);
         let mut prev = lp.state;
         for k in 0..8000u64 {
             let silent = (1000..1120).contains(&k) || (3000..3160).contains(&k);
-            let sp = (k % tg == 0 && !silent).then(|| g.step(lp.now + 100_000, None));
-            let s = lp.step_with(None, sp.as_ref(), None);
+            let s = follow(&mut lp, &mut g, k % tg == 0 && !silent);
             assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
             if k > 10 {
                 for i in 0..3 {
@@ -516,15 +527,13 @@ fn a_late_servo_cycle_is_not_a_step() {
     integration_tests::attributable(|| {
         // Servo itself stalls 3 ms (12 periods at 4 kHz) with the axes at full speed: the command
         // moves 48 µm in one cycle, which the real elapsed time explains; nothing is refused.
-        let cell = crate::closed_loop::at_rate(250).to_shm();
-        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,90,90)\nEND");
+        let (_, mut lp, mut g, tg) = at_4_khz_with("MOVE(140,90,90)\nEND");
         for k in 0..6000u64 {
             if k == 4000 {
                 assert!(lp.state.cmd_velocity[0] > 15.0);
                 lp.servo_stalls(12);
             }
-            let sp = (k % tg == 0).then(|| g.step(lp.now + 100_000, None));
-            let s = lp.step_with(None, sp.as_ref(), None);
+            let s = follow(&mut lp, &mut g, k % tg == 0);
             assert_eq!(s.status & st::FAULT_LATCHED, 0, "at {k}: {:?}", lp.codes());
         }
     });
@@ -533,9 +542,7 @@ fn a_late_servo_cycle_is_not_a_step() {
 #[test]
 fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit() {
     integration_tests::attributable(|| {
-        let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
+        let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         let step = |lp: &mut Loop, seq: u64, value: f64| {
             let r = shm_schema::ServoRequestV1 {
                 seq,
@@ -544,13 +551,7 @@ fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit
                 value,
             };
             let fb = lp.fb;
-            let mut q = shm_schema::EventQueue::default();
-            let s = lp
-                .servo
-                .cycle(lp.now + 300_000, Some(&r), None, fb.as_ref(), &mut q)
-                .1;
-            lp.events.extend_from_slice(q.as_slice());
-            s
+            lp.servo_only(Some(&r), fb.as_ref())
         };
         // Too large: refused, nothing moves.
         let s = step(&mut lp, 100, 0.6);
@@ -576,21 +577,7 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
     integration_tests::attributable(|| {
         // A following error at speed cuts power; a reset sent at once waits until every drive
         // has stopped (the quick-stop ramp ran its course) and is without power.
-        let cfg = cfg_with("axis[x].sim.effort_limit", 3.1);
-        let cell = cfg.to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
-        let mut k = 0u64;
-        loop {
-            let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
-            let s = lp.step_with(None, sp.as_ref(), None);
-            if s.status & st::FAULT_LATCHED != 0 {
-                break;
-            }
-            k += 1;
-            assert!(k < 20_000, "no fault");
-        }
+        let (mut lp, _) = an_axis_that_cannot_follow();
         assert!(
             lp.machine.axes()[0].velocity.abs() > 1.0,
             "moving when power was cut"
@@ -603,16 +590,9 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
         );
         let s = lp.until(None, 2000, |s| s.status & st::FAULT_LATCHED == 0);
         assert!(lp.machine.axes().iter().all(|a| a.velocity == 0.0));
-        assert!((0..3).all(|i| {
-            State::from_statusword(s.statusword[i]).is_some_and(|s| !s.power_stage_on())
-        }));
+        assert!(powered_off(&s));
         // The ramp ran: x went through Quick stop active (11), then Switch on disabled (12).
-        let x: Vec<f64> = lp
-            .events
-            .iter()
-            .filter(|e| e.code == code::DRIVE_TRANSITION && e.axis == 0)
-            .map(|e| e.value)
-            .collect();
+        let x = transitions(&lp, Some(0));
         assert!(x.ends_with(&[11.0, 12.0]), "{x:?}");
     });
 }
@@ -620,32 +600,23 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
 #[test]
 fn feedback_that_is_not_the_cells_latches() {
     integration_tests::attributable(|| {
-        // A drives' process for another machine (2 axes for a 3-axis cell) is refused at once.
+        // Servo's state after a cycle, enabled, on the feedback as `alter` changes it.
         let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut fb = lp.fb.expect("feedback");
-        fb.axes = 2;
-        fb.seq += 1;
-        let mut q = shm_schema::EventQueue::default();
-        let s = lp
-            .servo
-            .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
-            .1;
+        let on = |alter: fn(&mut shm_schema::DriveFeedbackV2)| {
+            let mut lp = Loop::enabled(&cell);
+            let mut fb = lp.fb.expect("feedback");
+            alter(&mut fb);
+            fb.seq += 1;
+            lp.servo_only(None, Some(&fb))
+        };
+        // A drives' process for another machine (2 axes for a 3-axis cell) is refused at once.
+        let s = on(|fb| fb.axes = 2);
         assert_eq!(
             (s.fault_code, s.fault_value, s.fault_limit),
             (code::FEEDBACK_MISMATCH, 2.0, 3.0)
         );
         // A drive that runs another mode than configured (CSP for a CST axis) while enabled.
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut fb = lp.fb.expect("feedback");
-        fb.mode_display[1] = cia402::Mode::Csp as i8;
-        fb.seq += 1;
-        let s = lp
-            .servo
-            .cycle(lp.now + 300_000, None, None, Some(&fb), &mut q)
-            .1;
+        let s = on(|fb| fb.mode_display[1] = cia402::Mode::Csp as i8);
         assert_eq!((s.fault_code, s.fault_axis), (code::FEEDBACK_MISMATCH, 1));
         assert_eq!((s.fault_value, s.fault_limit), (8.0, 10.0));
     });
@@ -654,16 +625,8 @@ fn feedback_that_is_not_the_cells_latches() {
 #[test]
 fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
     integration_tests::attributable(|| {
-        let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,90,90)\nEND");
-        for k in 0..2000u64 {
-            let sp = k.is_multiple_of(4).then(|| g.step(lp.now + 100_000, None));
-            lp.step_with(None, sp.as_ref(), None);
-        }
+        let (mut lp, _g) = two_seconds_into_a_move();
         let v0 = lp.state.cmd_velocity[0];
-        assert!(v0 > 10.0, "moving at {v0}");
         let s = lp.step_with(Some(RequestKind::Disable), None, None);
         assert_eq!(s.power, Power::Disabling as u8);
         assert!(
@@ -701,8 +664,7 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
         // trajgen publish one stamped 6 ms later. At 16 mm/s, taking it at its stamp would step
         // the command 0.1 mm in one cycle (found at 4 kHz on this VM); servo evaluates it back at
         // its own time instead.
-        let cell = crate::closed_loop::at_rate(250).to_shm();
-        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,40,0)\nEND");
+        let (_, mut lp, mut g, tg) = at_4_khz_with("MOVE(140,40,0)\nEND");
         for k in 0..12_000u64 {
             // One setpoint from the future of servo's cycle, at full speed.
             let ahead = if k == 10_000 { 6_000_000 } else { 0 };
@@ -717,15 +679,12 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
 fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
     integration_tests::attributable(|| {
         let cell = Config::default_cell().to_shm();
-        let mut lp = Loop::new(&cell);
-        lp.enable();
-        let mut g = generator(&cell, "MOVE(140,40,0)\nEND");
+        let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,40,0)\nEND");
         // A reader that sees every state finds exactly servo's latched figure.
         let mut seen = [0.0f64; 3];
         let mut last = None;
         for k in 0..12_000u64 {
-            let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
-            let s = lp.step_with(None, sp.as_ref(), None);
+            let s = follow(&mut lp, &mut g, k % tg == 0);
             for (m, e) in seen.iter_mut().zip(&s.following_error[..3]) {
                 *m = m.max(e.abs());
             }
@@ -741,8 +700,7 @@ fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
         }
         let mut first = None;
         for k in 0..4_000u64 {
-            let sp = (k % 4 == 0).then(|| g.step(lp.now + 100_000, None));
-            let s = lp.step_with(None, sp.as_ref(), None);
+            let s = follow(&mut lp, &mut g, k % tg == 0);
             if s.peak_program == 2 && first.is_none() {
                 first = Some(s);
             }
@@ -766,8 +724,7 @@ fn a_refused_first_setpoint_names_the_test_that_refused_it() {
     integration_tests::attributable(|| {
         let cell = Config::default_cell().to_shm();
         let refused = |x: f64, vx: f64| {
-            let mut lp = Loop::new(&cell);
-            lp.enable();
+            let mut lp = Loop::enabled(&cell);
             let sp = setpoint(&lp, 1, x, vx);
             let s = lp.step_with(None, Some(&sp), None);
             assert_ne!(s.status & st::SETPOINT_JUMP, 0, "{x}, {vx}: not refused");
@@ -858,8 +815,7 @@ impl Trapezoid {
 /// the commanded velocity per servo period over the run, per axis.
 fn trapezoids(targets: &[[f64; 3]], silent: impl Fn(u64) -> bool) -> [f64; 3] {
     let cell = Config::default_cell().to_shm();
-    let mut lp = Loop::new(&cell);
-    lp.enable();
+    let mut lp = Loop::enabled(&cell);
     let tg = cell.period_of("trajgen").expect("trajgen") / lp.period;
     let mut from = [40.0, 40.0, 0.0];
     let mut max_dv = [0.0f64; 3];

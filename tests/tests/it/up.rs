@@ -3,7 +3,8 @@
 
 use crate::drives::WATCHDOG;
 use integration_tests::{
-    assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, with_stall_room,
+    assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, wait_output,
+    with_stall_room,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -36,6 +37,12 @@ fn supervisor_in(netns: Option<&str>) -> Command {
 impl Up {
     pub(crate) fn start(test: &str, cfg: &Path) -> Self {
         Self::start_in(test, cfg, None)
+    }
+
+    /// [`Up::start`] of the default cell with room for the host's stalls ([`cell`], nothing
+    /// set).
+    pub(crate) fn default_cell(test: &str) -> Self {
+        Self::start(test, &cell(test, &[]))
     }
 
     /// [`Up::start`] in network namespace `netns` (every command of the test then runs
@@ -95,25 +102,80 @@ impl Up {
         run_with_watchdog(&mut cmd, WATCHDOG)
     }
 
-    /// Like [`Up::ctl`], and it must succeed; its stdout.
-    pub(crate) fn ok(&self, args: &[&str]) -> String {
-        let out = self.ctl(args);
+    /// `out` of `what`, a command against the cell, which must have succeeded: else a panic
+    /// with its exit status, its stdout and stderr, and the cell's log.
+    pub(crate) fn succeeded(&self, out: Output, what: &str) -> Output {
         assert!(
             out.status.success(),
-            "{args:?}: {}\n{}\nlog:\n{}",
+            "{what}: {}\n{}\n{}\nlog:\n{}",
+            out.status,
             String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr),
             self.log()
         );
+        out
+    }
+
+    /// Like [`Up::ctl`], and it must succeed; its stdout.
+    pub(crate) fn ok(&self, args: &[&str]) -> String {
+        let out = self.succeeded(self.ctl(args), &format!("{args:?}"));
         String::from_utf8_lossy(&out.stdout).to_string()
+    }
+
+    /// Like [`Up::ctl`], and it must exit with `code`; its stderr.
+    fn exits(&self, args: &[&str], code: i32) -> String {
+        let out = self.ctl(args);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(
+            out.status.code(),
+            Some(code),
+            "{args:?}: {}{err}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        err
     }
 
     /// Like [`Up::ctl`], and it must be refused (exit 2); its stderr.
     pub(crate) fn refused(&self, args: &[&str]) -> String {
-        let out = self.ctl(args);
-        let err = String::from_utf8_lossy(&out.stderr).to_string();
-        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
-        err
+        self.exits(args, 2)
+    }
+
+    /// Like [`Up::ctl`], and it must fail (exit 1); its stderr.
+    pub(crate) fn fails(&self, args: &[&str]) -> String {
+        self.exits(args, 1)
+    }
+
+    /// SIGKILLs the cell's process `name` (by the pid `status` gives); its pid.
+    pub(crate) fn kill(&self, name: &str) -> i64 {
+        let pid = process_in(&self.status(), name)["pid"]
+            .as_i64()
+            .unwrap_or_else(|| panic!("{name}'s pid"));
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid as i32),
+            nix::sys::signal::Signal::SIGKILL,
+        )
+        .unwrap_or_else(|e| panic!("kill {name}: {e}"));
+        pid
+    }
+
+    /// `reset`, then `start`, which must succeed.
+    pub(crate) fn reset_and_start(&self) {
+        self.ok(&["reset"]);
+        self.ok(&["start"]);
+    }
+
+    /// `exec PROGRAM --wait --json EXTRA`, under the watchdog.
+    pub(crate) fn exec_wait(&self, program: &Path, extra: &[&str]) -> Output {
+        let mut args = vec!["exec", program.to_str().expect("utf-8"), "--wait", "--json"];
+        args.extend_from_slice(extra);
+        self.ctl(&args)
+    }
+
+    /// [`Up::exec_wait`], which must succeed: the run's report.
+    pub(crate) fn report(&self, program: &Path, extra: &[&str]) -> Value {
+        let what = format!("exec {} --wait --json {extra:?}", program.display());
+        let out = self.succeeded(self.exec_wait(program, extra), &what);
+        serde_json::from_slice(&out.stdout).expect("the run's report")
     }
 
     /// `status --json`, checked against its type (every key known, none missing: the
@@ -244,15 +306,32 @@ impl Drop for Up {
     }
 }
 
-pub(crate) fn wait_child(mut c: Child) -> std::process::ExitStatus {
-    let start = Instant::now();
-    loop {
-        if let Some(s) = c.try_wait().expect("wait") {
-            return s;
-        }
-        assert!(start.elapsed() < WATCHDOG, "the supervisor did not exit");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+pub(crate) fn wait_child(c: Child) -> std::process::ExitStatus {
+    wait_output(c, WATCHDOG, "the supervisor did not exit").status
+}
+
+/// A program has moved the axes for more than a second, in `status --json` `s`.
+pub(crate) fn moving(s: &Value) -> bool {
+    s["supervisor"]["job"]["motion_time_s"]
+        .as_f64()
+        .is_some_and(|t| t > 1.0)
+}
+
+/// Process `name` in the supervisor's view of `status --json` `s` (null if it has none).
+pub(crate) fn process_in<'a>(s: &'a Value, name: &str) -> &'a Value {
+    s["supervisor"]["processes"]
+        .as_array()
+        .and_then(|p| p.iter().find(|p| p["name"] == name))
+        .unwrap_or(&Value::Null)
+}
+
+/// The value of IO `name` in `status --json` `s`.
+pub(crate) fn io_value(s: &Value, name: &str) -> Option<u64> {
+    s["io"]["entries"]
+        .as_array()?
+        .iter()
+        .find(|e| e["name"] == name)?["value"]
+        .as_u64()
 }
 
 /// The default cell with room for the host's stalls, its Modbus server on any free port (the

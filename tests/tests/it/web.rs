@@ -5,12 +5,12 @@
 //! across the cell going down and coming up again. A screenshot is saved.
 
 use crate::drives::WATCHDOG;
-use crate::up::{Up, cell};
-use integration_tests::{leftovers, scratch, supervisor};
+use crate::up::{Up, cell, moving};
+use integration_tests::{exited, leftovers, scratch, supervisor};
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
-use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// The page in Chromium, one command and one JSON answer at a time.
@@ -68,37 +68,78 @@ impl Drop for Browser {
     }
 }
 
-/// `supervisor web`, stopped (SIGTERM) when the test ends, whatever happens.
-struct Web(Child);
+/// A `supervisor web`, stopped as a user stops it (SIGTERM: it lets go of the instance)
+/// when dropped, so a failing test leaves no server behind either.
+pub(crate) struct View(Child);
 
-impl Drop for Web {
-    fn drop(&mut self) {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(self.0.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
-        let _ = self.0.wait();
+impl View {
+    /// SIGTERM (unless it has ended), then its exit status once it has ended; killed if it is
+    /// still running after the watchdog.
+    fn stop(&mut self) -> std::io::Result<ExitStatus> {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(self.0.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+        let start = Instant::now();
+        while matches!(self.0.try_wait(), Ok(None)) && start.elapsed() < WATCHDOG {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        self.0.wait()
     }
 }
 
-/// `supervisor web` on a free port: the process and the page's address.
-fn serve(inst: &str) -> (Web, String) {
+impl Drop for View {
+    fn drop(&mut self) {
+        let _ = self.stop();
+    }
+}
+
+/// `supervisor web` of `inst` on a free loopback port, with `extra` arguments, its stderr to
+/// `stderr`: the server and its address (`host:port`).
+pub(crate) fn serve(inst: &str, extra: &[&str], stderr: Stdio) -> (View, String) {
     let mut web = supervisor()
         .args(["web", "--instance", inst, "--listen", "127.0.0.1:0"])
+        .args(extra)
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .expect("supervisor web");
-    let mut line = String::new();
-    BufReader::new(web.stdout.as_mut().expect("stdout"))
-        .read_line(&mut line)
-        .expect("read");
-    let url = line
-        .split_whitespace()
-        .find(|w| w.starts_with("http://"))
+    let line = integration_tests::first_line(&mut web);
+    // "serving instance … on http://127.0.0.1:port/"
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .and_then(|a| a.trim_end().strip_suffix('/'))
         .unwrap_or_else(|| panic!("no address in {line:?}"))
         .to_string();
-    (Web(web), url)
+    (View(web), addr)
+}
+
+/// The page at `addr` in Chromium ([`Browser::open`]), which must open without an error.
+fn page(addr: &str) -> Browser {
+    let (page, ready) = Browser::open(&format!("http://{addr}/"));
+    assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+    page
+}
+
+/// Runs `program` on `up` and, once it moves, asks the page for `sample` (`sample N`: what
+/// the page drew over N seconds): the samples taken while the program moved.
+fn samples_while_moving(up: &Up, page: &mut Browser, program: &Path, sample: &str) -> Vec<Value> {
+    up.ok(&["exec", program.to_str().expect("utf-8")]);
+    up.until("moving", moving);
+    let a = page.ask(sample);
+    let samples: Vec<Value> = a["samples"]
+        .as_array()
+        .expect("samples")
+        .iter()
+        .filter(|s| s["state"] == 1)
+        .cloned()
+        .collect();
+    assert!(samples.len() >= 5, "too few samples while moving: {a}");
+    samples
 }
 
 #[test]
@@ -108,29 +149,15 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
         let inst = up.inst.clone();
-        let (mut web, url) = serve(&inst);
-        let (mut page, ready) = Browser::open(&url);
-        assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+        let (mut web, addr) = serve(&inst, &[], Stdio::inherit());
+        let mut page = page(&addr);
         // A program: x from 40 to 140 mm and back; the drawn tool follows the measured position.
         let short = scratch(
             test,
             "short.prog",
             "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
         );
-        up.ok(&["exec", short.to_str().expect("utf-8")]);
-        up.until("moving", |s| {
-            s["supervisor"]["job"]["motion_time_s"]
-                .as_f64()
-                .is_some_and(|t| t > 1.0)
-        });
-        let a = page.ask("sample 3");
-        let samples: Vec<&Value> = a["samples"]
-            .as_array()
-            .expect("samples")
-            .iter()
-            .filter(|s| s["state"] == 1)
-            .collect();
-        assert!(samples.len() >= 5, "too few samples while moving: {a}");
+        let samples = samples_while_moving(&up, &mut page, &short, "sample 3");
         let xs: Vec<f64> = samples
             .iter()
             .map(|s| s["drawn"][0].as_f64().expect("drawn x"))
@@ -264,12 +291,7 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
         let bye = page.ask("quit");
         assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
         drop(page);
-        nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(web.0.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        )
-        .expect("kill");
-        let status = web.0.wait().expect("web");
+        let status = web.stop().expect("web");
         assert!(status.success(), "web exited with {status}");
         up.down();
     });
@@ -303,26 +325,12 @@ fn the_page_draws_the_five_bar_through_its_kinematics() {
         let kin =
             kinematics::build("five-bar", &kinematics::Params(&params)).expect("the five-bar");
         let up = Up::start(test, &cfg);
-        let (web, url) = serve(&up.inst);
-        let (mut page, ready) = Browser::open(&url);
-        assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+        let (web, addr) = serve(&up.inst, &[], Stdio::inherit());
+        let mut page = page(&addr);
         let hello = page.ask("eval rtc.hello.kinematics")["value"].clone();
         assert_eq!(hello, "five-bar");
         let prog = integration_tests::examples().join("five-bar.prog");
-        up.ok(&["exec", prog.to_str().expect("utf-8")]);
-        up.until("moving", |s| {
-            s["supervisor"]["job"]["motion_time_s"]
-                .as_f64()
-                .is_some_and(|t| t > 1.0)
-        });
-        let a = page.ask("sample 2");
-        let samples: Vec<&Value> = a["samples"]
-            .as_array()
-            .expect("samples")
-            .iter()
-            .filter(|s| s["state"] == 1)
-            .collect();
-        assert!(samples.len() >= 5, "too few samples while moving: {a}");
+        let samples = samples_while_moving(&up, &mut page, &prog, "sample 2");
         for s in &samples {
             let q: Vec<f64> = s["joints"]
                 .as_array()
@@ -368,7 +376,6 @@ fn web_refuses_a_network_address_without_a_token() {
             .args(["web", "--instance", "nobody", "--listen", "0.0.0.0:0"])
             .output()
             .expect("web");
-        assert_eq!(out.status.code(), Some(2));
-        assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
+        assert!(exited(&out, 2).contains("--token"));
     });
 }
