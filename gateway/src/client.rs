@@ -253,6 +253,17 @@ fn run(cli: Cli) -> Result<u8, Failure> {
     let session = join(&file)?;
     // Let the links come up before asking (a get on a line not yet joined hears nothing).
     std::thread::sleep(Duration::from_millis(500));
+    let info = session.info();
+    let linked = info.peers_zid().wait().count() + info.routers_zid().wait().count();
+    if linked == 0 && !file.connect.is_empty() {
+        return Err((
+            1,
+            format!(
+                "no endpoint of the line let this client in ({}): the line is down, or it refused this client's certificate or password",
+                file.connect.join(", ")
+            ),
+        ));
+    }
     match ask {
         Ask::Command((cell, command)) => send(&session, &file, &cell_name(&cell)?, command, json),
         Ask::Cells => cells(&session, json),

@@ -103,8 +103,14 @@ fn private(test: &str, name: &str, text: &str) -> PathBuf {
 }
 
 /// Cell `k` of the line, `press-<k>`: the default cell with room for stalls, its gateway
-/// listening on its link.
+/// listening on its link in the clear.
 fn cell_config(test: &str, k: usize, users: &Path) -> PathBuf {
+    cell_config_with(test, k, users, "tcp", "")
+}
+
+/// [`cell_config`] listening on a `proto` endpoint, `more` appended to `[network]` (its
+/// sub-tables).
+fn cell_config_with(test: &str, k: usize, users: &Path, proto: &str, more: &str) -> PathBuf {
     let mut gateway = Table::new();
     gateway.insert("name", value("gateway"));
     gateway.insert(
@@ -124,17 +130,17 @@ fn cell_config(test: &str, k: usize, users: &Path) -> PathBuf {
     network.insert(
         "listen",
         value(integration_tests::toml::strings(&[&format!(
-            "tcp/10.77.{}.2:7447",
+            "{proto}/10.77.{}.2:7447",
             k + 1
         )])),
     );
-    network.insert("plain", value(true));
+    network.insert("plain", value(proto == "tcp"));
     network.insert("users", value(users.display().to_string()));
     network.insert("lease", value(LEASE_S));
     let src = CellToml::parse(&with_stall_room(&integration_tests::default_cell()))
         .push("process", gateway)
         .to_string();
-    let src = format!("{src}\n[network]\n{network}");
+    let src = format!("{src}\n[network]\n{network}\n{more}");
     scratch(test, &format!("cell-{k}.toml"), &src)
 }
 
@@ -365,4 +371,137 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     hosts.link(0, "up");
     until_listed(&hosts, &victor, &["press-0", "press-1"], patience);
     drop((a, b));
+}
+
+/// Runs `openssl` with `args` in `dir`; it must succeed.
+fn openssl(dir: &Path, args: &[&str]) {
+    let out = Command::new("openssl")
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("this test makes certificates with openssl (apt-get install openssl)");
+    assert!(out.status.success(), "openssl {args:?}: {}", text(&out));
+}
+
+/// In `dir`: a certificate authority `<ca>.pem` (made unless there), and `<name>.pem` and
+/// its key signed by it for IP `ip`; the key its owner's alone.
+fn certificate(dir: &Path, ca: &str, name: &str, ip: &str) {
+    let ec = [
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:P-256",
+        "-nodes",
+    ];
+    let (ca_key, ca_pem) = (format!("{ca}.key"), format!("{ca}.pem"));
+    if !dir.join(&ca_pem).exists() {
+        let subj = format!("/CN={ca}");
+        let mut args = vec!["req", "-x509"];
+        args.extend(ec);
+        args.extend([
+            "-days", "30", "-subj", &subj, "-keyout", &ca_key, "-out", &ca_pem,
+        ]);
+        openssl(dir, &args);
+    }
+    let (key, csr, pem) = (
+        format!("{name}.key"),
+        format!("{name}.csr"),
+        format!("{name}.pem"),
+    );
+    let subj = format!("/CN={name}");
+    let mut args = vec!["req"];
+    args.extend(ec);
+    args.extend(["-subj", &subj, "-keyout", &key, "-out", &csr]);
+    openssl(dir, &args);
+    let san = dir.join(format!("{name}.san"));
+    std::fs::write(&san, format!("subjectAltName=IP:{ip}\n")).expect("san");
+    openssl(
+        dir,
+        &[
+            "x509",
+            "-req",
+            "-in",
+            &csr,
+            "-CA",
+            &ca_pem,
+            "-CAkey",
+            &ca_key,
+            "-CAcreateserial",
+            "-days",
+            "30",
+            "-extfile",
+            san.to_str().expect("path"),
+            "-out",
+            &pem,
+        ],
+    );
+    std::fs::set_permissions(dir.join(&key), std::fs::Permissions::from_mode(0o600))
+        .expect("chmod");
+}
+
+#[test]
+fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
+    let test = "line_tls";
+    let hosts = Hosts::new(test, 1);
+    let users = private(test, "users.toml", USERS);
+    let dir = users.parent().expect("scratch folder").to_path_buf();
+    certificate(&dir, "line-ca", "press-0", "10.77.1.2");
+    certificate(&dir, "line-ca", "room", "10.77.1.1");
+    // A certificate the line's authority never signed.
+    certificate(&dir, "other-ca", "stranger", "10.77.1.1");
+    private(test, "press-0.password", "press-0-password\n");
+    private(test, "passwords", "room:room-password\n");
+    let at = |f: &str| dir.join(f).display().to_string();
+    let more = format!(
+        "[network.tls]\nroot_ca = \"{}\"\ncertificate = \"{}\"\nprivate_key = \"{}\"\n\n\
+         [network.login]\nuser = \"press-0\"\npassword_file = \"{}\"\ndictionary_file = \"{}\"\n",
+        at("line-ca.pem"),
+        at("press-0.pem"),
+        at("press-0.key"),
+        at("press-0.password"),
+        at("passwords")
+    );
+    let cfg = cell_config_with(test, 0, &users, "tls", &more);
+    let _cell = Up::start_in(&format!("{test}-c"), &cfg, Some(&hosts.cells[0]));
+    let room_file = |name: &str, cert: &str, password: &str| {
+        private(test, &format!("{name}.password"), &format!("{password}\n"));
+        scratch(
+            test,
+            &format!("{name}.line.toml"),
+            &format!(
+                "connect = [\"tls/10.77.1.2:7447\"]\n\n[tls]\nroot_ca = \"{}\"\n\
+                 certificate = \"{}\"\nprivate_key = \"{}\"\n\n\
+                 [login]\nuser = \"room\"\npassword_file = \"{}\"\n",
+                at("line-ca.pem"),
+                at(&format!("{cert}.pem")),
+                at(&format!("{cert}.key")),
+                at(&format!("{name}.password"))
+            ),
+        )
+    };
+    // The line's own: its authority's certificate and the room's password.
+    let own = room_file("own", "room", "room-password");
+    until_listed(&hosts, &own, &["press-0"], Duration::from_secs(30));
+    // Refused at the link, and said so: a certificate of another authority, a wrong password.
+    for (name, cert, password) in [
+        ("stranger", "stranger", "room-password"),
+        ("guesser", "room", "not-the-password"),
+    ] {
+        let out = room(&hosts, &room_file(name, cert, password), &["cells"]);
+        assert_eq!(out.status.code(), Some(1), "{name}: {}", text(&out));
+        assert!(
+            String::from_utf8_lossy(&out.stderr)
+                .contains("no endpoint of the line let this client in"),
+            "{name}: {}",
+            text(&out)
+        );
+    }
+    // The endpoint in the clear is no way in either.
+    let clear = scratch(
+        test,
+        "clear.line.toml",
+        "connect = [\"tcp/10.77.1.2:7447\"]\nplain = true\n",
+    );
+    let out = room(&hosts, &clear, &["cells"]);
+    assert_eq!(out.status.code(), Some(1), "in the clear: {}", text(&out));
 }
