@@ -8,7 +8,7 @@ use gateway::auth::{Envelope, sign};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
 use gateway::link::{Link, secret_file};
-use gateway::wire::{Answer, EventMessage, StatusMessage};
+use gateway::wire::{Answer, EventMessage, Missed, StatusMessage};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::ffi::OsString;
@@ -374,7 +374,7 @@ fn events(
         .wait()
         .map_err(|e| (1, format!("cannot subscribe: {e}")))?;
     let end = seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)));
-    let mut last: Option<u64> = None;
+    let mut last: Option<EventMessage> = None;
     loop {
         let wait = match end {
             Some(e) => match e.checked_duration_since(std::time::Instant::now()) {
@@ -389,16 +389,28 @@ fn events(
         let Ok(m) = serde_json::from_slice::<EventMessage>(&sample.payload().to_bytes()) else {
             continue;
         };
-        // Publications missed on the network, and events the gateway could not forward.
-        let missed = last.map_or(0, |l| m.seq.saturating_sub(l + 1)) + m.lost;
-        if missed > 0 {
+        let said = match m.missed_since(last.as_ref()) {
+            Missed::Nothing => None,
+            Missed::Events(n) => Some((n.to_string(), format!("... {n} events lost"))),
+            Missed::Restarted(n) => Some((
+                "\"unknown\"".into(),
+                format!(
+                    "... the cell's gateway started again: the events while it was away are not known{}",
+                    if n > 0 {
+                        format!(", and {n} lost since")
+                    } else {
+                        String::new()
+                    }
+                ),
+            )),
+        };
+        if let Some((count, words)) = said {
             if json {
-                println!("{}", serde_json::json!({ "lost": missed }));
+                println!("{{\"lost\": {count}}}");
             } else {
-                println!("... {missed} events lost");
+                println!("{words}");
             }
         }
-        last = Some(m.seq);
         if json {
             println!("{}", serde_json::to_string(&m.event).unwrap_or_default());
         } else {
@@ -412,6 +424,7 @@ fn events(
                 e.text
             );
         }
+        last = Some(m);
     }
 }
 

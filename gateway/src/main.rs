@@ -179,7 +179,9 @@ fn serve(
         .and_then(|h| h.into_string().ok())
         .unwrap_or_default();
     let _alive = session.liveliness().declare_token(name.alive()).wait()?;
-    let latest: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+    // The latest status: what a `get` of the status key and a viewer's `status` command are
+    // answered from (neither reaches the supervisor).
+    let latest: Latest = Arc::default();
     let status_pub = session
         .declare_publisher(name.status())
         .congestion_control(CongestionControl::Drop)
@@ -189,7 +191,10 @@ fn serve(
     let _status_queryable = session
         .declare_queryable(name.status())
         .callback(move |q| {
-            let bytes = for_query.lock().map(|g| g.clone()).unwrap_or_default();
+            let bytes = for_query
+                .lock()
+                .ok()
+                .and_then(|g| g.as_ref().map(|m| m.0.clone()));
             if let Some(b) = bytes {
                 let _ = q.reply(&status_key, b).wait();
             }
@@ -202,6 +207,7 @@ fn serve(
     let control = session.declare_queryable(name.control()).wait()?;
     let gate = Mutex::new(Gate::new(users, name.as_str()));
     let control_instance = *instance;
+    let for_control = latest.clone();
     std::thread::Builder::new()
         .name("control".into())
         .spawn(move || {
@@ -221,7 +227,19 @@ fn serve(
                 let answer = match admitted {
                     Ok(Ok(a)) => {
                         tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
-                        ask(&control_instance, &a.command)
+                        match a.command {
+                            Command::Status {} => for_control
+                                .lock()
+                                .ok()
+                                .and_then(|g| g.as_ref().map(|m| m.1.clone()))
+                                .map_or_else(
+                                    || Answer::Failed {
+                                        reason: "no status of the cell yet".into(),
+                                    },
+                                    |status| Answer::Status { status },
+                                ),
+                            ref other => ask(&control_instance, other),
+                        }
                     }
                     Ok(Err(refusal)) => {
                         tracing::warn!("a command refused: {refusal}");
@@ -245,6 +263,7 @@ fn serve(
     let period = Duration::from_secs_f64(net.status_period);
     let mut next_status = Instant::now();
     let mut seq = 0u64;
+    let started_ms = now_ms();
     let t0 = runtime::time::now_ns();
     loop {
         if runtime::signals::stop_requested() {
@@ -255,6 +274,7 @@ fn serve(
             Ok((e, lost)) => {
                 seq += 1;
                 let m = EventMessage {
+                    gateway_started_ms: started_ms,
                     seq,
                     lost,
                     event: control_plane::event::event(&e, axes, t0),
@@ -279,13 +299,16 @@ fn serve(
                 };
                 let bytes = serde_json::to_vec(&m).unwrap_or_default();
                 if let Ok(mut g) = latest.lock() {
-                    *g = Some(bytes.clone());
+                    *g = Some((bytes.clone(), m.status));
                 }
                 status_pub.put(bytes).wait()?;
             }
         }
     }
 }
+
+/// The latest status message, as published and typed.
+type Latest = Arc<Mutex<Option<(Vec<u8>, Box<control_plane::status::Status>)>>>;
 
 /// An admitted command, asked of the cell.
 fn ask(instance: &InstanceName, command: &Command) -> Answer {

@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! rtc/v1/<cell>/status   {"cell": "press-1", "host": "hostname", "status": {...status --json...}}
-//! rtc/v1/<cell>/events   {"seq": 7, "lost": 0, "event": {...one event of events --json...}}
+//! rtc/v1/<cell>/events   {"gateway_started_ms": 1764201600000, "seq": 7, "lost": 0,
+//!                         "event": {...one event of events --json...}}
 //! rtc/v1/<cell>/control  the answer: {"answer": "done", "message": "..."}
 //!                                    {"answer": "refused", "by": "gateway" | "cell", "reason": "..."}
 //!                                    {"answer": "failed", "reason": "..."}
@@ -33,12 +34,44 @@ pub struct StatusMessage {
 /// took them). Neither loss is silent.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EventMessage {
+    /// When the gateway started (ms since the Unix epoch): a new value is a gateway started
+    /// again, and the events between its two lives were not forwarded.
+    pub gateway_started_ms: u64,
     /// This publication's number, from 1 as the gateway starts.
     pub seq: u64,
     /// Events lost before this one, on the gateway's side.
     pub lost: u64,
     /// The event, as `supervisor events --json` prints it.
     pub event: Event,
+}
+
+/// What a subscriber missed between two event messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Missed {
+    /// Nothing.
+    Nothing,
+    /// This many events: publications the network lost, and events the gateway could not
+    /// forward.
+    Events(u64),
+    /// The gateway started again: the events while it was away are not known (and `lost`
+    /// events of its new life).
+    Restarted(u64),
+}
+
+impl EventMessage {
+    /// What was missed between `previous` (the last message taken, if any) and this one.
+    pub fn missed_since(&self, previous: Option<&EventMessage>) -> Missed {
+        match previous {
+            None => Missed::Nothing,
+            Some(p) if p.gateway_started_ms != self.gateway_started_ms => {
+                Missed::Restarted(self.lost)
+            }
+            Some(p) => match self.seq.saturating_sub(p.seq + 1) + self.lost {
+                0 => Missed::Nothing,
+                n => Missed::Events(n),
+            },
+        }
+    }
 }
 
 /// Who refused a command.
@@ -117,5 +150,53 @@ impl Answer {
             Self::Refused { .. } => 2,
             Self::Failed { .. } => 1,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn message(started: u64, seq: u64, lost: u64) -> EventMessage {
+        let event = serde_json::from_str(
+            r#"{"t_s": 1.0, "stamp_ns": 1, "source": "servo", "seq": 1, "severity": "info",
+                "code": 303, "name": "disabling", "axis": null, "value": 0.0, "limit": 0.0,
+                "text": ""}"#,
+        )
+        .expect("an event");
+        EventMessage {
+            gateway_started_ms: started,
+            seq,
+            lost,
+            event,
+        }
+    }
+
+    #[test]
+    fn no_loss_of_events_goes_unsaid() {
+        let first = message(10, 1, 0);
+        assert_eq!(first.missed_since(None), Missed::Nothing);
+        assert_eq!(
+            message(10, 2, 0).missed_since(Some(&first)),
+            Missed::Nothing
+        );
+        // Publications lost on the network, events the gateway could not forward, both.
+        assert_eq!(
+            message(10, 5, 0).missed_since(Some(&first)),
+            Missed::Events(3)
+        );
+        assert_eq!(
+            message(10, 2, 7).missed_since(Some(&first)),
+            Missed::Events(7)
+        );
+        assert_eq!(
+            message(10, 4, 7).missed_since(Some(&first)),
+            Missed::Events(9)
+        );
+        // A gateway started again: its numbers start afresh, the gap is unknown.
+        assert_eq!(
+            message(20, 1, 0).missed_since(Some(&first)),
+            Missed::Restarted(0)
+        );
     }
 }

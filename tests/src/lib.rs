@@ -1,6 +1,7 @@
 //! Helpers for the integration tests: the real binaries, unique instance names, a watchdog,
 //! and the check that an instance left nothing behind.
 
+pub mod load;
 pub mod toml;
 
 use std::path::{Path, PathBuf};
@@ -12,8 +13,11 @@ pub use toml::CellToml;
 
 /// The folder holding the workspace's binaries (same profile as the tests). `cargo test
 /// --workspace` has built them already (each process crate and the supervisor test their own
-/// command line, so cargo builds their binaries with the tests) and the `cargo build --bins`
-/// here finds them fresh; it builds them when a test binary runs on its own.
+/// command line, so cargo builds their binaries with the tests) and the `cargo test --no-run`
+/// here finds them fresh; it builds them when a test binary runs on its own. It is the tests'
+/// own build, not `cargo build --bins`: without the dev-dependencies some crates would get
+/// other features (proptest's regex-syntax, which Zenoh's logging uses too), and every
+/// binary would be built again while the tests run.
 pub fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -27,12 +31,12 @@ pub fn bin_dir() -> &'static Path {
         let release = dir.file_name().is_some_and(|n| n == "release");
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
-        cmd.args(["build", "--bins", "--workspace"]);
+        cmd.args(["test", "--no-run", "--workspace"]);
         if release {
             cmd.arg("--release");
         }
-        let status = cmd.status().expect("run cargo build");
-        assert!(status.success(), "cargo build --bins failed");
+        let status = cmd.status().expect("run cargo test --no-run");
+        assert!(status.success(), "cargo test --no-run failed");
         dir
     })
 }
