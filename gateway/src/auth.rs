@@ -29,7 +29,9 @@ use std::fmt;
 /// How far a command's time may be from the gateway's clock (ms), either way.
 pub const WINDOW_MS: u64 = 30_000;
 
-/// Commands remembered against replay, at most (within [`WINDOW_MS`]).
+/// Commands of one user remembered against replay, at most (within [`WINDOW_MS`]): one
+/// user's flood refuses that user's commands only. Reads are not remembered (a replayed read
+/// changes nothing).
 pub const REMEMBERED: usize = 4096;
 
 /// The shortest secret.
@@ -215,7 +217,7 @@ pub enum Refusal {
     },
     /// Its nonce was seen within the window.
     Replayed,
-    /// Too many commands within the window to remember them all.
+    /// Too many commands of this user within the window to remember them all.
     TooMany,
     /// The user's role does not allow it.
     NotAllowed {
@@ -244,7 +246,7 @@ impl fmt::Display for Refusal {
             Self::Replayed => f.write_str("this command was taken already (its nonce is used)"),
             Self::TooMany => write!(
                 f,
-                "more than {REMEMBERED} commands in {} s: refused until the window moves on",
+                "more than {REMEMBERED} commands of this user in {} s: refused until the window moves on",
                 WINDOW_MS / 1000
             ),
             Self::NotAllowed { user, role, op } => write!(
@@ -334,18 +336,26 @@ impl Gate {
         {
             return Err(Refusal::Replayed);
         }
-        if self.seen.len() >= REMEMBERED {
-            return Err(Refusal::TooMany);
-        }
-        if envelope.command.changes_the_cell() && role != Role::Operator {
+        let changes = envelope.command.changes_the_cell();
+        if changes && role != Role::Operator {
             return Err(Refusal::NotAllowed {
                 user: envelope.user,
                 role,
                 op: envelope.command.op(),
             });
         }
-        self.seen
-            .push_back((envelope.time_ms, envelope.user.clone(), envelope.nonce));
+        if changes {
+            let theirs = self
+                .seen
+                .iter()
+                .filter(|(_, u, _)| *u == envelope.user)
+                .count();
+            if theirs >= REMEMBERED {
+                return Err(Refusal::TooMany);
+            }
+            self.seen
+                .push_back((envelope.time_ms, envelope.user.clone(), envelope.nonce));
+        }
         Ok(Admitted {
             user: envelope.user,
             role,
@@ -388,6 +398,40 @@ secret = "victor's secret, long enough"
         .expect("json");
         let sig = sign(secret.as_bytes(), &payload);
         (payload, sig)
+    }
+
+    #[test]
+    fn one_users_flood_refuses_that_user_alone() {
+        let users = Users::parse(USERS, "users.toml").expect("users");
+        let mut gate = Gate::new(users, "press-1");
+        let now = 1_800_000_000_000;
+        let alice = "alice's secret, long enough";
+        let victor = "victor's secret, long enough";
+        // A viewer's reads, any number, remembered by nobody.
+        for n in 0..2 * REMEMBERED as u64 {
+            let (p, s) = signed("victor", victor, "press-1", now, n, Command::Status {});
+            gate.admit(&p, &s, now).expect("a read");
+        }
+        // An operator's commands: remembered up to the limit, then refused for that user.
+        for n in 0..REMEMBERED as u64 {
+            let (p, s) = signed("alice", alice, "press-1", now, n, Command::Pause {});
+            gate.admit(&p, &s, now).expect("a command");
+        }
+        let (p, s) = signed("alice", alice, "press-1", now, 1 << 40, Command::Pause {});
+        assert_eq!(gate.admit(&p, &s, now), Err(Refusal::TooMany));
+        let (p, s) = signed(
+            "victor",
+            victor,
+            "press-1",
+            now,
+            1 << 40,
+            Command::Status {},
+        );
+        gate.admit(&p, &s, now).expect("victor still reads");
+        // The window moves on.
+        let later = now + 2 * WINDOW_MS + 1;
+        let (p, s) = signed("alice", alice, "press-1", later, 1 << 41, Command::Pause {});
+        gate.admit(&p, &s, later).expect("alice again");
     }
 
     #[test]

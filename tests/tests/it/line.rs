@@ -173,6 +173,13 @@ fn room(hosts: &Hosts, file: &Path, args: &[&str]) -> Output {
     run_with_watchdog(&mut cmd, WATCHDOG)
 }
 
+/// [`room`], which must succeed; its output.
+fn ok(hosts: &Hosts, file: &Path, args: &[&str]) -> Output {
+    let out = room(hosts, file, args);
+    assert!(out.status.success(), "{args:?}: {}", text(&out));
+    out
+}
+
 fn text(out: &Output) -> String {
     format!(
         "exit {:?}\n{}{}",
@@ -250,8 +257,7 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     }
 
     // A cell's status crossed the link: its instance, its processes.
-    let out = room(&hosts, &victor, &["status", "press-1", "--json"]);
-    assert!(out.status.success(), "status: {}", text(&out));
+    let out = ok(&hosts, &victor, &["status", "press-1", "--json"]);
     let s: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
     assert_eq!(s["instance"], b.inst.as_str());
     assert!(!process_in(&s, "gateway").is_null(), "{s}");
@@ -280,26 +286,75 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     // The operator's commands reach the right cell and are acknowledged: a program on press-0
     // paused, resumed and aborted there; press-1 e-stopped, press-0 not.
     let program = integration_tests::small_triangle(test);
-    let out = room(
+    ok(
         &hosts,
         &olga,
         &["exec", "press-0", program.to_str().expect("path")],
     );
-    assert!(out.status.success(), "exec: {}", text(&out));
     a.until("the program moving", crate::up::moving);
-    let out = room(&hosts, &olga, &["pause", "press-0"]);
-    assert!(out.status.success(), "pause: {}", text(&out));
+    let out = ok(&hosts, &olga, &["pause", "press-0"]);
     assert!(
         String::from_utf8_lossy(&out.stdout).contains("paused"),
         "{}",
         text(&out)
     );
     a.until("paused", |s| s["supervisor"]["job"]["paused"] == true);
-    let out = room(&hosts, &olga, &["resume", "press-0"]);
-    assert!(out.status.success(), "resume: {}", text(&out));
+    ok(&hosts, &olga, &["resume", "press-0"]);
     a.until("resumed", |s| s["supervisor"]["job"]["paused"] == false);
-    let out = room(&hosts, &olga, &["abort", "press-0"]);
-    assert!(out.status.success(), "abort: {}", text(&out));
+    ok(&hosts, &olga, &["abort", "press-0"]);
+    a.until("aborted", |s| s["supervisor"]["job"].is_null());
+
+    // A client written from docs/network.md alone (Python, eclipse-zenoh) lists the cells,
+    // reads a status and pauses a program; a viewer's pause refused by the gateway.
+    let python = |user: &str, args: &[&str]| {
+        // The secret line_file wrote beside the users file.
+        let secret = users.with_file_name(format!("{user}.secret"));
+        let mut cmd = Command::new("ip");
+        cmd.args(["netns", "exec", &hosts.room, "python3"])
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/line_client.py"))
+            .args([
+                "--connect",
+                "tcp/10.77.1.2:7447",
+                "--connect",
+                "tcp/10.77.2.2:7447",
+            ])
+            .args(["--user", user, "--secret-file"])
+            .arg(secret)
+            .args(args);
+        run_with_watchdog(&mut cmd, WATCHDOG)
+    };
+    let out = python("victor", &["cells"]);
+    assert!(out.status.success(), "python cells: {}", text(&out));
+    let listed: Value = serde_json::from_slice(&out.stdout).expect("python cells JSON");
+    assert_eq!(
+        names(listed.as_array().expect("a list")),
+        ["press-0", "press-1"]
+    );
+    let out = python("victor", &["status", "press-1"]);
+    assert!(out.status.success(), "python status: {}", text(&out));
+    let s: Value = serde_json::from_slice(&out.stdout).expect("python status JSON");
+    assert_eq!(s["instance"], b.inst.as_str());
+    let out = python("victor", &["pause", "press-0"]);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "python viewer pause: {}",
+        text(&out)
+    );
+    ok(
+        &hosts,
+        &olga,
+        &["exec", "press-0", program.to_str().expect("path")],
+    );
+    a.until("the program moving", crate::up::moving);
+    let out = python("olga", &["pause", "press-0"]);
+    assert!(out.status.success(), "python pause: {}", text(&out));
+    let answer: Value = serde_json::from_slice(&out.stdout).expect("python answer JSON");
+    assert_eq!(answer["answer"], "done", "{answer}");
+    a.until("paused by python", |s| {
+        s["supervisor"]["job"]["paused"] == true
+    });
+    ok(&hosts, &olga, &["abort", "press-0"]);
     a.until("aborted", |s| s["supervisor"]["job"].is_null());
 
     // press-1's events as they happen, across its link: its e-stop's among them.
@@ -313,12 +368,11 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     let follower = std::thread::spawn(move || run_with_watchdog(&mut follow, WATCHDOG));
     // The follower joins the line and subscribes (it waits half a second before it listens).
     std::thread::sleep(Duration::from_secs(3));
-    let out = room(
+    ok(
         &hosts,
         &olga,
         &["estop", "press-1", "--reason", "from the room"],
     );
-    assert!(out.status.success(), "estop: {}", text(&out));
     let s = b.until("the e-stop latched", |s| s["estop"]["latched"] == true);
     assert!(
         s["estop"]["reason"]
