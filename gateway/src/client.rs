@@ -72,7 +72,14 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Lists the cells on the line: name, host, state, program, e-stop.
-    Cells,
+    Cells {
+        /// Instead: a line each time a cell comes onto the line or leaves it, until Ctrl-C.
+        #[arg(long)]
+        watch: bool,
+        /// With --watch: stop after this many seconds.
+        #[arg(long, requires = "watch")]
+        seconds: Option<f64>,
+    },
     /// A cell's status.
     Status {
         /// The cell's name on the line.
@@ -246,7 +253,11 @@ fn run(cli: Cli) -> Result<u8, Failure> {
     // A command is checked (its program read) before the line is joined.
     let ask = match cli.cmd {
         Cmd::Command(r) => Ask::Command(r.split().map_err(input)?),
-        Cmd::Cells => Ask::Cells,
+        Cmd::Cells { watch: false, .. } => Ask::Cells,
+        Cmd::Cells {
+            watch: true,
+            seconds,
+        } => Ask::Watch(seconds),
         Cmd::Status { cell } => Ask::Status(cell_name(&cell)?),
         Cmd::Events { cell, seconds } => Ask::Events(cell_name(&cell)?, seconds),
     };
@@ -267,6 +278,7 @@ fn run(cli: Cli) -> Result<u8, Failure> {
     match ask {
         Ask::Command((cell, command)) => send(&session, &file, &cell_name(&cell)?, command, json),
         Ask::Cells => cells(&session, json),
+        Ask::Watch(seconds) => watch(&session, seconds, json),
         Ask::Status(cell) => status(&session, &cell, json),
         Ask::Events(cell, seconds) => events(&session, &cell, seconds, json),
     }
@@ -276,6 +288,7 @@ fn run(cli: Cli) -> Result<u8, Failure> {
 enum Ask {
     Command((String, Command)),
     Cells,
+    Watch(Option<f64>),
     Status(CellName),
     Events(CellName, Option<f64>),
 }
@@ -300,6 +313,57 @@ fn statuses(
         }
     }
     Ok(out)
+}
+
+/// Now, in ms since the Unix epoch.
+fn unix_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// `cells --watch`: the line's cells as they come and go (their presence tokens), from the
+/// ones there now, until Ctrl-C or `seconds`.
+fn watch(session: &zenoh::Session, seconds: Option<f64>, json: bool) -> Result<u8, Failure> {
+    use zenoh::sample::SampleKind;
+    let sub = session
+        .liveliness()
+        .declare_subscriber(EVERY_CELL_ALIVE)
+        .history(true)
+        .wait()
+        .map_err(|e| (1, format!("cannot watch the line: {e}")))?;
+    let start = std::time::Instant::now();
+    let end = seconds.map(|s| start + Duration::from_secs_f64(s.max(0.0)));
+    loop {
+        let wait = match end {
+            Some(e) => match e.checked_duration_since(std::time::Instant::now()) {
+                Some(d) => d,
+                None => return Ok(0),
+            },
+            None => Duration::from_millis(500),
+        };
+        let Ok(Some(sample)) = sub.recv_timeout(wait) else {
+            continue;
+        };
+        let Some(cell) = cell_of(sample.key_expr().as_str()) else {
+            continue;
+        };
+        let alive = sample.kind() == SampleKind::Put;
+        let t_s = start.elapsed().as_secs_f64();
+        if json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "t_s": t_s,
+                    "time_ms": unix_ms(),
+                    "cell": cell.as_str(),
+                    "alive": alive
+                })
+            );
+        } else {
+            println!("{t_s:9.3} s  {} {cell}", if alive { "+" } else { "-" });
+        }
+    }
 }
 
 fn cells(session: &zenoh::Session, json: bool) -> Result<u8, Failure> {
@@ -444,9 +508,7 @@ fn send(
         .as_deref()
         .ok_or_else(|| input("the line file has no secret_file for its user"))?;
     let secret = secret_file(secret_path).map_err(input)?;
-    let time_ms = SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64);
+    let time_ms = unix_ms();
     let envelope = Envelope {
         user,
         cell: cell.to_string(),

@@ -243,9 +243,12 @@ enum Cmd {
         /// The line file (endpoints, user, secret); default: $RTC_LINE.
         #[arg(long, value_name = "FILE")]
         line: Option<PathBuf>,
-        /// One JSON array instead of the table.
+        /// One JSON array instead of the table (with --watch: one JSON object a line).
         #[arg(long)]
         json: bool,
+        /// A line each time a cell comes onto the line or leaves it, until Ctrl-C.
+        #[arg(long)]
+        watch: bool,
     },
     /// Show the processes of a running instance: state, cycles, overruns and wake-up latency
     /// percentiles since they started.
@@ -767,10 +770,13 @@ fn main() -> ExitCode {
         };
     }
     match cli.cmd {
-        Cmd::Cells { line, json } => {
+        Cmd::Cells { line, json, watch } => {
             let mut args = vec!["cells".to_string()];
             if json {
                 args.push("--json".into());
+            }
+            if watch {
+                args.push("--watch".into());
             }
             on_the_line(line.as_deref(), &args)
         }

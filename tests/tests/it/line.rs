@@ -11,7 +11,7 @@ use integration_tests::{CellToml, ip, run_with_watchdog, scratch, with_stall_roo
 use serde_json::Value;
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 use toml_edit::{Table, value};
 
@@ -399,8 +399,60 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         false
     );
 
-    // press-1's gateway killed: gone from the list once its session closes; back when the
-    // supervisor has started it again (a non-critical process, restarted on failure).
+    // A control room's screen, watching the line from here on: the cells as they come and go.
+    let mut watcher = Command::new("ip")
+        .args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("gateway"))
+        .args(["line", "--json", "--line"])
+        .arg(&victor)
+        .args(["cells", "--watch"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("a watcher");
+    let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::<Value>::new()));
+    let lines = std::io::BufReader::new(watcher.stdout.take().expect("piped"));
+    let into = seen.clone();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in lines.lines().map_while(Result::ok) {
+            if let (Ok(v), Ok(mut seen)) = (serde_json::from_str(&line), into.lock()) {
+                seen.push(v);
+            }
+        }
+    });
+    // Each cell's comings and goings as the watcher saw them: (alive, when in ms since the
+    // epoch).
+    let of = |cell: &str| -> Vec<(bool, f64)> {
+        seen.lock()
+            .expect("seen")
+            .iter()
+            .filter(|e| e["cell"] == cell)
+            .map(|e| (e["alive"] == true, e["time_ms"].as_f64().unwrap_or(0.0)))
+            .collect()
+    };
+    let alive = |cell: &str| of(cell).iter().map(|e| e.0).collect::<Vec<_>>();
+    let until_watched = |cell: &str, want: &[bool]| {
+        let start = Instant::now();
+        while alive(cell) != want {
+            assert!(
+                start.elapsed() < patience,
+                "{cell} as watched: {:?}, not {want:?}",
+                of(cell)
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    };
+    until_watched("press-0", &[true]);
+    until_watched("press-1", &[true]);
+    let unix_ms = || {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64() * 1e3)
+    };
+
+    // press-1's gateway killed: it leaves the line, and comes back when the supervisor has
+    // started it again (a non-critical process, restarted on failure).
     let s = b.until("the gateway running", |s| {
         process_in(s, "gateway")["pid"].is_u64()
     });
@@ -410,20 +462,36 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         nix::sys::signal::Signal::SIGKILL,
     )
     .expect("kill the gateway");
-    let limit = Duration::from_secs_f64(LEASE_S * 2.0 + 10.0);
-    until_listed(&hosts, &victor, &["press-0"], limit);
+    let killed_ms = unix_ms();
+    b.until("the gateway restarted", |s| {
+        process_in(s, "gateway")["restarts"].as_u64() >= Some(1)
+            && process_in(s, "gateway")["life"] == "running"
+    });
     until_listed(&hosts, &victor, &["press-0", "press-1"], patience);
 
     // press-0's link cut: the room sees it go within the lease (and some), the cell runs on;
     // the link restored, it comes back.
     hosts.link(0, "down");
-    let (_, gone_after) = until_listed(&hosts, &victor, &["press-1"], limit);
-    eprintln!("press-0 left the room's list {gone_after:?} after its link went down");
+    let cut_ms = unix_ms();
+    until_listed(&hosts, &victor, &["press-1"], patience);
+    // The watcher, whose link to press-0 stays quiet, sees it go once the lease runs out.
+    until_watched("press-0", &[true, false]);
     a.until("press-0 running on", |s| {
         process_in(s, "gateway")["life"] == "running"
     });
     hosts.link(0, "up");
     until_listed(&hosts, &victor, &["press-0", "press-1"], patience);
+    // The watcher links to each cell again by itself (its retries are seconds apart).
+    until_watched("press-1", &[true, false, true]);
+    until_watched("press-0", &[true, false, true]);
+    let _ = watcher.kill();
+    let _ = watcher.wait();
+    let (press_0, press_1) = (of("press-0"), of("press-1"));
+    eprintln!(
+        "the watcher saw press-1 leave {:.2} s after its gateway was killed, press-0 {:.2} s after its link was cut (lease {LEASE_S} s)",
+        (press_1[1].1 - killed_ms) / 1e3,
+        (press_0[1].1 - cut_ms) / 1e3
+    );
     drop((a, b));
 }
 
