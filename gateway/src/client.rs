@@ -315,6 +315,20 @@ fn statuses(
     Ok(out)
 }
 
+/// The end of a watch of `seconds`, if it has one.
+fn deadline(seconds: Option<f64>) -> Option<std::time::Instant> {
+    seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)))
+}
+
+/// How long to wait for the next sample before `end` (half a second with no end); `None`
+/// once it has passed.
+fn until(end: Option<std::time::Instant>) -> Option<Duration> {
+    match end {
+        Some(e) => e.checked_duration_since(std::time::Instant::now()),
+        None => Some(Duration::from_millis(500)),
+    }
+}
+
 /// Now, in ms since the Unix epoch.
 fn unix_ms() -> u64 {
     SystemTime::now()
@@ -333,14 +347,10 @@ fn watch(session: &zenoh::Session, seconds: Option<f64>, json: bool) -> Result<u
         .wait()
         .map_err(|e| (1, format!("cannot watch the line: {e}")))?;
     let start = std::time::Instant::now();
-    let end = seconds.map(|s| start + Duration::from_secs_f64(s.max(0.0)));
+    let end = deadline(seconds);
     loop {
-        let wait = match end {
-            Some(e) => match e.checked_duration_since(std::time::Instant::now()) {
-                Some(d) => d,
-                None => return Ok(0),
-            },
-            None => Duration::from_millis(500),
+        let Some(wait) = until(end) else {
+            return Ok(0);
         };
         let Ok(Some(sample)) = sub.recv_timeout(wait) else {
             continue;
@@ -437,15 +447,11 @@ fn events(
         .declare_subscriber(cell.events())
         .wait()
         .map_err(|e| (1, format!("cannot subscribe: {e}")))?;
-    let end = seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+    let end = deadline(seconds);
     let mut last: Option<EventMessage> = None;
     loop {
-        let wait = match end {
-            Some(e) => match e.checked_duration_since(std::time::Instant::now()) {
-                Some(d) => d,
-                None => return Ok(0),
-            },
-            None => Duration::from_millis(500),
+        let Some(wait) = until(end) else {
+            return Ok(0);
         };
         let Ok(Some(sample)) = sub.recv_timeout(wait) else {
             continue;
