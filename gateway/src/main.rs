@@ -25,6 +25,7 @@ use gateway::link::Link;
 use gateway::wire::{Answer, EventMessage, RefusedBy, StatusMessage};
 use runtime::ipc::Sub;
 use runtime::process::{self, Context, Cycle, SetupError, Task};
+use shm_schema::event::code;
 use shm_schema::{EventV1, InstanceName, ServiceId};
 use std::process::ExitCode;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
@@ -49,10 +50,31 @@ struct Bridge {
     tx: SyncSender<(EventV1, u64)>,
     /// Events not handed over since the last one that was.
     lost: u64,
+    /// What the network thread says of the line, to tell the cell as events.
+    notes: Receiver<Note>,
+}
+
+/// What the network thread tells the cycle.
+enum Note {
+    /// On the line: where it listens (or connects).
+    Joined(String),
+    /// Off the line: why (it tries again, or waits for a fixed configuration).
+    Failed(String),
 }
 
 impl Task for Bridge {
-    fn cycle(&mut self, _cx: &mut Cycle<'_>) {
+    fn cycle(&mut self, cx: &mut Cycle<'_>) {
+        // The line's state as the cell's events (`supervisor status` shows where it listens),
+        // as the Modbus server does.
+        while let Ok(note) = self.notes.try_recv() {
+            let (code, text) = match &note {
+                Note::Joined(at) => (code::LISTENING, at.as_str()),
+                Note::Failed(why) => (code::LISTEN_FAILED, why.as_str()),
+            };
+            let now = cx.now_ns();
+            cx.events
+                .push(EventV1::new(now, code, -1, 0.0, 0.0, &["the line: ", text]));
+        }
         while let Some(e) = self.events.next() {
             match self.tx.try_send((e, self.lost)) {
                 Ok(()) => self.lost = 0,
@@ -74,16 +96,18 @@ fn main() -> ExitCode {
         "the cell on a line of cells: its presence, status, events and commands on Zenoh",
         |ctx: &Context| {
             let (tx, rx) = sync_channel(EVENT_QUEUE);
+            let (note, notes) = sync_channel(16);
             let instance = ctx.instance;
             let axes = Axes::of_cell(&ctx.cell);
             std::thread::Builder::new()
                 .name("line".into())
-                .spawn(move || line(instance, axes, rx))
+                .spawn(move || line(instance, axes, rx, note))
                 .map_err(|e| SetupError::from(format!("cannot start the network thread: {e}")))?;
             Ok::<_, SetupError>(Bridge {
                 events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
                 tx,
                 lost: 0,
+                notes,
             })
         },
     )
@@ -123,18 +147,27 @@ fn now_ms() -> u64 {
 }
 
 /// The network thread: joins the line and serves the cell on it until the process ends.
-fn line(instance: InstanceName, axes: Axes, events: Receiver<(EventV1, u64)>) {
+fn line(
+    instance: InstanceName,
+    axes: Axes,
+    events: Receiver<(EventV1, u64)>,
+    note: SyncSender<Note>,
+) {
+    let off = |why: String| {
+        tracing::error!("{why}: the gateway stays off the network");
+        let _ = note.try_send(Note::Failed(why));
+    };
     let Some(net) = settings(&instance) else {
         return;
     };
     let Some(name) = net.name.clone() else {
-        tracing::error!("[network] came without the cell's name");
+        off("[network] came without the cell's name".into());
         return;
     };
     let users = match Users::load(&net.users) {
         Ok(u) => u,
         Err(e) => {
-            tracing::error!("{e}: the gateway stays off the network");
+            off(e.to_string());
             return;
         }
     };
@@ -152,6 +185,7 @@ fn line(instance: InstanceName, axes: Axes, events: Receiver<(EventV1, u64)>) {
             Ok(s) => break s,
             Err(e) => {
                 tracing::error!("{e}; trying again in {} s", JOIN_AGAIN.as_secs());
+                let _ = note.try_send(Note::Failed(e));
                 std::thread::sleep(JOIN_AGAIN);
                 if runtime::signals::stop_requested() {
                     return;
@@ -159,6 +193,12 @@ fn line(instance: InstanceName, axes: Axes, events: Receiver<(EventV1, u64)>) {
             }
         }
     };
+    let at = if net.listen.is_empty() {
+        format!("connected to {}", net.connect.join(", "))
+    } else {
+        net.listen.join(", ")
+    };
+    let _ = note.try_send(Note::Joined(format!("{name} on {at}")));
     if let Err(e) = serve(&session, &instance, &name, &net, users, &axes, &events) {
         tracing::error!("the gateway left the line: {e}");
     }

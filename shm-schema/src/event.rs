@@ -656,14 +656,14 @@ pub const CODES: &[CodeInfo] = &[
         name: "listening",
         severity: Severity::Info,
         unit: Unit::None,
-        meaning: "A process serves on a network address, which the text gives (the Modbus server: its `[modbus] listen`, with the port it got when that is 0). `supervisor status` shows it.",
+        meaning: "A process serves on a network address, which the text gives (the Modbus server: its `[modbus] listen`, with the port it got when that is 0; the gateway: the cell's name on the line and its endpoints). `supervisor status` shows it.",
     },
     CodeInfo {
         code: code::LISTEN_FAILED,
         name: "listen-failed",
         severity: Severity::Warning,
         unit: Unit::None,
-        meaning: "A process cannot listen on its address (in use by another instance or program, not an address of this machine); the text says why. It tries again every second; the cell runs on without it.",
+        meaning: "A process cannot listen on its address (in use by another instance or program, not an address of this machine), or the gateway cannot join the line (an endpoint it cannot open, a certificate or password file it cannot read, a users file it refuses); the text says why. It tries again (the Modbus server every second, the gateway every 2 s unless its configuration is at fault); the cell runs on without it.",
     },
     CodeInfo {
         code: code::FIELDBUS_WRITE,

@@ -260,7 +260,12 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     let out = ok(&hosts, &victor, &["status", "press-1", "--json"]);
     let s: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
     assert_eq!(s["instance"], b.inst.as_str());
-    assert!(!process_in(&s, "gateway").is_null(), "{s}");
+    // Its gateway says where it is on the line, as the Modbus server says where it listens.
+    assert_eq!(
+        process_in(&s, "gateway")["listening"],
+        "the line: press-1 on tcp/10.77.2.2:7447",
+        "{s}"
+    );
 
     // A viewer may read, not command: refused by the gateway, with why; the cell untouched.
     let out = room(&hosts, &victor, &["pause", "press-0"]);
@@ -626,4 +631,35 @@ fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
     );
     let out = room(&hosts, &clear, &["cells"]);
     assert_eq!(out.status.code(), Some(1), "in the clear: {}", text(&out));
+}
+
+#[test]
+fn a_gateway_whose_users_file_others_may_read_stays_off_the_line_and_says_why() {
+    let test = "line_users";
+    let hosts = Hosts::new(test, 1);
+    // Written as any file is: others may read it.
+    let users = scratch(test, "users.toml", USERS);
+    let cell = Up::start_in(test, &cell_config(test, 0, &users), Some(&hosts.cells[0]));
+    let start = Instant::now();
+    while !cell.log().contains("listen-failed") {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no listen-failed event:\n{}",
+            cell.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let log = cell.log();
+    assert!(
+        log.contains("the line: ") && log.contains("others than its owner may read it"),
+        "{log}"
+    );
+    // The cell runs on, its gateway off the line.
+    let s = cell.until("the gateway running", |s| {
+        process_in(s, "gateway")["life"] == "running"
+    });
+    assert!(process_in(&s, "gateway")["listening"].is_null(), "{s}");
+    let room = line_file(test, "victor", "victor", "victor-secret-0123456789", 1);
+    let out = self::room(&hosts, &room, &["cells"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
 }
