@@ -1870,6 +1870,90 @@ mod tests {
         assert_eq!(shm.feedback_timeout_ns, 100_000_000);
     }
 
+    /// Issue 21 item 15, as config.md says: `estop_stop_time` is range-checked (0.01..=60 s;
+    /// 0 would ask servo for an infinite deceleration) with its key and line named, and
+    /// `restart_backoff` (0..=60 s) and `restart_limit` (0..=1000) are taken as written, their
+    /// bounds included, and refused beyond them.
+    #[test]
+    fn estop_stop_time_and_the_restart_settings_are_checked_as_config_md_says() {
+        let motion = "setpoint_timeout = 0.05";
+        let m = line_of(motion) + 1;
+        for bad in ["0", "0.0", "0.009", "60.5", "-1.0", "nan"] {
+            check(
+                motion,
+                &format!("{motion}\nestop_stop_time = {bad}"),
+                &format!("cell.toml:{m}:1: estop_stop_time = "),
+            );
+            check_has(
+                motion,
+                &format!("{motion}\nestop_stop_time = {bad}"),
+                m,
+                "s must be 0.01..=60 s",
+            );
+        }
+        let with = |k: &str, v: &str| {
+            let src = DEFAULT_TOML.replacen(motion, &format!("{motion}\n{k} = {v}"), 1);
+            Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{k} = {v}: {e}"))
+        };
+        for v in [0.01, 0.5, 60.0] {
+            assert_eq!(
+                with("estop_stop_time", &v.to_string())
+                    .motion
+                    .estop_stop_time,
+                v
+            );
+        }
+
+        let sup = "supervisor_timeout = 0.5";
+        let s = line_of(sup) + 1;
+        let with = |k: &str, v: &str| {
+            let src = DEFAULT_TOML.replacen(sup, &format!("{sup}\n{k} = {v}"), 1);
+            Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{k} = {v}: {e}"))
+        };
+        let d = Config::default_cell().supervisor;
+        assert_eq!(
+            (d.restart_backoff, d.restart_limit),
+            (0.5, 3),
+            "the documented defaults"
+        );
+        for v in [0.0, 2.5, 60.0] {
+            assert_eq!(
+                with("restart_backoff", &format!("{v:?}"))
+                    .supervisor
+                    .restart_backoff,
+                v
+            );
+        }
+        for v in [0, 7, 1000] {
+            assert_eq!(
+                with("restart_limit", &v.to_string())
+                    .supervisor
+                    .restart_limit,
+                v
+            );
+        }
+        for (to, want) in [
+            (
+                "restart_backoff = 60.5",
+                "restart_backoff = 60.5 s must be 0..=60 s",
+            ),
+            (
+                "restart_backoff = -0.5",
+                "restart_backoff = -0.5 s must be 0..=60 s",
+            ),
+            (
+                "restart_limit = 1001",
+                "restart_limit = 1001 must be 0..=1000",
+            ),
+        ] {
+            check(
+                sup,
+                &format!("{sup}\n{to}"),
+                &format!("cell.toml:{s}:1: {want}"),
+            );
+        }
+    }
+
     #[test]
     fn a_missing_file_is_named() {
         let e = Config::load(Some(std::path::Path::new("/nonexistent/cell.toml")))

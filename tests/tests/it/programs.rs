@@ -174,6 +174,51 @@ fn the_prediction_is_the_generators_own_timing_exactly() {
     });
 }
 
+/// Issue 21 item 15: what a `STOP` costs is what docs/language.md says, as `supervisor check`
+/// (the generator's own timing) predicts it on the default cell. A move from rest to rest of
+/// `d` takes `d / vmax + 2 t_acc`. A `STOP` before the first move costs nothing; after a move,
+/// that move's deceleration to rest instead of a blend into the next move; right after
+/// another `STOP`, a zone of `2 t_acc` (the blend rule counts a repeated target as a
+/// segment). The figures language.md quotes (7.30, 8.35, 13.55 and 14.60 s) among them.
+#[test]
+fn a_stop_costs_what_the_language_document_says() {
+    let cell = cell_config::Config::default_cell();
+    let (t_acc, vmax) = (cell.motion.t_acc, cell.axis[0].vmax);
+    let cfg = scratch("prog-stop", "cell.toml", &default_cell());
+    // From the start (40, 40) along x: 100 mm there, 100 mm back.
+    let (there, back) = ("MOVE(140,40,0)\n", "MOVE(40,40,0)\n");
+    let one = 100.0 / vmax + 2.0 * t_acc;
+    let blended = 200.0 / vmax + 2.0 * t_acc;
+    for (k, (lines, want)) in [
+        (vec![there], one),
+        (vec!["STOP\n", there], one),
+        (vec!["STOP\n", "STOP\n", there], one),
+        (vec![there, "STOP\n"], one),
+        (vec![there, "STOP\n", "STOP\n"], one + 2.0 * t_acc),
+        (vec![there, "STOP\n", "STOP\n", "STOP\n"], one + 4.0 * t_acc),
+        (vec![there, back], blended),
+        (vec![there, "STOP\n", back], 2.0 * one),
+        (
+            vec![there, "STOP\n", "STOP\n", back],
+            2.0 * one + 2.0 * t_acc,
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let src = lines.concat() + "END\n";
+        let prog = scratch("prog-stop", &format!("p{k}.prog"), &src);
+        let (t, text) = predicted_with_text(&cfg, &prog);
+        assert!(
+            (t - want).abs() < 5e-4,
+            "predicted {t} s, language.md says {want} s:\n{src}\n{text}"
+        );
+    }
+    // language.md's own figures.
+    assert!((one - 7.30).abs() < 1e-9 && (one + 2.0 * t_acc - 8.35).abs() < 1e-9);
+    assert!((blended - 13.55).abs() < 1e-9 && (2.0 * one - 14.60).abs() < 1e-9);
+}
+
 /// Issue 21 item 11: a loop is checked until two iterations begin alike, the rest passed over
 /// (`check` of the triangle 39 000 times took 26 s; 5000 times, 8 s), and what `check`
 /// predicts is what running every iteration gives: the triangle `n` times takes the time of
