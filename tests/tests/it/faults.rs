@@ -1055,18 +1055,84 @@ fn a_client_whose_reader_stops_early_ends_quietly() {
     });
 }
 
-/// `supervisor ARGS` in a mount namespace of its own whose `/dev/shm` is a tmpfs of `kib`
-/// KiB (root, util-linux' `unshare`): shared memory full, without touching the host's.
-fn in_small_shm(kib: u32, args: &[&str]) -> std::process::Output {
-    let exe = integration_tests::bin("supervisor");
-    let mut cmd = Command::new("unshare");
-    cmd.args(["--mount", "--propagation", "private", "sh", "-c"])
-        .arg(format!(
-            "mount -t tmpfs -o size={kib}k tmpfs /dev/shm && exec \"$0\" \"$@\""
-        ))
-        .arg(exe)
-        .args(args);
-    run_with_watchdog(&mut cmd, WATCHDOG)
+/// A mount namespace of the test's own whose `/dev/shm` is a tmpfs of `kib` KiB, kept by a
+/// process that sleeps in it (root, util-linux' `unshare` and `nsenter`): shared memory that
+/// fills without touching the host's. Dropped: that process killed, the tmpfs gone with it.
+struct PrivateShm {
+    holder: std::process::Child,
+    pid: String,
+}
+
+impl PrivateShm {
+    fn new(kib: u64) -> Self {
+        let mut holder = Command::new("unshare")
+            .args(["--mount", "--propagation", "private", "sh", "-c"])
+            .arg(format!(
+                "mount -t tmpfs -o size={kib}k tmpfs /dev/shm && echo mounted && exec sleep infinity"
+            ))
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("unshare (util-linux)");
+        let said = integration_tests::first_line(&mut holder);
+        let pid = holder.id().to_string();
+        let shm = Self { holder, pid };
+        assert_eq!(
+            said.trim(),
+            "mounted",
+            "this test mounts a tmpfs on /dev/shm in a mount namespace of its own: it needs \
+             root and util-linux' unshare"
+        );
+        shm
+    }
+
+    /// The command that runs a program in the namespace, in the test's working directory.
+    fn within(&self) -> [&str; 5] {
+        ["nsenter", "--target", &self.pid, "--mount", "--wd"]
+    }
+
+    /// `supervisor`, to run in the namespace.
+    fn supervisor(&self) -> Command {
+        let [program, args @ ..] = self.within();
+        let mut cmd = Command::new(program);
+        cmd.args(args).arg(integration_tests::bin("supervisor"));
+        cmd
+    }
+
+    /// The shell command `script` in the namespace, which must succeed: its stdout.
+    fn sh(&self, script: &str) -> String {
+        let [program, args @ ..] = self.within();
+        let out = integration_tests::succeeded(
+            Command::new(program).args(args).args(["sh", "-c", script]),
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    /// Fills the tmpfs: a file takes every free page.
+    fn fill(&self) {
+        self.sh("fallocate -l $(( $(stat -f -c '%a * %S' /dev/shm) )) /dev/shm/filler");
+        let free = self.sh("stat -f -c %a /dev/shm");
+        assert_eq!(free.trim(), "0", "/dev/shm not full");
+    }
+
+    /// Frees what [`PrivateShm::fill`] took.
+    fn free(&self) {
+        self.sh("rm /dev/shm/filler");
+    }
+
+    /// The names in the tmpfs.
+    fn files(&self) -> Vec<String> {
+        self.sh("ls -A /dev/shm")
+            .lines()
+            .map(str::to_string)
+            .collect()
+    }
+}
+
+impl Drop for PrivateShm {
+    fn drop(&mut self) {
+        let _ = self.holder.kill();
+        let _ = self.holder.wait();
+    }
 }
 
 #[test]
@@ -1076,15 +1142,12 @@ fn a_full_dev_shm_is_said_in_words_and_exits_1_never_by_sigbus() {
     let inst = instance("shm-full");
     let cfg =
         integration_tests::scratch("shm-full", "cell.toml", &integration_tests::default_cell());
-    let out = in_small_shm(
-        64,
-        &[
-            "up",
-            "--instance",
-            &inst,
-            "--config",
-            cfg.to_str().expect("utf-8"),
-        ],
+    let shm = PrivateShm::new(64);
+    let out = run_with_watchdog(
+        shm.supervisor()
+            .args(["up", "--instance", &inst, "--config"])
+            .arg(&cfg),
+        WATCHDOG,
     );
     let err = exited(&out, 1);
     assert!(
@@ -1095,4 +1158,63 @@ fn a_full_dev_shm_is_said_in_words_and_exits_1_never_by_sigbus() {
     let name = shm_schema::InstanceName::new(&inst).expect("name");
     runtime::ipc::purge_instance(&name);
     integration_tests::assert_clean(&inst);
+}
+
+/// Item 8 with the cell up: its `/dev/shm` fills (a file takes every free page). The commands
+/// that only ask the supervisor (`status`, `estop`) answer as ever; those that attach to the
+/// cell's shared memory (`io`, listing and requesting, `events`, `record`) say "shared memory
+/// is full" and exit 1 (they died by SIGBUS, exit 135, saying nothing); none dies by a signal.
+/// The cell goes on: every process runs, none restarted; with the file gone, `io` works again
+/// and the cell is reset and goes down clean, nothing left in its `/dev/shm`.
+#[test]
+fn a_running_cell_whose_dev_shm_fills_goes_on_and_its_commands_say_so() {
+    integration_tests::attributable(|| {
+        let test = "shm-fills";
+        // The cell takes about 90 MB of it.
+        let shm = PrivateShm::new(256 << 10);
+        let up = Up::start_within(test, &cell(test, &[]), &shm.within());
+        shm.fill();
+        let recording = integration_tests::scratch(test, "full.mcap", "");
+        let recording = recording.to_str().expect("utf-8");
+        let attaching: [&[&str]; 4] = [
+            &["io"],
+            &["io", "cycle_lamp", "1"],
+            &["events"],
+            &["record", "--out", recording, "--duration", "1"],
+        ];
+        for args in attaching {
+            let out = up.ctl(args);
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(
+                out.status.code(),
+                Some(1),
+                "{args:?}: {}\n{err}",
+                out.status
+            );
+            assert!(
+                err.contains("error: shared memory is full (/dev/shm: 0 MB free)"),
+                "{args:?}: {err}"
+            );
+        }
+        let said = up.ok(&["estop", "--reason", "shm full"]);
+        assert!(said.contains("e-stop raised"), "{said}");
+        let s = up.status();
+        assert_eq!(s["supervisor"]["estop"]["origin"], "external", "{s}");
+        for name in ["drives", "servo", "trajgen", "iobridge", "modbus"] {
+            let p = process_in(&s, name);
+            assert!(
+                p["life"] == "running" && p["restarts"] == 0,
+                "{name} did not go on: {p}\n{s}"
+            );
+        }
+        shm.free();
+        up.ok(&["io"]);
+        up.ok(&["reset"]);
+        down_leaving_nothing(up);
+        assert!(
+            shm.files().is_empty(),
+            "left in /dev/shm: {:?}",
+            shm.files()
+        );
+    });
 }

@@ -17,17 +17,17 @@ pub(crate) struct Up {
     pub(crate) inst: String,
     pub(crate) child: Option<Child>,
     log: PathBuf,
-    /// The network namespace the cell and every command run in (an EtherCAT cell's), if any.
-    netns: Option<String>,
+    /// The command the cell and every command run under (`ip netns exec NS` for an EtherCAT
+    /// cell's network namespace, `nsenter` for a mount namespace), if any: program, arguments.
+    within: Vec<String>,
 }
 
-/// `supervisor`, in network namespace `netns` if there is one.
-fn supervisor_in(netns: Option<&str>) -> Command {
-    match netns {
-        Some(ns) => {
-            let mut c = Command::new("ip");
-            c.args(["netns", "exec", ns])
-                .arg(integration_tests::bin("supervisor"));
+/// `supervisor`, under the command `within` (program and arguments) if there is one.
+fn supervisor_within(within: &[String]) -> Command {
+    match within.split_first() {
+        Some((program, args)) => {
+            let mut c = Command::new(program);
+            c.args(args).arg(integration_tests::bin("supervisor"));
             c
         }
         None => supervisor(),
@@ -48,9 +48,17 @@ impl Up {
     /// [`Up::start`] in network namespace `netns` (every command of the test then runs
     /// there too).
     pub(crate) fn start_in(test: &str, cfg: &Path, netns: Option<&str>) -> Self {
+        let within = netns.map_or(vec![], |ns| vec!["ip", "netns", "exec", ns]);
+        Self::start_within(test, cfg, &within)
+    }
+
+    /// [`Up::start`] under the command `within` (program and arguments: `nsenter -t PID -m`),
+    /// as every command of the test then runs.
+    pub(crate) fn start_within(test: &str, cfg: &Path, within: &[&str]) -> Self {
+        let within: Vec<String> = within.iter().map(|a| a.to_string()).collect();
         let inst = instance(test);
         let log = scratch(test, "up.log", "");
-        let child = supervisor_in(netns)
+        let child = supervisor_within(&within)
             .args(["up", "--instance", &inst, "--config"])
             .arg(cfg)
             .stdout(Stdio::null())
@@ -61,14 +69,14 @@ impl Up {
             inst,
             child: Some(child),
             log,
-            netns: netns.map(str::to_string),
+            within,
         };
         up.wait_enabled();
         up
     }
 
     pub(crate) fn command(&self) -> Command {
-        supervisor_in(self.netns.as_deref())
+        supervisor_within(&self.within)
     }
 
     /// A `supervisor up` of `inst` started by the caller (its stderr into `log`), once the
@@ -78,7 +86,7 @@ impl Up {
             inst,
             child: Some(child),
             log,
-            netns: None,
+            within: vec![],
         };
         up.wait_enabled();
         up
