@@ -470,6 +470,113 @@ fn a_foreign_trapezoid_generator_process_is_never_refused() {
     });
 }
 
+/// Item 16 on the real binaries: a foreign generator process (tests/python/jumping_generator.py)
+/// swapped in for trajgen starts its setpoints off where servo holds: 2 mm off on x (a position
+/// jump), then, swapped in again, at 1 mm/s where x rests (a velocity jump alone). Each time
+/// servo refuses the first setpoint, holds, and says which test refused it, with that test's
+/// own value and limit, the value beyond the limit (`supervisor events --json`); the
+/// generator then starts again from where servo holds and servo follows it to its target. The
+/// event used to be `setpoint-jump` whichever test refused, with the position's value.
+#[test]
+fn a_refused_jump_of_a_foreign_generator_names_its_test_value_and_limit() {
+    integration_tests::attributable(|| {
+        integration_tests::require_python_iceoryx2();
+        let up = Up::default_cell("foreign-jump");
+        let mut follower = up
+            .command()
+            .args(["events", "--follow", "--json", "--instance", &up.inst])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("events --follow");
+        let (events, arrived) = std::sync::mpsc::channel::<serde_json::Value>();
+        let stdout = follower.stdout.take().expect("piped");
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stdout)
+                .lines()
+                .map_while(Result::ok)
+            {
+                if let Ok(e) = serde_json::from_str(&line)
+                    && events.send(e).is_err()
+                {
+                    break;
+                }
+            }
+        });
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/jumping_generator.py");
+        // (the jump: offset mm, velocity mm/s; where x goes then; the test that refuses it)
+        for (k, (offset, velocity, to, test)) in [
+            (2.0, 0.0, 50.0, "setpoint-jump"),
+            (0.0, 1.0, 40.0, "setpoint-velocity-jump"),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let command = format!(
+                "python3 {} --instance {{instance}} --name {{name}} --jump x {offset} {velocity} \
+                 --to {to}",
+                script.display()
+            );
+            up.ok(&["swap", "trajgen", "--command", &command]);
+            let start = Instant::now();
+            let refusal = loop {
+                let left = WATCHDOG.saturating_sub(start.elapsed());
+                let e = arrived
+                    .recv_timeout(left)
+                    .unwrap_or_else(|_| panic!("{test}: no refusal event\n{}", up.log()));
+                if e["name"] == "setpoint-jump" || e["name"] == "setpoint-velocity-jump" {
+                    break e;
+                }
+            };
+            assert_eq!(refusal["name"], test, "{refusal}");
+            assert_eq!(refusal["axis"], "x", "{refusal}");
+            let (value, limit) = (
+                refusal["value"].as_f64().expect("value"),
+                refusal["limit"].as_f64().expect("limit"),
+            );
+            assert!(value > limit && limit > 0.0, "{refusal}");
+            // Its own test's value: the distance (2 mm; at rest the stamp's age adds nothing,
+            // where servo holds is its enable's encoder reading), or the velocity difference
+            // (1 mm/s).
+            let want = offset + velocity;
+            assert!(
+                (value - want).abs() < 0.01,
+                "{test}: {value} vs {want}: {refusal}"
+            );
+            // Servo held, then followed the generator from there to its target.
+            let done = up.until("the generator's move done", |s| {
+                let x = &s["servo"]["axes"]["x"];
+                s["program"]["state"] == "done"
+                    && x["settled"] == true
+                    && x["position"]
+                        .as_f64()
+                        .is_some_and(|p| (p - to).abs() < 0.01)
+                    || !s["servo"]["fault"].is_null()
+                    || !s["supervisor"]["estop"].is_null()
+            });
+            assert!(done["servo"]["fault"].is_null(), "servo latched: {done}");
+            assert!(done["supervisor"]["estop"].is_null(), "e-stop: {done}");
+            assert_eq!(
+                up.log()
+                    .matches("servo refused a setpoint as a jump")
+                    .count(),
+                k + 1,
+                "the generator never saw the refusal:\n{}",
+                up.log()
+            );
+        }
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(follower.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+        let _ = follower.wait();
+        let log = up.down();
+        let errors = error_events(&log);
+        assert!(errors.is_empty(), "{errors:#?}\n{log}");
+    });
+}
+
 /// Event lines of a severity `error` in a supervisor's log (faults, cuts).
 fn error_events(log: &str) -> Vec<&str> {
     log.lines().filter(|l| l.contains("] error ")).collect()
