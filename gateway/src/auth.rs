@@ -230,11 +230,19 @@ pub enum Refusal {
     },
 }
 
+/// A name as a refusal says it: at most 64 characters (a stranger's name is theirs to choose).
+fn short(name: &str) -> String {
+    match name.char_indices().nth(64) {
+        Some((i, _)) => format!("{}...", &name[..i]),
+        None => name.into(),
+    }
+}
+
 impl fmt::Display for Refusal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Malformed(e) => write!(f, "not a command: {e}"),
-            Self::UnknownUser(u) => write!(f, "{u:?} is not a user of this line"),
+            Self::UnknownUser(u) => write!(f, "{:?} is not a user of this line", short(u)),
             Self::BadSignature(u) => write!(f, "the signature is not {u:?}'s"),
             Self::OtherCell { named } => write!(f, "the command is for cell {named:?}"),
             Self::Stale { age_ms } => write!(
@@ -318,7 +326,8 @@ impl Gate {
                 named: envelope.cell,
             });
         }
-        let age_ms = now_ms as i64 - envelope.time_ms as i64;
+        let age_ms = (i128::from(now_ms) - i128::from(envelope.time_ms))
+            .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64;
         if age_ms.unsigned_abs() > WINDOW_MS {
             return Err(Refusal::Stale { age_ms });
         }

@@ -182,6 +182,9 @@ impl Row {
     }
 }
 
+/// How long a client waits for a first link to the line.
+const LINK_PATIENCE: Duration = Duration::from_secs(3);
+
 /// How long a `get` waits for the line's answers.
 const PATIENCE: Duration = Duration::from_secs(3);
 
@@ -208,7 +211,20 @@ fn load(path: Option<&Path>) -> Result<LineFile, Failure> {
         std::fs::read_to_string(path).map_err(|e| input(format!("{}: {e}", path.display())))?;
     let file: LineFile =
         toml::from_str(&text).map_err(|e| input(format!("{}: {e}", path.display())))?;
+    if !(file.lease.is_finite() && (1.0..=60.0).contains(&file.lease)) {
+        return Err(input(format!(
+            "{}: lease = {} s must be 1..=60 s",
+            path.display(),
+            file.lease
+        )));
+    }
     for e in &file.connect {
+        if !(e.starts_with("tcp/") || e.starts_with("tls/")) {
+            return Err(input(format!(
+                "{}: connect {e:?} is not an endpoint (\"tls/HOST:PORT\", or \"tcp/HOST:PORT\" with plain = true)",
+                path.display()
+            )));
+        }
         let clear = e.starts_with("tcp/");
         if clear && !file.plain {
             return Err(input(format!(
@@ -262,11 +278,17 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         Cmd::Events { cell, seconds } => Ask::Events(cell_name(&cell)?, seconds),
     };
     let session = join(&file)?;
-    // Let the links come up before asking (a get on a line not yet joined hears nothing).
-    std::thread::sleep(Duration::from_millis(500));
+    // Let the links come up before asking (a get on a line not yet joined hears nothing):
+    // a first peer, for at most LINK_PATIENCE, then a moment for the others.
     let info = session.info();
-    let linked = info.peers_zid().wait().count() + info.routers_zid().wait().count();
-    if linked == 0 && !file.connect.is_empty() {
+    let linked = || info.peers_zid().wait().count() + info.routers_zid().wait().count();
+    let start = std::time::Instant::now();
+    let expect_links = !file.connect.is_empty() || file.multicast;
+    while expect_links && linked() == 0 && start.elapsed() < LINK_PATIENCE {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    if linked() == 0 && !file.connect.is_empty() {
         return Err((
             1,
             format!(
@@ -306,10 +328,12 @@ fn statuses(
         .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
     let mut out = BTreeMap::new();
     while let Ok(reply) = replies.recv() {
+        // By the key it came on, not by what it says of itself.
         if let Ok(sample) = reply.result()
+            && let Some(cell) = cell_of(sample.key_expr().as_str())
             && let Ok(m) = serde_json::from_slice::<StatusMessage>(&sample.payload().to_bytes())
         {
-            out.insert(m.cell.clone(), m);
+            out.insert(cell.to_string(), m);
         }
     }
     Ok(out)
@@ -317,7 +341,9 @@ fn statuses(
 
 /// The end of a watch of `seconds`, if it has one.
 fn deadline(seconds: Option<f64>) -> Option<std::time::Instant> {
-    seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)))
+    seconds.and_then(|s| {
+        std::time::Instant::now().checked_add(Duration::try_from_secs_f64(s.max(0.0)).ok()?)
+    })
 }
 
 /// How long to wait for the next sample before `end` (half a second with no end); `None`
@@ -540,6 +566,12 @@ fn send(
     let sample = reply
         .result()
         .map_err(|e| (1, format!("cell {cell}: {:?}", e.payload().try_to_string())))?;
+    if sample.key_expr().as_str() != cell.control() {
+        return Err((
+            1,
+            format!("an answer on {} is not cell {cell}'s", sample.key_expr()),
+        ));
+    }
     let answer: Answer = serde_json::from_slice(&sample.payload().to_bytes())
         .map_err(|e| (1, format!("cell {cell} answered something else: {e}")))?;
     if json {

@@ -34,8 +34,11 @@ fn path(p: &Path) -> String {
     json(p.display().to_string())
 }
 
-/// The first line of `file` (a password), which only its owner may read.
-pub fn secret_file(file: &Path) -> Result<String, String> {
+/// The largest message taken from the line (bytes).
+pub const MAX_MESSAGE: usize = 4 << 20;
+
+/// `file` is its owner's alone (mode 600), or why not.
+fn private(file: &Path) -> Result<(), String> {
     use std::os::unix::fs::MetadataExt;
     let meta = std::fs::metadata(file).map_err(|e| format!("{}: {e}", file.display()))?;
     if meta.mode() & 0o077 != 0 {
@@ -45,6 +48,12 @@ pub fn secret_file(file: &Path) -> Result<String, String> {
             meta.mode() & 0o777
         ));
     }
+    Ok(())
+}
+
+/// The first line of `file` (a password), which only its owner may read.
+pub fn secret_file(file: &Path) -> Result<String, String> {
+    private(file)?;
     let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
     let line = text.lines().next().unwrap_or("").trim().to_string();
     if line.is_empty() {
@@ -71,7 +80,12 @@ impl Link<'_> {
         )?;
         // Keep-alives four per lease (Zenoh's own ratio).
         set("transport/link/tx/keep_alive", json(4))?;
+        // Nothing of the line needs more (a program's text is the largest); a peer's larger
+        // message is dropped before it is put together.
+        set("transport/link/rx/max_message_size", json(MAX_MESSAGE))?;
         if let Some(t) = self.tls {
+            // Its owner's alone, as a secret.
+            private(&t.private_key)?;
             set("transport/link/tls/root_ca_certificate", path(&t.root_ca))?;
             set(
                 "transport/link/tls/listen_certificate",

@@ -42,6 +42,12 @@ const EVENT_QUEUE: usize = 1024;
 /// How often the network thread asks the supervisor again for `[network]` before it answers.
 const ASK_AGAIN: Duration = Duration::from_millis(500);
 
+/// Commands waiting for the control thread at most.
+const CONTROL_QUEUE: usize = 64;
+
+/// How long a command waits for the cell's answer at most.
+const PATIENCE: Duration = Duration::from_secs(60);
+
 /// How long a failed join of the line waits before the next.
 const JOIN_AGAIN: Duration = Duration::from_secs(2);
 
@@ -180,9 +186,9 @@ fn line(
         tls: net.tls.as_ref(),
         login: net.login.as_ref(),
     };
-    let session = loop {
-        match link.open() {
-            Ok(s) => break s,
+    loop {
+        let session = match link.open() {
+            Ok(s) => s,
             Err(e) => {
                 tracing::error!("{e}; trying again in {} s", JOIN_AGAIN.as_secs());
                 let _ = note.try_send(Note::Failed(e));
@@ -190,17 +196,25 @@ fn line(
                 if runtime::signals::stop_requested() {
                     return;
                 }
+                continue;
+            }
+        };
+        let at = if net.listen.is_empty() {
+            format!("connected to {}", net.connect.join(", "))
+        } else {
+            net.listen.join(", ")
+        };
+        let _ = note.try_send(Note::Joined(format!("{name} on {at}")));
+        match serve(&session, &instance, &name, &net, &users, &axes, &events) {
+            Ok(()) => return,
+            Err(e) => {
+                let why = format!("the gateway left the line: {e}");
+                tracing::error!("{why}; joining again in {} s", JOIN_AGAIN.as_secs());
+                let _ = note.try_send(Note::Failed(why));
+                drop(session);
+                std::thread::sleep(JOIN_AGAIN);
             }
         }
-    };
-    let at = if net.listen.is_empty() {
-        format!("connected to {}", net.connect.join(", "))
-    } else {
-        net.listen.join(", ")
-    };
-    let _ = note.try_send(Note::Joined(format!("{name} on {at}")));
-    if let Err(e) = serve(&session, &instance, &name, &net, users, &axes, &events) {
-        tracing::error!("the gateway left the line: {e}");
     }
 }
 
@@ -210,7 +224,7 @@ fn serve(
     instance: &InstanceName,
     name: &CellName,
     net: &NetworkSettings,
-    users: Users,
+    users: &Users,
     axes: &Axes,
     events: &Receiver<(EventV1, u64)>,
 ) -> zenoh::Result<()> {
@@ -240,12 +254,19 @@ fn serve(
             }
         })
         .wait()?;
+    // A subscriber that stops reading must not hold the gateway up: what the network drops
+    // is said by the numbers (`seq`).
     let event_pub = session
         .declare_publisher(name.events())
-        .congestion_control(CongestionControl::Block)
+        .congestion_control(CongestionControl::Drop)
         .wait()?;
-    let control = session.declare_queryable(name.control()).wait()?;
-    let gate = Mutex::new(Gate::new(users, name.as_str()));
+    // Queries wait for the control thread in a ring: a flood drops the oldest, never blocks
+    // Zenoh's own threads.
+    let control = session
+        .declare_queryable(name.control())
+        .with(zenoh::handlers::RingChannel::new(CONTROL_QUEUE))
+        .wait()?;
+    let gate = Mutex::new(Gate::new(users.clone(), name.as_str()));
     let control_instance = *instance;
     let for_control = latest.clone();
     std::thread::Builder::new()
@@ -350,7 +371,12 @@ fn serve(
 /// The latest status message, as published and typed.
 type Latest = Arc<Mutex<Option<(Vec<u8>, Box<control_plane::status::Status>)>>>;
 
-/// An admitted command, asked of the cell.
+/// An admitted command, asked of the cell: answered within [`PATIENCE`] (a program's
+/// validation included; the remote client waits as long).
 fn ask(instance: &InstanceName, command: &Command) -> Answer {
-    Answer::of_reply(channel::call(instance, &command.request()))
+    Answer::of_reply(channel::call_within(
+        instance,
+        &command.request(),
+        Some(PATIENCE),
+    ))
 }

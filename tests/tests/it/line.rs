@@ -631,6 +631,11 @@ fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
     );
     let out = room(&hosts, &clear, &["cells"]);
     assert_eq!(out.status.code(), Some(1), "in the clear: {}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no endpoint of the line let this client in"),
+        "in the clear: {}",
+        text(&out)
+    );
 }
 
 #[test]
