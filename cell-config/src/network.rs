@@ -214,6 +214,43 @@ impl From<CellName> for String {
     }
 }
 
+/// What is wrong with endpoint `e` of `key` (`listen`, `connect`), if anything: a `tls/`
+/// endpoint without certificates (in table `tls_table`), a `tcp/` one not allowed by `plain`,
+/// anything else, or no port. Shared by `[network]` and a control room's line file.
+pub fn endpoint_problem(
+    key: &str,
+    e: &str,
+    plain: bool,
+    tls: bool,
+    tls_table: &str,
+) -> Option<String> {
+    let (proto, addr) = e.split_once('/').unwrap_or(("", e));
+    let problem = match proto {
+        "tls" if !tls => Some(format!(
+            "{key} {e:?} is a tls/ endpoint: {tls_table} must give its certificates"
+        )),
+        "tcp" if !plain => Some(format!(
+            "{key} {e:?} is in the clear: use tls/, or allow it with plain = true"
+        )),
+        "tls" | "tcp" => None,
+        _ => Some(format!(
+            "{key} {e:?} is not an endpoint (\"tls/HOST:PORT\", or \"tcp/HOST:PORT\" with plain = true)"
+        )),
+    };
+    problem.or_else(|| {
+        addr.rsplit_once(':')
+            .and_then(|(_, p)| p.parse::<u16>().ok())
+            .is_none()
+            .then(|| format!("{key} {e:?} has no port (\"{proto}/HOST:PORT\")"))
+    })
+}
+
+/// What is wrong with a link's lease (s), if anything: 1..=60.
+pub fn lease_problem(lease: f64) -> Option<String> {
+    (!(lease.is_finite() && (1.0..=60.0).contains(&lease)))
+        .then(|| format!("lease = {lease} s must be 1..=60 s"))
+}
+
 /// Every problem of `[network]`, each at its key; `gateway` says whether the process table
 /// has the gateway that serves it.
 pub(super) fn validate(
@@ -245,27 +282,8 @@ pub(super) fn validate(
     }
     for (key, endpoints) in [("listen", &n.listen), ("connect", &n.connect)] {
         for e in endpoints {
-            let (proto, addr) = e.split_once('/').unwrap_or(("", e));
-            let problem = match proto {
-                "tls" if n.tls.is_none() => Some(format!(
-                    "network {key} {e:?} is a tls/ endpoint: [network.tls] must give its certificates"
-                )),
-                "tls" => None,
-                "tcp" if !n.plain => Some(format!(
-                    "network {key} {e:?} is in the clear: use tls/, or allow it with plain = true"
-                )),
-                "tcp" => None,
-                _ => Some(format!(
-                    "network {key} {e:?} is not an endpoint (\"tls/HOST:PORT\", or \"tcp/HOST:PORT\" with plain = true)"
-                )),
-            };
-            let problem = problem.or_else(|| {
-                addr.rsplit_once(':')
-                    .and_then(|(_, p)| p.parse::<u16>().ok())
-                    .is_none()
-                    .then(|| format!("network {key} {e:?} has no port (\"{proto}/HOST:PORT\")"))
-            });
-            found.extend(problem.map(|p| (at(key), p)));
+            let problem = endpoint_problem(key, e, n.plain, n.tls.is_some(), "[network.tls]");
+            found.extend(problem.map(|p| (at(key), format!("network {p}"))));
         }
     }
     if !(n.status_period.is_finite() && (0.02..=10.0).contains(&n.status_period)) {
@@ -277,11 +295,8 @@ pub(super) fn validate(
             ),
         ));
     }
-    if !(n.lease.is_finite() && (1.0..=60.0).contains(&n.lease)) {
-        found.push((
-            at("lease"),
-            format!("network lease = {} s must be 1..=60 s", n.lease),
-        ));
+    if let Some(p) = lease_problem(n.lease) {
+        found.push((at("lease"), format!("network {p}")));
     }
     found
 }

@@ -11,14 +11,14 @@
 //! Run it with `bash bench/line.sh [--rounds N] [--duration S] [--clients N]` (root, for
 //! `SCHED_FIFO`, as a controller runs).
 
-use gateway::auth::{Envelope, sign};
+use gateway::auth::{Envelope, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName};
 use gateway::link::Link;
 use integration_tests::load::{Cell, Load, alternate};
 use std::os::unix::fs::PermissionsExt;
 use std::sync::atomic::Ordering;
-use std::time::{Duration, SystemTime};
+use std::time::Duration;
 use zenoh::Wait;
 
 /// The line's load benchmark: wake-up latency with and without a busy remote client.
@@ -69,19 +69,14 @@ fn bring_up(port: u16) -> Cell {
 
 /// A signed `status` command of the bench's viewer.
 fn signed_status(cell: &CellName, nonce: u64) -> (Vec<u8>, String) {
-    let time_ms = SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64);
-    let envelope = Envelope {
+    Envelope {
         user: "bench".into(),
         cell: cell.to_string(),
-        time_ms,
+        time_ms: now_ms(),
         nonce,
         command: Command::Status {},
-    };
-    let payload = serde_json::to_vec(&envelope).expect("JSON");
-    let signature = sign(SECRET.as_bytes(), &payload);
-    (payload, signature)
+    }
+    .signed(SECRET.as_bytes())
 }
 
 fn main() {

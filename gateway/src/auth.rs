@@ -175,6 +175,22 @@ pub struct Envelope {
     pub command: Command,
 }
 
+impl Envelope {
+    /// The payload as sent (its JSON) and its signature with `secret`.
+    pub fn signed(&self, secret: &[u8]) -> (Vec<u8>, String) {
+        let payload = serde_json::to_vec(self).expect("an envelope is JSON");
+        let signature = sign(secret, &payload);
+        (payload, signature)
+    }
+}
+
+/// Now, in ms since the Unix epoch: an envelope's time, and the gate's clock.
+pub fn now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
 /// The signature of `payload` with `secret`: 64 lowercase hex digits.
 pub fn sign(secret: &[u8], payload: &[u8]) -> String {
     let mut mac = <Hmac<Sha256> as Mac>::new_from_slice(secret).expect("HMAC takes any key");
@@ -397,16 +413,14 @@ secret = "victor's secret, long enough"
         nonce: u64,
         c: Command,
     ) -> (Vec<u8>, String) {
-        let payload = serde_json::to_vec(&Envelope {
+        Envelope {
             user: user.into(),
             cell: cell.into(),
             time_ms,
             nonce,
             command: c,
-        })
-        .expect("json");
-        let sig = sign(secret.as_bytes(), &payload);
-        (payload, sig)
+        }
+        .signed(secret.as_bytes())
     }
 
     #[test]

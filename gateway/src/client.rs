@@ -2,9 +2,9 @@
 //! commands' `--remote CELL` run): lists the cells, reads one's status and events, and sends
 //! it a signed command.
 
-use cell_config::network::{Login, Mode, Tls};
+use cell_config::network::{Login, Mode, Tls, endpoint_problem, lease_problem};
 use clap::{Parser, Subcommand};
-use gateway::auth::{Envelope, sign};
+use gateway::auth::{Envelope, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
 use gateway::link::{Link, secret_file};
@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::{Duration, SystemTime};
+use std::time::Duration;
 use zenoh::Wait;
 use zenoh::query::QueryTarget;
 
@@ -211,33 +211,13 @@ fn load(path: Option<&Path>) -> Result<LineFile, Failure> {
         std::fs::read_to_string(path).map_err(|e| input(format!("{}: {e}", path.display())))?;
     let file: LineFile =
         toml::from_str(&text).map_err(|e| input(format!("{}: {e}", path.display())))?;
-    if !(file.lease.is_finite() && (1.0..=60.0).contains(&file.lease)) {
-        return Err(input(format!(
-            "{}: lease = {} s must be 1..=60 s",
-            path.display(),
-            file.lease
-        )));
-    }
-    for e in &file.connect {
-        if !(e.starts_with("tcp/") || e.starts_with("tls/")) {
-            return Err(input(format!(
-                "{}: connect {e:?} is not an endpoint (\"tls/HOST:PORT\", or \"tcp/HOST:PORT\" with plain = true)",
-                path.display()
-            )));
-        }
-        let clear = e.starts_with("tcp/");
-        if clear && !file.plain {
-            return Err(input(format!(
-                "{}: connect {e:?} is in the clear: use tls/, or allow it with plain = true",
-                path.display()
-            )));
-        }
-        if e.starts_with("tls/") && file.tls.is_none() {
-            return Err(input(format!(
-                "{}: connect {e:?} needs [tls] certificates",
-                path.display()
-            )));
-        }
+    let problem = lease_problem(file.lease).or_else(|| {
+        file.connect
+            .iter()
+            .find_map(|e| endpoint_problem("connect", e, file.plain, file.tls.is_some(), "[tls]"))
+    });
+    if let Some(p) = problem {
+        return Err(input(format!("{}: {p}", path.display())));
     }
     Ok(file)
 }
@@ -355,13 +335,6 @@ fn until(end: Option<std::time::Instant>) -> Option<Duration> {
     }
 }
 
-/// Now, in ms since the Unix epoch.
-fn unix_ms() -> u64 {
-    SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
-}
-
 /// `cells --watch`: the line's cells as they come and go (their presence tokens), from the
 /// ones there now, until Ctrl-C or `seconds`.
 fn watch(session: &zenoh::Session, seconds: Option<f64>, json: bool) -> Result<u8, Failure> {
@@ -391,7 +364,7 @@ fn watch(session: &zenoh::Session, seconds: Option<f64>, json: bool) -> Result<u
                 "{}",
                 serde_json::json!({
                     "t_s": t_s,
-                    "time_ms": unix_ms(),
+                    "time_ms": now_ms(),
                     "cell": cell.as_str(),
                     "alive": alive
                 })
@@ -540,16 +513,15 @@ fn send(
         .as_deref()
         .ok_or_else(|| input("the line file has no secret_file for its user"))?;
     let secret = secret_file(secret_path).map_err(input)?;
-    let time_ms = unix_ms();
-    let envelope = Envelope {
+    let time_ms = now_ms();
+    let (payload, signature) = Envelope {
         user,
         cell: cell.to_string(),
         time_ms,
         nonce: u64::from(std::process::id()) << 32 ^ time_ms,
         command,
-    };
-    let payload = serde_json::to_vec(&envelope).map_err(|e| (1, e.to_string()))?;
-    let signature = sign(secret.as_bytes(), &payload);
+    }
+    .signed(secret.as_bytes());
     let replies = session
         .get(cell.control())
         .payload(payload)

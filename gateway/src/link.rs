@@ -3,7 +3,7 @@
 //! Zenoh's shared-memory transport is not built in: what crosses between hosts crosses the
 //! network, and a cell's shared memory stays its own.
 
-use cell_config::network::{Login, Mode, Tls};
+use cell_config::network::{Login, Mode, NetworkSettings, Tls};
 use std::path::Path;
 use zenoh::Wait;
 
@@ -62,7 +62,20 @@ pub fn secret_file(file: &Path) -> Result<String, String> {
     Ok(line)
 }
 
-impl Link<'_> {
+impl<'a> Link<'a> {
+    /// As a cell's `[network]` section says.
+    pub fn of(net: &'a NetworkSettings) -> Self {
+        Self {
+            mode: net.mode,
+            listen: &net.listen,
+            connect: &net.connect,
+            multicast: net.multicast,
+            lease_s: net.lease,
+            tls: net.tls.as_ref(),
+            login: net.login.as_ref(),
+        }
+    }
+
     /// Zenoh's configuration.
     pub fn config(&self) -> Result<zenoh::Config, String> {
         let mut c = zenoh::Config::default();

@@ -18,7 +18,7 @@
 use cell_config::network::NetworkSettings;
 use control_plane::event::Axes;
 use control_plane::{Reply, Request, channel};
-use gateway::auth::{Gate, Users};
+use gateway::auth::{Gate, Users, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName};
 use gateway::link::Link;
@@ -30,7 +30,7 @@ use shm_schema::{EventV1, InstanceName, ServiceId};
 use std::process::ExitCode;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 use zenoh::Wait;
 use zenoh::qos::CongestionControl;
 
@@ -146,12 +146,6 @@ fn settings(instance: &InstanceName) -> Option<NetworkSettings> {
     }
 }
 
-fn now_ms() -> u64 {
-    SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
-}
-
 /// The network thread: joins the line and serves the cell on it until the process ends.
 fn line(
     instance: InstanceName,
@@ -177,15 +171,7 @@ fn line(
             return;
         }
     };
-    let link = Link {
-        mode: net.mode,
-        listen: &net.listen,
-        connect: &net.connect,
-        multicast: net.multicast,
-        lease_s: net.lease,
-        tls: net.tls.as_ref(),
-        login: net.login.as_ref(),
-    };
+    let link = Link::of(&net);
     loop {
         let session = match link.open() {
             Ok(s) => s,
@@ -266,7 +252,7 @@ fn serve(
         .declare_queryable(name.control())
         .with(zenoh::handlers::RingChannel::new(CONTROL_QUEUE))
         .wait()?;
-    let gate = Mutex::new(Gate::new(users.clone(), name.as_str()));
+    let mut gate = Gate::new(users.clone(), name.as_str());
     let control_instance = *instance;
     let for_control = latest.clone();
     std::thread::Builder::new()
@@ -281,12 +267,8 @@ fn serve(
                     .attachment()
                     .and_then(|a| a.try_to_string().ok().map(|s| s.to_string()))
                     .unwrap_or_default();
-                let admitted = gate
-                    .lock()
-                    .map_err(|_| "the gate broke".to_string())
-                    .map(|mut g| g.admit(&payload, &signature, now_ms()));
-                let answer = match admitted {
-                    Ok(Ok(a)) => {
+                let answer = match gate.admit(&payload, &signature, now_ms()) {
+                    Ok(a) => {
                         tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
                         match a.command {
                             Command::Status {} => for_control
@@ -302,14 +284,13 @@ fn serve(
                             ref other => ask(&control_instance, other),
                         }
                     }
-                    Ok(Err(refusal)) => {
+                    Err(refusal) => {
                         tracing::warn!("a command refused: {refusal}");
                         Answer::Refused {
                             by: RefusedBy::Gateway,
                             reason: refusal.to_string(),
                         }
                     }
-                    Err(e) => Answer::Failed { reason: e },
                 };
                 let bytes = serde_json::to_vec(&answer).unwrap_or_default();
                 let _ = q.reply(q.key_expr().clone(), bytes).wait();
