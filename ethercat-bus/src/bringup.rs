@@ -98,7 +98,7 @@ impl Pump {
     /// counter 0, and the emergency is kept in `caught`. ethercrab 0.7.1 would throw it away
     /// (clearing a full mailbox before an SDO) or, meeting it as an SDO's answer, fail the
     /// SDO or **panic** (`assert_ne!(service, Emergency)`, `mailbox/coe/mod.rs`, whichever
-    /// code the emergency carries; `tests/emergency.rs` of the emulator pins it). With working
+    /// code the emergency carries; `tests/it/emergency.rs` of the emulator pins it). With working
     /// counter 0 its clearing read goes on (it ignores the counter) and an SDO fails
     /// with a working-counter error, which [`Pump::sdo`] tries once more.
     fn guard(&mut self, n: usize) {

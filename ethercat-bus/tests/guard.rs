@@ -1,5 +1,5 @@
 //! A CoE emergency in place of an SDO answer during start-up: ethercrab 0.7.1 alone panics on
-//! it (`ethercat-emulator/tests/emergency.rs` pins that), the bus' [`Master`] takes it out of
+//! it (`ethercat-emulator/tests/it/emergency.rs` pins that), the bus' [`Master`] takes it out of
 //! the reply first, tries the SDO once more, and reports the emergency with the SubDevice's
 //! position. On a veth pair in a network namespace of the test's own (root), the emulated
 //! drive answering on a thread of the test.

@@ -48,7 +48,7 @@ pub type Ipc = RtIpc;
 /// Everything else is the type iceoryx2's `ipc::Service` uses, so the publish-subscribe
 /// services (all the cell's data) are the same files in the same formats: a process on stock
 /// iceoryx2 (the C, C++ and Python bindings) opens them as before
-/// (`tests/flavour_interop.rs` proves it). Only the event service
+/// (`tests/tests/it/flavour_interop.rs` proves it). Only the event service
 /// ([`shm_schema::ServiceId::SetpointReady`]) needs this flavour to be waited on.
 #[derive(Debug, Clone)]
 pub struct RtIpc {}

@@ -2,7 +2,8 @@
 //! (the triangle, bad input, killed processes; drive faults, injections, CSP, 4 kHz, tune),
 //! `loop_sim` puts servo and the machine model in one process for `closed_loop` and
 //! `servo_layer`, `latency` runs the latency tool and `supervisor status`, `no_alloc` proves
-//! the cycle code allocation-free.
+//! the cycle code allocation-free, `flavour_interop` has a stock iceoryx2 process exchange
+//! samples with ours (here, where the stock flavour's generic code is compiled unoptimised).
 
 mod cell;
 mod closed_loop;
@@ -11,6 +12,7 @@ mod estop;
 mod ethercat;
 mod faults;
 mod fieldbus;
+mod flavour_interop;
 mod latency;
 mod line;
 mod loop_sim;

@@ -4,9 +4,7 @@
 //! (SOEM and kickcat, two masters we did not write, check the same process from the
 //! integration tests: `tests/tests/it/masters.rs`.)
 
-mod common;
-
-use common::{MAX_PDI, MAX_SUBDEVICES, Storage};
+use crate::common::{MAX_PDI, MAX_SUBDEVICES, Storage};
 use std::time::{Duration, Instant};
 
 static PDU_STORAGE: Storage = Storage::new();
@@ -27,7 +25,7 @@ fn ethercrab_on_a_veth_brings_the_emulator_process_to_op_and_its_outputs_come_ba
         let task = ethercrab::std::tx_rx_task("m0", tx, rx).expect("ethercrab's raw socket on m0");
         let _ = futures_lite::future::block_on(task);
     });
-    let maindevice = common::maindevice_on(pdu_loop);
+    let maindevice = crate::common::maindevice_on(pdu_loop);
     futures_lite::future::block_on(async {
         // The emulator may still be opening its socket: the first scans may find nothing.
         let start = Instant::now();

@@ -11,9 +11,7 @@
 //! meet an emergency (docs/ethercat.md); if a new ethercrab behaves otherwise, it fails and
 //! says so.
 
-mod common;
-
-use common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
+use crate::common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
 use ethercat_emulator::bus::Bus;
 use ethercat_emulator::drive::{self, Drive, obj};
 use ethercat_emulator::terminals::Terminal;

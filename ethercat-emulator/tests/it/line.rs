@@ -4,9 +4,7 @@
 //! with the expected working counter. In process: ethercrab's frames go straight into the
 //! emulator (`PduTx`/`PduRx`) and its replies come straight back, no network.
 
-mod common;
-
-use common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
+use crate::common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
 use ethercat_emulator::bus::Bus;
 use ethercat_emulator::esc::AlState;
 use ethercat_emulator::terminals::{BECKHOFF, Terminal};

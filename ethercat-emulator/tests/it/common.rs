@@ -1,9 +1,6 @@
 //! An in-process wire between ethercrab and the emulated line: ethercrab's frames go straight
 //! into the emulator (`PduTx`/`PduRx`) and its replies come straight back, no network.
 
-// Each test binary that includes this module uses part of it.
-#![allow(dead_code)]
-
 use ethercat_emulator::bus::Bus;
 use ethercrab::{MainDevice, MainDeviceConfig, PduLoop, PduRx, PduStorage, PduTx, Timeouts};
 use std::future::Future;

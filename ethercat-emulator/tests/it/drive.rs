@@ -7,9 +7,7 @@
 //! disabled; one whose watchdog the master turned off faults by its own command watchdog
 //! (0xFF01).
 
-mod common;
-
-use common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
+use crate::common::{MAX_PDI, MAX_SUBDEVICES, Storage, main_device};
 use ethercat_emulator::bus::Bus;
 use ethercat_emulator::drive::{self, Drive, RX_DEFAULT, TX_DEFAULT, mapping, obj};
 use ethercat_emulator::terminals::Terminal;
