@@ -567,14 +567,8 @@ fn decode_over_all_words_against_the_mask_table() {
             "{word:#06x}"
         );
     }
-    assert_eq!(decode(0x0000), Some(Command::DisableVoltage));
-    assert_eq!(decode(0x0004), Some(Command::DisableVoltage));
-    assert_eq!(decode(0x0002), Some(Command::QuickStop));
-    assert_eq!(decode(0x0003), Some(Command::QuickStop));
-    assert_eq!(decode(0x0006), Some(Command::Shutdown));
-    assert_eq!(decode(0x0007), Some(Command::SwitchOn));
+    // The brief's words one by one: `command::tests::the_words_named_in_the_brief`.
     assert_eq!(decode(cw::DISABLE_OPERATION), Some(Command::SwitchOn));
-    assert_eq!(decode(0x000F), Some(Command::EnableOperation));
 }
 
 #[test]
