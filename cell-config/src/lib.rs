@@ -807,7 +807,12 @@ impl Config {
         }
         let gateway = self.process_named("gateway").is_some();
         match &self.network {
-            Some(n) => found.extend(network::validate(n, &self.cell.name, gateway)),
+            Some(n) => {
+                let axes: Vec<_> = (self.axis.iter())
+                    .map(|a| (a.name.as_str(), a.unit.as_str()))
+                    .collect();
+                found.extend(network::validate(n, &self.cell.name, &axes, gateway));
+            }
             None if gateway => found.push((
                 vec![Seg::Key("process")],
                 "a process named \"gateway\" serves [network], which the cell does not have".into(),

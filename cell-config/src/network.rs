@@ -52,6 +52,64 @@ pub struct NetworkSettings {
     /// `[network.login]`: Zenoh's user/password authentication of the link.
     #[serde(default)]
     pub login: Option<Login>,
+    /// `[network.ros2]`: the cell's joint states for ROS 2 (rmw_zenoh) too.
+    #[serde(default)]
+    pub ros2: Option<Ros2>,
+}
+
+/// `[network.ros2]`: the gateway publishes the cell's joint states as a
+/// `sensor_msgs/msg/JointState` on `/<namespace>/joint_states`, the way ROS 2 Jazzy reads it
+/// through rmw_zenoh, at the status period. The axes' units must be ROS's (m or rad) or
+/// convert to them (mm, deg).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2 {
+    /// The ROS domain (`ROS_DOMAIN_ID`), 0..=232. Default 0.
+    #[serde(default)]
+    pub domain: u32,
+    /// The namespace of the cell's topics (a ROS name: letters, digits and `_`, starting with
+    /// a letter). Default: the cell's name on the line with `-` as `_`.
+    #[serde(default)]
+    pub namespace: Option<String>,
+}
+
+impl Ros2 {
+    /// The largest ROS domain.
+    pub const MAX_DOMAIN: u32 = 232;
+
+    /// The namespace of the cell's topics: as given, or from its name on the line.
+    pub fn namespace_of(&self, cell: &CellName) -> String {
+        match &self.namespace {
+            Some(n) => n.clone(),
+            None => cell.as_str().replace('-', "_"),
+        }
+    }
+}
+
+/// What is wrong with `n` as a ROS namespace (one token of a ROS name), if anything.
+pub fn ros_name_problem(n: &str) -> Option<&'static str> {
+    if n.is_empty() {
+        Some("it is empty")
+    } else if !n.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
+        Some("it has a character other than a letter, a digit and '_'")
+    } else if !n.as_bytes()[0].is_ascii_alphabetic() {
+        Some("it does not start with a letter")
+    } else if n.contains("__") || n.ends_with('_') {
+        Some("it has '__' or ends with '_'")
+    } else {
+        None
+    }
+}
+
+/// How many of ROS's units (m, rad) one of the cell's `unit` is, if it converts.
+pub fn ros_scale(unit: &str) -> Option<f64> {
+    match unit {
+        "m" | "rad" => Some(1.0),
+        "mm" => Some(1e-3),
+        "um" | "µm" => Some(1e-6),
+        "deg" => Some(std::f64::consts::PI / 180.0),
+        _ => None,
+    }
 }
 
 /// Zenoh's mode.
@@ -252,10 +310,11 @@ pub fn lease_problem(lease: f64) -> Option<String> {
 }
 
 /// Every problem of `[network]`, each at its key; `gateway` says whether the process table
-/// has the gateway that serves it.
+/// has the gateway that serves it; `axes` are the cell's (name, unit).
 pub(super) fn validate(
     n: &NetworkSettings,
     cell_name: &str,
+    axes: &[(&str, &str)],
     gateway: bool,
 ) -> Vec<(Vec<Seg>, String)> {
     use Seg::Key as K;
@@ -297,6 +356,38 @@ pub(super) fn validate(
     }
     if let Some(p) = lease_problem(n.lease) {
         found.push((at("lease"), format!("network {p}")));
+    }
+    if let Some(r) = &n.ros2 {
+        let at = |k: &'static str| vec![K("network"), K("ros2"), K(k)];
+        if r.domain > Ros2::MAX_DOMAIN {
+            found.push((
+                at("domain"),
+                format!(
+                    "network.ros2 domain = {} must be 0..={}",
+                    r.domain,
+                    Ros2::MAX_DOMAIN
+                ),
+            ));
+        }
+        if let Ok(cell) = n.line_name(cell_name) {
+            let ns = r.namespace_of(&cell);
+            if let Some(why) = ros_name_problem(&ns) {
+                found.push((
+                    at("namespace"),
+                    format!("network.ros2 namespace {ns:?} is no ROS name: {why}"),
+                ));
+            }
+        }
+        for (axis, unit) in axes {
+            if ros_scale(unit).is_none() {
+                found.push((
+                    vec![K("network"), K("ros2")],
+                    format!(
+                        "[network.ros2] needs ROS's units: axis {axis}'s unit {unit:?} is none of m, mm, um, rad, deg"
+                    ),
+                ));
+            }
+        }
     }
     found
 }

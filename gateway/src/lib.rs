@@ -8,7 +8,8 @@
 //!   command), each command signed with its user's secret (HMAC-SHA256), fresh and never
 //!   replayed; a refusal says why, where the transport's own access control would be silent;
 //! - [`link`]: a Zenoh session from a `[network]` section or a control room's line file;
-//! - [`wire`]: the status, events and answers as the network carries them.
+//! - [`wire`]: the status, events and answers as the network carries them;
+//! - [`ros2`]: the cell's joint states as ROS 2 reads them through rmw_zenoh.
 //!
 //! Nothing real-time crosses the network: the gateway is a client of the cell's control
 //! channel like `supervisor pause`, under the cell's own user.
@@ -17,4 +18,5 @@ pub mod auth;
 pub mod command;
 pub mod keys;
 pub mod link;
+pub mod ros2;
 pub mod wire;

@@ -22,6 +22,7 @@ use gateway::auth::{Gate, Users, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName};
 use gateway::link::Link;
+use gateway::ros2;
 use gateway::wire::{Answer, EventMessage, RefusedBy, StatusMessage};
 use runtime::ipc::Sub;
 use runtime::process::{self, Context, Cycle, SetupError, Task};
@@ -302,6 +303,10 @@ fn serve(
         net.listen.join(", "),
         net.connect.join(", ")
     );
+    let mut joints = match &net.ros2 {
+        Some(r) => Some(JointStates::declare(session, name, r, axes)?),
+        None => None,
+    };
     let period = Duration::from_secs_f64(net.status_period);
     let mut next_status = Instant::now();
     let mut seq = 0u64;
@@ -340,12 +345,75 @@ fn serve(
                     status: s,
                 };
                 let bytes = serde_json::to_vec(&m).unwrap_or_default();
+                if let Some(j) = &mut joints {
+                    j.publish(&m.status)?;
+                }
                 if let Ok(mut g) = latest.lock() {
                     *g = Some((bytes.clone(), m.status));
                 }
                 status_pub.put(bytes).wait()?;
             }
         }
+    }
+}
+
+/// The cell's joint states for ROS 2 (`[network.ros2]`), from each status it publishes.
+struct JointStates {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    /// The frame of the message: the namespace.
+    frame: String,
+    /// Each axis' name and how many m or rad its unit is.
+    axes: Vec<(String, f64)>,
+    /// The publisher's GID in rmw_zenoh's attachment: the session's Zenoh id.
+    gid: [u8; 16],
+    seq: i64,
+}
+
+impl JointStates {
+    fn declare(
+        session: &zenoh::Session,
+        name: &CellName,
+        r: &cell_config::network::Ros2,
+        axes: &Axes,
+    ) -> zenoh::Result<Self> {
+        let frame = r.namespace_of(name);
+        let publisher = session
+            .declare_publisher(ros2::joint_states_key(r.domain, &frame))
+            .congestion_control(CongestionControl::Drop)
+            .wait()?;
+        tracing::info!(
+            "ROS 2: /{frame}/{} in domain {} (sensor_msgs/msg/JointState)",
+            ros2::JOINT_STATES,
+            r.domain
+        );
+        Ok(Self {
+            publisher,
+            frame,
+            // The configuration was checked: every unit converts.
+            axes: (axes.axes.iter())
+                .map(|(n, u)| (n.clone(), cell_config::network::ros_scale(u).unwrap_or(1.0)))
+                .collect(),
+            gid: session.zid().to_le_bytes(),
+            seq: 0,
+        })
+    }
+
+    /// The joint states of `status`, stamped now (none before servo's first report).
+    fn publish(&mut self, status: &control_plane::status::Status) -> zenoh::Result<()> {
+        let Some(servo) = &status.servo else {
+            return Ok(());
+        };
+        let joints: Vec<(&str, f64)> = (self.axes.iter())
+            .filter_map(|(n, scale)| Some((n.as_str(), servo.axes.get(n)?.position * scale)))
+            .collect();
+        let stamp_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        self.seq += 1;
+        self.publisher
+            .put(ros2::joint_state(stamp_ns, &self.frame, &joints))
+            .attachment(ros2::attachment(self.seq, stamp_ns as i64, &self.gid))
+            .wait()
     }
 }
 

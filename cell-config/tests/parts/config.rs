@@ -566,3 +566,54 @@ fn a_missing_file_is_named() {
         "{e}"
     );
 }
+
+/// `[network]` and `[network.ros2]`: every problem at its key's line, at once; the same
+/// section with sane values parses.
+#[test]
+fn the_network_and_its_ros2_table_are_checked_where_they_are_written() {
+    let gateway = "\n[[process]]\nname = \"gateway\"\ncommand = [\"gateway\", \"--instance\", \"{instance}\"]\nperiod_us = 20000\npriority = 0\ncritical = false\n";
+    let network = "\n[network]\nname = \"press-0\"\nlisten = [\"tcp/0.0.0.0:7447\"]\nplain = true\nusers = \"users.toml\"\n";
+    let good = format!("{DEFAULT_TOML}{gateway}{network}\n[network.ros2]\ndomain = 42\n");
+    let c = Config::parse(&good, "cell.toml").expect("a sane [network.ros2]");
+    let r = (c.network.as_ref())
+        .and_then(|n| n.ros2.clone())
+        .expect("[network.ros2]");
+    let name = network::CellName::new("press-0").expect("a name");
+    assert_eq!(
+        (r.domain, r.namespace_of(&name)),
+        (42, "press_0".to_string())
+    );
+
+    let bad = format!(
+        "{}{gateway}{network}\n[network.ros2]\ndomain = 233\nnamespace = \"2nd-press\"\n",
+        DEFAULT_TOML.replacen("unit = \"mm\"", "unit = \"inch\"", 1)
+    );
+    let e = Config::parse(&bad, "cell.toml").expect_err("three problems");
+    let text = e.to_string();
+    assert_eq!(e.problems.len(), 3, "{text}");
+    let at = |needle: &str| {
+        bad.lines()
+            .position(|l| l.starts_with(needle))
+            .expect("present")
+            + 1
+    };
+    for (line, needle) in [
+        (
+            at("[network.ros2]"),
+            "axis x's unit \"inch\" is none of m, mm, um, rad, deg",
+        ),
+        (
+            at("domain = 233"),
+            "network.ros2 domain = 233 must be 0..=232",
+        ),
+        (
+            at("namespace = \"2nd-press\""),
+            "namespace \"2nd-press\" is no ROS name: it has a character other than a letter, a digit and '_'",
+        ),
+    ] {
+        let p = (e.problems.iter())
+            .find(|p| p.message.contains(needle))
+            .unwrap_or_else(|| panic!("{needle:?} in\n{text}"));
+        assert_eq!(p.line, line, "{needle:?} at line {line}:\n{text}");
+    }
+}

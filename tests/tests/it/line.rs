@@ -9,6 +9,7 @@ use crate::drives::WATCHDOG;
 use crate::up::{Up, process_in};
 use integration_tests::{CellToml, ip, run_with_watchdog, scratch, with_stall_room};
 use serde_json::Value;
+use std::f64::consts::PI;
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -234,9 +235,10 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     let test = "line_two";
     let hosts = Hosts::new(test, 2);
     let users = private(test, "users.toml", USERS);
+    // press-0 also shows its joint states to ROS 2 (rmw_zenoh), in domain 42.
     let a = Up::start_in(
         &format!("{test}-a"),
-        &cell_config(test, 0, &users),
+        &cell_config_with(test, 0, &users, "tcp", "[network.ros2]\ndomain = 42\n"),
         Some(&hosts.cells[0]),
     );
     let b = Up::start_in(
@@ -265,6 +267,48 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         process_in(&s, "gateway")["listening"],
         "the line: press-1 on tcp/10.77.2.2:7447",
         "{s}"
+    );
+
+    // press-0's joint states as a ROS 2 node on rmw_zenoh would receive them, checked by
+    // eclipse-zenoh and rosbags in the room (the CDR bytes, the type hash in the key, the
+    // attachment): at rest at the default start, x and y 40 mm and theta 0 deg, in m and rad.
+    let mut ros = Command::new("ip");
+    ros.args(["netns", "exec", &hosts.room, "python3"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/ros2_joint_states.py"))
+        .args(["--connect", "tcp/10.77.1.2:7447", "--domain", "42"])
+        .args(["--namespace", "press_0", "--samples", "3"]);
+    let out = run_with_watchdog(&mut ros, WATCHDOG);
+    assert!(out.status.success(), "ROS 2 joint states: {}", text(&out));
+    let j: Value = serde_json::from_slice(&out.stdout).expect("the checker's JSON");
+    assert_eq!(j["names"], serde_json::json!(["x", "y", "theta"]), "{j}");
+    assert_eq!(j["frame"], "press_0", "{j}");
+    let status = a.until("at rest", |s| {
+        s["servo"]["axes"]["x"]["position"].is_number()
+    });
+    for (k, (axis, scale)) in [("x", 1e-3), ("y", 1e-3), ("theta", PI / 180.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let want = status["servo"]["axes"][axis]["position"]
+            .as_f64()
+            .expect("position")
+            * scale;
+        for p in j["positions"].as_array().expect("positions") {
+            let got = p[k].as_f64().expect("a position");
+            assert!(
+                (got - want).abs() < 1e-5,
+                "{axis}: {got} against {want}: {j}"
+            );
+        }
+    }
+    let seqs: Vec<i64> = (j["seqs"].as_array().expect("seqs").iter())
+        .map(|v| v.as_i64().expect("seq"))
+        .collect();
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1), "{j}");
+    assert_eq!(
+        j["gids"].as_array().map(Vec::len),
+        Some(1),
+        "one publisher: {j}"
     );
 
     // A viewer may read, not command: refused by the gateway, with why; the cell untouched.

@@ -1,0 +1,140 @@
+//! The cell's joint states as ROS 2 sees them through `rmw_zenoh` (Jazzy, rmw_zenoh 0.2.4 and
+//! later; docs/network.md says what was checked and how): a `sensor_msgs/msg/JointState` on
+//! the key `<domain>/<namespace>/joint_states/<type>/<type hash>`, its payload CDR
+//! little-endian with its encapsulation header, its attachment the sequence number, the
+//! source time stamp and the publisher's GID.
+
+/// The type's name as rmw_zenoh writes it in a key.
+pub const JOINT_STATE_TYPE: &str = "sensor_msgs::msg::dds_::JointState_";
+/// The type's hash (REP 2016, RIHS01): PyPI `rosbags` 0.11.9's `hash_rihs01` of
+/// `sensor_msgs/msg/JointState` on Jazzy, which the tests check again.
+pub const JOINT_STATE_HASH: &str =
+    "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e";
+/// The topic under the cell's namespace.
+pub const JOINT_STATES: &str = "joint_states";
+
+/// The key of `/<namespace>/joint_states` in ROS domain `domain`.
+pub fn joint_states_key(domain: u32, namespace: &str) -> String {
+    format!("{domain}/{namespace}/{JOINT_STATES}/{JOINT_STATE_TYPE}/{JOINT_STATE_HASH}")
+}
+
+/// A ROS time stamp from nanoseconds since the Unix epoch.
+pub fn stamp(ns: u64) -> (i32, u32) {
+    let sec = i32::try_from(ns / 1_000_000_000).unwrap_or(i32::MAX);
+    (sec, (ns % 1_000_000_000) as u32)
+}
+
+/// A `sensor_msgs/msg/JointState` in CDR (little-endian, with its encapsulation header):
+/// stamped `stamp_ns` (since the Unix epoch), frame `frame_id`, each joint's name and position
+/// (m or rad); velocity and effort empty (the message allows it: the cell's status has
+/// neither).
+pub fn joint_state(stamp_ns: u64, frame_id: &str, joints: &[(&str, f64)]) -> Vec<u8> {
+    let mut w = Cdr::new();
+    let (sec, nanosec) = stamp(stamp_ns);
+    w.i32(sec);
+    w.u32(nanosec);
+    w.string(frame_id);
+    w.u32(joints.len() as u32);
+    for (name, _) in joints {
+        w.string(name);
+    }
+    w.u32(joints.len() as u32);
+    for (_, position) in joints {
+        w.f64(*position);
+    }
+    w.u32(0); // velocity
+    w.u32(0); // effort
+    w.bytes
+}
+
+/// rmw_zenoh's attachment (since 0.2.4): the sequence number and the source time stamp (ns
+/// since the Unix epoch), each an i64 little-endian, then the GID's length (16, one byte) and
+/// the GID.
+pub fn attachment(seq: i64, stamp_ns: i64, gid: &[u8; 16]) -> Vec<u8> {
+    let mut a = Vec::with_capacity(33);
+    a.extend_from_slice(&seq.to_le_bytes());
+    a.extend_from_slice(&stamp_ns.to_le_bytes());
+    a.push(16);
+    a.extend_from_slice(gid);
+    a
+}
+
+/// A CDR little-endian writer: each primitive aligned to its size from the end of the
+/// encapsulation header.
+struct Cdr {
+    bytes: Vec<u8>,
+}
+
+impl Cdr {
+    /// The encapsulation header: CDR_LE, no options.
+    const HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+
+    fn new() -> Self {
+        Self {
+            bytes: Self::HEADER.to_vec(),
+        }
+    }
+
+    fn align(&mut self, n: usize) {
+        while !(self.bytes.len() - Self::HEADER.len()).is_multiple_of(n) {
+            self.bytes.push(0);
+        }
+    }
+
+    fn u32(&mut self, v: u32) {
+        self.align(4);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    fn i32(&mut self, v: i32) {
+        self.align(4);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    fn f64(&mut self, v: f64) {
+        self.align(8);
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+    }
+
+    /// Its length with the terminating NUL, its bytes, the NUL.
+    fn string(&mut self, s: &str) {
+        self.u32(s.len() as u32 + 1);
+        self.bytes.extend_from_slice(s.as_bytes());
+        self.bytes.push(0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bytes PyPI `rosbags` 0.11.9 serialises for the same message (`serialize_cdr`,
+    /// Jazzy's type store); the integration test checks live messages against it too.
+    #[test]
+    fn a_joint_state_is_the_bytes_rosbags_writes() {
+        let ours = joint_state(
+            5_000_000_007,
+            "press_0",
+            &[("x", 0.04), ("y", 0.04), ("theta", 0.0)],
+        );
+        let rosbags = "0001000005000000070000000800000070726573735f300003000000020000007800\
+                       00000200000079000000060000007468657461000000030000007b14ae47e17aa43f\
+                       7b14ae47e17aa43f00000000000000000000000000000000";
+        let hex: String = ours.iter().map(|b| format!("{b:02x}")).collect();
+        assert_eq!(hex, rosbags);
+    }
+
+    #[test]
+    fn the_key_and_the_attachment_are_as_rmw_zenoh_writes_them() {
+        assert_eq!(
+            joint_states_key(7, "press_0"),
+            "7/press_0/joint_states/sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"
+        );
+        let a = attachment(3, -2, &[9; 16]);
+        assert_eq!(a.len(), 33);
+        assert_eq!(a[..8], 3i64.to_le_bytes());
+        assert_eq!(a[8..16], (-2i64).to_le_bytes());
+        assert_eq!(a[16], 16);
+        assert_eq!(a[17..], [9; 16]);
+    }
+}

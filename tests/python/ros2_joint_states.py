@@ -1,0 +1,88 @@
+#!/usr/bin/env python3
+"""What a ROS 2 node on rmw_zenoh (Jazzy) would receive of a cell's joint states, checked
+without ROS: eclipse-zenoh takes the samples off the line, PyPI rosbags (0.11.9) decodes the
+CDR payload as sensor_msgs/msg/JointState, encodes the message again (the bytes must be the
+same) and computes the type hash the key must carry.
+
+    ros2_joint_states.py --connect tcp/HOST:PORT --domain D --namespace NS [--samples N]
+
+Prints one JSON object: the key, the frame, the names, the positions, the stamps (s), the
+attachments' sequence numbers and GID. Exit 1 with the reason on stderr if anything differs
+from what rmw_zenoh writes or nothing arrives within 10 s.
+"""
+import argparse
+import json
+import queue
+import struct
+import sys
+
+import zenoh
+from rosbags.typesys import Stores, get_typestore
+
+TYPE = "sensor_msgs/msg/JointState"
+
+
+def fail(why):
+    print(why, file=sys.stderr)
+    sys.exit(1)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--connect", action="append", required=True)
+    ap.add_argument("--domain", type=int, required=True)
+    ap.add_argument("--namespace", required=True)
+    ap.add_argument("--samples", type=int, default=2)
+    args = ap.parse_args()
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    want_type = "sensor_msgs::msg::dds_::JointState_"
+    want_hash = store.hash_rihs01(TYPE)
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("connect/endpoints", json.dumps(args.connect))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    got = queue.Queue()
+    with zenoh.open(conf) as session:
+        # Any type and hash under the topic: the key must name them itself.
+        key = f"{args.domain}/{args.namespace}/joint_states/*/*"
+        sub = session.declare_subscriber(key, lambda s: got.put(
+            (str(s.key_expr), s.payload.to_bytes(),
+             s.attachment.to_bytes() if s.attachment is not None else None)))
+        samples = []
+        try:
+            while len(samples) < args.samples:
+                samples.append(got.get(timeout=10))
+        except queue.Empty:
+            fail(f"{len(samples)} samples on {key} in 10 s")
+        sub.undeclare()
+
+    out = {"names": None, "positions": [], "stamps": [], "seqs": [], "gids": set()}
+    for key_expr, payload, attachment in samples:
+        chunks = key_expr.split("/")
+        if chunks[-2:] != [want_type, want_hash]:
+            fail(f"key {key_expr}: not .../{want_type}/{want_hash}")
+        out["key"] = key_expr
+        msg = store.deserialize_cdr(payload, TYPE)
+        again = bytes(store.serialize_cdr(msg, TYPE))
+        if again != payload:
+            fail(f"rosbags encodes the message as {again.hex()}, the cell sent {payload.hex()}")
+        if attachment is None or len(attachment) != 33 or attachment[16] != 16:
+            fail(f"attachment {attachment!r}: not seq (i64), stamp (i64), 16, GID (16 bytes)")
+        seq, stamp_ns = struct.unpack("<qq", attachment[:16])
+        out["seqs"].append(seq)
+        out["gids"].add(attachment[17:].hex())
+        out["frame"] = msg.header.frame_id
+        out["names"] = list(msg.name)
+        out["positions"].append([float(p) for p in msg.position])
+        out["stamps"].append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        out["attachment_stamps"] = out.get("attachment_stamps", []) + [stamp_ns * 1e-9]
+        if len(msg.velocity) or len(msg.effort):
+            out["velocity"], out["effort"] = list(msg.velocity), list(msg.effort)
+    out["gids"] = sorted(out["gids"])
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
