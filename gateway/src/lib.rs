@@ -7,6 +7,7 @@
 //! - [`auth`]: who may ask it: the line's users (a viewer may read, an operator may also
 //!   command), each command signed with its user's secret (HMAC-SHA256), fresh and never
 //!   replayed; a refusal says why, where the transport's own access control would be silent;
+//! - [`budget`]: at most so many log lines of a flood of commands, the rest counted;
 //! - [`link`]: a Zenoh session from a `[network]` section or a control room's line file;
 //! - [`wire`]: the status, events and answers as the network carries them;
 //! - [`ros2`]: the cell's joint states as ROS 2 reads them through rmw_zenoh.
@@ -15,6 +16,7 @@
 //! channel like `supervisor pause`, under the cell's own user.
 
 pub mod auth;
+pub mod budget;
 pub mod command;
 pub mod keys;
 pub mod link;

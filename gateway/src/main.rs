@@ -19,6 +19,7 @@ use cell_config::network::NetworkSettings;
 use control_plane::event::Axes;
 use control_plane::{Reply, Request, channel};
 use gateway::auth::{Gate, Users, now_ms};
+use gateway::budget::LogBudget;
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName};
 use gateway::link::Link;
@@ -51,6 +52,11 @@ const PATIENCE: Duration = Duration::from_secs(60);
 
 /// How long a failed join of the line waits before the next.
 const JOIN_AGAIN: Duration = Duration::from_secs(2);
+/// The commands from the line in the cell's log: at most so many lines in so many ms, then
+/// one line saying how many more came (a viewer polling at 1 800 requests a second filled the
+/// log with a line each).
+const LOG_LINES: u32 = 20;
+const LOG_WINDOW_MS: u64 = 10_000;
 
 struct Bridge {
     events: Sub<EventV1>,
@@ -254,6 +260,8 @@ fn serve(
         .with(zenoh::handlers::RingChannel::new(CONTROL_QUEUE))
         .wait()?;
     let mut gate = Gate::new(users.clone(), name.as_str());
+    // The commands in the cell's log: the first of a flood, then how many were not logged.
+    let mut budget = LogBudget::new(LOG_LINES, LOG_WINDOW_MS);
     let control_instance = *instance;
     let for_control = latest.clone();
     std::thread::Builder::new()
@@ -268,9 +276,19 @@ fn serve(
                     .attachment()
                     .and_then(|a| a.try_to_string().ok().map(|s| s.to_string()))
                     .unwrap_or_default();
-                let answer = match gate.admit(&payload, &signature, now_ms()) {
+                let now = now_ms();
+                let verdict = budget.take(now);
+                if let Some(n) = verdict.held_before {
+                    tracing::warn!(
+                        "{n} more commands from the line not logged (at most {LOG_LINES} in {} s)",
+                        budget.window_s()
+                    );
+                }
+                let answer = match gate.admit(&payload, &signature, now) {
                     Ok(a) => {
-                        tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
+                        if verdict.log {
+                            tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
+                        }
                         match a.command {
                             Command::Status {} => for_control
                                 .lock()
@@ -286,7 +304,9 @@ fn serve(
                         }
                     }
                     Err(refusal) => {
-                        tracing::warn!("a command refused: {refusal}");
+                        if verdict.log {
+                            tracing::warn!("a command refused: {refusal}");
+                        }
                         Answer::Refused {
                             by: RefusedBy::Gateway,
                             reason: refusal.to_string(),
