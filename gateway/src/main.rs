@@ -112,9 +112,10 @@ fn main() -> ExitCode {
             let (note, notes) = sync_channel(16);
             let instance = ctx.instance;
             let axes = Axes::of_cell(&ctx.cell);
+            let kin = forward_kinematics(&ctx.cell);
             std::thread::Builder::new()
                 .name("line".into())
-                .spawn(move || line(instance, axes, rx, note))
+                .spawn(move || line(instance, axes, kin, rx, note))
                 .map_err(|e| SetupError::from(format!("cannot start the network thread: {e}")))?;
             Ok::<_, SetupError>(Bridge {
                 events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
@@ -157,6 +158,7 @@ fn settings(instance: &InstanceName) -> Option<NetworkSettings> {
 fn line(
     instance: InstanceName,
     axes: Axes,
+    kin: Option<kinematics::Boxed>,
     events: Receiver<(EventV1, u64)>,
     note: SyncSender<Note>,
 ) {
@@ -198,7 +200,11 @@ fn line(
             net.listen.join(", ")
         };
         let _ = note.try_send(Note::Joined(format!("{name} on {at}")));
-        match serve(&session, &instance, &name, &net, &users, &axes, &events) {
+        let cell = Cell {
+            axes: &axes,
+            kin: kin.as_deref(),
+        };
+        match serve(&session, &instance, &name, &net, &users, &cell, &events) {
             Ok(()) => return,
             Err(e) => {
                 let why = format!("the gateway left the line: {e}");
@@ -218,9 +224,10 @@ fn serve(
     name: &CellName,
     net: &NetworkSettings,
     users: &Users,
-    axes: &Axes,
+    cell: &Cell<'_>,
     events: &Receiver<(EventV1, u64)>,
 ) -> zenoh::Result<()> {
+    let axes = cell.axes;
     let host = nix::unistd::gethostname()
         .ok()
         .and_then(|h| h.into_string().ok())
@@ -324,7 +331,7 @@ fn serve(
         net.connect.join(", ")
     );
     let mut joints = match &net.ros2 {
-        Some(r) => Some(JointStates::declare(session, name, r, axes)?),
+        Some(r) => Some(JointStates::declare(session, name, r, cell)?),
         None => None,
     };
     let period = Duration::from_secs_f64(net.status_period);
@@ -377,9 +384,58 @@ fn serve(
     }
 }
 
-/// The cell's joint states for ROS 2 (`[network.ros2]`), from each status it publishes.
-struct JointStates {
+/// What the network thread knows of the cell: its axes, its forward kinematics.
+struct Cell<'a> {
+    axes: &'a Axes,
+    /// `None` when the cell's kinematics cannot be built (the configuration was checked: not
+    /// expected); the tool pose is then not published.
+    kin: Option<&'a (dyn kinematics::Kinematics + Send + Sync)>,
+}
+
+/// The cell's forward kinematics: `[kinematics]`, or the gantry of its axes.
+fn forward_kinematics(cell: &shm_schema::CellConfigV6) -> Option<kinematics::Boxed> {
+    let k = &cell.kinematics;
+    let name = shm_schema::str_of(&k.type_name);
+    let gantry = [("axes", cell.axes().len() as f64)];
+    let params: Vec<(&str, f64)> = if name.is_empty() || name == "gantry" {
+        gantry.to_vec()
+    } else {
+        (k.params[..(k.param_count as usize).min(k.params.len())].iter())
+            .map(|p| (shm_schema::str_of(&p.name), p.value))
+            .collect()
+    };
+    let name = if name.is_empty() { "gantry" } else { name };
+    kinematics::build(name, &kinematics::Params(&params))
+        .inspect_err(|e| tracing::warn!("no tool pose for ROS 2: kinematics {name}: {e}"))
+        .ok()
+}
+
+/// The tool pose of `pose` (in `coords`): its position in m (`x`, `y`, `z`; 0 where the
+/// kinematics has none) and its turn about z in rad (`theta`; 0 where none).
+fn tool_pose(coords: &[kinematics::Coord], pose: &kinematics::Pose) -> ([f64; 3], f64) {
+    let mut position = [0.0; 3];
+    let mut yaw = 0.0;
+    for (c, v) in coords.iter().zip(pose) {
+        match c.name {
+            "x" => position[0] = v * 1e-3,
+            "y" => position[1] = v * 1e-3,
+            "z" => position[2] = v * 1e-3,
+            "theta" => yaw = v.to_radians(),
+            _ => {}
+        }
+    }
+    (position, yaw)
+}
+
+/// The cell's joint states and tool pose for ROS 2 (`[network.ros2]`), from each status it
+/// publishes.
+struct JointStates<'a> {
     publisher: zenoh::pubsub::Publisher<'static>,
+    /// The tool pose's publisher, with the kinematics that gives it.
+    pose: Option<(
+        zenoh::pubsub::Publisher<'static>,
+        &'a (dyn kinematics::Kinematics + Send + Sync),
+    )>,
     /// The frame of the message: the namespace.
     frame: String,
     /// Each axis' name and how many m or rad its unit is.
@@ -389,28 +445,37 @@ struct JointStates {
     seq: i64,
 }
 
-impl JointStates {
+impl<'a> JointStates<'a> {
     fn declare(
         session: &zenoh::Session,
         name: &CellName,
         r: &cell_config::network::Ros2,
-        axes: &Axes,
+        cell: &Cell<'a>,
     ) -> zenoh::Result<Self> {
         let frame = r.namespace_of(name);
-        let publisher = session
-            .declare_publisher(ros2::joint_states_key(r.domain, &frame))
-            .congestion_control(CongestionControl::Drop)
-            .wait()?;
+        let declare = |key: String| {
+            session
+                .declare_publisher(key)
+                .congestion_control(CongestionControl::Drop)
+                .wait()
+        };
+        let publisher = declare(ros2::joint_states_key(r.domain, &frame))?;
+        let pose = match cell.kin {
+            Some(k) => Some((declare(ros2::tool_pose_key(r.domain, &frame))?, k)),
+            None => None,
+        };
         tracing::info!(
-            "ROS 2: /{frame}/{} in domain {} (sensor_msgs/msg/JointState)",
+            "ROS 2: /{frame}/{} (sensor_msgs/msg/JointState) and /{frame}/{} (geometry_msgs/msg/PoseStamped) in domain {}",
             ros2::JOINT_STATES,
+            ros2::TOOL_POSE,
             r.domain
         );
         Ok(Self {
             publisher,
+            pose,
             frame,
             // The configuration was checked: every unit converts.
-            axes: (axes.axes.iter())
+            axes: (cell.axes.axes.iter())
                 .map(|(n, u)| (n.clone(), cell_config::network::ros_scale(u).unwrap_or(1.0)))
                 .collect(),
             gid: session.zid().to_le_bytes(),
@@ -433,6 +498,25 @@ impl JointStates {
         self.publisher
             .put(ros2::joint_state(stamp_ns, &self.frame, &joints))
             .attachment(ros2::attachment(self.seq, stamp_ns as i64, &self.gid))
+            .wait()?;
+        // The tool pose of the same joints, in the cell's units (mm, deg) for the kinematics.
+        let Some((publisher, kin)) = &self.pose else {
+            return Ok(());
+        };
+        let mut q: kinematics::Joints = [0.0; kinematics::MAX_JOINTS];
+        for (slot, (n, _)) in q.iter_mut().zip(&self.axes) {
+            *slot = servo.axes.get(n).map_or(0.0, |a| a.position);
+        }
+        let Ok(p) = kin.axes_to_cartesian(&q) else {
+            return Ok(());
+        };
+        let (position, yaw) = tool_pose(kin.coords(), &p);
+        // Its own GID: the session's Zenoh id, the last byte turned.
+        let mut gid = self.gid;
+        gid[15] ^= 1;
+        publisher
+            .put(ros2::pose_stamped(stamp_ns, &self.frame, position, yaw))
+            .attachment(ros2::attachment(self.seq, stamp_ns as i64, &gid))
             .wait()
     }
 }
@@ -448,4 +532,23 @@ fn ask(instance: &InstanceName, command: &Command) -> Answer {
         &command.request(),
         Some(PATIENCE),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A gantry at (40 mm, 50 mm, 30 deg): the pose in m, turned 30 degrees about z.
+    #[test]
+    fn a_tool_pose_is_in_metres_and_radians() {
+        let gantry = kinematics::Gantry::new(3).expect("a gantry");
+        let kin: &dyn kinematics::Kinematics = &gantry;
+        let mut q: kinematics::Joints = [0.0; kinematics::MAX_JOINTS];
+        q[..3].copy_from_slice(&[40.0, 50.0, 30.0]);
+        let p = kin.axes_to_cartesian(&q).expect("a pose");
+        let (position, yaw) = tool_pose(kin.coords(), &p);
+        assert!((position[0] - 0.04).abs() < 1e-12 && (position[1] - 0.05).abs() < 1e-12);
+        assert_eq!(position[2], 0.0);
+        assert!((yaw - std::f64::consts::FRAC_PI_6).abs() < 1e-12, "{yaw}");
+    }
 }

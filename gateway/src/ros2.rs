@@ -12,10 +12,39 @@ pub const JOINT_STATE_HASH: &str =
     "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e";
 /// The topic under the cell's namespace.
 pub const JOINT_STATES: &str = "joint_states";
+/// The tool pose's type as rmw_zenoh writes it in a key.
+pub const POSE_STAMPED_TYPE: &str = "geometry_msgs::msg::dds_::PoseStamped_";
+/// `geometry_msgs/msg/PoseStamped`'s hash on Jazzy (rosbags 0.11.9, as above).
+pub const POSE_STAMPED_HASH: &str =
+    "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8";
+/// The tool pose's topic under the cell's namespace.
+pub const TOOL_POSE: &str = "tool_pose";
 
 /// The key of `/<namespace>/joint_states` in ROS domain `domain`.
 pub fn joint_states_key(domain: u32, namespace: &str) -> String {
     format!("{domain}/{namespace}/{JOINT_STATES}/{JOINT_STATE_TYPE}/{JOINT_STATE_HASH}")
+}
+
+/// The key of `/<namespace>/tool_pose` in ROS domain `domain`.
+pub fn tool_pose_key(domain: u32, namespace: &str) -> String {
+    format!("{domain}/{namespace}/{TOOL_POSE}/{POSE_STAMPED_TYPE}/{POSE_STAMPED_HASH}")
+}
+
+/// A `geometry_msgs/msg/PoseStamped` in CDR: stamped `stamp_ns`, frame `frame_id`, at
+/// `position` (m) turned by `yaw` (rad) about z (the quaternion `(0, 0, sin yaw/2, cos yaw/2)`).
+pub fn pose_stamped(stamp_ns: u64, frame_id: &str, position: [f64; 3], yaw: f64) -> Vec<u8> {
+    let mut w = Cdr::new();
+    let (sec, nanosec) = stamp(stamp_ns);
+    w.i32(sec);
+    w.u32(nanosec);
+    w.string(frame_id);
+    for v in position {
+        w.f64(v);
+    }
+    for v in [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()] {
+        w.f64(v);
+    }
+    w.bytes
 }
 
 /// A ROS time stamp from nanoseconds since the Unix epoch.
@@ -122,6 +151,23 @@ mod tests {
                        7b14ae47e17aa43f00000000000000000000000000000000";
         let hex: String = ours.iter().map(|b| format!("{b:02x}")).collect();
         assert_eq!(hex, rosbags);
+    }
+
+    /// The same for a tool pose 30 degrees about z.
+    #[test]
+    fn a_pose_stamped_is_the_bytes_rosbags_writes() {
+        let ours = pose_stamped(
+            5_000_000_007,
+            "press_0",
+            [0.04, 0.05, 0.0],
+            30f64.to_radians(),
+        );
+        let rosbags = "0001000005000000070000000800000070726573735f3000000000007b14ae47e17a\
+                       a43f9a9999999999a93f000000000000000000000000000000000000000000000000\
+                       900693c17d90d03f15bf4847dde8ee3f";
+        let hex: String = ours.iter().map(|b| format!("{b:02x}")).collect();
+        assert_eq!(hex, rosbags);
+        assert!(tool_pose_key(0, "p").ends_with(POSE_STAMPED_HASH));
     }
 
     #[test]

@@ -4,10 +4,11 @@ without ROS: eclipse-zenoh takes the samples off the line, PyPI rosbags (0.11.9)
 CDR payload as sensor_msgs/msg/JointState, encodes the message again (the bytes must be the
 same) and computes the type hash the key must carry.
 
-    ros2_joint_states.py --connect tcp/HOST:PORT --domain D --namespace NS [--samples N]
+    ros2_joint_states.py --connect tcp/HOST:PORT --domain D --namespace NS [--samples N] [--pose]
 
 Prints one JSON object: the key, the frame, the names, the positions, the stamps (s), the
-attachments' sequence numbers and GID. Exit 1 with the reason on stderr if anything differs
+attachments' sequence numbers and GID; with --pose also one tool pose
+(geometry_msgs/msg/PoseStamped on tool_pose, checked the same way). Exit 1 with the reason on stderr if anything differs
 from what rmw_zenoh writes or nothing arrives within 10 s.
 """
 import argparse
@@ -33,6 +34,7 @@ def main():
     ap.add_argument("--domain", type=int, required=True)
     ap.add_argument("--namespace", required=True)
     ap.add_argument("--samples", type=int, default=2)
+    ap.add_argument("--pose", action="store_true", help="also one tool pose on tool_pose")
     args = ap.parse_args()
 
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -81,7 +83,41 @@ def main():
         if len(msg.velocity) or len(msg.effort):
             out["velocity"], out["effort"] = list(msg.velocity), list(msg.effort)
     out["gids"] = sorted(out["gids"])
+    if args.pose:
+        out["pose"] = tool_pose(args, store)
     print(json.dumps(out))
+
+
+def tool_pose(args, store):
+    """One tool pose (geometry_msgs/msg/PoseStamped), checked as the joint states are."""
+    pose_type = "geometry_msgs/msg/PoseStamped"
+    want = ["geometry_msgs::msg::dds_::PoseStamped_", store.hash_rihs01(pose_type)]
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("connect/endpoints", json.dumps(args.connect))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    got = queue.Queue()
+    with zenoh.open(conf) as session:
+        key = f"{args.domain}/{args.namespace}/tool_pose/*/*"
+        sub = session.declare_subscriber(key, lambda s: got.put(
+            (str(s.key_expr), s.payload.to_bytes(),
+             s.attachment.to_bytes() if s.attachment is not None else None)))
+        try:
+            key_expr, payload, attachment = got.get(timeout=10)
+        except queue.Empty:
+            fail(f"no sample on {key} in 10 s")
+        sub.undeclare()
+    if key_expr.split("/")[-2:] != want:
+        fail(f"key {key_expr}: not .../{want[0]}/{want[1]}")
+    msg = store.deserialize_cdr(payload, pose_type)
+    again = bytes(store.serialize_cdr(msg, pose_type))
+    if again != payload:
+        fail(f"rosbags encodes the pose as {again.hex()}, the cell sent {payload.hex()}")
+    if attachment is None or len(attachment) != 33 or attachment[16] != 16:
+        fail(f"the pose's attachment {attachment!r}")
+    p, o = msg.pose.position, msg.pose.orientation
+    return {"frame": msg.header.frame_id, "position": [p.x, p.y, p.z],
+            "orientation": [o.x, o.y, o.z, o.w], "gid": attachment[17:].hex()}
 
 
 if __name__ == "__main__":

@@ -271,12 +271,13 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
 
     // press-0's joint states as a ROS 2 node on rmw_zenoh would receive them, checked by
     // eclipse-zenoh and rosbags in the room (the CDR bytes, the type hash in the key, the
-    // attachment): at rest at the default start, x and y 40 mm and theta 0 deg, in m and rad.
+    // attachment): at rest at the default start, x and y 40 mm and theta 0 deg, in m and rad,
+    // and the tool pose there.
     let mut ros = Command::new("ip");
     ros.args(["netns", "exec", &hosts.room, "python3"])
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/ros2_joint_states.py"))
         .args(["--connect", "tcp/10.77.1.2:7447", "--domain", "42"])
-        .args(["--namespace", "press_0", "--samples", "3"]);
+        .args(["--namespace", "press_0", "--samples", "3", "--pose"]);
     let out = run_with_watchdog(&mut ros, WATCHDOG);
     assert!(out.status.success(), "ROS 2 joint states: {}", text(&out));
     let j: Value = serde_json::from_slice(&out.stdout).expect("the checker's JSON");
@@ -310,6 +311,30 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         Some(1),
         "one publisher: {j}"
     );
+    // The tool pose of the gantry at rest there: (0.04, 0.04, 0) m, not turned; a publisher
+    // of its own.
+    let pose = &j["pose"];
+    assert_eq!(pose["frame"], "press_0", "{j}");
+    let near = |v: &Value, want: &[f64]| {
+        (v.as_array().expect("numbers").iter())
+            .zip(want)
+            .all(|(g, w)| (g.as_f64().expect("a number") - w).abs() < 1e-5)
+    };
+    let at = |axis: &str| {
+        status["servo"]["axes"][axis]["position"]
+            .as_f64()
+            .expect("position")
+    };
+    assert!(
+        near(&pose["position"], &[at("x") * 1e-3, at("y") * 1e-3, 0.0]),
+        "{j}"
+    );
+    let half = at("theta").to_radians() / 2.0;
+    assert!(
+        near(&pose["orientation"], &[0.0, 0.0, half.sin(), half.cos()]),
+        "{j}"
+    );
+    assert_ne!(pose["gid"], j["gids"][0], "{j}");
 
     // A viewer may read, not command: refused by the gateway, with why; the cell untouched.
     let out = room(&hosts, &victor, &["pause", "press-0"]);
