@@ -28,6 +28,29 @@ def fail(why):
     sys.exit(1)
 
 
+def take(args, topic, n):
+    """The first `n` samples (key, payload, attachment) of `topic` under the namespace, of any
+    type and hash: the key must name them itself."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("connect/endpoints", json.dumps(args.connect))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    got = queue.Queue()
+    key = f"{args.domain}/{args.namespace}/{topic}/*/*"
+    with zenoh.open(conf) as session:
+        sub = session.declare_subscriber(key, lambda s: got.put(
+            (str(s.key_expr), s.payload.to_bytes(),
+             s.attachment.to_bytes() if s.attachment is not None else None)))
+        samples = []
+        try:
+            while len(samples) < n:
+                samples.append(got.get(timeout=10))
+        except queue.Empty:
+            fail(f"{len(samples)} samples on {key} in 10 s")
+        sub.undeclare()
+    return samples
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", action="append", required=True)
@@ -41,24 +64,7 @@ def main():
     want_type = "sensor_msgs::msg::dds_::JointState_"
     want_hash = store.hash_rihs01(TYPE)
 
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps("peer"))
-    conf.insert_json5("connect/endpoints", json.dumps(args.connect))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    got = queue.Queue()
-    with zenoh.open(conf) as session:
-        # Any type and hash under the topic: the key must name them itself.
-        key = f"{args.domain}/{args.namespace}/joint_states/*/*"
-        sub = session.declare_subscriber(key, lambda s: got.put(
-            (str(s.key_expr), s.payload.to_bytes(),
-             s.attachment.to_bytes() if s.attachment is not None else None)))
-        samples = []
-        try:
-            while len(samples) < args.samples:
-                samples.append(got.get(timeout=10))
-        except queue.Empty:
-            fail(f"{len(samples)} samples on {key} in 10 s")
-        sub.undeclare()
+    samples = take(args, "joint_states", args.samples)
 
     out = {"names": None, "positions": [], "stamps": [], "seqs": [], "gids": set()}
     for key_expr, payload, attachment in samples:
@@ -92,21 +98,7 @@ def tool_pose(args, store):
     """One tool pose (geometry_msgs/msg/PoseStamped), checked as the joint states are."""
     pose_type = "geometry_msgs/msg/PoseStamped"
     want = ["geometry_msgs::msg::dds_::PoseStamped_", store.hash_rihs01(pose_type)]
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps("peer"))
-    conf.insert_json5("connect/endpoints", json.dumps(args.connect))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    got = queue.Queue()
-    with zenoh.open(conf) as session:
-        key = f"{args.domain}/{args.namespace}/tool_pose/*/*"
-        sub = session.declare_subscriber(key, lambda s: got.put(
-            (str(s.key_expr), s.payload.to_bytes(),
-             s.attachment.to_bytes() if s.attachment is not None else None)))
-        try:
-            key_expr, payload, attachment = got.get(timeout=10)
-        except queue.Empty:
-            fail(f"no sample on {key} in 10 s")
-        sub.undeclare()
+    key_expr, payload, attachment = take(args, "tool_pose", 1)[0]
     if key_expr.split("/")[-2:] != want:
         fail(f"key {key_expr}: not .../{want[0]}/{want[1]}")
     msg = store.deserialize_cdr(payload, pose_type)
