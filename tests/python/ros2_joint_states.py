@@ -51,6 +51,26 @@ def take(args, topic, n):
     return samples
 
 
+def checked(store, sample, ros_type):
+    """A sample of `ros_type` (`pkg/msg/Type`) as rmw_zenoh writes one: its key ends with
+    the type and the hash rosbags computes, rosbags encodes the decoded message to the same
+    bytes, its attachment is seq (i64), stamp (i64), 16, GID (16 bytes). Returns the message,
+    the sequence number, the stamp (ns) and the GID (hex)."""
+    key_expr, payload, attachment = sample
+    pkg, _, name = ros_type.split("/")
+    want = [f"{pkg}::msg::dds_::{name}_", store.hash_rihs01(ros_type)]
+    if key_expr.split("/")[-2:] != want:
+        fail(f"key {key_expr}: not .../{want[0]}/{want[1]}")
+    msg = store.deserialize_cdr(payload, ros_type)
+    again = bytes(store.serialize_cdr(msg, ros_type))
+    if again != payload:
+        fail(f"rosbags encodes the {name} as {again.hex()}, the cell sent {payload.hex()}")
+    if attachment is None or len(attachment) != 33 or attachment[16] != 16:
+        fail(f"attachment {attachment!r}: not seq (i64), stamp (i64), 16, GID (16 bytes)")
+    seq, stamp_ns = struct.unpack("<qq", attachment[:16])
+    return msg, seq, stamp_ns, attachment[17:].hex()
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", action="append", required=True)
@@ -61,26 +81,14 @@ def main():
     args = ap.parse_args()
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    want_type = "sensor_msgs::msg::dds_::JointState_"
-    want_hash = store.hash_rihs01(TYPE)
-
     samples = take(args, "joint_states", args.samples)
 
     out = {"names": None, "positions": [], "stamps": [], "seqs": [], "gids": set()}
-    for key_expr, payload, attachment in samples:
-        chunks = key_expr.split("/")
-        if chunks[-2:] != [want_type, want_hash]:
-            fail(f"key {key_expr}: not .../{want_type}/{want_hash}")
-        out["key"] = key_expr
-        msg = store.deserialize_cdr(payload, TYPE)
-        again = bytes(store.serialize_cdr(msg, TYPE))
-        if again != payload:
-            fail(f"rosbags encodes the message as {again.hex()}, the cell sent {payload.hex()}")
-        if attachment is None or len(attachment) != 33 or attachment[16] != 16:
-            fail(f"attachment {attachment!r}: not seq (i64), stamp (i64), 16, GID (16 bytes)")
-        seq, stamp_ns = struct.unpack("<qq", attachment[:16])
+    for sample in samples:
+        out["key"] = sample[0]
+        msg, seq, stamp_ns, gid = checked(store, sample, TYPE)
         out["seqs"].append(seq)
-        out["gids"].add(attachment[17:].hex())
+        out["gids"].add(gid)
         out["frame"] = msg.header.frame_id
         out["names"] = list(msg.name)
         out["positions"].append([float(p) for p in msg.position])
@@ -96,20 +104,10 @@ def main():
 
 def tool_pose(args, store):
     """One tool pose (geometry_msgs/msg/PoseStamped), checked as the joint states are."""
-    pose_type = "geometry_msgs/msg/PoseStamped"
-    want = ["geometry_msgs::msg::dds_::PoseStamped_", store.hash_rihs01(pose_type)]
-    key_expr, payload, attachment = take(args, "tool_pose", 1)[0]
-    if key_expr.split("/")[-2:] != want:
-        fail(f"key {key_expr}: not .../{want[0]}/{want[1]}")
-    msg = store.deserialize_cdr(payload, pose_type)
-    again = bytes(store.serialize_cdr(msg, pose_type))
-    if again != payload:
-        fail(f"rosbags encodes the pose as {again.hex()}, the cell sent {payload.hex()}")
-    if attachment is None or len(attachment) != 33 or attachment[16] != 16:
-        fail(f"the pose's attachment {attachment!r}")
+    msg, _, _, gid = checked(store, take(args, "tool_pose", 1)[0], "geometry_msgs/msg/PoseStamped")
     p, o = msg.pose.position, msg.pose.orientation
     return {"frame": msg.header.frame_id, "position": [p.x, p.y, p.z],
-            "orientation": [o.x, o.y, o.z, o.w], "gid": attachment[17:].hex()}
+            "orientation": [o.x, o.y, o.z, o.w], "gid": gid}
 
 
 if __name__ == "__main__":
