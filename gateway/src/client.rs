@@ -446,6 +446,14 @@ fn events(
         .declare_subscriber(cell.events())
         .wait()
         .map_err(|e| (1, format!("cannot subscribe: {e}")))?;
+    // A round trip to the cell's gateway after the subscription: on the link between them it
+    // went out first, so once the cell answers it knows of it, and nothing it publishes from
+    // then on is missed. Said on stderr, where a script waits for it.
+    if statuses(session, &cell.status())?.contains_key(cell.as_str()) {
+        eprintln!("following {cell}'s events");
+    } else {
+        eprintln!("following {cell}'s events (it does not answer on the line yet)");
+    }
     let end = deadline(seconds);
     let mut last: Option<EventMessage> = None;
     loop {

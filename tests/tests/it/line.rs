@@ -439,9 +439,34 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         .args(["line", "--json", "--line"])
         .arg(&victor)
         .args(["events", "press-1", "--seconds", "8"]);
-    let follower = std::thread::spawn(move || run_with_watchdog(&mut follow, WATCHDOG));
-    // The follower joins the line and subscribes (it waits half a second before it listens).
-    std::thread::sleep(Duration::from_secs(3));
+    // It says on stderr once the cell's gateway knows of its subscription (a round trip).
+    let mut follower = follow
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the follower");
+    let stdout = follower.stdout.take().expect("piped");
+    let collected = std::thread::spawn(move || {
+        let mut out = String::new();
+        std::io::Read::read_to_string(&mut std::io::BufReader::new(stdout), &mut out).map(|_| out)
+    });
+    let mut said = String::new();
+    let mut stderr = std::io::BufRead::lines(std::io::BufReader::new(
+        follower.stderr.take().expect("piped"),
+    ))
+    .map_while(Result::ok);
+    for line in stderr.by_ref() {
+        said.push_str(&line);
+        said.push('\n');
+        if line.starts_with("following press-1's events") {
+            break;
+        }
+    }
+    let drained = std::thread::spawn(move || stderr.for_each(drop));
+    assert!(
+        said.contains("following press-1's events\n"),
+        "the follower: {said}"
+    );
     ok(
         &hosts,
         &olga,
@@ -455,14 +480,18 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         "{}",
         s["estop"]
     );
-    let followed = follower.join().expect("the follower");
-    let lines = String::from_utf8_lossy(&followed.stdout).to_string();
+    let lines = collected
+        .join()
+        .expect("the follower's output")
+        .expect("its stdout");
+    let status = follower.wait().expect("the follower ends (--seconds 8)");
+    let _ = drained.join();
+    assert!(status.success(), "the follower: {status}: {lines}");
     assert!(
         lines
             .lines()
             .any(|l| l.contains("\"source\":\"servo\"") && l.contains("\"name\":\"estop-safe\"")),
-        "press-1's events in the room: {}",
-        text(&followed)
+        "press-1's events in the room: {lines}"
     );
     assert!(
         !lines.contains("\"lost\""),
