@@ -158,7 +158,7 @@ fn settings(instance: &InstanceName) -> Option<NetworkSettings> {
 fn line(
     instance: InstanceName,
     axes: Axes,
-    kin: Option<kinematics::Boxed>,
+    kin: Option<ForwardKinematics>,
     events: Receiver<(EventV1, u64)>,
     note: SyncSender<Note>,
 ) {
@@ -330,8 +330,8 @@ fn serve(
         net.listen.join(", "),
         net.connect.join(", ")
     );
-    let mut joints = match &net.ros2 {
-        Some(r) => Some(JointStates::declare(session, name, r, cell)?),
+    let mut ros = match &net.ros2 {
+        Some(r) => Some(RosTopics::declare(session, name, r, cell)?),
         None => None,
     };
     let period = Duration::from_secs_f64(net.status_period);
@@ -372,8 +372,8 @@ fn serve(
                     status: s,
                 };
                 let bytes = serde_json::to_vec(&m).unwrap_or_default();
-                if let Some(j) = &mut joints {
-                    j.publish(&m.status)?;
+                if let Some(r) = &mut ros {
+                    r.publish(&m.status)?;
                 }
                 if let Ok(mut g) = latest.lock() {
                     *g = Some((bytes.clone(), m.status));
@@ -384,6 +384,9 @@ fn serve(
     }
 }
 
+/// A cell's forward kinematics, shared with the network thread.
+type ForwardKinematics = Arc<dyn kinematics::Kinematics + Send + Sync>;
+
 /// What the network thread knows of the cell: its axes, its forward kinematics.
 struct Cell<'a> {
     axes: &'a Axes,
@@ -392,21 +395,18 @@ struct Cell<'a> {
     kin: Option<&'a (dyn kinematics::Kinematics + Send + Sync)>,
 }
 
-/// The cell's forward kinematics: `[kinematics]`, or the gantry of its axes.
-fn forward_kinematics(cell: &shm_schema::CellConfigV6) -> Option<kinematics::Boxed> {
-    let k = &cell.kinematics;
-    let name = shm_schema::str_of(&k.type_name);
-    let gantry = [("axes", cell.axes().len() as f64)];
-    let params: Vec<(&str, f64)> = if name.is_empty() || name == "gantry" {
-        gantry.to_vec()
-    } else {
-        (k.params[..(k.param_count as usize).min(k.params.len())].iter())
-            .map(|p| (shm_schema::str_of(&p.name), p.value))
-            .collect()
+/// The cell's forward kinematics: `[kinematics]` as trajgen builds it, or the gantry of its
+/// axes (whose coordinates are its joints).
+fn forward_kinematics(cell: &shm_schema::CellConfigV6) -> Option<ForwardKinematics> {
+    let built = match motion_core::generator::Kin::of_cell(cell) {
+        Ok(Some(kin)) => Ok(kin.0),
+        Ok(None) => kinematics::Gantry::new(cell.axes().len())
+            .map(|g| Arc::new(g) as ForwardKinematics)
+            .map_err(|e| e.to_string()),
+        Err(e) => Err(e.to_string()),
     };
-    let name = if name.is_empty() { "gantry" } else { name };
-    kinematics::build(name, &kinematics::Params(&params))
-        .inspect_err(|e| tracing::warn!("no tool pose for ROS 2: kinematics {name}: {e}"))
+    built
+        .inspect_err(|e| tracing::warn!("no tool pose for ROS 2: {e}"))
         .ok()
 }
 
@@ -427,9 +427,9 @@ fn tool_pose(coords: &[kinematics::Coord], pose: &kinematics::Pose) -> ([f64; 3]
     (position, yaw)
 }
 
-/// The cell's joint states and tool pose for ROS 2 (`[network.ros2]`), from each status it
-/// publishes.
-struct JointStates<'a> {
+/// The cell's ROS 2 topics (`[network.ros2]`): its joint states and tool pose, from each
+/// status it publishes.
+struct RosTopics<'a> {
     publisher: zenoh::pubsub::Publisher<'static>,
     /// The tool pose's publisher, with the kinematics that gives it.
     pose: Option<(
@@ -445,7 +445,7 @@ struct JointStates<'a> {
     seq: i64,
 }
 
-impl<'a> JointStates<'a> {
+impl<'a> RosTopics<'a> {
     fn declare(
         session: &zenoh::Session,
         name: &CellName,
@@ -483,7 +483,8 @@ impl<'a> JointStates<'a> {
         })
     }
 
-    /// The joint states of `status`, stamped now (none before servo's first report).
+    /// The joint states and tool pose of `status`, stamped now (none before servo's first
+    /// report).
     fn publish(&mut self, status: &control_plane::status::Status) -> zenoh::Result<()> {
         let Some(servo) = &status.servo else {
             return Ok(());

@@ -286,14 +286,16 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     let status = a.until("at rest", |s| {
         s["servo"]["axes"]["x"]["position"].is_number()
     });
+    let at = |axis: &str| {
+        status["servo"]["axes"][axis]["position"]
+            .as_f64()
+            .expect("position")
+    };
     for (k, (axis, scale)) in [("x", 1e-3), ("y", 1e-3), ("theta", PI / 180.0)]
         .into_iter()
         .enumerate()
     {
-        let want = status["servo"]["axes"][axis]["position"]
-            .as_f64()
-            .expect("position")
-            * scale;
+        let want = at(axis) * scale;
         for p in j["positions"].as_array().expect("positions") {
             let got = p[k].as_f64().expect("a position");
             assert!(
@@ -319,11 +321,6 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         (v.as_array().expect("numbers").iter())
             .zip(want)
             .all(|(g, w)| (g.as_f64().expect("a number") - w).abs() < 1e-5)
-    };
-    let at = |axis: &str| {
-        status["servo"]["axes"][axis]["position"]
-            .as_f64()
-            .expect("position")
     };
     assert!(
         near(&pose["position"], &[at("x") * 1e-3, at("y") * 1e-3, 0.0]),
@@ -445,27 +442,11 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         .stderr(Stdio::piped())
         .spawn()
         .expect("the follower");
-    let stdout = follower.stdout.take().expect("piped");
-    let collected = std::thread::spawn(move || {
-        let mut out = String::new();
-        std::io::Read::read_to_string(&mut std::io::BufReader::new(stdout), &mut out).map(|_| out)
-    });
-    let mut said = String::new();
-    let mut stderr = std::io::BufRead::lines(std::io::BufReader::new(
-        follower.stderr.take().expect("piped"),
-    ))
-    .map_while(Result::ok);
-    for line in stderr.by_ref() {
-        said.push_str(&line);
-        said.push('\n');
-        if line.starts_with("following press-1's events") {
-            break;
-        }
-    }
-    let drained = std::thread::spawn(move || stderr.for_each(drop));
-    assert!(
-        said.contains("following press-1's events\n"),
-        "the follower: {said}"
+    integration_tests::until_it_says(
+        &mut follower,
+        "follower",
+        "following press-1's events\n",
+        WATCHDOG,
     );
     ok(
         &hosts,
@@ -480,13 +461,14 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         "{}",
         s["estop"]
     );
-    let lines = collected
-        .join()
-        .expect("the follower's output")
-        .expect("its stdout");
-    let status = follower.wait().expect("the follower ends (--seconds 8)");
-    let _ = drained.join();
-    assert!(status.success(), "the follower: {status}: {lines}");
+    let followed =
+        integration_tests::wait_output(follower, WATCHDOG, "the follower ends (--seconds 8)");
+    let lines = String::from_utf8_lossy(&followed.stdout).to_string();
+    assert!(
+        followed.status.success(),
+        "the follower: {}: {lines}",
+        followed.status
+    );
     assert!(
         lines
             .lines()
