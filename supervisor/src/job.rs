@@ -6,12 +6,14 @@ use crate::cell::TICK;
 use crate::cell::{Cell, Incident};
 use crate::error::RunError;
 use crate::program::{Checked, Predicted};
-use crate::report::{Report, TraceRow};
+use crate::report::{Report, TraceRow, per_axis};
 use cell_client::figures::Envelope;
 use cell_config::Config;
 use control_plane::Failure;
 use control_plane::failure::AxisValue;
 use control_plane::figures::{AxisEnvelope, Figures};
+use control_plane::report::{Delay, RunReport};
+use indexmap::IndexMap;
 use motion_program::Commands;
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::code;
@@ -509,34 +511,42 @@ impl Job {
         let figures = self
             .plot
             .then(|| Box::new(self.figures(cfg, title, &trace, &max_fe)));
-        Report {
+        let axes: Vec<String> = cfg.axis.iter().map(|a| a.name.clone()).collect();
+        let of_axes = |v: &[f64]| per_axis(&axes, v);
+        let run = RunReport {
             ok: true,
             program: self.name.clone(),
             instance: cell.instance.to_string(),
             cell: cfg.cell.name.clone(),
-            axes: cfg.axis.iter().map(|a| a.name.clone()).collect(),
-            units: cfg.axis.iter().map(|a| a.unit.clone()).collect(),
-            vmax: cfg.axis.iter().map(|a| a.vmax).collect(),
+            theoretical_s: done.theoretical_s,
+            predicted_s: self.predicted.duration_s,
+            measured_s,
+            waited_s: done.waited_s,
+            difference_s: measured_s - done.theoretical_s,
+            trajgen_period_s: cfg.period_s("trajgen"),
+            settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
+            final_position: of_axes(&final_state.act_position[..n]),
+            // The generator's resting point at the end is the last target.
+            final_error: of_axes(
+                &(0..n)
+                    .map(|i| final_state.act_position[i] - done.position[i])
+                    .collect::<Vec<_>>(),
+            ),
+            max_following_error: of_axes(&max_fe[..n]),
+            units: cfg
+                .axis
+                .iter()
+                .map(|a| (a.name.clone(), a.unit.clone()))
+                .collect(),
+            vmax: cfg.axis.iter().map(|a| (a.name.clone(), a.vmax)).collect(),
             t_acc: cfg.motion.t_acc,
-            start: self.start_pos.clone(),
+            start: of_axes(&self.start_pos),
             periods_us: cfg
                 .process
                 .iter()
                 .map(|p| (p.name.clone(), p.period_us))
                 .collect(),
-            theoretical_s: done.theoretical_s,
-            predicted_s: self.predicted.duration_s,
-            measured_s,
-            waited_s: done.waited_s,
-            trajgen_period_s: cfg.period_s("trajgen"),
-            settle_s: settle_start.saturating_sub(done.motion_end_ns) as f64 * 1e-9,
-            final_position: final_state.act_position[..n].to_vec(),
-            // The generator's resting point at the end is the last target.
-            final_error: (0..n)
-                .map(|i| final_state.act_position[i] - done.position[i])
-                .collect(),
-            max_following_error: max_fe[..n].to_vec(),
-            setpoints: self.rows.len(),
+            setpoints: self.rows.len() as u64,
             lost_setpoints: lost_setpoints(&self.rows),
             lost_servo_states: self
                 .servo_log
@@ -545,16 +555,18 @@ impl Job {
                 .sum(),
             trace_truncated: self.truncated,
             starved: done.starved,
-            iobridge_delay_us: (images.0 > 0).then(|| {
-                (
-                    images.1 as f64 / images.0 as f64 * 1e-3,
-                    images.2 as f64 * 1e-3,
-                )
+            iobridge_delay_us: (images.0 > 0).then(|| Delay {
+                mean: images.1 as f64 / images.0 as f64 * 1e-3,
+                max: images.2 as f64 * 1e-3,
             }),
-            processes: Vec::new(),
-            trace,
+            processes: IndexMap::new(),
+            sense_to_command_us: None,
             events: Vec::new(),
-            sense_to_command: None,
+            axes,
+        };
+        Report {
+            run,
+            trace,
             figures,
         }
     }

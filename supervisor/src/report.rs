@@ -1,11 +1,11 @@
 //! The result of a run: JSON for tools, a summary for people.
 
-use control_plane::event::{Event, Severity};
+use control_plane::event::Severity;
 use control_plane::report::{Delay, ProcessReport, RunReport};
 use indexmap::IndexMap;
 use latency::report::Summary;
 use runtime::rt::policy_name;
-use shm_schema::{MAX_AXES, ProcessStatusV2};
+use shm_schema::{LatencyHistogramV1, MAX_AXES, ProcessStatusV2};
 
 /// One process' figures from the last status it published (its percentiles are added from
 /// its histograms).
@@ -45,205 +45,117 @@ pub struct TraceRow {
     pub act: [f64; MAX_AXES],
 }
 
-/// Everything a run measured.
+/// Everything a run measured: the document `supervisor run --json` prints, and what stays
+/// with whoever ran it (the trace, the figures).
 #[derive(Clone, Debug)]
 pub struct Report {
-    /// Success.
-    pub ok: bool,
-    /// Program file.
-    pub program: String,
-    /// Instance name.
-    pub instance: String,
-    /// Cell name.
-    pub cell: String,
-    /// Axis names.
-    pub axes: Vec<String>,
-    /// Axis units.
-    pub units: Vec<String>,
-    /// vmax per axis.
-    pub vmax: Vec<f64>,
-    /// t_acc (s).
-    pub t_acc: f64,
-    /// Position the motion started from.
-    pub start: Vec<f64>,
-    /// Period per process (µs).
-    pub periods_us: Vec<(String, u64)>,
-    /// Sum of segment times, from trajgen (s).
-    pub theoretical_s: f64,
-    /// The same, predicted by the supervisor before the motion with trajgen's generator (s).
-    pub predicted_s: f64,
-    /// Wall-clock time from the first setpoint of the motion to its last, less the time
-    /// spent in `WAIT`s (s).
-    pub measured_s: f64,
-    /// Real time the program spent in `WAIT`s (s).
-    pub waited_s: f64,
-    /// trajgen's period (s).
-    pub trajgen_period_s: f64,
-    /// From the last setpoint until the axes were in position (s).
-    pub settle_s: f64,
-    /// Measured position once settled.
-    pub final_position: Vec<f64>,
-    /// Final position minus the last target.
-    pub final_error: Vec<f64>,
-    /// Largest |following error| per axis during the motion and settling, as servo latched it
-    /// in every one of its cycles (`ServoStateV3.peak_following_error`).
-    pub max_following_error: Vec<f64>,
-    /// Setpoints recorded.
-    pub setpoints: usize,
-    /// Setpoints missing from the record (sequence gaps).
-    pub lost_setpoints: u64,
-    /// The trace covers only the program's first [`crate::job::MAX_RECORD_S`] seconds.
-    pub trace_truncated: bool,
-    /// servo states the supervisor did not receive (sequence gaps: it was stalled, or its
-    /// buffer overflowed). The trace misses them; the following-error figures and the verdict
-    /// do not, since servo judges and latches every cycle itself.
-    pub lost_servo_states: u64,
-    /// Times trajgen's queue ran empty.
-    pub starved: u32,
-    /// iobridge: mean and max age of the position in the fieldbus image (µs).
-    pub iobridge_delay_us: Option<(f64, f64)>,
-    /// Per process.
-    pub processes: Vec<ProcessReport>,
-    /// The trace.
+    /// The run's document.
+    pub run: RunReport,
+    /// The trace (the program's first [`crate::job::MAX_RECORD_S`] seconds).
     pub trace: Vec<TraceRow>,
-    /// Every event of the run (`docs/events.md`).
-    pub events: Vec<Event>,
-    /// Sense-to-command latency the drives measured over the run: sampling the encoders to
-    /// applying the command computed from that sample.
-    pub sense_to_command: Option<Summary>,
     /// What `--plot` draws (the path, the following error over the run, the latency
     /// histograms), when it was asked for: built at the program's end only then.
     pub figures: Option<Box<control_plane::figures::Figures>>,
 }
 
 /// `values` keyed by the axes' `names`, in their order.
-fn per_axis<T: Clone>(names: &[String], values: &[T]) -> IndexMap<String, T> {
+pub(crate) fn per_axis<T: Clone>(names: &[String], values: &[T]) -> IndexMap<String, T> {
     names.iter().cloned().zip(values.iter().cloned()).collect()
 }
 
 impl Report {
-    /// measured − theoretical (s).
-    pub fn difference_s(&self) -> f64 {
-        self.measured_s - self.theoretical_s
-    }
-
-    /// The document of `supervisor run --json`.
-    pub fn document(&self) -> RunReport {
-        RunReport {
-            ok: self.ok,
-            program: self.program.clone(),
-            instance: self.instance.clone(),
-            cell: self.cell.clone(),
-            theoretical_s: self.theoretical_s,
-            predicted_s: self.predicted_s,
-            measured_s: self.measured_s,
-            waited_s: self.waited_s,
-            difference_s: self.difference_s(),
-            trajgen_period_s: self.trajgen_period_s,
-            settle_s: self.settle_s,
-            final_position: per_axis(&self.axes, &self.final_position),
-            final_error: per_axis(&self.axes, &self.final_error),
-            max_following_error: per_axis(&self.axes, &self.max_following_error),
-            axes: self.axes.clone(),
-            units: per_axis(&self.axes, &self.units),
-            vmax: per_axis(&self.axes, &self.vmax),
-            t_acc: self.t_acc,
-            start: per_axis(&self.axes, &self.start),
-            periods_us: self.periods_us.iter().cloned().collect(),
-            setpoints: self.setpoints as u64,
-            lost_setpoints: self.lost_setpoints,
-            lost_servo_states: self.lost_servo_states,
-            trace_truncated: self.trace_truncated,
-            starved: self.starved,
-            iobridge_delay_us: self
-                .iobridge_delay_us
-                .map(|(mean, max)| Delay { mean, max }),
-            processes: self
-                .processes
-                .iter()
-                .map(|p| (p.name.clone(), p.clone()))
-                .collect(),
-            sense_to_command_us: self.sense_to_command,
-            events: self.events.clone(),
+    /// The cell's own figures over the run, added once the program ended: each process' report
+    /// (`processes`, in the table's order), their wake-up latency histograms (to the figures,
+    /// when drawn) and the drives' sense-to-command latency.
+    pub(crate) fn add_cell_figures(
+        &mut self,
+        processes: Vec<ProcessReport>,
+        latency: Vec<control_plane::figures::ProcessLatency>,
+        sense_to_command: Option<&LatencyHistogramV1>,
+    ) {
+        self.run.processes = processes.into_iter().map(|p| (p.name.clone(), p)).collect();
+        if let Some(f) = &mut self.figures {
+            f.latency = latency;
         }
+        self.run.sense_to_command_us = sense_to_command.filter(|h| h.count > 0).map(Summary::of);
     }
 
-    /// [`Report::document`] as JSON.
+    /// [`Report::run`] as JSON.
     pub fn to_json(&self) -> String {
-        serde_json::to_string(&self.document()).unwrap_or_default()
+        serde_json::to_string(&self.run).unwrap_or_default()
     }
 
     /// The human summary.
     pub fn human(&self) -> String {
+        let r = &self.run;
         let mut s = String::new();
-        let ax = |v: &[f64], prec: usize| -> String {
-            self.axes
+        let ax = |v: &IndexMap<String, f64>, prec: usize| -> String {
+            r.axes
                 .iter()
-                .zip(v)
-                .zip(&self.units)
-                .map(|((a, x), u)| format!("{a} {x:.prec$} {u}"))
+                .map(|a| {
+                    let x = v.get(a).copied().unwrap_or(f64::NAN);
+                    let u = r.units.get(a).map_or("", String::as_str);
+                    format!("{a} {x:.prec$} {u}")
+                })
                 .collect::<Vec<_>>()
                 .join(", ")
         };
         s += &format!(
             "{} on {} (instance {}): done\n",
-            self.program, self.cell, self.instance
+            r.program, r.cell, r.instance
         );
         s += &format!(
             "  motion time        {:.4} s measured, {:.4} s theoretical ({:+.2} ms; trajgen period {:.1} ms)\n",
-            self.measured_s,
-            self.theoretical_s,
-            self.difference_s() * 1e3,
-            self.trajgen_period_s * 1e3
+            r.measured_s,
+            r.theoretical_s,
+            r.difference_s * 1e3,
+            r.trajgen_period_s * 1e3
         );
-        if self.waited_s > 0.0 {
+        if r.waited_s > 0.0 {
             s += &format!(
                 "  waited             {:.4} s in WAITs (not in the motion time above)\n",
-                self.waited_s
+                r.waited_s
             );
         }
         s += &format!(
             "  settled            {:.3} s after the last setpoint\n",
-            self.settle_s
+            r.settle_s
         );
-        s += &format!("  final position     {}\n", ax(&self.final_position, 4));
-        s += &format!(
-            "  max following err  {}\n",
-            ax(&self.max_following_error, 4)
-        );
-        if let Some((mean, max)) = self.iobridge_delay_us {
+        s += &format!("  final position     {}\n", ax(&r.final_position, 4));
+        s += &format!("  max following err  {}\n", ax(&r.max_following_error, 4));
+        if let Some(Delay { mean, max }) = r.iobridge_delay_us {
             s += &format!(
                 "  fieldbus image age {mean:.0} µs mean, {max:.0} µs max (measurement to write)\n"
             );
         }
-        if let Some(m) = self.sense_to_command {
+        if let Some(m) = r.sense_to_command_us {
             s += &format!(
                 "  sense to command   {:.0} µs p50, {:.0} µs p99, {:.0} µs max (encoder sample to the drives applying its command)\n",
                 m.p50_us, m.p99_us, m.max_us
             );
         }
-        let worst = self
+        let worst = r
             .events
             .iter()
             .filter(|e| e.severity != Severity::Info)
             .count();
         s += &format!(
             "  events             {} ({} warnings or errors)\n",
-            self.events.len(),
+            r.events.len(),
             worst
         );
         s += &format!(
             "  trace              {} setpoints, {} lost\n",
-            self.setpoints, self.lost_setpoints
+            r.setpoints, r.lost_setpoints
         );
-        if self.lost_servo_states > 0 {
+        if r.lost_servo_states > 0 {
             s += &format!(
                 "  servo states       {} not received: the trace misses them (servo latched its figures itself)\n",
-                self.lost_servo_states
+                r.lost_servo_states
             );
         }
         s += "  process    pid      policy       prio  period   cycles   overruns  wake-up µs: p50    p99  p99.9      max  exec µs p99     max   cpu\n";
-        for p in &self.processes {
+        for p in r.processes.values() {
             let m = p.wakeup_latency_us.unwrap_or_default();
             s += &format!(
                 "  {:<9}  {:<7}  {:<11}  {:>4}  {:>5.0} µs {:>7}  {:>8}  {:>16.1} {:>6.1} {:>6.1} {:>8.1}  {:>11.1} {:>7.0}   {}\n",
@@ -270,11 +182,11 @@ impl Report {
 /// The trace as CSV: `t_s, cmd_<axis>..., act_<axis>...`, one row per setpoint.
 pub(crate) fn trace_csv(report: &Report) -> String {
     use std::fmt::Write as _;
-    let n = report.axes.len();
+    let n = report.run.axes.len();
     let mut out = String::new();
     let mut header = vec!["t_s".to_string()];
-    header.extend(report.axes.iter().map(|a| format!("cmd_{a}")));
-    header.extend(report.axes.iter().map(|a| format!("act_{a}")));
+    header.extend(report.run.axes.iter().map(|a| format!("cmd_{a}")));
+    header.extend(report.run.axes.iter().map(|a| format!("act_{a}")));
     let _ = writeln!(out, "{}", header.join(","));
     for r in &report.trace {
         let _ = write!(out, "{:.6}", r.t_s);

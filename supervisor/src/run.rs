@@ -122,15 +122,8 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             }));
         }
     };
-    report.sense_to_command = sense_to_command
-        .as_deref()
-        .filter(|h| h.count > 0)
-        .map(latency::report::Summary::of);
-    report.processes = processes;
-    if let Some(f) = &mut report.figures {
-        f.latency = latency_figures;
-    }
-    report.events = closed.events;
+    report.add_cell_figures(processes, latency_figures, sense_to_command.as_deref());
+    report.run.events = closed.events;
     if let Some(e) = closed.problem {
         return Err(e);
     }

@@ -378,19 +378,14 @@ impl Loop<'_> {
             let result = match result {
                 Ok(mut report) => {
                     self.cell.take_events();
-                    report.events = self.events_json(r.events_from);
+                    report.run.events = self.events_json(r.events_from);
                     if !run {
                         self.cell.refresh_latency();
-                        report.processes = process_reports(self.cell);
-                        if let Some(f) = &mut report.figures {
-                            f.latency = latency_figures(self.cell);
-                        }
-                        report.sense_to_command = self
-                            .cell
-                            .sense_to_command
-                            .as_deref()
-                            .filter(|h| h.count > 0)
-                            .map(latency::report::Summary::of);
+                        report.add_cell_figures(
+                            process_reports(self.cell),
+                            latency_figures(self.cell),
+                            self.cell.sense_to_command.as_deref(),
+                        );
                     }
                     Ok(report)
                 }
@@ -601,7 +596,7 @@ impl Loop<'_> {
         let wants_trace = r.waiters.iter().any(|w| w.trace);
         let (outcome, text, csv) = match result {
             Ok(rep) => (
-                Outcome::Completed(Box::new(rep.document())),
+                Outcome::Completed(Box::new(rep.run.clone())),
                 rep.human(),
                 wants_trace.then(|| crate::report::trace_csv(rep)),
             ),
@@ -612,8 +607,8 @@ impl Loop<'_> {
             Ok(rep) => tracing::info!(
                 "{} done: {:.3} s measured, {:.3} s theoretical",
                 r.job.name,
-                rep.measured_s,
-                rep.theoretical_s
+                rep.run.measured_s,
+                rep.run.theoretical_s
             ),
             Err(e) => tracing::error!("{} failed: {e}", r.job.name),
         }
@@ -621,8 +616,8 @@ impl Loop<'_> {
             program: r.job.name.clone(),
             ok,
             error: (!ok).then(|| text.clone()),
-            measured_s: result.as_ref().ok().map(|r| r.measured_s),
-            theoretical_s: result.as_ref().ok().map(|r| r.theoretical_s),
+            measured_s: result.as_ref().ok().map(|r| r.run.measured_s),
+            theoretical_s: result.as_ref().ok().map(|r| r.run.theoretical_s),
             ran_s: r.started.elapsed().as_secs_f64(),
         });
         for w in &r.waiters {
