@@ -8,7 +8,8 @@ use gateway::auth::{Envelope, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
 use gateway::link::{Link, secret_file};
-use gateway::wire::{Answer, EventMessage, Missed, StatusMessage};
+use gateway::wire::{Answer, EventMessage, Missed, RecordBatch, RecordTopics, StatusMessage};
+use recorder::{RecordOptions, Recorded, Writer};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::ffi::OsString;
@@ -92,6 +93,24 @@ enum Cmd {
         /// Stop after this many (s); default: never.
         #[arg(long)]
         seconds: Option<f64>,
+    },
+    /// Records every service of a cell into an MCAP file here, as `supervisor record` does on
+    /// the cell's host: until Ctrl-C, `--duration`, or the cell leaving the line.
+    Record {
+        /// The cell's name on the line.
+        cell: String,
+        /// The MCAP file to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Start a new file (OUT-000.mcap, OUT-001.mcap, …) once one reaches this many MB.
+        #[arg(long)]
+        rotate_size: Option<f64>,
+        /// Start a new file every this many seconds.
+        #[arg(long)]
+        rotate_time: Option<f64>,
     },
     /// Sends a cell a command (pause, resume, abort, reset, start, speed, estop, exec).
     #[command(flatten)]
@@ -256,6 +275,17 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         } => Ask::Watch(seconds),
         Cmd::Status { cell } => Ask::Status(cell_name(&cell)?),
         Cmd::Events { cell, seconds } => Ask::Events(cell_name(&cell)?, seconds),
+        Cmd::Record {
+            cell,
+            out,
+            duration,
+            rotate_size,
+            rotate_time,
+        } => Ask::Record(
+            cell_name(&cell)?,
+            RecordOptions::of_command_line(&out, duration, rotate_size, rotate_time)
+                .map_err(input)?,
+        ),
     };
     let session = join(&file)?;
     // Let the links come up before asking (a get on a line not yet joined hears nothing):
@@ -283,6 +313,7 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         Ask::Watch(seconds) => watch(&session, seconds, json),
         Ask::Status(cell) => status(&session, &cell, json),
         Ask::Events(cell, seconds) => events(&session, &cell, seconds, json),
+        Ask::Record(cell, opts) => record(&session, &cell, &opts),
     }
 }
 
@@ -293,6 +324,7 @@ enum Ask {
     Watch(Option<f64>),
     Status(CellName),
     Events(CellName, Option<f64>),
+    Record(CellName, RecordOptions),
 }
 
 /// The statuses of every cell that answers, by name.
@@ -565,4 +597,150 @@ fn send(
         }
     }
     Ok(answer.exit_code())
+}
+
+/// How long without a batch of the recording stream (its heartbeat is every half second)
+/// before the recording takes the cell for gone.
+const RECORD_GONE: Duration = Duration::from_secs(3);
+
+/// The recording stream's topics, asked of the cell's gateway (which starts its source).
+fn record_topics(session: &zenoh::Session, cell: &CellName) -> Result<RecordTopics, Failure> {
+    let mut why = String::from("no answer");
+    // The source starts on the question: a few tries while it does.
+    for _ in 0..3 {
+        let replies = session
+            .get(cell.record_topics())
+            .timeout(PATIENCE)
+            .wait()
+            .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
+        while let Ok(reply) = replies.recv() {
+            match reply.result() {
+                Ok(sample) => {
+                    return serde_json::from_slice(&sample.payload().to_bytes()).map_err(|e| {
+                        (
+                            1,
+                            format!("cell {cell} answered its topics with something else: {e}"),
+                        )
+                    });
+                }
+                Err(e) => {
+                    why = e
+                        .payload()
+                        .try_to_string()
+                        .map_or_else(|_| "an error".into(), |s| s.to_string());
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    Err((
+        1,
+        format!("cell {cell} cannot be recorded from the line: {why}"),
+    ))
+}
+
+/// `record`: the cell's recording stream into MCAP files here, the same channels and
+/// messages as a recording on the cell's host.
+fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Result<u8, Failure> {
+    runtime::signals::install().map_err(|e| (1, format!("cannot install signal handlers: {e}")))?;
+    // Subscribed first: the gateway runs its source while anyone does, and every batch from
+    // the topics' answer on reaches this subscriber.
+    let stream = session
+        .declare_subscriber(cell.record())
+        .wait()
+        .map_err(|e| (1, format!("cannot subscribe: {e}")))?;
+    let mut topics = record_topics(session, cell)?;
+    let names: Vec<String> = topics.topics.iter().map(|t| t.topic.clone()).collect();
+    let file = |e: String| (1, e);
+    let mut out = Writer::create(&opts.out, opts.rotate, topics.topics.clone()).map_err(file)?;
+    {
+        use std::io::Write;
+        println!("recording cell {cell} to {}", out.path().display());
+        let _ = std::io::stdout().flush();
+    }
+    let mut written = vec![0u64; names.len()];
+    // Per topic: lost by the sources before the current one, and by the current one.
+    let mut lost_before = vec![0u64; names.len()];
+    let mut lost_now = vec![0u64; names.len()];
+    // Batches lost on the way, and sources started again (the messages between unknown).
+    let mut missed_batches = 0u64;
+    let mut restarts = 0u64;
+    let mut last_seq: Option<u64> = None;
+    let began = std::time::Instant::now();
+    let mut heard = std::time::Instant::now();
+    let mut last_check = std::time::Instant::now();
+    let ended = loop {
+        if runtime::signals::stop_requested() {
+            break "stopped".to_string();
+        }
+        if opts.duration.is_some_and(|d| began.elapsed() >= d) {
+            break "its duration is over".to_string();
+        }
+        if heard.elapsed() > RECORD_GONE {
+            break format!("cell {cell} left the line");
+        }
+        if last_check.elapsed() >= Duration::from_secs(1) {
+            last_check = std::time::Instant::now();
+            out.maybe_rotate().map_err(file)?;
+        }
+        let Ok(Some(sample)) = stream.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        let Ok(batch) = serde_json::from_slice::<RecordBatch>(&sample.payload().to_bytes()) else {
+            continue;
+        };
+        heard = std::time::Instant::now();
+        if batch.source_started_ms != topics.source_started_ms {
+            // The gateway started its source again (it was restarted, or its source had
+            // stopped): the same topics go on in the same file; other topics end it.
+            let again = record_topics(session, cell)?;
+            if again.source_started_ms != batch.source_started_ms {
+                continue;
+            }
+            if again.topics != topics.topics {
+                break format!("cell {cell}'s topics changed");
+            }
+            topics = again;
+            restarts += 1;
+            for (b, n) in lost_before.iter_mut().zip(&mut lost_now) {
+                *b += std::mem::take(n);
+            }
+            last_seq = Some(0);
+        }
+        if let Some(prev) = last_seq {
+            missed_batches += batch.seq.saturating_sub(prev + 1);
+        }
+        last_seq = Some(batch.seq);
+        for (k, t, message) in &batch.messages {
+            let k = *k as usize;
+            if k < names.len() {
+                out.write(k, *t, message.get().as_bytes()).map_err(file)?;
+                written[k] += 1;
+            }
+        }
+        for (l, n) in lost_now.iter_mut().zip(&batch.lost) {
+            *l = *n;
+        }
+    };
+    let mut ended = ended;
+    if missed_batches > 0 {
+        ended += &format!("; {missed_batches} batches of messages missed on the line");
+    }
+    if restarts > 0 {
+        ended += &format!(
+            "; the cell's gateway started its recording again {restarts} times (what came between is missing)"
+        );
+    }
+    let recorded = Recorded {
+        files: out.finish().map_err(file)?,
+        topics: names
+            .into_iter()
+            .zip(written)
+            .zip(lost_before.iter().zip(&lost_now))
+            .map(|((t, n), (b, l))| (t, n, b + l))
+            .collect(),
+        ended,
+    };
+    print!("{}", recorded.text());
+    Ok(0)
 }

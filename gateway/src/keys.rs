@@ -6,6 +6,8 @@
 //! | `rtc/v1/<cell>/status`  | `status --json`, downsampled; asked, the latest           |
 //! | `rtc/v1/<cell>/events`  | each event, numbered, and any gap said                    |
 //! | `rtc/v1/<cell>/control` | a signed command, answered with an acknowledgement or why |
+//! | `rtc/v1/<cell>/record`  | the recording stream: every service's messages, in batches |
+//! | `rtc/v1/<cell>/record/topics` | asked: the stream's topics and their JSON Schemas   |
 //!
 //! A cell's name is what its gateway publishes under: 1 to 32 of `a-z`, `0-9`, `-`, `_`,
 //! starting with a letter or a digit, so that it is one chunk of a key expression and never a
@@ -29,6 +31,10 @@ pub trait CellKeys {
     fn events(&self) -> String;
     /// Its control queryable's key.
     fn control(&self) -> String;
+    /// Its recording stream's key.
+    fn record(&self) -> String;
+    /// Its recording topics' key.
+    fn record_topics(&self) -> String;
 }
 
 impl CellKeys for CellName {
@@ -46,6 +52,14 @@ impl CellKeys for CellName {
 
     fn control(&self) -> String {
         key(self, "control")
+    }
+
+    fn record(&self) -> String {
+        key(self, "record")
+    }
+
+    fn record_topics(&self) -> String {
+        key(self, "record/topics")
     }
 }
 

@@ -2,11 +2,12 @@
 //!
 //! As a process of the cell (`gateway --instance NAME`, the `gateway` entry of the process
 //! table, switched on by `[network]`), it shows the cell on Zenoh under `rtc/v1/<cell>/`:
-//! its presence, its status, its events, and a control queryable whose every command is
-//! judged by [`gateway::auth::Gate`] before it goes to the cell's control channel.
+//! its presence, its status, its events, a control queryable whose every command is judged by
+//! [`gateway::auth::Gate`] before it goes to the cell's control channel, and, while anyone
+//! subscribes to it, the recording stream (`recording`).
 //!
 //! As a control room's client (`gateway line ...`, which `supervisor cells` and `--remote`
-//! run), it lists the line's cells and reads or commands one of them.
+//! run), it lists the line's cells, reads, records or commands one of them.
 //!
 //! # Not real-time
 //! The process runs under `SCHED_OTHER` and is not critical. Its cycle only takes the cell's
@@ -30,6 +31,7 @@ use runtime::process::{self, Context, Cycle, SetupError, Task};
 use shm_schema::event::code;
 use shm_schema::{EventV1, InstanceName, ServiceId};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -37,6 +39,7 @@ use zenoh::Wait;
 use zenoh::qos::CongestionControl;
 
 mod client;
+mod recording;
 
 /// Events queued between the cycle and the network at most.
 const EVENT_QUEUE: usize = 1024;
@@ -334,54 +337,70 @@ fn serve(
         Some(r) => Some(RosTopics::declare(session, name, r, cell)?),
         None => None,
     };
-    let period = Duration::from_secs_f64(net.status_period);
-    let mut next_status = Instant::now();
-    let mut seq = 0u64;
-    let started_ms = now_ms();
-    let t0 = runtime::time::now_ns();
-    loop {
-        if runtime::signals::stop_requested() {
-            return Ok(());
-        }
-        let wait = next_status.saturating_duration_since(Instant::now());
-        match events.recv_timeout(wait) {
-            Ok((e, lost)) => {
-                seq += 1;
-                let m = EventMessage {
-                    gateway_started_ms: started_ms,
-                    seq,
-                    lost,
-                    event: control_plane::event::event(&e, axes, t0),
-                };
-                event_pub
-                    .put(serde_json::to_vec(&m).unwrap_or_default())
-                    .wait()?;
-            }
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => return Ok(()),
-        }
-        if Instant::now() >= next_status {
-            next_status += period;
-            if next_status < Instant::now() {
-                next_status = Instant::now() + period;
-            }
-            if let Ok(Reply::Status(s)) = channel::call(instance, &Request::Status) {
-                let m = StatusMessage {
-                    cell: name.to_string(),
-                    host: host.clone(),
-                    status: s,
-                };
-                let bytes = serde_json::to_vec(&m).unwrap_or_default();
-                if let Some(r) = &mut ros {
-                    r.publish(&m.status)?;
+    // The recording stream beside the rest, ended with it.
+    let leaving = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        std::thread::Builder::new()
+            .name("record".into())
+            .spawn_scoped(scope, || {
+                if let Err(e) = recording::serve(session, instance, name, &leaving) {
+                    tracing::error!("the recording on the line ended: {e}");
                 }
-                if let Ok(mut g) = latest.lock() {
-                    *g = Some((bytes.clone(), m.status));
+            })
+            .map_err(|e| format!("cannot start the recording thread: {e}"))?;
+        let result = (|| -> zenoh::Result<()> {
+            let period = Duration::from_secs_f64(net.status_period);
+            let mut next_status = Instant::now();
+            let mut seq = 0u64;
+            let started_ms = now_ms();
+            let t0 = runtime::time::now_ns();
+            loop {
+                if runtime::signals::stop_requested() {
+                    return Ok(());
                 }
-                status_pub.put(bytes).wait()?;
+                let wait = next_status.saturating_duration_since(Instant::now());
+                match events.recv_timeout(wait) {
+                    Ok((e, lost)) => {
+                        seq += 1;
+                        let m = EventMessage {
+                            gateway_started_ms: started_ms,
+                            seq,
+                            lost,
+                            event: control_plane::event::event(&e, axes, t0),
+                        };
+                        event_pub
+                            .put(serde_json::to_vec(&m).unwrap_or_default())
+                            .wait()?;
+                    }
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => return Ok(()),
+                }
+                if Instant::now() >= next_status {
+                    next_status += period;
+                    if next_status < Instant::now() {
+                        next_status = Instant::now() + period;
+                    }
+                    if let Ok(Reply::Status(s)) = channel::call(instance, &Request::Status) {
+                        let m = StatusMessage {
+                            cell: name.to_string(),
+                            host: host.clone(),
+                            status: s,
+                        };
+                        let bytes = serde_json::to_vec(&m).unwrap_or_default();
+                        if let Some(r) = &mut ros {
+                            r.publish(&m.status)?;
+                        }
+                        if let Ok(mut g) = latest.lock() {
+                            *g = Some((bytes.clone(), m.status));
+                        }
+                        status_pub.put(bytes).wait()?;
+                    }
+                }
             }
-        }
-    }
+        })();
+        leaving.store(true, Ordering::Relaxed);
+        result
+    })
 }
 
 /// A cell's forward kinematics, shared with the network thread.

@@ -9,6 +9,13 @@
 //!                                    {"answer": "refused", "by": "gateway" | "cell", "reason": "..."}
 //!                                    {"answer": "failed", "reason": "..."}
 //!                                    {"answer": "status", "status": {...}}
+//! rtc/v1/<cell>/record          {"source_started_ms": 1764201600000, "seq": 12,
+//!                                "messages": [[3, 1764201600123456789, {...}], ...],
+//!                                "lost": [0, 0, 2, ...]}
+//! rtc/v1/<cell>/record/topics   {"source_started_ms": 1764201600000,
+//!                                "topics": [{"topic": "/servo/state",
+//!                                            "schema_name": "rtc.ServoStateV3",
+//!                                            "schema": {...JSON Schema...}}, ...]}
 //! ```
 
 use control_plane::event::Event;
@@ -72,6 +79,38 @@ impl EventMessage {
             },
         }
     }
+}
+
+/// The topics of a cell's recording stream: what `record` writes as MCAP channels, in the
+/// order the stream's messages number them. Answered to a `get` of
+/// `rtc/v1/<cell>/record/topics` (which starts the gateway's recording source if it was not
+/// running).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecordTopics {
+    /// When the gateway's recording source started (ms since the Unix epoch): the stream's
+    /// batches of that source carry the same value.
+    pub source_started_ms: u64,
+    /// Each topic, its schema's name and its JSON Schema.
+    pub topics: Vec<recorder::TopicInfo>,
+}
+
+/// One batch of a cell's recording stream on `rtc/v1/<cell>/record`: every message the
+/// gateway's recording source read since the previous batch (a batch every few ms while
+/// anyone subscribes; an empty one at least every half second, a heartbeat).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RecordBatch {
+    /// When the source started (ms since the Unix epoch): a new value is a new source, whose
+    /// topics are asked again.
+    pub source_started_ms: u64,
+    /// The batch's number, from 1 as its source starts: a jump is a batch the network lost.
+    pub seq: u64,
+    /// `[topic, log time (ns since the Unix epoch), message]`, the topic as its index in
+    /// [`RecordTopics::topics`], the message as a local recording writes it (the same JSON,
+    /// byte for byte).
+    pub messages: Vec<(u32, u64, Box<serde_json::value::RawValue>)>,
+    /// Per topic, the samples the source lost so far (read too late from the cell's shared
+    /// memory: a subscriber's buffer overflowed), as a local recording counts them.
+    pub lost: Vec<u64>,
 }
 
 /// Who refused a command.

@@ -15,7 +15,7 @@ use control_plane::event::Axes;
 use mcap::records::MessageHeader;
 use runtime::ipc::Payload;
 use runtime::ipc::{self, Sub};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value, json};
 use shm_schema::estop::HostStateV1;
 use shm_schema::latency::LatencyHistogramV1;
@@ -313,6 +313,36 @@ pub struct RecordOptions {
     pub rotate: Rotate,
 }
 
+impl RecordOptions {
+    /// The options of `record` as the command line gives them (seconds, megabytes),
+    /// checked: a duration and a rotation size of at least a millisecond and a thousandth of a
+    /// MB, a rotation time of at least a second, none above 1e9.
+    pub fn of_command_line(
+        out: &Path,
+        duration_s: Option<f64>,
+        rotate_size_mb: Option<f64>,
+        rotate_time_s: Option<f64>,
+    ) -> Result<Self, String> {
+        let checked = |name: &str, v: Option<f64>, lo: f64| match v {
+            Some(v) if !(v.is_finite() && v >= lo && v <= 1e9) => Err(format!(
+                "--{name} {v} must be at least {lo} (and at most 1e9)"
+            )),
+            v => Ok(v),
+        };
+        let duration = checked("duration", duration_s, 0.001)?;
+        let size_mb = checked("rotate-size", rotate_size_mb, 0.001)?;
+        let every = checked("rotate-time", rotate_time_s, 1.0)?;
+        Ok(Self {
+            out: out.to_path_buf(),
+            duration: duration.map(Duration::from_secs_f64),
+            rotate: Rotate {
+                bytes: size_mb.map(|mb| (mb * 1e6) as u64),
+                every: every.map(Duration::from_secs_f64),
+            },
+        })
+    }
+}
+
 /// What a recording wrote, per topic: messages written and samples lost.
 #[derive(Clone, Debug, Default)]
 pub struct Recorded {
@@ -371,19 +401,20 @@ impl Clock {
     }
 }
 
+/// Where a topic's messages go: `(log time in ns since the Unix epoch, the message's JSON)`.
+type Sink<'a> = dyn FnMut(u64, &[u8]) -> Result<(), String> + 'a;
+
+/// Where a source's messages go: `(the topic's index, log time in ns since the Unix epoch,
+/// the message's JSON)`.
+pub type SourceSink<'a> = dyn FnMut(usize, u64, &[u8]) -> Result<(), String> + 'a;
+
 /// One topic: a subscriber and its counts.
 trait Topic {
     fn name(&self) -> &str;
     fn schema_name(&self) -> &'static str;
     fn schema(&self, axes: &[String]) -> Value;
-    /// Writes what arrived to `out`.
-    fn drain(
-        &mut self,
-        out: &mut Out,
-        k: usize,
-        axes: &[String],
-        clock: Clock,
-    ) -> Result<(), String>;
+    /// Hands what arrived to `sink`.
+    fn drain(&mut self, sink: &mut Sink<'_>, axes: &[String], clock: Clock) -> Result<(), String>;
     fn counts(&self) -> (u64, u64);
 }
 
@@ -412,13 +443,7 @@ impl<T: Message + Payload> Topic for Chan<T> {
         T::schema(axes)
     }
 
-    fn drain(
-        &mut self,
-        out: &mut Out,
-        k: usize,
-        axes: &[String],
-        clock: Clock,
-    ) -> Result<(), String> {
+    fn drain(&mut self, sink: &mut Sink<'_>, axes: &[String], clock: Clock) -> Result<(), String> {
         while let Some(m) = self.sub.next() {
             // A number lower than the last (a restarted process) starts the count again.
             if let Some((stream, seq)) = m.seq()
@@ -437,7 +462,7 @@ impl<T: Message + Payload> Topic for Chan<T> {
             };
             self.stamp = Some(stamp);
             let data = serde_json::to_vec(&m.json(axes)).map_err(|e| e.to_string())?;
-            out.write(k, clock.epoch(stamp), &data)?;
+            sink(clock.epoch(stamp), &data)?;
             self.written += 1;
         }
         Ok(())
@@ -466,10 +491,23 @@ fn chan<T: Message + Payload>(
     }))
 }
 
-/// The MCAP file being written, and the next ones.
-struct Out {
+/// A recorded topic: its name, and its messages' JSON Schema with that schema's name.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TopicInfo {
+    /// The topic (`/servo/state`).
+    pub topic: String,
+    /// The schema's name (`rtc.ServoStateV3`).
+    pub schema_name: String,
+    /// The JSON Schema of its messages.
+    pub schema: Value,
+}
+
+/// The MCAP file being written, and the next ones: one channel per topic, in the order of
+/// the topics it was created with.
+pub struct Writer {
     base: PathBuf,
     rotate: Rotate,
+    topics: Vec<TopicInfo>,
     part: u32,
     path: PathBuf,
     writer: mcap::Writer<BufWriter<File>>,
@@ -480,11 +518,27 @@ struct Out {
     files: Vec<PathBuf>,
 }
 
-/// (topic, schema name, schema) of every topic.
-type Topics = Vec<(String, &'static str, Value)>;
+impl std::fmt::Debug for Writer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Writer")
+            .field("path", &self.path)
+            .field("topics", &self.topics.len())
+            .finish_non_exhaustive()
+    }
+}
 
-impl Out {
-    fn create(base: &Path, rotate: Rotate, part: u32, topics: &Topics) -> Result<Self, String> {
+impl Writer {
+    /// Creates the first file (`base`, or `STEM-000.mcap` beside it with rotation).
+    pub fn create(base: &Path, rotate: Rotate, topics: Vec<TopicInfo>) -> Result<Self, String> {
+        Self::part(base, rotate, topics, 0)
+    }
+
+    fn part(
+        base: &Path,
+        rotate: Rotate,
+        topics: Vec<TopicInfo>,
+        part: u32,
+    ) -> Result<Self, String> {
         let path = if rotate.bytes.is_some() || rotate.every.is_some() {
             let stem = base
                 .file_stem()
@@ -500,28 +554,29 @@ impl Out {
             .create(BufWriter::new(file))
             .map_err(|e| mcap_error(&path, e))?;
         let mut ids = Vec::new();
-        let mut schemas: HashMap<&'static str, u16> = HashMap::new();
-        for (topic, name, schema) in topics {
-            let schema_id = match schemas.get(name) {
+        let mut schemas: HashMap<&str, u16> = HashMap::new();
+        for t in &topics {
+            let schema_id = match schemas.get(t.schema_name.as_str()) {
                 Some(id) => *id,
                 None => {
-                    let text = serde_json::to_vec(schema).map_err(|e| e.to_string())?;
+                    let text = serde_json::to_vec(&t.schema).map_err(|e| e.to_string())?;
                     let id = writer
-                        .add_schema(name, "jsonschema", &text)
+                        .add_schema(&t.schema_name, "jsonschema", &text)
                         .map_err(|e| mcap_error(&path, e))?;
-                    schemas.insert(name, id);
+                    schemas.insert(&t.schema_name, id);
                     id
                 }
             };
             ids.push(
                 writer
-                    .add_channel(schema_id, topic, "json", &BTreeMap::new())
+                    .add_channel(schema_id, &t.topic, "json", &BTreeMap::new())
                     .map_err(|e| mcap_error(&path, e))?,
             );
         }
         Ok(Self {
             base: base.to_path_buf(),
             rotate,
+            topics,
             part,
             path: path.clone(),
             writer,
@@ -532,12 +587,28 @@ impl Out {
         })
     }
 
-    fn write(&mut self, k: usize, log_time: u64, data: &[u8]) -> Result<(), String> {
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The topics, in their channels' order.
+    pub fn topics(&self) -> &[TopicInfo] {
+        &self.topics
+    }
+
+    /// Writes one message of topic `k` (its index in [`Writer::topics`]) at `log_time` (ns
+    /// since the Unix epoch).
+    pub fn write(&mut self, k: usize, log_time: u64, data: &[u8]) -> Result<(), String> {
+        let channel_id = *self
+            .ids
+            .get(k)
+            .ok_or_else(|| format!("{}: no topic {k}", self.path.display()))?;
         self.sequence = self.sequence.wrapping_add(1);
         self.writer
             .write_to_known_channel(
                 &MessageHeader {
-                    channel_id: self.ids[k],
+                    channel_id,
                     sequence: self.sequence,
                     log_time,
                     publish_time: log_time,
@@ -548,7 +619,7 @@ impl Out {
     }
 
     /// Starts the next file when this one is full or old enough.
-    fn maybe_rotate(&mut self, topics: &Topics) -> Result<(), String> {
+    pub fn maybe_rotate(&mut self) -> Result<(), String> {
         let full = self
             .rotate
             .bytes
@@ -560,20 +631,23 @@ impl Out {
         if !(full || old) {
             return Ok(());
         }
-        let mut next = Self::create(&self.base, self.rotate, self.part + 1, topics)?;
+        let mut next = Self::part(&self.base, self.rotate, self.topics.clone(), self.part + 1)?;
         std::mem::swap(self, &mut next);
         let mut files = std::mem::take(&mut next.files);
         files.append(&mut self.files);
         self.files = files;
-        next.finish()?;
-        Ok(())
-    }
-
-    fn finish(&mut self) -> Result<(), String> {
-        self.writer
+        next.writer
             .finish()
             .map(|_| ())
-            .map_err(|e| mcap_error(&self.path, e))
+            .map_err(|e| mcap_error(&next.path, e))
+    }
+
+    /// Writes the index and the footer; the files written, in order.
+    pub fn finish(mut self) -> Result<Vec<PathBuf>, String> {
+        self.writer
+            .finish()
+            .map_err(|e| mcap_error(&self.path, e))?;
+        Ok(self.files)
     }
 }
 
@@ -690,19 +764,6 @@ fn topics(
     Ok(t)
 }
 
-/// Removes what is left of the instance once this observer's node is gone, if the cell is gone
-/// too.
-struct Leave(InstanceName);
-
-impl Drop for Leave {
-    fn drop(&mut self) {
-        ipc::cleanup_after_client(&self.0);
-    }
-}
-
-/// How long without the supervisor's heartbeat before the recording takes the cell for gone.
-const GONE: Duration = Duration::from_secs(3);
-
 /// Why a recording did not start or did not finish.
 #[derive(Debug)]
 pub enum RecordError {
@@ -760,6 +821,126 @@ impl std::error::Error for RecordError {
     }
 }
 
+/// Removes what is left of the instance once this observer's node is gone, if the cell is gone
+/// too.
+struct Leave(InstanceName);
+
+impl Drop for Leave {
+    fn drop(&mut self) {
+        ipc::cleanup_after_client(&self.0);
+    }
+}
+
+/// How long without the supervisor's heartbeat before the recording takes the cell for gone.
+const GONE: Duration = Duration::from_secs(3);
+
+/// A running cell's services as recorded messages: the recorder's side that reads shared
+/// memory, whoever writes the messages (a file here, or the line: the gateway).
+pub struct Source {
+    // Dropped in this order: the ports, the node, then what is left of a gone cell.
+    chans: Vec<Box<dyn Topic>>,
+    host: Sub<HostStateV1>,
+    _node: iceoryx2::prelude::Node<ipc::Ipc>,
+    _leave: Leave,
+    axes: Vec<String>,
+    clock: Clock,
+    heard: Instant,
+}
+
+impl std::fmt::Debug for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Source")
+            .field("topics", &self.chans.len())
+            .field("axes", &self.axes)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Source {
+    /// Subscribes to every service of `instance` (a service whose subscriber slots are all
+    /// taken is left out, with a warning), under a node named `node_name`.
+    pub fn open(instance: &InstanceName, node_name: &str) -> Result<Self, RecordError> {
+        ipc::quiet_iceoryx2_log();
+        // A listing that fails (out of descriptors) says why, not "not running".
+        if ipc::live_node_pids(instance)
+            .map_err(|e| RecordError::Attach(e.to_string()))?
+            .is_empty()
+        {
+            return Err(RecordError::NotUp(*instance));
+        }
+        let attach = |e: ipc::IpcError| RecordError::Attach(e.to_string());
+        // Whatever happens from here, the recorder leaves nothing of the instance behind it
+        // once the cell is gone (dropped after the node).
+        let leave = Leave(*instance);
+        let node = ipc::node(instance, node_name).map_err(attach)?;
+        let cell_sub =
+            Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1).map_err(attach)?;
+        let start = Instant::now();
+        let cell = loop {
+            if let Some(c) = cell_sub.latest() {
+                break Box::new(c);
+            }
+            if start.elapsed() > Duration::from_secs(2) {
+                return Err(RecordError::NoConfiguration(*instance));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        drop(cell_sub);
+        let axes: Vec<String> = Axes::of_cell(&cell).axes.into_iter().map(|a| a.0).collect();
+        let chans = topics(&node, instance, &cell).map_err(RecordError::Attach)?;
+        let host =
+            Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(attach)?;
+        Ok(Self {
+            chans,
+            host,
+            _node: node,
+            _leave: leave,
+            axes,
+            clock: Clock::new(),
+            heard: Instant::now(),
+        })
+    }
+
+    /// The topics, in the order [`Source::drain`] numbers them.
+    pub fn topics(&self) -> Vec<TopicInfo> {
+        self.chans
+            .iter()
+            .map(|c| TopicInfo {
+                topic: c.name().to_string(),
+                schema_name: c.schema_name().to_string(),
+                schema: c.schema(&self.axes),
+            })
+            .collect()
+    }
+
+    /// Hands every message that arrived to `sink(k, log time, JSON)`, `k` its topic's index.
+    pub fn drain(&mut self, sink: &mut SourceSink<'_>) -> Result<(), String> {
+        for (k, c) in self.chans.iter_mut().enumerate() {
+            c.drain(&mut |t, data| sink(k, t, data), &self.axes, self.clock)?;
+        }
+        Ok(())
+    }
+
+    /// Whether the cell is still there: its supervisor's heartbeat heard within [`GONE`].
+    pub fn cell_alive(&mut self) -> bool {
+        if self.host.latest().is_some() {
+            self.heard = Instant::now();
+        }
+        self.heard.elapsed() <= GONE
+    }
+
+    /// Per topic: (name, messages handed over, samples lost before they were read).
+    pub fn counts(&self) -> Vec<(String, u64, u64)> {
+        self.chans
+            .iter()
+            .map(|c| {
+                let (n, lost) = c.counts();
+                (c.name().to_string(), n, lost)
+            })
+            .collect()
+    }
+}
+
 /// Records `instance` until `stop` says so, the duration is over or the cell goes down.
 /// `ready` is called once every subscriber is in place.
 pub fn record(
@@ -768,83 +949,38 @@ pub fn record(
     stop: &dyn Fn() -> bool,
     ready: &mut dyn FnMut(&Path),
 ) -> Result<Recorded, RecordError> {
-    ipc::quiet_iceoryx2_log();
-    // A listing that fails (out of descriptors) says why, not "not running".
-    if ipc::live_node_pids(instance)
-        .map_err(|e| RecordError::Attach(e.to_string()))?
-        .is_empty()
-    {
-        return Err(RecordError::NotUp(*instance));
-    }
     let f = RecordError::File;
-    let attach = |e: ipc::IpcError| RecordError::Attach(e.to_string());
-    // Whatever happens from here, the recorder leaves nothing of the instance behind it once
-    // the cell is gone (declared before the node: dropped after it).
-    let _leave = Leave(*instance);
-    let node = ipc::node(instance, &format!("recorder-{}", std::process::id())).map_err(attach)?;
-    let cell_sub =
-        Sub::<CellConfigV6>::new(&node, instance, ServiceId::CellConfig, 1).map_err(attach)?;
-    let start = Instant::now();
-    let cell = loop {
-        if let Some(c) = cell_sub.latest() {
-            break Box::new(c);
-        }
-        if start.elapsed() > Duration::from_secs(2) {
-            return Err(RecordError::NoConfiguration(*instance));
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    };
-    drop(cell_sub);
-    let axes: Vec<String> = Axes::of_cell(&cell).axes.into_iter().map(|a| a.0).collect();
-    let mut chans = topics(&node, instance, &cell).map_err(RecordError::Attach)?;
-    let list: Topics = chans
-        .iter()
-        .map(|c| (c.name().to_string(), c.schema_name(), c.schema(&axes)))
-        .collect();
-    let mut out = Out::create(&opts.out, opts.rotate, 0, &list).map_err(f)?;
-    let host = Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(attach)?;
-    let clock = Clock::new();
-    ready(&out.path);
+    let mut source = Source::open(instance, &format!("recorder-{}", std::process::id()))?;
+    let mut out = Writer::create(&opts.out, opts.rotate, source.topics()).map_err(f)?;
+    ready(out.path());
     let began = Instant::now();
-    let mut heard = Instant::now();
     let mut last_check = Instant::now();
     let ended = loop {
-        for (k, c) in chans.iter_mut().enumerate() {
-            c.drain(&mut out, k, &axes, clock).map_err(f)?;
-        }
-        if host.latest().is_some() {
-            heard = Instant::now();
-        }
+        source
+            .drain(&mut |k, t, data| out.write(k, t, data))
+            .map_err(f)?;
         if stop() {
             break "stopped".to_string();
         }
         if opts.duration.is_some_and(|d| began.elapsed() >= d) {
             break "its duration is over".to_string();
         }
-        if heard.elapsed() > GONE {
+        if !source.cell_alive() {
             break format!("instance {instance} went down");
         }
         if last_check.elapsed() >= Duration::from_secs(1) {
             last_check = Instant::now();
-            out.maybe_rotate(&list).map_err(f)?;
+            out.maybe_rotate().map_err(f)?;
         }
         std::thread::sleep(Duration::from_millis(5));
     };
     // What arrived meanwhile, then the index and the footer.
-    for (k, c) in chans.iter_mut().enumerate() {
-        c.drain(&mut out, k, &axes, clock).map_err(f)?;
-    }
-    out.finish().map_err(f)?;
-    let topics = chans
-        .iter()
-        .map(|c| {
-            let (n, lost) = c.counts();
-            (c.name().to_string(), n, lost)
-        })
-        .collect();
+    source
+        .drain(&mut |k, t, data| out.write(k, t, data))
+        .map_err(f)?;
     Ok(Recorded {
-        files: out.files.clone(),
-        topics,
+        files: out.finish().map_err(f)?,
+        topics: source.counts(),
         ended,
     })
 }

@@ -104,6 +104,8 @@ enum Cmd {
         out: PathBuf,
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        remote: Remote,
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
@@ -420,6 +422,31 @@ fn remote_of(cmd: &Cmd) -> Option<OnTheLine> {
                 ));
             }
             at(remote, &["exec", &program.display().to_string()])
+        }
+        Cmd::Record {
+            remote,
+            out,
+            duration,
+            rotate_size,
+            rotate_time,
+            ..
+        } => {
+            let mut args = vec![
+                "record".to_string(),
+                "--out".into(),
+                out.display().to_string(),
+            ];
+            for (flag, v) in [
+                ("--duration", duration),
+                ("--rotate-size", rotate_size),
+                ("--rotate-time", rotate_time),
+            ] {
+                if let Some(v) = v {
+                    args.extend([flag.to_string(), v.to_string()]);
+                }
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            at(remote, &args)
         }
         _ => None,
     }
@@ -797,6 +824,7 @@ fn main() -> ExitCode {
             duration,
             rotate_size,
             rotate_time,
+            ..
         } => record(&out, &instance, duration, rotate_size, rotate_time),
         Cmd::Up {
             config,
@@ -1046,45 +1074,22 @@ fn record(
     rotate_size: Option<f64>,
     rotate_time: Option<f64>,
 ) -> ExitCode {
-    use recorder::{RecordOptions, Rotate};
     let i = match instance_of(instance) {
         Ok(i) => i,
         Err(c) => return c,
     };
-    let secs = |name: &str, v: Option<f64>, lo: f64| -> Result<Option<f64>, String> {
-        match v {
-            Some(v) if !(v.is_finite() && v >= lo && v <= 1e9) => Err(format!(
-                "--{name} {v} must be at least {lo} (and at most 1e9)"
-            )),
-            v => Ok(v),
-        }
-    };
-    let checked = secs("duration", duration, 0.001).and_then(|d| {
-        Ok((
-            d,
-            secs("rotate-size", rotate_size, 0.001)?,
-            secs("rotate-time", rotate_time, 1.0)?,
-        ))
-    });
-    let (duration, size_mb, every) = match checked {
-        Ok(v) => v,
-        Err(e) => {
-            eprint!("{}", errors(&e));
-            return ExitCode::from(2);
-        }
-    };
+    let opts =
+        match recorder::RecordOptions::of_command_line(out, duration, rotate_size, rotate_time) {
+            Ok(o) => o,
+            Err(e) => {
+                eprint!("{}", errors(&e));
+                return ExitCode::from(2);
+            }
+        };
     if let Err(e) = runtime::signals::install() {
         eprintln!("error: cannot install signal handlers: {e}");
         return ExitCode::FAILURE;
     }
-    let opts = RecordOptions {
-        out: out.to_path_buf(),
-        duration: duration.map(std::time::Duration::from_secs_f64),
-        rotate: Rotate {
-            bytes: size_mb.map(|mb| (mb * 1e6) as u64),
-            every: every.map(std::time::Duration::from_secs_f64),
-        },
-    };
     let result = recorder::record(&i, &opts, &runtime::signals::stop_requested, &mut |path| {
         use std::io::Write;
         println!("recording instance {i} to {}", path.display());

@@ -580,6 +580,163 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     drop((a, b));
 }
 
+/// `ip netns exec NS PROGRAM ARGS` in the background, its stdout and stderr piped.
+fn spawn_in(ns: &str, program: &str, args: &[&str]) -> std::process::Child {
+    Command::new("ip")
+        .args(["netns", "exec", ns])
+        .arg(integration_tests::bin(program))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{program}: {e}"))
+}
+
+/// Asks a recorder to stop (SIGINT, as Ctrl-C), and waits for its summary.
+fn stop_recorder(child: std::process::Child, what: &str) -> String {
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .unwrap_or_else(|e| panic!("stop the {what}: {e}"));
+    let out = integration_tests::wait_output(child, WATCHDOG, what);
+    assert!(out.status.success(), "the {what}: {}", text(&out));
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// Per topic, samples a recorder's summary says it lost (`  /topic   N messages  L lost`).
+fn lost_per_topic(summary: &str) -> std::collections::BTreeMap<String, u64> {
+    summary
+        .lines()
+        .filter_map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            match w.as_slice() {
+                [topic, _, "messages", lost, "lost"] if topic.starts_with('/') => {
+                    Some((topic.to_string(), lost.parse().ok()?))
+                }
+                _ => None,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn a_remote_recording_equals_a_local_one_of_the_same_run() {
+    let test = "line_rec";
+    let hosts = Hosts::new(test, 1);
+    let users = private(test, "users.toml", USERS);
+    let a = Up::start_in(
+        &format!("{test}-a"),
+        &cell_config(test, 0, &users),
+        Some(&hosts.cells[0]),
+    );
+    // A viewer may record: recording is reading.
+    let victor = line_file(test, "victor", "victor", "victor-secret-0123456789", 1);
+    until_listed(&hosts, &victor, &["press-0"], Duration::from_secs(30));
+
+    // On the cell's host, `supervisor record`; in the room, the same through the line. The
+    // local one starts first and stops last: the remote's window lies inside it.
+    let local_file = scratch(test, "local.mcap", "");
+    let mut local = spawn_in(
+        &hosts.cells[0],
+        "supervisor",
+        &[
+            "record",
+            "--instance",
+            &a.inst,
+            "--out",
+            local_file.to_str().expect("path"),
+        ],
+    );
+    let said = integration_tests::first_line(&mut local);
+    assert!(said.starts_with("recording instance"), "{said}");
+    let remote_file = scratch(test, "remote.mcap", "");
+    let mut remote = Command::new("ip");
+    remote
+        .args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("supervisor"))
+        .args(["record", "--remote", "press-0", "--line"])
+        .arg(&victor)
+        .arg("--out")
+        .arg(&remote_file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut remote = remote.spawn().expect("the remote recorder");
+    let said = integration_tests::first_line(&mut remote);
+    assert!(said.starts_with("recording cell press-0 to"), "{said}");
+
+    // A program runs while both record.
+    let report = a.report(&integration_tests::small_triangle(test), &[]);
+    assert_eq!(report["ok"], true, "{report}");
+    let remote_summary = stop_recorder(remote, "remote recorder");
+    let local_summary = stop_recorder(local, "local recorder");
+    println!("local:\n{local_summary}remote:\n{remote_summary}");
+
+    let mut compare = Command::new("python3");
+    compare
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/mcap_compare.py"))
+        .arg(&local_file)
+        .arg(&remote_file);
+    let out = run_with_watchdog(&mut compare, WATCHDOG);
+    assert!(out.status.success(), "mcap_compare: {}", text(&out));
+    let c: Value = serde_json::from_slice(&out.stdout).expect("the comparison's JSON");
+    // The same channels: topics, schemas and encodings, to the byte.
+    assert_eq!(c["channels_local"], c["channels_remote"]);
+    assert!(
+        c["channels_local"].as_array().map_or(0, Vec::len) >= 20,
+        "{}",
+        c["channels_local"]
+    );
+    // The same samples: over the remote's window, each topic's messages are the local's,
+    // byte for byte and one unbroken run; a topic either recorder lost samples of (its
+    // reader stalled past its buffer: a host stall, which each summary counts) needs only
+    // the messages both have in the same order.
+    let (lost_l, lost_r) = (
+        lost_per_topic(&local_summary),
+        lost_per_topic(&remote_summary),
+    );
+    for (topic, t) in c["topics"].as_object().expect("topics") {
+        let remote_n = t["remote"].as_u64().expect("count");
+        assert_eq!(t["matched"], remote_n, "{topic}: {t}");
+        let stalled =
+            lost_l.get(topic).copied().unwrap_or(0) + lost_r.get(topic).copied().unwrap_or(0);
+        // The latency summaries (two samples kept) are read as they come, not counted.
+        let sampled = topic.ends_with("/latency")
+            || topic.ends_with("/exec_time")
+            || topic == "/drives/sense_to_command";
+        if stalled == 0 && !sampled {
+            assert_eq!(t["run"], true, "{topic}: {t}");
+        }
+    }
+    for topic in [
+        "/trajgen/setpoint",
+        "/servo/state",
+        "/drives/feedback",
+        "/trajgen/command",
+    ] {
+        assert!(
+            c["topics"][topic]["remote"].as_u64() > Some(0),
+            "{topic}: {}",
+            c["topics"][topic]
+        );
+    }
+    // The program's motion whole in both: every one of its setpoints.
+    let programs = c["programs"].as_object().expect("programs");
+    let ran = programs.values().collect::<Vec<_>>();
+    assert_eq!(ran.len(), 1, "one program ran: {programs:?}");
+    assert_eq!(ran[0]["local"], ran[0]["remote"], "{programs:?}");
+    assert!(ran[0]["local"].as_u64() > Some(100), "{programs:?}");
+    // Log times: a sample's own stamp, mapped to the Unix epoch by each recorder's clock; the
+    // read time where the sample has none (the program's commands).
+    println!(
+        "the remote recording: {} topics, its messages the local one's; log times apart by at most {} ns on /servo/state, {} ns on /trajgen/command",
+        c["topics"].as_object().map_or(0, |t| t.len()),
+        c["topics"]["/servo/state"]["max_log_time_ns"],
+        c["topics"]["/trajgen/command"]["max_log_time_ns"],
+    );
+    drop(a);
+}
+
 /// Runs `openssl` with `args` in `dir`; it must succeed.
 fn openssl(dir: &Path, args: &[&str]) {
     let out = Command::new("openssl")
