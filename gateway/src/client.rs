@@ -99,18 +99,8 @@ enum Cmd {
     Record {
         /// The cell's name on the line.
         cell: String,
-        /// The MCAP file to write.
-        #[arg(long)]
-        out: PathBuf,
-        /// Stop after this many seconds.
-        #[arg(long)]
-        duration: Option<f64>,
-        /// Start a new file (OUT-000.mcap, OUT-001.mcap, …) once one reaches this many MB.
-        #[arg(long)]
-        rotate_size: Option<f64>,
-        /// Start a new file every this many seconds.
-        #[arg(long)]
-        rotate_time: Option<f64>,
+        #[command(flatten)]
+        args: recorder::RecordArgs,
     },
     /// Sends a cell a command (pause, resume, abort, reset, start, speed, estop, exec).
     #[command(flatten)]
@@ -275,17 +265,9 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         } => Ask::Watch(seconds),
         Cmd::Status { cell } => Ask::Status(cell_name(&cell)?),
         Cmd::Events { cell, seconds } => Ask::Events(cell_name(&cell)?, seconds),
-        Cmd::Record {
-            cell,
-            out,
-            duration,
-            rotate_size,
-            rotate_time,
-        } => Ask::Record(
-            cell_name(&cell)?,
-            RecordOptions::of_command_line(&out, duration, rotate_size, rotate_time)
-                .map_err(input)?,
-        ),
+        Cmd::Record { cell, args } => {
+            Ask::Record(cell_name(&cell)?, args.options().map_err(input)?)
+        }
     };
     let session = join(&file)?;
     // Let the links come up before asking (a get on a line not yet joined hears nothing):

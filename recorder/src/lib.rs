@@ -313,33 +313,60 @@ pub struct RecordOptions {
     pub rotate: Rotate,
 }
 
-impl RecordOptions {
-    /// The options of `record` as the command line gives them (seconds, megabytes),
-    /// checked: a duration and a rotation size of at least a millisecond and a thousandth of a
-    /// MB, a rotation time of at least a second, none above 1e9.
-    pub fn of_command_line(
-        out: &Path,
-        duration_s: Option<f64>,
-        rotate_size_mb: Option<f64>,
-        rotate_time_s: Option<f64>,
-    ) -> Result<Self, String> {
+/// `record`'s options on a command line (`supervisor record`, and `gateway line record` for a
+/// cell of the line).
+#[derive(Clone, Debug, clap::Args)]
+pub struct RecordArgs {
+    /// The MCAP file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Start a new file (OUT-000.mcap, OUT-001.mcap, …) once one reaches this many MB.
+    #[arg(long)]
+    pub rotate_size: Option<f64>,
+    /// Start a new file every this many seconds.
+    #[arg(long)]
+    pub rotate_time: Option<f64>,
+}
+
+impl RecordArgs {
+    /// The options, checked: a duration and a rotation size of at least a millisecond and a
+    /// thousandth of a MB, a rotation time of at least a second, none above 1e9.
+    pub fn options(&self) -> Result<RecordOptions, String> {
         let checked = |name: &str, v: Option<f64>, lo: f64| match v {
             Some(v) if !(v.is_finite() && v >= lo && v <= 1e9) => Err(format!(
                 "--{name} {v} must be at least {lo} (and at most 1e9)"
             )),
             v => Ok(v),
         };
-        let duration = checked("duration", duration_s, 0.001)?;
-        let size_mb = checked("rotate-size", rotate_size_mb, 0.001)?;
-        let every = checked("rotate-time", rotate_time_s, 1.0)?;
-        Ok(Self {
-            out: out.to_path_buf(),
+        let duration = checked("duration", self.duration, 0.001)?;
+        let size_mb = checked("rotate-size", self.rotate_size, 0.001)?;
+        let every = checked("rotate-time", self.rotate_time, 1.0)?;
+        Ok(RecordOptions {
+            out: self.out.clone(),
             duration: duration.map(Duration::from_secs_f64),
             rotate: Rotate {
                 bytes: size_mb.map(|mb| (mb * 1e6) as u64),
                 every: every.map(Duration::from_secs_f64),
             },
         })
+    }
+
+    /// The same options as command-line arguments again.
+    pub fn to_args(&self) -> Vec<String> {
+        let mut args = vec!["--out".to_string(), self.out.display().to_string()];
+        for (flag, v) in [
+            ("--duration", self.duration),
+            ("--rotate-size", self.rotate_size),
+            ("--rotate-time", self.rotate_time),
+        ] {
+            if let Some(v) = v {
+                args.extend([flag.to_string(), v.to_string()]);
+            }
+        }
+        args
     }
 }
 

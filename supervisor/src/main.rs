@@ -99,22 +99,12 @@ enum Cmd {
     /// Record every service of a running cell into an MCAP file (for Foxglove, PlotJuggler):
     /// until SIGINT/SIGTERM, `--duration`, or the cell going down (docs/recording.md).
     Record {
-        /// The MCAP file to write.
-        #[arg(long)]
-        out: PathBuf,
+        #[command(flatten)]
+        args: recorder::RecordArgs,
         #[command(flatten)]
         instance: Instance,
         #[command(flatten)]
         remote: Remote,
-        /// Stop after this many seconds.
-        #[arg(long)]
-        duration: Option<f64>,
-        /// Start a new file (OUT-000.mcap, OUT-001.mcap, …) once one reaches this many MB.
-        #[arg(long)]
-        rotate_size: Option<f64>,
-        /// Start a new file every this many seconds.
-        #[arg(long)]
-        rotate_time: Option<f64>,
     },
     /// Bring a cell up and keep it up, cyclic, drives enabled and holding, until `down`,
     /// SIGTERM or SIGINT. Logs on stderr. Control it from other shells (docs/operations.md).
@@ -423,30 +413,10 @@ fn remote_of(cmd: &Cmd) -> Option<OnTheLine> {
             }
             at(remote, &["exec", &program.display().to_string()])
         }
-        Cmd::Record {
-            remote,
-            out,
-            duration,
-            rotate_size,
-            rotate_time,
-            ..
-        } => {
-            let mut args = vec![
-                "record".to_string(),
-                "--out".into(),
-                out.display().to_string(),
-            ];
-            for (flag, v) in [
-                ("--duration", duration),
-                ("--rotate-size", rotate_size),
-                ("--rotate-time", rotate_time),
-            ] {
-                if let Some(v) = v {
-                    args.extend([flag.to_string(), v.to_string()]);
-                }
-            }
-            let args: Vec<&str> = args.iter().map(String::as_str).collect();
-            at(remote, &args)
+        Cmd::Record { remote, args, .. } => {
+            let mut v = vec!["record".to_string()];
+            v.extend(args.to_args());
+            at(remote, &v.iter().map(String::as_str).collect::<Vec<_>>())
         }
         _ => None,
     }
@@ -818,14 +788,7 @@ fn main() -> ExitCode {
             listen,
             token,
         } => web(&instance, &listen, token),
-        Cmd::Record {
-            out,
-            instance,
-            duration,
-            rotate_size,
-            rotate_time,
-            ..
-        } => record(&out, &instance, duration, rotate_size, rotate_time),
+        Cmd::Record { args, instance, .. } => record(&args, &instance),
         Cmd::Up {
             config,
             instance,
@@ -1067,25 +1030,18 @@ fn main() -> ExitCode {
 }
 
 /// `supervisor record`.
-fn record(
-    out: &std::path::Path,
-    instance: &str,
-    duration: Option<f64>,
-    rotate_size: Option<f64>,
-    rotate_time: Option<f64>,
-) -> ExitCode {
+fn record(args: &recorder::RecordArgs, instance: &str) -> ExitCode {
     let i = match instance_of(instance) {
         Ok(i) => i,
         Err(c) => return c,
     };
-    let opts =
-        match recorder::RecordOptions::of_command_line(out, duration, rotate_size, rotate_time) {
-            Ok(o) => o,
-            Err(e) => {
-                eprint!("{}", errors(&e));
-                return ExitCode::from(2);
-            }
-        };
+    let opts = match args.options() {
+        Ok(o) => o,
+        Err(e) => {
+            eprint!("{}", errors(&e));
+            return ExitCode::from(2);
+        }
+    };
     if let Err(e) = runtime::signals::install() {
         eprintln!("error: cannot install signal handlers: {e}");
         return ExitCode::FAILURE;
