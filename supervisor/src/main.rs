@@ -96,6 +96,24 @@ enum Cmd {
         #[arg(long)]
         token: Option<String>,
     },
+    /// Serve the cell live to Foxglove (its WebSocket protocol): every service of the cell as
+    /// a channel, the recorder's JSON messages and schemas (docs/recording.md). It reads the
+    /// cell while a client is connected, waits for it when it is not up; until SIGINT or
+    /// SIGTERM. Only shows: a client may subscribe, nothing else.
+    Foxglove {
+        #[command(flatten)]
+        instance: Instance,
+        /// Address to listen on (port 0: any free port, printed). Anything but a loopback
+        /// address needs --token.
+        #[arg(long, default_value = "127.0.0.1:8765")]
+        listen: String,
+        /// A token every client must give (`?token=` in the server's address).
+        #[arg(long)]
+        token: Option<String>,
+        /// An origin whose pages may connect, besides the Foxglove app's (repeatable).
+        #[arg(long, value_name = "ORIGIN")]
+        allow_origin: Vec<String>,
+    },
     /// Record every service of a running cell into an MCAP file (for Foxglove, PlotJuggler):
     /// until SIGINT/SIGTERM, `--duration`, or the cell going down (docs/recording.md).
     Record {
@@ -751,7 +769,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let watching = matches!(
         cli.cmd,
-        Cmd::Up { .. } | Cmd::Run { .. } | Cmd::Tune { .. } | Cmd::Web { .. } | Cmd::Record { .. }
+        Cmd::Up { .. }
+            | Cmd::Run { .. }
+            | Cmd::Tune { .. }
+            | Cmd::Web { .. }
+            | Cmd::Foxglove { .. }
+            | Cmd::Record { .. }
     );
     if !watching {
         quiet_on_a_closed_pipe();
@@ -788,6 +811,12 @@ fn main() -> ExitCode {
             listen,
             token,
         } => web(&instance, &listen, token),
+        Cmd::Foxglove {
+            instance,
+            listen,
+            token,
+            allow_origin,
+        } => foxglove(&instance, &listen, token, allow_origin),
         Cmd::Record { args, instance, .. } => record(&args, &instance),
         Cmd::Up {
             config,
@@ -1062,22 +1091,10 @@ fn record(args: &recorder::RecordArgs, instance: &str) -> ExitCode {
 
 /// `supervisor web`.
 fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
-    let i = match instance_of(instance) {
-        Ok(i) => i,
+    let (i, listen) = match served(instance, listen, token.as_deref()) {
+        Ok(v) => v,
         Err(c) => return c,
     };
-    let Ok(listen) = listen.parse() else {
-        eprintln!("error: --listen {listen:?} is not an IP:port address (\"127.0.0.1:8080\")");
-        return ExitCode::from(2);
-    };
-    if let Some(Err(e)) = token.as_deref().map(web_view::check_token) {
-        eprint!("{}", errors(&e));
-        return ExitCode::from(2);
-    }
-    if let Err(e) = runtime::signals::install() {
-        eprintln!("error: cannot install signal handlers: {e}");
-        return ExitCode::FAILURE;
-    }
     let opts = web_view::WebOptions {
         instance: i,
         listen,
@@ -1086,6 +1103,52 @@ fn web(instance: &str, listen: &str, token: Option<String>) -> ExitCode {
     let result = web_view::web(&opts, &mut |addr| {
         use std::io::Write;
         println!("serving instance {i} on http://{addr}/");
+        let _ = std::io::stdout().flush();
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => failed(&e, e.is_input()),
+    }
+}
+
+/// What `web` and `foxglove` check before they serve: the instance, the address, the token;
+/// then the signal handlers.
+fn served(
+    instance: &str,
+    listen: &str,
+    token: Option<&str>,
+) -> Result<(shm_schema::InstanceName, std::net::SocketAddr), ExitCode> {
+    let i = instance_of(instance)?;
+    let Ok(listen) = listen.parse() else {
+        eprintln!("error: --listen {listen:?} is not an IP:port address (\"127.0.0.1:8080\")");
+        return Err(ExitCode::from(2));
+    };
+    if let Some(Err(e)) = token.map(web_view::check_token) {
+        eprint!("{}", errors(&e));
+        return Err(ExitCode::from(2));
+    }
+    if let Err(e) = runtime::signals::install() {
+        eprintln!("error: cannot install signal handlers: {e}");
+        return Err(ExitCode::FAILURE);
+    }
+    Ok((i, listen))
+}
+
+/// `supervisor foxglove`.
+fn foxglove(instance: &str, listen: &str, token: Option<String>, origins: Vec<String>) -> ExitCode {
+    let (i, listen) = match served(instance, listen, token.as_deref()) {
+        Ok(v) => v,
+        Err(c) => return c,
+    };
+    let opts = web_view::foxglove::FoxgloveOptions {
+        instance: i,
+        listen,
+        token,
+        origins,
+    };
+    let result = web_view::foxglove::foxglove(&opts, &mut |addr| {
+        use std::io::Write;
+        println!("serving instance {i} to Foxglove on ws://{addr}/");
         let _ = std::io::stdout().flush();
     });
     match result {

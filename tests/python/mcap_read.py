@@ -4,7 +4,9 @@
 
 Prints one JSON object: per topic its message count, schema name and encoding and message
 encoding, whether every message's log time is in order, and every setpoint of
-`/trajgen/setpoint` as [program_id, motion_time_s, state, position by axis name...].
+`/trajgen/setpoint` as [program_id, motion_time_s, state, position by axis name...]; and
+"channels": each channel as [topic, schema name, schema encoding, message encoding, schema
+text], sorted.
 """
 
 import json
@@ -16,6 +18,7 @@ from mcap.reader import make_reader
 def main():
     topics = {}
     setpoints = []
+    channels = set()
     for path in sys.argv[1:]:
         with open(path, "rb") as f:
             reader = make_reader(f)
@@ -27,6 +30,8 @@ def main():
                                                   "encoding": ch.message_encoding,
                                                   "in_order": True, "last": 0})
                 json.loads(sc.data)  # the schema is JSON
+                channels.add((ch.topic, sc.name, sc.encoding, ch.message_encoding,
+                              sc.data.decode()))
             for schema, channel, message in reader.iter_messages(log_time_order=False):
                 t = topics[channel.topic]
                 t["count"] += 1
@@ -39,7 +44,8 @@ def main():
                                       m["position"]])
     for t in topics.values():
         del t["last"]
-    print(json.dumps({"topics": topics, "setpoints": setpoints}))
+    print(json.dumps({"topics": topics, "setpoints": setpoints,
+                      "channels": sorted(channels)}))
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@
 //!   page of another origin cannot send it without a CORS preflight, which is never granted),
 //!   and a `POST` or a WebSocket upgrade whose `Origin` is not this server's is refused.
 
+pub mod foxglove;
+
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Query, State};
@@ -83,6 +85,8 @@ struct Shared {
 pub enum WebError {
     /// `--listen` names an address other than loopback and no `--token` was given.
     TokenNeeded(SocketAddr),
+    /// The same, for a server that only shows the cell (Foxglove live).
+    TokenNeededToShow(SocketAddr),
     /// The token given is too short or holds characters a URL or a cookie cannot carry.
     BadToken(TokenError),
     /// The address cannot be listened on (in use, not this machine's).
@@ -105,6 +109,10 @@ impl std::fmt::Display for WebError {
                 f,
                 "--listen {a} opens the cell's controls (e-stop, reset, start) to the network: give --token"
             ),
+            Self::TokenNeededToShow(a) => write!(
+                f,
+                "--listen {a} shows the cell to the network: give --token"
+            ),
             Self::BadToken(e) => e.fmt(f),
             Self::CannotListen(a, e) => write!(f, "web: cannot listen on {a}: {e}"),
             Self::Server(e) => write!(f, "web: {e}"),
@@ -117,28 +125,16 @@ impl std::error::Error for WebError {
         match self {
             Self::CannotListen(_, e) | Self::Server(e) => Some(e),
             Self::BadToken(e) => Some(e),
-            Self::TokenNeeded(_) => None,
+            Self::TokenNeeded(_) | Self::TokenNeededToShow(_) => None,
         }
     }
 }
 
 /// Serves the page until SIGINT or SIGTERM. `ready` gets the address it listens on.
 pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), WebError> {
-    if !opts.listen.ip().is_loopback() && opts.token.is_none() {
-        return Err(WebError::TokenNeeded(opts.listen));
-    }
-    if let Some(t) = &opts.token {
-        check_token(t).map_err(WebError::BadToken)?;
-    }
+    let server = Listening::on(opts.listen, opts.token.as_deref(), WebError::TokenNeeded)?;
+    let addr = server.addr;
     let (frames, _) = broadcast::channel(64);
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(WebError::Server)?;
-    let listener = rt
-        .block_on(tokio::net::TcpListener::bind(opts.listen))
-        .map_err(|e| WebError::CannotListen(opts.listen, e))?;
-    let addr = listener.local_addr().map_err(WebError::Server)?;
     let shared = Shared {
         instance: opts.instance,
         token: opts.token.clone(),
@@ -175,19 +171,61 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), W
         .layer(axum::middleware::from_fn_with_state(shared.clone(), guard))
         .with_state(shared);
     ready(addr);
-    let serve = axum::serve(
-        listener,
-        app.into_make_service_with_connect_info::<SocketAddr>(),
-    )
-    .with_graceful_shutdown(async {
-        while !runtime::signals::stop_requested() {
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
-    });
-    let result = rt.block_on(async { serve.await }).map_err(WebError::Server);
+    let result = server.serve(app);
     STOP.store(true, std::sync::atomic::Ordering::Relaxed);
     let _ = sampler.join();
     result
+}
+
+/// A server that may start: `--listen` and `--token` acceptable, its socket bound, its
+/// runtime built.
+struct Listening {
+    rt: tokio::runtime::Runtime,
+    listener: tokio::net::TcpListener,
+    /// Where it listens (the port chosen, for port 0).
+    addr: SocketAddr,
+}
+
+impl Listening {
+    /// Binds `listen`; anything but loopback needs a token (`needed` says so), a token must
+    /// be one [`check_token`] takes.
+    fn on(
+        listen: SocketAddr,
+        token: Option<&str>,
+        needed: fn(SocketAddr) -> WebError,
+    ) -> Result<Self, WebError> {
+        if !listen.ip().is_loopback() && token.is_none() {
+            return Err(needed(listen));
+        }
+        if let Some(t) = token {
+            check_token(t).map_err(WebError::BadToken)?;
+        }
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(WebError::Server)?;
+        let listener = rt
+            .block_on(tokio::net::TcpListener::bind(listen))
+            .map_err(|e| WebError::CannotListen(listen, e))?;
+        let addr = listener.local_addr().map_err(WebError::Server)?;
+        Ok(Self { rt, listener, addr })
+    }
+
+    /// Serves `app` until SIGINT or SIGTERM.
+    fn serve(self, app: Router) -> Result<(), WebError> {
+        let serve = axum::serve(
+            self.listener,
+            app.into_make_service_with_connect_info::<SocketAddr>(),
+        )
+        .with_graceful_shutdown(async {
+            while !runtime::signals::stop_requested() {
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        });
+        self.rt
+            .block_on(async { serve.await })
+            .map_err(WebError::Server)
+    }
 }
 
 const JS: &str = "text/javascript; charset=utf-8";

@@ -13,6 +13,7 @@ mod ethercat;
 mod faults;
 mod fieldbus;
 mod flavour_interop;
+mod foxglove;
 mod latency;
 mod line;
 mod loop_sim;
