@@ -96,6 +96,7 @@ fn main() {
         lease_s: 3.0,
         tls: None,
         login: None,
+        access: gateway::link::Access::Open,
     }
     .open()
     .expect("join the line");

@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand};
 use gateway::auth::{Envelope, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
-use gateway::link::{Link, secret_file};
+use gateway::link::{Access, Link, secret_file};
 use gateway::wire::{Answer, EventMessage, Missed, RecordBatch, RecordTopics, StatusMessage};
 use recorder::{RecordOptions, Recorded, Writer};
 use serde::Deserialize;
@@ -47,6 +47,11 @@ struct LineFile {
     /// The links' user and password.
     #[serde(default)]
     login: Option<Login>,
+    /// The line's cells: with them (and `[tls]`), Zenoh's access control lets only the cell
+    /// whose certificate's common name is `C` publish, answer or be present under
+    /// `rtc/v1/C/`.
+    #[serde(default)]
+    cells: Vec<String>,
 }
 
 fn default_lease() -> f64 {
@@ -225,6 +230,17 @@ fn load(path: Option<&Path>) -> Result<LineFile, Failure> {
             .iter()
             .find_map(|e| endpoint_problem("connect", e, file.plain, file.tls.is_some(), "[tls]"))
     });
+    let problem = problem.or_else(|| {
+        (!file.cells.is_empty() && file.tls.is_none()).then(|| {
+            "cells: the access control knows the cells by their certificates: give [tls]"
+                .to_string()
+        })
+    });
+    let problem = problem.or_else(|| {
+        file.cells
+            .iter()
+            .find_map(|c| CellName::new(c).err().map(|e| format!("cells: {c:?}: {e}")))
+    });
     if let Some(p) = problem {
         return Err(input(format!("{}: {p}", path.display())));
     }
@@ -232,6 +248,11 @@ fn load(path: Option<&Path>) -> Result<LineFile, Failure> {
 }
 
 fn join(file: &LineFile) -> Result<zenoh::Session, Failure> {
+    let cells: Vec<CellName> = file
+        .cells
+        .iter()
+        .filter_map(|c| CellName::new(c).ok())
+        .collect();
     Link {
         mode: Mode::Peer,
         listen: &[],
@@ -240,6 +261,11 @@ fn join(file: &LineFile) -> Result<zenoh::Session, Failure> {
         lease_s: file.lease,
         tls: file.tls.as_ref(),
         login: file.login.as_ref(),
+        access: if cells.is_empty() {
+            Access::Open
+        } else {
+            Access::Room { cells: &cells }
+        },
     }
     .open()
     .map_err(|e| (1, e))

@@ -183,7 +183,11 @@ fn line(
             return;
         }
     };
-    let link = Link::of(&net);
+    // Its ROS 2 topics, beside its own keys: what its access control lets it publish.
+    let also: Vec<String> = (net.ros2.iter())
+        .map(|r| format!("{}/{}/**", r.domain, r.namespace_of(&name)))
+        .collect();
+    let link = Link::of(&net, &name, &also);
     loop {
         let session = match link.open() {
             Ok(s) => s,

@@ -826,7 +826,7 @@ fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
         at("passwords")
     );
     let cfg = cell_config_with(test, 0, &users, "tls", &more);
-    let _cell = Up::start_in(&format!("{test}-c"), &cfg, Some(&hosts.cells[0]));
+    let cell = Up::start_in(&format!("{test}-c"), &cfg, Some(&hosts.cells[0]));
     let room_file = |name: &str, cert: &str, password: &str| {
         private(test, &format!("{name}.password"), &format!("{password}\n"));
         scratch(
@@ -873,6 +873,81 @@ fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
         "in the clear: {}",
         text(&out)
     );
+
+    // A rogue host with the line's authority and the room's password (a compromised host),
+    // its certificate naming it press-9, publishes events under press-0's name and its own.
+    certificate(&dir, "line-ca", "press-9", "127.0.0.1");
+    let mut rogue = Command::new("ip");
+    rogue
+        .args(["netns", "exec", &hosts.room, "python3"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/rogue_cell.py"))
+        .args(["--listen", "tls/127.0.0.1:7450", "--ca", &at("line-ca.pem")])
+        .args(["--cert", &at("press-9.pem"), "--key", &at("press-9.key")])
+        .args(["--dictionary", &at("passwords")])
+        .args(["--victim", "press-0", "--own", "press-9"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut rogue = rogue.spawn().expect("the rogue");
+    let said = integration_tests::first_line(&mut rogue);
+    assert_eq!(said.trim(), "ready", "the rogue: {said}");
+    // The room joined to both, without and with the list of its cells (Zenoh's access
+    // control: only the cell whose certificate names it may publish under its name).
+    let joined = |name: &str, cells: &str| {
+        private(test, &format!("{name}.password"), "room-password\n");
+        scratch(
+            test,
+            &format!("{name}.line.toml"),
+            &format!(
+                "connect = [\"tls/10.77.1.2:7447\", \"tls/127.0.0.1:7450\"]\n{cells}\n[tls]\n\
+                 root_ca = \"{}\"\ncertificate = \"{}\"\nprivate_key = \"{}\"\n\n\
+                 [login]\nuser = \"room\"\npassword_file = \"{}\"\n",
+                at("line-ca.pem"),
+                at("room.pem"),
+                at("room.key"),
+                at(&format!("{name}.password"))
+            ),
+        )
+    };
+    let events = |file: &Path, cell: &str| {
+        let out = ok(&hosts, file, &["events", cell, "--seconds", "2", "--json"]);
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    // Without it the forgery gets through: the room takes what comes on press-0's key.
+    let trusting = joined("trusting", "");
+    let seen = events(&trusting, "press-0");
+    assert!(
+        seen.contains("forged by press-9"),
+        "without access control: {seen}"
+    );
+    // With it, press-9 publishes under its own name, and nothing under press-0's.
+    let guarded = joined("guarded", "cells = [\"press-0\", \"press-9\"]");
+    let seen = events(&guarded, "press-9");
+    assert!(
+        seen.contains("press-9's own"),
+        "press-9 under its own name: {seen}"
+    );
+    let seen = events(&guarded, "press-0");
+    assert!(!seen.contains("forged"), "with access control: {seen}");
+    // press-0 itself is still read: its status crossed the guarded link.
+    let out = ok(&hosts, &guarded, &["status", "press-0", "--json"]);
+    let s: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
+    assert_eq!(s["instance"], cell.inst.as_str(), "{s}");
+    // A list of cells without certificates to know them by is refused before anything.
+    let bare = scratch(
+        test,
+        "bare.line.toml",
+        "connect = [\"tcp/10.77.1.2:7447\"]\nplain = true\ncells = [\"press-0\"]\n",
+    );
+    let out = room(&hosts, &bare, &["cells"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr)
+            .contains("cells: the access control knows the cells by their certificates"),
+        "{}",
+        text(&out)
+    );
+    let _ = rogue.kill();
+    let _ = rogue.wait();
 }
 
 #[test]
