@@ -66,18 +66,44 @@ pub struct WebOptions {
     pub token: Option<String>,
 }
 
+/// What a page shows: a view's messages, the cell's description (`hello`) and then its
+/// frames.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The frames, as they come (a slow page skips some).
+    pub frames: broadcast::Sender<Arc<str>>,
+    /// The cell's description (axes, kinematics, processes), for a page that connects.
+    pub hello: Arc<Mutex<Option<Arc<str>>>>,
+}
+
+impl Default for View {
+    fn default() -> Self {
+        Self {
+            frames: broadcast::channel(64).0,
+            hello: Arc::new(Mutex::new(None)),
+        }
+    }
+}
+
+/// Where a page's view comes from, and what its buttons do: this host's instance
+/// (`supervisor web`), or the cells of a line (`gateway line web`).
+pub trait Feed: Send + Sync + 'static {
+    /// The view a page asks for with `?cell=` (`None`: without it).
+    fn view(&self, cell: Option<&str>) -> Result<View, String>;
+    /// A button of a page (`estop`, `reset`, `start`) on its cell: the answer's words, or
+    /// the HTTP status and why not.
+    fn action(&self, what: &str, cell: Option<&str>) -> Result<String, (StatusCode, String)>;
+}
+
 /// The state the HTTP side shares.
 #[derive(Clone)]
 struct Shared {
-    instance: InstanceName,
     token: Option<String>,
     /// Where it listens (the connections' local end).
     addr: SocketAddr,
     /// The user it runs as.
     uid: u32,
-    frames: broadcast::Sender<Arc<str>>,
-    /// The cell's description (axes, kinematics, processes), for a client that connects.
-    hello: Arc<Mutex<Option<Arc<str>>>>,
+    feed: Arc<dyn Feed>,
 }
 
 /// Why the web view did not start or stopped.
@@ -130,25 +156,83 @@ impl std::error::Error for WebError {
     }
 }
 
+/// This host's instance, sampled by a thread of its own.
+struct Local {
+    instance: InstanceName,
+    view: View,
+}
+
+impl Feed for Local {
+    fn view(&self, cell: Option<&str>) -> Result<View, String> {
+        match cell {
+            None => Ok(self.view.clone()),
+            Some(c) => Err(format!(
+                "this view shows instance {} only, not cell {c:?} (`supervisor web --line`)",
+                self.instance
+            )),
+        }
+    }
+
+    fn action(&self, what: &str, _cell: Option<&str>) -> Result<String, (StatusCode, String)> {
+        use control_plane::{Reply, Request};
+        let instance = self.instance;
+        let req = match what {
+            "estop" => {
+                return cell_client::control::estop(
+                    instance.as_str(),
+                    "e-stop button of the web view",
+                )
+                .map_err(|e| (StatusCode::CONFLICT, e.to_string()));
+            }
+            "reset" => Request::Reset,
+            "start" => Request::Start,
+            other => return Err((StatusCode::NOT_FOUND, format!("no action {other:?}"))),
+        };
+        match control_plane::channel::call(&instance, &req) {
+            Ok(Reply::Done(m)) => Ok(m),
+            Ok(Reply::Refused(m)) => Err((StatusCode::CONFLICT, m.to_string())),
+            Ok(Reply::Failed(failure)) => Err((StatusCode::CONFLICT, failure.to_string())),
+            Ok(other) => Ok(format!("{other:?}")),
+            Err(e) => Err((StatusCode::SERVICE_UNAVAILABLE, e.to_string())),
+        }
+    }
+}
+
 /// Serves the page until SIGINT or SIGTERM. `ready` gets the address it listens on.
 pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), WebError> {
-    let server = Listening::on(opts.listen, opts.token.as_deref(), WebError::TokenNeeded)?;
-    let addr = server.addr;
-    let (frames, _) = broadcast::channel(64);
-    let shared = Shared {
+    let local = Arc::new(Local {
         instance: opts.instance,
-        token: opts.token.clone(),
-        addr,
-        uid: nix::unistd::geteuid().as_raw(),
-        frames: frames.clone(),
-        hello: Arc::new(Mutex::new(None)),
-    };
+        view: View::default(),
+    });
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let sampler = {
-        let (hello, instance) = (shared.hello.clone(), opts.instance);
+        let (view, instance, stop) = (local.view.clone(), opts.instance, stop.clone());
         std::thread::Builder::new()
             .name("web-sampler".into())
-            .spawn(move || sample_forever(instance, &frames, &hello))
+            .spawn(move || sample(instance, &view, &stop))
             .map_err(WebError::Server)?
+    };
+    let result = serve_page(opts.listen, opts.token.clone(), local, ready);
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let _ = sampler.join();
+    result
+}
+
+/// Serves the page, its views from `feed`, until SIGINT or SIGTERM (local only without a
+/// token, see the module's documentation). `ready` gets the address it listens on.
+pub fn serve_page(
+    listen: SocketAddr,
+    token: Option<String>,
+    feed: Arc<dyn Feed>,
+    ready: &mut dyn FnMut(SocketAddr),
+) -> Result<(), WebError> {
+    let server = Listening::on(listen, token.as_deref(), WebError::TokenNeeded)?;
+    let addr = server.addr;
+    let shared = Shared {
+        token,
+        addr,
+        uid: nix::unistd::geteuid().as_raw(),
+        feed,
     };
     let app = Router::new()
         .route(
@@ -171,10 +255,7 @@ pub fn web(opts: &WebOptions, ready: &mut dyn FnMut(SocketAddr)) -> Result<(), W
         .layer(axum::middleware::from_fn_with_state(shared.clone(), guard))
         .with_state(shared);
     ready(addr);
-    let result = server.serve(app);
-    STOP.store(true, std::sync::atomic::Ordering::Relaxed);
-    let _ = sampler.join();
-    result
+    server.serve(app)
 }
 
 /// A server that may start: `--listen` and `--token` acceptable, its socket bound, its
@@ -229,8 +310,6 @@ impl Listening {
 }
 
 const JS: &str = "text/javascript; charset=utf-8";
-
-static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
 fn page(kind: &'static str, body: &'static str) -> Response {
     ([(header::CONTENT_TYPE, kind)], body).into_response()
@@ -491,12 +570,32 @@ async fn guard(
     }
 }
 
-async fn ws(State(s): State<Shared>, upgrade: WebSocketUpgrade) -> Response {
-    upgrade.on_upgrade(move |socket| client(socket, s))
+/// The cell a page asks for (`?cell=NAME`), if any.
+fn cell_of(query: &Query<Vec<(String, String)>>) -> Option<String> {
+    query
+        .0
+        .iter()
+        .find(|(k, _)| k == "cell")
+        .map(|(_, v)| v.clone())
+}
+
+async fn ws(
+    State(s): State<Shared>,
+    query: Query<Vec<(String, String)>>,
+    upgrade: WebSocketUpgrade,
+) -> Response {
+    let cell = cell_of(&query);
+    let feed = s.feed.clone();
+    let view = tokio::task::spawn_blocking(move || feed.view(cell.as_deref())).await;
+    match view {
+        Ok(Ok(view)) => upgrade.on_upgrade(move |socket| client(socket, view)),
+        Ok(Err(why)) => (StatusCode::NOT_FOUND, why).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, e.to_string()).into_response(),
+    }
 }
 
 /// One page: the cell's description (again whenever it changes), then every frame.
-async fn client(mut socket: WebSocket, s: Shared) {
+async fn client(mut socket: WebSocket, s: View) {
     let mut frames = s.frames.subscribe();
     let mut sent_hello: Option<Arc<str>> = None;
     loop {
@@ -530,35 +629,15 @@ async fn client(mut socket: WebSocket, s: Shared) {
     }
 }
 
-/// `POST /api/estop|reset|start`: the CLI's paths.
+/// `POST /api/estop|reset|start`: the feed's (this host's: the CLI's paths).
 async fn action(
     State(s): State<Shared>,
     axum::extract::Path(what): axum::extract::Path<String>,
+    query: Query<Vec<(String, String)>>,
 ) -> Response {
-    let instance = s.instance;
-    let result = tokio::task::spawn_blocking(move || -> Result<String, (StatusCode, String)> {
-        use control_plane::{Reply, Request};
-        let req = match what.as_str() {
-            "estop" => {
-                return cell_client::control::estop(
-                    instance.as_str(),
-                    "e-stop button of the web view",
-                )
-                .map_err(|e| (StatusCode::CONFLICT, e.to_string()));
-            }
-            "reset" => Request::Reset,
-            "start" => Request::Start,
-            other => return Err((StatusCode::NOT_FOUND, format!("no action {other:?}"))),
-        };
-        match control_plane::channel::call(&instance, &req) {
-            Ok(Reply::Done(m)) => Ok(m),
-            Ok(Reply::Refused(m)) => Err((StatusCode::CONFLICT, m.to_string())),
-            Ok(Reply::Failed(failure)) => Err((StatusCode::CONFLICT, failure.to_string())),
-            Ok(other) => Ok(format!("{other:?}")),
-            Err(e) => Err((StatusCode::SERVICE_UNAVAILABLE, e.to_string())),
-        }
-    })
-    .await;
+    let cell = cell_of(&query);
+    let feed = s.feed.clone();
+    let result = tokio::task::spawn_blocking(move || feed.action(&what, cell.as_deref())).await;
     match result {
         Ok(Ok(m)) => (StatusCode::OK, m).into_response(),
         Ok(Err((code, m))) => (code, m).into_response(),
@@ -566,24 +645,21 @@ async fn action(
     }
 }
 
-/// The sampler: attached while the cell is up, waiting for it while it is not.
-fn sample_forever(
-    instance: InstanceName,
-    frames: &broadcast::Sender<Arc<str>>,
-    hello: &Mutex<Option<Arc<str>>>,
-) {
+/// The sampler: attached while the cell is up, waiting for it while it is not, until `stop`.
+/// Its messages go to `view`: the cell's description, then 30 frames a second.
+pub fn sample(instance: InstanceName, view: &View, stop: &std::sync::atomic::AtomicBool) {
     ipc::quiet_iceoryx2_log();
     let started = Instant::now();
-    while !STOP.load(std::sync::atomic::Ordering::Relaxed) {
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         if !ipc::live_node_pids(&instance)
             .unwrap_or_default()
             .is_empty()
-            && let Err(e) = attached(instance, frames, hello, started)
+            && let Err(e) = attached(instance, view, stop, started)
         {
             tracing::debug!("web: {e}");
         }
         let down = json!({"kind": "frame", "up": false, "t": started.elapsed().as_secs_f64()});
-        let _ = frames.send(Arc::from(down.to_string()));
+        let _ = view.frames.send(Arc::from(down.to_string()));
         std::thread::sleep(Duration::from_millis(500));
     }
 }
@@ -591,10 +667,11 @@ fn sample_forever(
 /// Samples the cell until it goes down (or the server stops).
 fn attached(
     instance: InstanceName,
-    frames: &broadcast::Sender<Arc<str>>,
-    hello: &Mutex<Option<Arc<str>>>,
+    view: &View,
+    stop: &std::sync::atomic::AtomicBool,
     started: Instant,
 ) -> Result<(), String> {
+    let (frames, hello) = (&view.frames, &view.hello);
     let f = |e: ipc::IpcError| e.to_string();
     let node = ipc::node(&instance, &format!("web-{}", std::process::id())).map_err(f)?;
     let result = (|| {
@@ -645,7 +722,7 @@ fn attached(
         let mut peak_fe = [0.0f64; MAX_AXES];
         let n = axes.axes.len();
         let mut count = 0u64;
-        while !STOP.load(std::sync::atomic::Ordering::Relaxed) {
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
             count += 1;
             // Every servo state since the last frame: the largest following error among them.
             while let Some(s) = servo.next() {
