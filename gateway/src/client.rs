@@ -8,7 +8,9 @@ use gateway::auth::{Envelope, now_ms};
 use gateway::command::Command;
 use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
 use gateway::link::{Access, Link, secret_file};
-use gateway::wire::{Answer, EventMessage, Missed, RecordBatch, RecordTopics, StatusMessage};
+use gateway::wire::{
+    Answer, EventMessage, Missed, RecordBatch, RecordFlushed, RecordTopics, StatusMessage,
+};
 use recorder::{RecordOptions, Recorded, Writer};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -107,6 +109,18 @@ enum Cmd {
         #[command(flatten)]
         args: recorder::RecordArgs,
     },
+    /// Serves the web view of the line: the list of its cells, then the 3D view of the one
+    /// chosen (`?cell=NAME`), until SIGINT or SIGTERM. It only shows: its buttons are refused
+    /// (command a cell with `supervisor estop --remote CELL`).
+    Web {
+        /// Address to listen on (port 0: any free port, printed). Anything but a loopback
+        /// address needs --token.
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        listen: std::net::SocketAddr,
+        /// A token every client must give (`?token=` in the page's address).
+        #[arg(long)]
+        token: Option<String>,
+    },
     /// Sends a cell a command (pause, resume, abort, reset, start, speed, estop, exec).
     #[command(flatten)]
     Command(Remote),
@@ -162,8 +176,8 @@ impl Remote {
 
 /// A cell as `cells` lists it (`null` where its status did not come).
 #[derive(Debug, serde::Serialize)]
-struct Row {
-    cell: String,
+pub(crate) struct Row {
+    pub(crate) cell: String,
     host: Option<String>,
     /// `enabled`, `disabled` or `fault`.
     state: Option<String>,
@@ -213,7 +227,7 @@ pub fn main(args: impl Iterator<Item = OsString>) -> ExitCode {
     }
 }
 
-type Failure = (u8, String);
+pub(crate) type Failure = (u8, String);
 
 fn input(e: impl std::fmt::Display) -> Failure {
     (2, e.to_string())
@@ -291,6 +305,12 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         } => Ask::Watch(seconds),
         Cmd::Status { cell } => Ask::Status(cell_name(&cell)?),
         Cmd::Events { cell, seconds } => Ask::Events(cell_name(&cell)?, seconds),
+        Cmd::Web { listen, token } => {
+            if let Some(t) = &token {
+                web_view::check_token(t).map_err(input)?;
+            }
+            Ask::Web(listen, token)
+        }
         Cmd::Record { cell, args } => {
             Ask::Record(cell_name(&cell)?, args.options().map_err(input)?)
         }
@@ -322,6 +342,7 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         Ask::Status(cell) => status(&session, &cell, json),
         Ask::Events(cell, seconds) => events(&session, &cell, seconds, json),
         Ask::Record(cell, opts) => record(&session, &cell, &opts),
+        Ask::Web(listen, token) => crate::line_web::serve(session, listen, token),
     }
 }
 
@@ -333,6 +354,7 @@ enum Ask {
     Status(CellName),
     Events(CellName, Option<f64>),
     Record(CellName, RecordOptions),
+    Web(std::net::SocketAddr, Option<String>),
 }
 
 /// The statuses of every cell that answers, by name.
@@ -415,7 +437,8 @@ fn watch(session: &zenoh::Session, seconds: Option<f64>, json: bool) -> Result<u
     }
 }
 
-fn cells(session: &zenoh::Session, json: bool) -> Result<u8, Failure> {
+/// The cells on the line (their presence tokens), each with what its status says.
+pub(crate) fn rows(session: &zenoh::Session) -> Result<Vec<Row>, Failure> {
     let tokens = session
         .liveliness()
         .get(EVERY_CELL_ALIVE)
@@ -433,10 +456,14 @@ fn cells(session: &zenoh::Session, json: bool) -> Result<u8, Failure> {
     alive.sort();
     alive.dedup();
     let statuses = statuses(session, &format!("{ROOT}/*/status"))?;
-    let rows: Vec<Row> = alive
+    Ok(alive
         .iter()
         .map(|name| Row::of(name, statuses.get(name)))
-        .collect();
+        .collect())
+}
+
+fn cells(session: &zenoh::Session, json: bool) -> Result<u8, Failure> {
+    let rows = rows(session)?;
     if json {
         println!("{}", serde_json::to_string(&rows).unwrap_or_default());
     } else {
@@ -607,6 +634,11 @@ fn send(
     Ok(answer.exit_code())
 }
 
+/// How long a stopping recording waits for the cell's gateway to say which batch ends it: the
+/// gateway answers once it has sent what it read before, which a loaded host (or a slow room)
+/// may hold up for seconds.
+const FLUSH_PATIENCE: Duration = Duration::from_secs(30);
+
 /// How long without a batch of the recording stream (its heartbeat is every half second)
 /// before the recording takes the cell for gone.
 const RECORD_GONE: Duration = Duration::from_secs(3);
@@ -647,6 +679,18 @@ fn record_topics(session: &zenoh::Session, cell: &CellName) -> Result<RecordTopi
     ))
 }
 
+/// The batch of `cell`'s recording stream that holds everything it published before now
+/// (`None` when its gateway does not say).
+fn flushed(session: &zenoh::Session, cell: &CellName) -> Option<RecordFlushed> {
+    let replies = session
+        .get(cell.record_flush())
+        .timeout(FLUSH_PATIENCE)
+        .wait()
+        .ok()?;
+    let reply = replies.recv().ok()?;
+    serde_json::from_slice(&reply.result().ok()?.payload().to_bytes()).ok()
+}
+
 /// `record`: the cell's recording stream into MCAP files here, the same channels and
 /// messages as a recording on the cell's host.
 fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Result<u8, Failure> {
@@ -677,12 +721,32 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
     let began = std::time::Instant::now();
     let mut heard = std::time::Instant::now();
     let mut last_check = std::time::Instant::now();
+    // Once asked to end: why, and the batch that holds all the cell published before.
+    let mut ending: Option<(String, Option<RecordFlushed>)> = None;
     let ended = loop {
-        if runtime::signals::stop_requested() {
-            break "stopped".to_string();
+        if ending.is_none() {
+            let why = if runtime::signals::stop_requested() {
+                Some("stopped".to_string())
+            } else if opts.duration.is_some_and(|d| began.elapsed() >= d) {
+                Some("its duration is over".to_string())
+            } else {
+                None
+            };
+            if let Some(why) = why {
+                let flushed = flushed(session, cell);
+                ending = Some((why, flushed));
+            }
         }
-        if opts.duration.is_some_and(|d| began.elapsed() >= d) {
-            break "its duration is over".to_string();
+        if let Some((why, flushed)) = &ending {
+            let caught_up = match flushed {
+                Some(f) => {
+                    f.source_started_ms != topics.source_started_ms || last_seq >= Some(f.seq)
+                }
+                None => true,
+            };
+            if caught_up {
+                break why.clone();
+            }
         }
         if heard.elapsed() > RECORD_GONE {
             break format!("cell {cell} left the line");
@@ -731,6 +795,9 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
         }
     };
     let mut ended = ended;
+    if ending.as_ref().is_some_and(|(_, f)| f.is_none()) {
+        ended += "; the cell's gateway did not say which batch ends the recording: what was on its way is missing";
+    }
     if missed_batches > 0 {
         ended += &format!("; {missed_batches} batches of messages missed on the line");
     }

@@ -8,6 +8,8 @@
 //! | `rtc/v1/<cell>/control` | a signed command, answered with an acknowledgement or why |
 //! | `rtc/v1/<cell>/record`  | the recording stream: every service's messages, in batches |
 //! | `rtc/v1/<cell>/record/topics` | asked: the stream's topics and their JSON Schemas   |
+//! | `rtc/v1/<cell>/record/flush`  | asked: the batch that holds all the cell published before |
+//! | `rtc/v1/<cell>/view`    | the web view's messages (the cell's description, frames)  |
 //!
 //! A cell's name is what its gateway publishes under: 1 to 32 of `a-z`, `0-9`, `-`, `_`,
 //! starting with a letter or a digit, so that it is one chunk of a key expression and never a
@@ -35,6 +37,10 @@ pub trait CellKeys {
     fn record(&self) -> String;
     /// Its recording topics' key.
     fn record_topics(&self) -> String;
+    /// Its recording flush's key.
+    fn record_flush(&self) -> String;
+    /// Its web view's key.
+    fn view(&self) -> String;
 }
 
 impl CellKeys for CellName {
@@ -60,6 +66,14 @@ impl CellKeys for CellName {
 
     fn record_topics(&self) -> String {
         key(self, "record/topics")
+    }
+
+    fn record_flush(&self) -> String {
+        key(self, "record/flush")
+    }
+
+    fn view(&self) -> String {
+        key(self, "view")
     }
 }
 

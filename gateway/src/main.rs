@@ -39,7 +39,9 @@ use zenoh::Wait;
 use zenoh::qos::CongestionControl;
 
 mod client;
+mod line_web;
 mod recording;
+mod viewing;
 
 /// Events queued between the cycle and the network at most.
 const EVENT_QUEUE: usize = 1024;
@@ -341,17 +343,26 @@ fn serve(
         Some(r) => Some(RosTopics::declare(session, name, r, cell)?),
         None => None,
     };
-    // The recording stream beside the rest, ended with it.
+    // The recording stream and the web view beside the rest, ended with it.
     let leaving = AtomicBool::new(false);
     std::thread::scope(|scope| {
-        std::thread::Builder::new()
-            .name("record".into())
-            .spawn_scoped(scope, || {
-                if let Err(e) = recording::serve(session, instance, name, &leaving) {
-                    tracing::error!("the recording on the line ended: {e}");
-                }
-            })
-            .map_err(|e| format!("cannot start the recording thread: {e}"))?;
+        type Stream =
+            fn(&zenoh::Session, &InstanceName, &CellName, &AtomicBool) -> zenoh::Result<()>;
+        let streams: [(&str, &str, Stream); 2] = [
+            ("record", "the recording", recording::serve),
+            ("view-line", "the web view", viewing::serve),
+        ];
+        for (thread, what, serve) in streams {
+            let leaving = &leaving;
+            std::thread::Builder::new()
+                .name(thread.into())
+                .spawn_scoped(scope, move || {
+                    if let Err(e) = serve(session, instance, name, leaving) {
+                        tracing::error!("{what} on the line ended: {e}");
+                    }
+                })
+                .map_err(|e| format!("cannot start {what}'s thread: {e}"))?;
+        }
         let result = (|| -> zenoh::Result<()> {
             let period = Duration::from_secs_f64(net.status_period);
             let mut next_status = Instant::now();

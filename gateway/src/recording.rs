@@ -11,7 +11,7 @@
 //! lost, as a local recording counts it. The cell never waits.
 
 use gateway::keys::{CellKeys, CellName};
-use gateway::wire::{RecordBatch, RecordTopics};
+use gateway::wire::{RecordBatch, RecordFlushed, RecordTopics};
 use recorder::Source;
 use serde_json::value::RawValue;
 use shm_schema::InstanceName;
@@ -62,7 +62,12 @@ pub fn serve(
         .declare_queryable(name.record_topics())
         .with(zenoh::handlers::RingChannel::new(QUESTIONS))
         .wait()?;
+    let flushes = session
+        .declare_queryable(name.record_flush())
+        .with(zenoh::handlers::RingChannel::new(QUESTIONS))
+        .wait()?;
     let topics_key = name.record_topics();
+    let flush_key = name.record_flush();
     let node_name = format!("gateway-record-{}", std::process::id());
     let mut running: Option<Running> = None;
     let mut wanted_at: Option<Instant> = None;
@@ -76,6 +81,11 @@ pub fn serve(
         let mut asked = Vec::new();
         while let Ok(Some(q)) = questions.try_recv() {
             asked.push(q);
+        }
+        // Asked before this turn's drain: answered after it, with the batch that holds it.
+        let mut flush = Vec::new();
+        while let Ok(Some(q)) = flushes.try_recv() {
+            flush.push(q);
         }
         let matched = stream.matching_status().wait().is_ok_and(|m| m.matching());
         if matched || !asked.is_empty() {
@@ -165,6 +175,21 @@ pub fn serve(
                 }
                 r.sent = Instant::now();
             }
+        }
+        for q in flush {
+            let _ = match &running {
+                Some(r) => q
+                    .reply(
+                        &flush_key,
+                        serde_json::to_vec(&RecordFlushed {
+                            source_started_ms: r.topics.source_started_ms,
+                            seq: r.seq,
+                        })
+                        .unwrap_or_default(),
+                    )
+                    .wait(),
+                None => q.reply_err("no recording runs").wait(),
+            };
         }
         std::thread::sleep(BATCH);
     }

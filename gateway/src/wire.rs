@@ -12,6 +12,7 @@
 //! rtc/v1/<cell>/record          {"source_started_ms": 1764201600000, "seq": 12,
 //!                                "messages": [[3, 1764201600123456789, {...}], ...],
 //!                                "lost": [0, 0, 2, ...]}
+//! rtc/v1/<cell>/record/flush    {"source_started_ms": 1764201600000, "seq": 57}
 //! rtc/v1/<cell>/record/topics   {"source_started_ms": 1764201600000,
 //!                                "topics": [{"topic": "/servo/state",
 //!                                            "schema_name": "rtc.ServoStateV3",
@@ -92,6 +93,18 @@ pub struct RecordTopics {
     pub source_started_ms: u64,
     /// Each topic, its schema's name and its JSON Schema.
     pub topics: Vec<recorder::TopicInfo>,
+}
+
+/// The answer to a `get` of `rtc/v1/<cell>/record/flush`: the stream's batch `seq` (of the
+/// source that started at `source_started_ms`) holds everything the cell published before
+/// the question reached its gateway. A recorder that stops asks, and ends once it has that
+/// batch: it misses nothing that was in flight.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordFlushed {
+    /// The source the batches are numbered in.
+    pub source_started_ms: u64,
+    /// The last batch sent.
+    pub seq: u64,
 }
 
 /// One batch of a cell's recording stream on `rtc/v1/<cell>/record`: every message the

@@ -95,6 +95,10 @@ enum Cmd {
         /// A token every client must give (`?token=` in the page's address).
         #[arg(long)]
         token: Option<String>,
+        /// Instead of this host's instance: every cell of a line (its line file,
+        /// docs/network.md), listed, and the 3D view of the one chosen. Only shows.
+        #[arg(long, value_name = "FILE", conflicts_with = "instance")]
+        line: Option<PathBuf>,
     },
     /// Serve the cell live to Foxglove (its WebSocket protocol): every service of the cell as
     /// a channel, the recorder's JSON messages and schemas (docs/recording.md). It reads the
@@ -807,9 +811,22 @@ fn main() -> ExitCode {
             ..
         } => status(&instance, json, watch),
         Cmd::Web {
+            line: Some(line),
+            listen,
+            token,
+            ..
+        } => {
+            let mut args = vec!["web".to_string(), "--listen".into(), listen];
+            if let Some(t) = token {
+                args.extend(["--token".into(), t]);
+            }
+            on_the_line(Some(&line), &args)
+        }
+        Cmd::Web {
             instance,
             listen,
             token,
+            ..
         } => web(&instance, &listen, token),
         Cmd::Foxglove {
             instance,

@@ -52,8 +52,19 @@ def cells(session):
     return 0
 
 
+def reachable(session, cell, patience_s=15.0):
+    """The cell's status once its gateway answers (our links come up one by one: the first
+    peer linked need not be this cell's), or none after `patience_s`."""
+    end = time.monotonic() + patience_s
+    while True:
+        replies = get_json(session, f"rtc/v1/{cell}/status")
+        if replies or time.monotonic() > end:
+            return replies
+        time.sleep(0.2)
+
+
 def status(session, cell):
-    replies = get_json(session, f"rtc/v1/{cell}/status")
+    replies = reachable(session, cell)
     if not replies:
         print(json.dumps({"answer": "failed", "reason": f"no status from {cell!r}"}))
         return 1
@@ -62,6 +73,8 @@ def status(session, cell):
 
 
 def command(session, cell, user, secret, cmd):
+    # Sent once the cell is linked: a command that reaches no one is not sent twice.
+    reachable(session, cell)
     envelope = {"user": user, "cell": cell, "time_ms": int(time.time() * 1000),
                 "nonce": secrets.randbelow(2**53), "command": cmd}
     payload = json.dumps(envelope).encode()

@@ -10,7 +10,9 @@ Prints one JSON object:
   schema encoding, message encoding, schema text], sorted;
 - "topics": per topic, "local" and "remote" (message counts), "run": whether the remote's
   messages, byte for byte, are one unbroken run of the local's, "matched": how many of the
-  remote's messages the local one has, in order, and "max_log_time_ns": the largest
+  remote's messages the local one has, in order, "contained": how many of them it has in any
+  order (a topic several processes publish on reaches two readers in orders of their own),
+  and "max_log_time_ns": the largest
   difference of log time between a remote message and its local copy;
 - "programs": per program id, the setpoints of that program's motion (state Moving) in
   each file.
@@ -48,16 +50,18 @@ def compare(local, remote):
     except ValueError:
         start = None
     run = start is not None and datas[start:start + len(remote)] == [d for _, d in remote]
-    # In order, whatever the gaps: how many of the remote's the local one has.
+    # In order, whatever the gaps on either side: how many of the remote's the local one has
+    # after the one before (a message the local one lost is passed over).
     matched, i, worst = 0, 0, 0
     for t, d in remote:
-        while i < len(local) and local[i][1] != d:
-            i += 1
-        if i == len(local):
-            break
+        j = i
+        while j < len(local) and local[j][1] != d:
+            j += 1
+        if j == len(local):
+            continue
         matched += 1
-        worst = max(worst, abs(local[i][0] - t))
-        i += 1
+        worst = max(worst, abs(local[j][0] - t))
+        i = j + 1
     return run, matched, worst
 
 
@@ -69,8 +73,16 @@ def main():
     for topic in sorted(set(local) | set(remote)):
         l, r = local.get(topic, []), remote.get(topic, [])
         run, matched, worst = compare(l, r)
+        pool = {}
+        for _, d in l:
+            pool[d] = pool.get(d, 0) + 1
+        contained = 0
+        for _, d in r:
+            if pool.get(d, 0) > 0:
+                pool[d] -= 1
+                contained += 1
         topics[topic] = {"local": len(l), "remote": len(r), "run": run, "matched": matched,
-                         "max_log_time_ns": worst}
+                         "contained": contained, "max_log_time_ns": worst}
     for name, msgs in (("local", local), ("remote", remote)):
         for _, d in msgs.get("/trajgen/setpoint", []):
             m = json.loads(d)

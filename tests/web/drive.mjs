@@ -6,6 +6,7 @@
 //   click ID         clicks a button (estop, reset, start)
 //   until EXPR       waits (up to 60 s) until the expression holds in the page, e.g. rtc.estop
 //   eval EXPR        the expression's value in the page, e.g. rtc.path
+//   goto URL         another page (its errors from then on)
 //   quit
 import { chromium } from 'playwright-core';
 import readline from 'node:readline';
@@ -50,6 +51,9 @@ for await (const line of readline.createInterface({ input: process.stdin })) {
       say({ held: arg, banner: await page.textContent('#banner'), answer: await page.textContent('#answer') });
     } else if (cmd === 'eval') {
       say({ value: await page.evaluate(arg) });
+    } else if (cmd === 'goto') {
+      await page.goto(arg);
+      say({ at: arg, errors });
     } else if (cmd === 'quit') {
       say({ bye: true, errors });
       break;

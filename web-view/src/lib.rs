@@ -24,6 +24,10 @@
 
 pub mod foxglove;
 
+/// What a [`Feed`] answers with, and a [`View`]'s channel, for feeds of other crates.
+pub use axum::http::StatusCode as HttpStatus;
+pub use tokio::sync::broadcast;
+
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, Query, State};
@@ -42,7 +46,6 @@ use shm_schema::{
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use tokio::sync::broadcast;
 
 /// Frames per second sent to the page.
 const RATE_HZ: u64 = 30;
@@ -719,6 +722,9 @@ fn attached(
             *h = Some(Arc::from(description.to_string()));
         }
         let (mut last_servo, mut last_sp, mut heard) = (None, None, Instant::now());
+        // The supervisor's newest heartbeat, kept: a frame between two of them (the
+        // supervisor stalled a moment) still shows the e-stop it latched.
+        let mut beat = None;
         let mut peak_fe = [0.0f64; MAX_AXES];
         let n = axes.axes.len();
         let mut count = 0u64;
@@ -736,8 +742,8 @@ fn attached(
             if let Some(sp) = setpoint.latest() {
                 last_sp = Some(sp);
             }
-            let beat = host.latest();
-            if beat.is_some() {
+            if let Some(b) = host.latest() {
+                beat = Some(b);
                 heard = Instant::now();
             }
             if heard.elapsed() > GONE {

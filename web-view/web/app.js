@@ -3,10 +3,21 @@
 import * as THREE from 'three';
 import { OrbitControls } from '/vendor/OrbitControls.js';
 
-const token = new URLSearchParams(location.search).get('token');
-const withToken = (path) => token ? `${path}?token=${encodeURIComponent(token)}` : path;
+// `?token=` when the server needs one; `?cell=NAME` for a cell of a line (`supervisor web
+// --line`), whose page without it lists the line's cells.
+const params = new URLSearchParams(location.search);
+const token = params.get('token');
+const cellName = params.get('cell');
+const query = (cell) => {
+  const q = new URLSearchParams();
+  if (token) q.set('token', token);
+  if (cell) q.set('cell', cell);
+  const s = q.toString();
+  return s ? `?${s}` : '';
+};
+const withToken = (path) => `${path}${query(cellName)}`;
 const rtc = window.rtc = {
-  frames: 0, hello: null, last: null, drawn: null, estop: null, up: false,
+  frames: 0, hello: null, last: null, drawn: null, estop: null, up: false, cells: null,
   // The plots' data: the current program's commanded and measured tool path, each process'
   // latency histogram; and what the plots last drew.
   path: { program: null, commanded: [], measured: [] }, latency: [], plotted: {},
@@ -346,12 +357,28 @@ function onFrame(f) {
   if (rtc.hello) keep(feHist, f.t, f.following_error, rtc.hello.axes.map(a => a.name));
 }
 
+// ---- a line's cells (`supervisor web --line`): the list, each a link to its view ----
+const text = (v) => String(v ?? '–').replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+function listCells(list) {
+  rtc.cells = list;
+  $('line').hidden = false;
+  $('banner').className = 'ok';
+  $('banner').textContent = `the line: ${list.length} cells; choose one`;
+  $('cells').innerHTML = '<tr><th>cell</th><th>host</th><th>state</th><th>program</th><th>e-stop</th></tr>' +
+    list.map((c) => `<tr><td><a href="/${query(c.cell)}">${text(c.cell)}</a></td><td>${text(c.host)}</td>` +
+      `<td>${text(c.state)}</td><td>${text(c.program)}</td><td>${c.estop === null ? '–' : c.estop ? 'latched' : 'clear'}</td></tr>`).join('');
+}
+if (cellName) {
+  $('line').hidden = false;
+  $('cells').innerHTML = `<tr><td>${text(cellName)} — <a href="/${query(null)}">every cell of the line</a></td></tr>`;
+}
+
 // ---- the connection: again and again, whatever the cell does ----
 function connect() {
   const ws = new WebSocket(withToken(`ws://${location.host}/ws`));
   ws.onmessage = (ev) => {
     const m = JSON.parse(ev.data);
-    if (m.kind === 'hello') { rtc.hello = m; build(m); } else onFrame(m);
+    if (m.kind === 'hello') { rtc.hello = m; build(m); } else if (m.kind === 'cells') listCells(m.cells); else onFrame(m);
   };
   ws.onclose = () => { rtc.up = false; $('banner').className = 'down'; $('banner').textContent = 'web server unreachable: retrying'; setTimeout(connect, 1000); };
 }

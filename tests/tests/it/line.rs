@@ -620,9 +620,9 @@ fn lost_per_topic(summary: &str) -> std::collections::BTreeMap<String, u64> {
         .collect()
 }
 
-#[test]
-fn a_remote_recording_equals_a_local_one_of_the_same_run() {
-    let test = "line_rec";
+/// A line of one cell, press-0, up, and the line file of the viewer victor, who sees it
+/// listed.
+fn one_cell_and_a_viewer(test: &str) -> (Hosts, Up, PathBuf) {
     let hosts = Hosts::new(test, 1);
     let users = private(test, "users.toml", USERS);
     let a = Up::start_in(
@@ -630,9 +630,16 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
         &cell_config(test, 0, &users),
         Some(&hosts.cells[0]),
     );
-    // A viewer may record: recording is reading.
     let victor = line_file(test, "victor", "victor", "victor-secret-0123456789", 1);
     until_listed(&hosts, &victor, &["press-0"], Duration::from_secs(30));
+    (hosts, a, victor)
+}
+
+#[test]
+fn a_remote_recording_equals_a_local_one_of_the_same_run() {
+    // A viewer may record: recording is reading.
+    let (hosts, a, victor) = one_cell_and_a_viewer("line_rec");
+    let test = "line_rec";
 
     // On the cell's host, `supervisor record`; in the room, the same through the line. The
     // local one starts first and stops last: the remote's window lies inside it.
@@ -696,16 +703,34 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
         lost_per_topic(&remote_summary),
     );
     for (topic, t) in c["topics"].as_object().expect("topics") {
-        let remote_n = t["remote"].as_u64().expect("count");
-        assert_eq!(t["matched"], remote_n, "{topic}: {t}");
-        let stalled =
-            lost_l.get(topic).copied().unwrap_or(0) + lost_r.get(topic).copied().unwrap_or(0);
-        // The latency summaries (two samples kept) are read as they come, not counted.
+        // The latency summaries are sampled: each reader takes the newest of a process'
+        // histogram when it looks (two kept, none numbered), so two readers may take
+        // different ones, and each one holds everything before it.
         let sampled = topic.ends_with("/latency")
             || topic.ends_with("/exec_time")
             || topic == "/drives/sense_to_command";
-        if stalled == 0 && !sampled {
-            assert_eq!(t["run"], true, "{topic}: {t}");
+        if sampled {
+            continue;
+        }
+        let remote_n = t["remote"].as_u64().expect("count");
+        // A topic several processes publish on (the events, the e-stops, the motion
+        // control) reaches each reader in an order of its own across its publishers: the
+        // same messages, in any order.
+        let several = ["/events", "/estop", "/trajgen/control"].contains(&topic.as_str());
+        let matched = t[if several { "contained" } else { "matched" }]
+            .as_u64()
+            .expect("count");
+        let (lost_here, lost_there) = (
+            lost_l.get(topic).copied().unwrap_or(0),
+            lost_r.get(topic).copied().unwrap_or(0),
+        );
+        if lost_here + lost_there == 0 {
+            assert_eq!(matched, remote_n, "{topic}: {t}");
+            assert!(several || t["run"] == true, "{topic}: {t}");
+        } else {
+            // What the local one lost is all the remote has beyond it.
+            assert!(matched + lost_here >= remote_n, "{topic}: {t}");
+            println!("{topic}: {lost_here} lost here, {lost_there} there (a reader stalled)");
         }
     }
     for topic in [
@@ -724,7 +749,11 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
     let programs = c["programs"].as_object().expect("programs");
     let ran = programs.values().collect::<Vec<_>>();
     assert_eq!(ran.len(), 1, "one program ran: {programs:?}");
-    assert_eq!(ran[0]["local"], ran[0]["remote"], "{programs:?}");
+    let setpoints_lost = lost_l.get("/trajgen/setpoint").copied().unwrap_or(0)
+        + lost_r.get("/trajgen/setpoint").copied().unwrap_or(0);
+    if setpoints_lost == 0 {
+        assert_eq!(ran[0]["local"], ran[0]["remote"], "{programs:?}");
+    }
     assert!(ran[0]["local"].as_u64() > Some(100), "{programs:?}");
     // Log times: a sample's own stamp, mapped to the Unix epoch by each recorder's clock; the
     // read time where the sample has none (the program's commands).
@@ -734,6 +763,102 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
         c["topics"]["/servo/state"]["max_log_time_ns"],
         c["topics"]["/trajgen/command"]["max_log_time_ns"],
     );
+    drop(a);
+}
+
+#[test]
+fn the_line_s_web_view_lists_its_cells_and_shows_the_one_chosen() {
+    let (hosts, a, victor) = one_cell_and_a_viewer("line_web");
+    // In the room, a host with no cell: the line's page.
+    let mut web = Command::new("ip");
+    web.args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("supervisor"))
+        .args(["web", "--listen", "127.0.0.1:0", "--line"])
+        .arg(&victor)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut web = web.spawn().expect("supervisor web --line");
+    let said = integration_tests::first_line(&mut web);
+    let base = said
+        .trim()
+        .strip_prefix("serving the line on ")
+        .unwrap_or_else(|| panic!("{said}"))
+        .trim_end_matches('/')
+        .to_string();
+    let mut page = Command::new("ip");
+    page.args(["netns", "exec", &hosts.room, "node"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("web/line_page.mjs"))
+        .args([base.as_str(), "press-0"]);
+    let out = run_with_watchdog(&mut page, WATCHDOG);
+    assert!(out.status.success(), "line_page: {}", text(&out));
+    let j: Value = serde_json::from_slice(&out.stdout).expect("line_page's JSON");
+    // The list: press-0, enabled.
+    let list = &j["list"][0];
+    assert_eq!(list["kind"], "cells", "{j}");
+    assert_eq!(list["cells"][0]["cell"], "press-0", "{j}");
+    assert_eq!(list["cells"][0]["state"], "enabled", "{j}");
+    // The cell chosen: its description (the gantry's axes), then frames of the cell up, where
+    // its status says it stands.
+    let view = j["cell"].as_array().expect("messages");
+    let hello = view
+        .iter()
+        .find(|m| m["kind"] == "hello")
+        .unwrap_or_else(|| panic!("no hello: {j}"));
+    let axes: Vec<&str> = (hello["axes"].as_array().expect("axes").iter())
+        .filter_map(|a| a["name"].as_str())
+        .collect();
+    assert_eq!(axes, ["x", "y", "theta"], "{hello}");
+    let status = a.until("at rest", |s| {
+        s["servo"]["axes"]["x"]["position"].is_number()
+    });
+    let frames: Vec<&Value> = view.iter().filter(|m| m["kind"] == "frame").collect();
+    assert!(!frames.is_empty(), "{j}");
+    for f in &frames {
+        assert_eq!(f["up"], true, "{f}");
+        for (k, axis) in ["x", "y", "theta"].iter().enumerate() {
+            let want = status["servo"]["axes"][axis]["position"]
+                .as_f64()
+                .expect("position");
+            let got = f["joints"][k].as_f64().expect("a joint");
+            assert!((got - want).abs() < 1e-3, "{axis}: {got} against {want}");
+        }
+    }
+    // A name that is none is refused; the buttons only on the cell's own view.
+    assert_eq!(j["unknown"][0]["refused"], 404, "{j}");
+    assert_eq!(j["estop"]["status"], 403, "{j}");
+    assert!(
+        j["estop"]["text"]
+            .as_str()
+            .is_some_and(|t| t.contains("supervisor estop --remote press-0")),
+        "{j}"
+    );
+    assert_eq!(a.status()["estop"]["latched"], false);
+    // The page itself, in Chromium in the room: the cell's view draws the machine, with a
+    // way back to the list; the list links each cell to its view.
+    let (mut browser, ready) =
+        crate::web::Browser::open_in(Some(&hosts.room), &format!("{base}/?cell=press-0"));
+    assert_eq!(ready["errors"], serde_json::json!([]), "{ready}");
+    let back = browser.ask("eval document.getElementById('cells').textContent");
+    assert!(
+        back["value"]
+            .as_str()
+            .is_some_and(|t| t.contains("every cell of the line")),
+        "{back}"
+    );
+    browser.ask(&format!("goto {base}/"));
+    browser.ask("until rtc.cells && rtc.cells.length === 1");
+    let link = browser.ask("eval document.querySelector('#cells a').getAttribute('href')");
+    assert_eq!(link["value"], "/?cell=press-0", "{link}");
+    let bye = browser.ask("quit");
+    assert_eq!(bye["errors"], serde_json::json!([]), "{bye}");
+    drop(browser);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(web.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .expect("stop the page");
+    let out = integration_tests::wait_output(web, WATCHDOG, "supervisor web --line stops");
+    assert!(out.status.success(), "{}", text(&out));
     drop(a);
 }
 

@@ -14,7 +14,7 @@ use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// The page in Chromium, one command and one JSON answer at a time.
-struct Browser {
+pub(crate) struct Browser {
     child: Child,
     stdin: ChildStdin,
     stdout: BufReader<ChildStdout>,
@@ -22,12 +22,26 @@ struct Browser {
 
 impl Browser {
     fn open(url: &str) -> (Self, Value) {
+        Self::open_in(None, url)
+    }
+
+    /// The page at `url` in Chromium, run in network namespace `ns` when given; with the
+    /// driver's first answer (ready, and the page's errors so far).
+    pub(crate) fn open_in(ns: Option<&str>, url: &str) -> (Self, Value) {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("web");
         assert!(
             dir.join("node_modules/playwright-core").exists(),
             "playwright-core is not installed: `npm ci --prefix tests/web` (.ci/run does it)"
         );
-        let mut child = Command::new("node")
+        let mut child = match ns {
+            Some(ns) => {
+                let mut c = Command::new("ip");
+                c.args(["netns", "exec", ns, "node"]);
+                c
+            }
+            None => Command::new("node"),
+        };
+        let mut child = child
             .arg(dir.join("drive.mjs"))
             .arg(url)
             .stdin(Stdio::piped())
@@ -53,7 +67,7 @@ impl Browser {
         serde_json::from_str(&line).expect("JSON from the driver")
     }
 
-    fn ask(&mut self, cmd: &str) -> Value {
+    pub(crate) fn ask(&mut self, cmd: &str) -> Value {
         writeln!(self.stdin, "{cmd}").expect("write");
         let a = self.answer();
         assert!(a["error"].is_null(), "{cmd}: {a}");
