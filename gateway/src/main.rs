@@ -187,7 +187,13 @@ fn line(
     };
     // Its ROS 2 topics, beside its own keys: what its access control lets it publish.
     let also: Vec<String> = (net.ros2.iter())
-        .map(|r| format!("{}/{}/**", r.domain, r.namespace_of(&name)))
+        .flat_map(|r| {
+            let ns = r.namespace_of(&name);
+            [
+                format!("{}/{ns}/**", r.domain),
+                ros2::graph_keys(r.domain, &ns),
+            ]
+        })
         .collect();
     let link = Link::of(&net, &name, &also);
     loop {
@@ -477,6 +483,8 @@ struct RosTopics<'a> {
     /// The publisher's GID in rmw_zenoh's attachment: the session's Zenoh id.
     gid: [u8; 16],
     seq: i64,
+    /// The node and its publishers in ROS 2's graph, for as long as they publish.
+    _graph: Vec<zenoh::liveliness::LivelinessToken>,
 }
 
 impl<'a> RosTopics<'a> {
@@ -498,6 +506,31 @@ impl<'a> RosTopics<'a> {
             Some(k) => Some((declare(ros2::tool_pose_key(r.domain, &frame))?, k)),
             None => None,
         };
+        let zid = session.zid().to_string();
+        let mut graph = vec![ros2::node_token(r.domain, &zid, &frame)];
+        graph.push(ros2::publisher_token(
+            r.domain,
+            &zid,
+            1,
+            &frame,
+            ros2::JOINT_STATES,
+            ros2::JOINT_STATE_TYPE,
+            ros2::JOINT_STATE_HASH,
+        ));
+        if pose.is_some() {
+            graph.push(ros2::publisher_token(
+                r.domain,
+                &zid,
+                2,
+                &frame,
+                ros2::TOOL_POSE,
+                ros2::POSE_STAMPED_TYPE,
+                ros2::POSE_STAMPED_HASH,
+            ));
+        }
+        let graph = (graph.into_iter())
+            .map(|key| session.liveliness().declare_token(key).wait())
+            .collect::<zenoh::Result<Vec<_>>>()?;
         tracing::info!(
             "ROS 2: /{frame}/{} (sensor_msgs/msg/JointState) and /{frame}/{} (geometry_msgs/msg/PoseStamped) in domain {}",
             ros2::JOINT_STATES,
@@ -514,6 +547,7 @@ impl<'a> RosTopics<'a> {
                 .collect(),
             gid: session.zid().to_le_bytes(),
             seq: 0,
+            _graph: graph,
         })
     }
 

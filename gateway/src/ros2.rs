@@ -2,7 +2,9 @@
 //! later; docs/network.md says what was checked and how): a `sensor_msgs/msg/JointState` on
 //! the key `<domain>/<namespace>/joint_states/<type>/<type hash>`, its payload CDR
 //! little-endian with its encapsulation header, its attachment the sequence number, the
-//! source time stamp and the publisher's GID.
+//! source time stamp and the publisher's GID; and the node and its publishers in ROS 2's graph
+//! (liveliness tokens `@ros2_lv/...`), so that `ros2 topic list` and `ros2 topic echo` find
+//! them.
 
 /// The type's name as rmw_zenoh writes it in a key.
 pub const JOINT_STATE_TYPE: &str = "sensor_msgs::msg::dds_::JointState_";
@@ -19,6 +21,56 @@ pub const POSE_STAMPED_HASH: &str =
     "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8";
 /// The tool pose's topic under the cell's namespace.
 pub const TOOL_POSE: &str = "tool_pose";
+
+/// The ROS node that publishes a cell's topics, in the cell's namespace.
+pub const NODE: &str = "rtc_gateway";
+
+/// The QoS every publisher declares in its token: reliable, volatile, keep last 10 (rmw_zenoh
+/// writes a default as an empty field: `<reliability>:<durability>:<history>,<depth>:
+/// <deadline>:<lifespan>:<liveliness>`).
+pub const QOS: &str = "::,10:,:,:,,";
+
+/// A ROS name as rmw_zenoh writes it in a graph token: each `/` as `%` (`/press_0/joint_states`
+/// is `%press_0%joint_states`).
+pub fn mangle(name: &str) -> String {
+    name.replace('/', "%")
+}
+
+/// The node's liveliness token in ROS 2's graph (rmw_zenoh's design document, Jazzy):
+/// `@ros2_lv/<domain>/<session id>/<node id>/<node id>/NN/<enclave>/<namespace>/<node>`.
+pub fn node_token(domain: u32, zid: &str, namespace: &str) -> String {
+    format!(
+        "@ros2_lv/{domain}/{zid}/0/0/NN/%/{}/{NODE}",
+        mangle(&format!("/{namespace}"))
+    )
+}
+
+/// A publisher's liveliness token (entity `entity` of the node): `@ros2_lv/<domain>/<session
+/// id>/<node id>/<entity id>/MP/<enclave>/<namespace>/<node>/<topic>/<type>/<hash>/<qos>`.
+pub fn publisher_token(
+    domain: u32,
+    zid: &str,
+    entity: u32,
+    namespace: &str,
+    topic: &str,
+    type_name: &str,
+    hash: &str,
+) -> String {
+    format!(
+        "@ros2_lv/{domain}/{zid}/0/{entity}/MP/%/{}/{NODE}/{}/{type_name}/{hash}/{QOS}",
+        mangle(&format!("/{namespace}")),
+        mangle(&format!("/{namespace}/{topic}"))
+    )
+}
+
+/// What of ROS 2's graph a cell may declare in domain `domain`: its own node's tokens, in its
+/// namespace (the access control's key expression).
+pub fn graph_keys(domain: u32, namespace: &str) -> String {
+    format!(
+        "@ros2_lv/{domain}/*/*/*/*/%/{}/**",
+        mangle(&format!("/{namespace}"))
+    )
+}
 
 /// The key of `/<namespace>/joint_states` in ROS domain `domain`.
 pub fn joint_states_key(domain: u32, namespace: &str) -> String {
@@ -182,5 +234,39 @@ mod tests {
         assert_eq!(a[8..16], (-2i64).to_le_bytes());
         assert_eq!(a[16], 16);
         assert_eq!(a[17..], [9; 16]);
+    }
+}
+
+#[cfg(test)]
+mod graph {
+    use super::*;
+
+    #[test]
+    fn the_graph_tokens_are_rmw_zenohs() {
+        // As rmw_zenoh's design document writes a talker's (node `talker`, root namespace).
+        let zid = "8b20917502ee955ac4476e0266340d5c";
+        assert_eq!(
+            format!("@ros2_lv/0/{zid}/0/0/NN/%/%/talker"),
+            node_token(0, zid, "").replace(NODE, "talker")
+        );
+        assert_eq!(
+            node_token(42, zid, "press_0"),
+            format!("@ros2_lv/42/{zid}/0/0/NN/%/%press_0/rtc_gateway")
+        );
+        assert_eq!(
+            publisher_token(
+                42,
+                zid,
+                1,
+                "press_0",
+                JOINT_STATES,
+                JOINT_STATE_TYPE,
+                JOINT_STATE_HASH
+            ),
+            format!(
+                "@ros2_lv/42/{zid}/0/1/MP/%/%press_0/rtc_gateway/%press_0%joint_states/\
+                 sensor_msgs::msg::dds_::JointState_/{JOINT_STATE_HASH}/::,10:,:,:,,"
+            )
+        );
     }
 }

@@ -8,8 +8,10 @@ same) and computes the type hash the key must carry.
 
 Prints one JSON object: the key, the frame, the names, the positions, the stamps (s), the
 attachments' sequence numbers and GID; with --pose also one tool pose
-(geometry_msgs/msg/PoseStamped on tool_pose, checked the same way). Exit 1 with the reason on stderr if anything differs
-from what rmw_zenoh writes or nothing arrives within 10 s.
+(geometry_msgs/msg/PoseStamped on tool_pose, checked the same way); and "graph": the node
+and publisher tokens in ROS 2's graph (liveliness `@ros2_lv/<domain>/...`), each checked
+against the layout of rmw_zenoh's design document and the data keys. Exit 1 with the reason
+on stderr if anything differs from what rmw_zenoh writes or nothing arrives within 10 s.
 """
 import argparse
 import json
@@ -99,15 +101,60 @@ def main():
     out["gids"] = sorted(out["gids"])
     if args.pose:
         out["pose"] = tool_pose(args, store)
+    out["graph"] = graph(args, {"joint_states": out["key"],
+                                **({"tool_pose": out["pose"]["key"]} if args.pose else {})})
     print(json.dumps(out))
+
+
+def graph(args, data_keys):
+    """The cell's node and publishers in ROS 2's graph, as rmw_zenoh's design document lays
+    its liveliness tokens out: `@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/<enclave>/<ns>/<node>`
+    and `@ros2_lv/<domain>/<zid>/<nid>/<eid>/MP/<enclave>/<ns>/<node>/<topic>/<type>/<hash>/<qos>`,
+    names mangled (`/` as `%`), each publisher's type and hash those of its data key."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("connect/endpoints", json.dumps(args.connect))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    ns = "%" + args.namespace
+    with zenoh.open(conf) as session:
+        tokens = sorted({str(r.ok.key_expr)
+                         for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**", timeout=5)
+                         if r.ok is not None})
+    nodes = [t.split("/") for t in tokens if t.split("/")[5:6] == ["NN"]]
+    pubs = [t.split("/") for t in tokens if t.split("/")[5:6] == ["MP"]]
+    if len(nodes) != 1:
+        fail(f"graph: {len(nodes)} node tokens in {tokens}")
+    node = nodes[0]
+    if node[0] != "@ros2_lv" or node[1] != str(args.domain) or node[3] != node[4] \
+            or node[6] != "%" or node[7] != ns or len(node) != 9:
+        fail(f"graph: node token {'/'.join(node)}")
+    zid, nid, name = node[2], node[3], node[8]
+    found = {}
+    for p in pubs:
+        if len(p) != 13 or p[2] != zid or p[3] != nid or p[6] != "%" or p[7] != ns or p[8] != name:
+            fail(f"graph: publisher token {'/'.join(p)} is not the node's")
+        topic = p[9]
+        leaf = topic.removeprefix(ns + "%")
+        if leaf not in data_keys:
+            fail(f"graph: publisher of {topic}, which the cell does not publish")
+        want = data_keys[leaf].split("/")[-2:]
+        if p[10:12] != want:
+            fail(f"graph: {topic} declared as {p[10:12]}, published as {want}")
+        found[leaf] = {"token": "/".join(p), "qos": p[12]}
+    if sorted(found) != sorted(data_keys):
+        fail(f"graph: publishers {sorted(found)}, topics {sorted(data_keys)}")
+    if len(zid) != 32 or any(c not in "0123456789abcdef" for c in zid):
+        fail(f"graph: session id {zid!r} is not 32 hex digits")
+    return {"node": "/".join(node), "name": name, "publishers": found}
 
 
 def tool_pose(args, store):
     """One tool pose (geometry_msgs/msg/PoseStamped), checked as the joint states are."""
-    msg, _, _, gid = checked(store, take(args, "tool_pose", 1)[0], "geometry_msgs/msg/PoseStamped")
+    sample = take(args, "tool_pose", 1)[0]
+    msg, _, _, gid = checked(store, sample, "geometry_msgs/msg/PoseStamped")
     p, o = msg.pose.position, msg.pose.orientation
     return {"frame": msg.header.frame_id, "position": [p.x, p.y, p.z],
-            "orientation": [o.x, o.y, o.z, o.w], "gid": gid}
+            "orientation": [o.x, o.y, o.z, o.w], "gid": gid, "key": sample[0]}
 
 
 if __name__ == "__main__":

@@ -332,6 +332,13 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         "{j}"
     );
     assert_ne!(pose["gid"], j["gids"][0], "{j}");
+    // In ROS 2's graph (what `ros2 topic list` reads): the node in press_0's namespace and its
+    // two publishers, reliable, keep last 10.
+    let graph = &j["graph"];
+    assert_eq!(graph["name"], "rtc_gateway", "{graph}");
+    for topic in ["joint_states", "tool_pose"] {
+        assert_eq!(graph["publishers"][topic]["qos"], "::,10:,:,:,,", "{graph}");
+    }
 
     // A viewer may read, not command: refused by the gateway, with why; the cell untouched.
     let out = room(&hosts, &victor, &["pause", "press-0"]);
