@@ -66,8 +66,16 @@ const LOG_WINDOW_MS: u64 = 10_000;
 struct Bridge {
     events: Sub<EventV1>,
     tx: SyncSender<(EventV1, u64)>,
-    /// Events not handed over since the last one that was.
+    /// Events not handed over since the last one that was: the queue was full, or the cell
+    /// published more than this process' subscriber holds between two cycles (a gap in a
+    /// source's numbers).
     lost: u64,
+    /// Each source's last event number (the supervisor's and its tools' share theirs: no
+    /// gap is counted in them). A source's events before the first one this process saw are
+    /// not counted: they cannot be told from those published before it subscribed.
+    last_seq: std::collections::HashMap<u32, u64>,
+    /// This process' source number, for its own note of a loss.
+    source: u32,
     /// What the network thread says of the line, to tell the cell as events.
     notes: Receiver<Note>,
 }
@@ -94,11 +102,35 @@ impl Task for Bridge {
                 .push(EventV1::new(now, code, -1, 0.0, 0.0, &["the line: ", text]));
         }
         while let Some(e) = self.events.next() {
+            if e.source != shm_schema::event::SOURCE_SUPERVISOR
+                && let Some(prev) = self.last_seq.insert(e.source, e.seq)
+                && e.seq > prev + 1
+            {
+                self.lost += e.seq - prev - 1;
+            }
             match self.tx.try_send((e, self.lost)) {
                 Ok(()) => self.lost = 0,
                 Err(TrySendError::Full(_)) => self.lost += 1,
                 // The network thread ended (it said why).
                 Err(TrySendError::Disconnected(_)) => {}
+            }
+        }
+        // A loss is said even when no event follows it: a note of the gateway's own, as soon
+        // as the queue takes one.
+        if self.lost > 0 {
+            let mut note = EventV1::new(
+                cx.now_ns(),
+                code::EVENTS_DROPPED,
+                -1,
+                self.lost as f64,
+                0.0,
+                &[
+                    "the line: events not forwarded (the cell published them faster than the network took them)",
+                ],
+            );
+            note.source = self.source;
+            if self.tx.try_send((note, self.lost)).is_ok() {
+                self.lost = 0;
             }
         }
     }
@@ -126,6 +158,8 @@ fn main() -> ExitCode {
                 events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
                 tx,
                 lost: 0,
+                last_seq: std::collections::HashMap::new(),
+                source: ctx.index as u32,
                 notes,
             })
         },
@@ -269,11 +303,13 @@ fn serve(
             }
         })
         .wait()?;
-    // A subscriber that stops reading must not hold the gateway up: what the network drops
-    // is said by the numbers (`seq`).
+    // No event dropped on the way unsaid: the publications wait for a slow subscriber (a
+    // dropped last one would go unnoticed, nothing numbered coming after it); meanwhile the
+    // cycle's queue fills, and what it cannot take is counted and said (`lost`). A peer that
+    // stops reading altogether loses its link to Zenoh's lease.
     let event_pub = session
         .declare_publisher(name.events())
-        .congestion_control(CongestionControl::Drop)
+        .congestion_control(CongestionControl::Block)
         .wait()?;
     // Queries wait for the control thread in a ring: a flood drops the oldest, never blocks
     // Zenoh's own threads.

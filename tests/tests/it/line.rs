@@ -774,6 +774,109 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
 }
 
 #[test]
+fn an_event_burst_reaches_the_room_whole_or_says_how_many_were_lost() {
+    let (hosts, a, victor) = one_cell_and_a_viewer("line_burst");
+    let mut follower = Command::new("ip")
+        .args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("gateway"))
+        .args(["line", "--json", "--line"])
+        .arg(&victor)
+        .args(["events", "press-0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("the follower");
+    // What the room saw: burst events, and how many it was told were lost.
+    let seen = std::sync::Arc::new(std::sync::Mutex::new((0u64, 0u64, false)));
+    let lines = std::io::BufReader::new(follower.stdout.take().expect("piped"));
+    let into = seen.clone();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in lines.lines().map_while(Result::ok) {
+            let Ok(v) = serde_json::from_str::<Value>(&line) else {
+                continue;
+            };
+            let Ok(mut seen) = into.lock() else {
+                return;
+            };
+            let text = v["text"].as_str().unwrap_or("");
+            if let Some(n) = v["lost"].as_u64() {
+                seen.1 += n;
+            } else if text.starts_with("burst ") {
+                seen.0 += 1;
+            } else if text.starts_with("warm-up") {
+                seen.2 = true;
+            }
+        }
+    });
+    let seen = || *seen.lock().expect("seen");
+    let instance = shm_schema::InstanceName::new(&a.inst).expect("instance");
+    let node = runtime::ipc::node(&instance, "burst").expect("node");
+    let events: runtime::ipc::Pub<shm_schema::EventV1> =
+        runtime::ipc::Pub::new(&node, &instance, shm_schema::ServiceId::Events).expect("pub");
+    let event = |source: u32, seq: u64, text: &str| {
+        let mut e = shm_schema::EventV1::new(
+            runtime::time::now_ns(),
+            shm_schema::event::code::LISTENING,
+            -1,
+            0.0,
+            0.0,
+            &[text],
+        );
+        e.source = source;
+        e.seq = seq;
+        e
+    };
+    // The gateway takes this new publisher's events once it has connected to it, and the
+    // room follows once its subscription is known: a warm-up event until one arrives.
+    let start = Instant::now();
+    let mut seq = 0;
+    loop {
+        seq += 1;
+        events.send(&event(77, seq, "warm-up"));
+        std::thread::sleep(Duration::from_millis(50));
+        if seen().2 {
+            break;
+        }
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "no warm-up event reached the room"
+        );
+    }
+    // A burst from the same source, its numbers going on: far more at once than the
+    // gateway's subscriber holds between two of its cycles (1 024). What iceoryx2 refuses
+    // to publish is not the line's to report.
+    let mut published = 0u64;
+    for k in 1..=5_000u64 {
+        if events.send(&event(77, seq + k, &format!("burst {k}"))) {
+            published += 1;
+        }
+    }
+    const BURST: u64 = 5_000;
+    println!("{published} of a burst of {BURST} published");
+    // Every event of the burst arrives, or the room is told how many did not.
+    let start = Instant::now();
+    while seen().0 + seen().1 < published {
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "{} arrived, {} said lost, of {published}",
+            seen().0,
+            seen().1
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (arrived, said_lost, _) = seen();
+    println!("an event burst of {published}: {arrived} reached the room, {said_lost} said lost");
+    assert!(arrived > 0);
+    let _ = follower.kill();
+    let _ = follower.wait();
+    drop(events);
+    drop(node);
+    runtime::ipc::cleanup_after_client(&instance);
+    drop(a);
+}
+
+#[test]
 fn the_line_s_web_view_lists_its_cells_and_shows_the_one_chosen() {
     let (hosts, a, victor) = one_cell_and_a_viewer("line_web");
     // In the room, a host with no cell: the line's page.
