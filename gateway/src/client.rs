@@ -720,7 +720,6 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
     let mut last_seq: Option<u64> = None;
     let began = std::time::Instant::now();
     let mut heard = std::time::Instant::now();
-    let mut last_check = std::time::Instant::now();
     // Once asked to end: why, and the batch that holds all the cell published before.
     let mut ending: Option<(String, Option<RecordFlushed>)> = None;
     let ended = loop {
@@ -751,10 +750,7 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
         if heard.elapsed() > RECORD_GONE {
             break format!("cell {cell} left the line");
         }
-        if last_check.elapsed() >= Duration::from_secs(1) {
-            last_check = std::time::Instant::now();
-            out.maybe_rotate().map_err(file)?;
-        }
+        out.maybe_rotate().map_err(file)?;
         let Ok(Some(sample)) = stream.recv_timeout(Duration::from_millis(100)) else {
             continue;
         };

@@ -542,6 +542,8 @@ pub struct Writer {
     ids: Vec<u16>,
     sequence: u32,
     opened: Instant,
+    /// When the file's size was last looked at.
+    sized: Instant,
     files: Vec<PathBuf>,
 }
 
@@ -610,6 +612,7 @@ impl Writer {
             ids,
             sequence: 0,
             opened: Instant::now(),
+            sized: Instant::now(),
             files: vec![path],
         })
     }
@@ -645,12 +648,18 @@ impl Writer {
             .map_err(|e| mcap_error(&self.path, e))
     }
 
-    /// Starts the next file when this one is full or old enough.
+    /// Starts the next file when this one is old enough, or full (its size looked at once a
+    /// second): cheap enough to call after every batch of messages.
     pub fn maybe_rotate(&mut self) -> Result<(), String> {
-        let full = self
-            .rotate
-            .bytes
-            .is_some_and(|b| std::fs::metadata(&self.path).is_ok_and(|m| m.len() >= b));
+        let look = self.sized.elapsed() >= Duration::from_secs(1);
+        if look {
+            self.sized = Instant::now();
+        }
+        let full = look
+            && self
+                .rotate
+                .bytes
+                .is_some_and(|b| std::fs::metadata(&self.path).is_ok_and(|m| m.len() >= b));
         let old = self
             .rotate
             .every
@@ -981,7 +990,6 @@ pub fn record(
     let mut out = Writer::create(&opts.out, opts.rotate, source.topics()).map_err(f)?;
     ready(out.path());
     let began = Instant::now();
-    let mut last_check = Instant::now();
     let ended = loop {
         source
             .drain(&mut |k, t, data| out.write(k, t, data))
@@ -995,10 +1003,7 @@ pub fn record(
         if !source.cell_alive() {
             break format!("instance {instance} went down");
         }
-        if last_check.elapsed() >= Duration::from_secs(1) {
-            last_check = Instant::now();
-            out.maybe_rotate().map_err(f)?;
-        }
+        out.maybe_rotate().map_err(f)?;
         std::thread::sleep(Duration::from_millis(5));
     };
     // What arrived meanwhile, then the index and the footer.

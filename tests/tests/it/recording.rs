@@ -122,15 +122,30 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
         let test = "rec-up";
         let up = Up::default_cell(test);
         let base = scratch(test, "cell.mcap", "");
-        let out = succeeded_within(
-            supervisor()
-                .args(["record", "--instance", &up.inst, "--out"])
-                .arg(&base)
-                .args(["--duration", "3.5", "--rotate-time", "1"]),
-            WATCHDOG,
-        );
+        // Rotated every second: stopped once its third file is there (however long the host's
+        // stalls make that).
+        let recorder = supervisor()
+            .args(["record", "--instance", &up.inst, "--out"])
+            .arg(&base)
+            .args(["--rotate-time", "1"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("supervisor record");
+        let start = Instant::now();
+        while !base.with_file_name("cell-002.mcap").exists() {
+            assert!(start.elapsed() < WATCHDOG, "no third file");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(recorder.id() as i32),
+            nix::sys::signal::Signal::SIGINT,
+        )
+        .expect("stop the recorder");
+        let out = integration_tests::wait_output(recorder, WATCHDOG, "the recorder stops");
+        assert!(out.status.success(), "{out:?}");
         let text = String::from_utf8_lossy(&out.stdout).to_string();
-        assert!(text.contains("its duration is over"), "{text}");
+        assert!(text.contains("(stopped)"), "{text}");
         let files: Vec<PathBuf> = (0..10)
             .map(|k| base.with_file_name(format!("cell-{k:03}.mcap")))
             .filter(|f| f.exists())
