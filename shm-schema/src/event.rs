@@ -565,7 +565,7 @@ pub const CODES: &[CodeInfo] = &[
         name: "events-dropped",
         severity: Severity::Warning,
         unit: Unit::Number("events (limit: the queue's capacity)"),
-        meaning: "A process' cycle queued more events than its fixed queue holds; the value says how many were lost since the previous such event.",
+        meaning: "A process' cycle queued more events than its fixed queue holds; the value says how many were lost since the previous such event. From the gateway (on the line only, not on the cell's own events): events of the cell it could not forward to the line.",
     },
     CodeInfo {
         code: code::SUPERVISOR_ACTION,
