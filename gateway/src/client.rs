@@ -679,6 +679,12 @@ fn record_topics(session: &zenoh::Session, cell: &CellName) -> Result<RecordTopi
     ))
 }
 
+/// A stopping recording's question to the cell's gateway: asked, or answered.
+enum Flush {
+    Asked(std::sync::mpsc::Receiver<Option<RecordFlushed>>),
+    Answered(Option<RecordFlushed>),
+}
+
 /// The batch of `cell`'s recording stream that holds everything it published before now
 /// (`None` when its gateway does not say).
 fn flushed(session: &zenoh::Session, cell: &CellName) -> Option<RecordFlushed> {
@@ -720,8 +726,10 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
     let mut last_seq: Option<u64> = None;
     let began = std::time::Instant::now();
     let mut heard = std::time::Instant::now();
-    // Once asked to end: why, and the batch that holds all the cell published before.
-    let mut ending: Option<(String, Option<RecordFlushed>)> = None;
+    // Once asked to end: why, and the batch that holds all the cell published before, asked
+    // on a thread of its own while the stream goes on being read (the gateway answers after
+    // sending what it has: not reading meanwhile could hold it up).
+    let mut ending: Option<(String, Flush)> = None;
     let ended = loop {
         if ending.is_none() {
             let why = if runtime::signals::stop_requested() {
@@ -732,16 +740,26 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
                 None
             };
             if let Some(why) = why {
-                let flushed = flushed(session, cell);
-                ending = Some((why, flushed));
+                let (tx, rx) = std::sync::mpsc::channel();
+                let (s, c) = (session.clone(), cell.clone());
+                std::thread::spawn(move || {
+                    let _ = tx.send(flushed(&s, &c));
+                });
+                ending = Some((why, Flush::Asked(rx)));
             }
         }
-        if let Some((why, flushed)) = &ending {
-            let caught_up = match flushed {
-                Some(f) => {
+        if let Some((why, flush)) = &mut ending {
+            if let Flush::Asked(rx) = flush
+                && let Ok(answer) = rx.try_recv()
+            {
+                *flush = Flush::Answered(answer);
+            }
+            let caught_up = match flush {
+                Flush::Asked(_) => false,
+                Flush::Answered(Some(f)) => {
                     f.source_started_ms != topics.source_started_ms || last_seq >= Some(f.seq)
                 }
-                None => true,
+                Flush::Answered(None) => true,
             };
             if caught_up {
                 break why.clone();
@@ -791,7 +809,10 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
         }
     };
     let mut ended = ended;
-    if ending.as_ref().is_some_and(|(_, f)| f.is_none()) {
+    if ending
+        .as_ref()
+        .is_some_and(|(_, f)| matches!(f, Flush::Answered(None)))
+    {
         ended += "; the cell's gateway did not say which batch ends the recording: what was on its way is missing";
     }
     if missed_batches > 0 {

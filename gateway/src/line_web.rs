@@ -18,8 +18,39 @@ struct Line {
     session: zenoh::Session,
     /// The list of cells.
     list: View,
-    /// Each cell asked for: its view, fed by its subscriber (kept with it).
-    cells: Mutex<HashMap<String, (View, zenoh::pubsub::Subscriber<()>)>>,
+    /// Each cell asked for: its view, fed by its subscriber (kept with it), and since when no
+    /// page has looked at it.
+    cells: Mutex<HashMap<String, Followed>>,
+}
+
+/// A cell whose view the room follows.
+struct Followed {
+    view: View,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    unwatched_since: Option<std::time::Instant>,
+}
+
+/// How long a cell's view is followed after its last page left: its gateway samples the cell
+/// only while someone follows.
+const UNWATCHED: Duration = Duration::from_secs(10);
+
+impl Line {
+    /// Lets go of the views no page has looked at for [`UNWATCHED`].
+    fn forget_unwatched(&self) {
+        let Ok(mut cells) = self.cells.lock() else {
+            return;
+        };
+        cells.retain(|_, f| {
+            if f.view.frames.receiver_count() > 0 {
+                f.unwatched_since = None;
+                return true;
+            }
+            let since = *f
+                .unwatched_since
+                .get_or_insert_with(std::time::Instant::now);
+            since.elapsed() < UNWATCHED
+        });
+    }
 }
 
 impl Feed for Line {
@@ -32,8 +63,8 @@ impl Feed for Line {
             .cells
             .lock()
             .map_err(|_| "the feed failed".to_string())?;
-        if let Some((view, _)) = cells.get(cell) {
-            return Ok(view.clone());
+        if let Some(f) = cells.get(cell) {
+            return Ok(f.view.clone());
         }
         let view = View::default();
         let into = view.clone();
@@ -58,7 +89,14 @@ impl Feed for Line {
             })
             .wait()
             .map_err(|e| format!("cannot follow cell {cell}: {e}"))?;
-        cells.insert(cell.to_string(), (view.clone(), subscriber));
+        cells.insert(
+            cell.to_string(),
+            Followed {
+                view: view.clone(),
+                _subscriber: subscriber,
+                unwatched_since: None,
+            },
+        );
         Ok(view)
     }
 
@@ -85,13 +123,15 @@ pub fn serve(
         list: View::default(),
         cells: Mutex::new(HashMap::new()),
     });
-    // The list, every second while the page is served.
+    // The list, every second while the page is served; the views no page looks at any more
+    // let go.
     {
-        let (list, session) = (line.list.clone(), session.clone());
+        let (list, session, line) = (line.list.clone(), session.clone(), line.clone());
         std::thread::Builder::new()
             .name("line-list".into())
             .spawn(move || {
                 while !runtime::signals::stop_requested() {
+                    line.forget_unwatched();
                     if list.frames.receiver_count() > 0
                         && let Ok(cells) = rows(&session)
                     {

@@ -305,8 +305,8 @@ fn serve(
         .wait()?;
     // No event dropped on the way unsaid: the publications wait for a slow subscriber (a
     // dropped last one would go unnoticed, nothing numbered coming after it); meanwhile the
-    // cycle's queue fills, and what it cannot take is counted and said (`lost`). A peer that
-    // stops reading altogether loses its link to Zenoh's lease.
+    // cycle's queue fills, and what it cannot take is counted and said (`lost`). A link that
+    // stays blocked 5 s is closed by Zenoh (`wait_before_close`): that peer has to join again.
     let event_pub = session
         .declare_publisher(name.events())
         .congestion_control(CongestionControl::Block)
@@ -396,14 +396,18 @@ fn serve(
         ];
         for (thread, what, serve) in streams {
             let leaving = &leaving;
-            std::thread::Builder::new()
+            let started = std::thread::Builder::new()
                 .name(thread.into())
                 .spawn_scoped(scope, move || {
                     if let Err(e) = serve(session, instance, name, leaving) {
                         tracing::error!("{what} on the line ended: {e}");
                     }
-                })
-                .map_err(|e| format!("cannot start {what}'s thread: {e}"))?;
+                });
+            if let Err(e) = started {
+                // The threads already started end before the scope does.
+                leaving.store(true, Ordering::Relaxed);
+                return Err(format!("cannot start {what}'s thread: {e}").into());
+            }
         }
         let result = (|| -> zenoh::Result<()> {
             let period = Duration::from_secs_f64(net.status_period);

@@ -71,8 +71,9 @@ pub fn serve(
     let node_name = format!("gateway-record-{}", std::process::id());
     let mut running: Option<Running> = None;
     let mut wanted_at: Option<Instant> = None;
-    // A source that cannot open is said once, not every 10 ms.
+    // A source that cannot open is said once, and tried again a second later.
     let mut said = String::new();
+    let mut retry_at: Option<Instant> = None;
     loop {
         if runtime::signals::stop_requested() || leaving.load(Ordering::Relaxed) {
             return Ok(());
@@ -95,7 +96,7 @@ pub fn serve(
         if !wanted && running.take().is_some() {
             tracing::info!("the recording on the line stopped: nobody reads it");
         }
-        if wanted && running.is_none() {
+        if wanted && running.is_none() && retry_at.is_none_or(|t| now >= t) {
             match Source::open(instance, &node_name) {
                 Ok(source) => {
                     let topics = RecordTopics {
@@ -115,6 +116,8 @@ pub fn serve(
                     });
                 }
                 Err(e) => {
+                    // Not again at once: an attempt may wait 2 s for the configuration.
+                    retry_at = Some(now + Duration::from_secs(1));
                     let why = format!("the cell cannot be recorded: {e}");
                     if why != said {
                         tracing::warn!("{why}");
