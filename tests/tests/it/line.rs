@@ -363,7 +363,13 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
 
     // The operator's commands reach the right cell and are acknowledged: a program on press-0
     // paused, resumed and aborted there; press-1 e-stopped, press-0 not.
-    let program = integration_tests::small_triangle(test);
+    // Long enough (four long moves, aborted below) that a command sent while it moves still
+    // finds it moving on a loaded host: the small triangle ended once before a pause came.
+    let program = scratch(
+        test,
+        "long.prog",
+        "MOVE(190,140,0)\nMOVE(10,10,0)\nMOVE(190,140,0)\nMOVE(10,10,0)\nEND\n",
+    );
     ok(
         &hosts,
         &olga,
