@@ -26,9 +26,28 @@ const BATCH: Duration = Duration::from_millis(10);
 /// An empty batch at least this often while the source runs: the room knows the cell is there.
 const HEARTBEAT: Duration = Duration::from_millis(500);
 
-/// How long the source stays without a subscriber after the last one left (or after a
-/// question for the topics, which comes before the subscription's first batch).
+/// How long a stream's source stays without a subscriber after the last one left (or after
+/// a question for the recording's topics, which comes before the subscription's first
+/// batch).
 const LINGER: Duration = Duration::from_secs(2);
+
+/// Whether a stream of the line is wanted: someone subscribed (or asked) within [`LINGER`].
+/// What the recording and the web view's streams share: their sources run only then.
+#[derive(Debug, Default)]
+pub struct Demand {
+    last: Option<Instant>,
+}
+
+impl Demand {
+    /// `asked`: a subscriber matches, or a question came, now.
+    pub fn wanted(&mut self, asked: bool) -> bool {
+        let now = Instant::now();
+        if asked {
+            self.last = Some(now);
+        }
+        self.last.is_some_and(|t| now.duration_since(t) < LINGER)
+    }
+}
 
 /// The messages of one batch, in bytes, at most (one message larger goes alone): well below
 /// the largest message the line takes ([`gateway::link::MAX_MESSAGE`]).
@@ -70,7 +89,7 @@ pub fn serve(
     let flush_key = name.record_flush();
     let node_name = format!("gateway-record-{}", std::process::id());
     let mut running: Option<Running> = None;
-    let mut wanted_at: Option<Instant> = None;
+    let mut demand = Demand::default();
     // A source that cannot open is said once, and tried again a second later.
     let mut said = String::new();
     let mut retry_at: Option<Instant> = None;
@@ -89,10 +108,7 @@ pub fn serve(
             flush.push(q);
         }
         let matched = stream.matching_status().wait().is_ok_and(|m| m.matching());
-        if matched || !asked.is_empty() {
-            wanted_at = Some(now);
-        }
-        let wanted = wanted_at.is_some_and(|t| now.duration_since(t) < LINGER);
+        let wanted = demand.wanted(matched || !asked.is_empty());
         if !wanted && running.take().is_some() {
             tracing::info!("the recording on the line stopped: nobody reads it");
         }

@@ -24,9 +24,6 @@ const TICK: Duration = Duration::from_millis(10);
 /// The cell's description again this often, for a late joiner.
 const HELLO_AGAIN: Duration = Duration::from_secs(2);
 
-/// How long the sampler runs on without a subscriber.
-const LINGER: Duration = Duration::from_secs(2);
-
 /// A running sampler.
 struct Sampling {
     view: View,
@@ -57,16 +54,13 @@ pub fn serve(
         .congestion_control(CongestionControl::Drop)
         .wait()?;
     let mut sampling: Option<Sampling> = None;
-    let mut wanted_at: Option<Instant> = None;
+    // The sampler runs on a moment after the last subscriber left, as the recording does.
+    let mut demand = crate::recording::Demand::default();
     loop {
         if runtime::signals::stop_requested() || leaving.load(Ordering::Relaxed) {
             return Ok(());
         }
-        let now = Instant::now();
-        if stream.matching_status().wait().is_ok_and(|m| m.matching()) {
-            wanted_at = Some(now);
-        }
-        let wanted = wanted_at.is_some_and(|t| now.duration_since(t) < LINGER);
+        let wanted = demand.wanted(stream.matching_status().wait().is_ok_and(|m| m.matching()));
         if !wanted {
             sampling = None;
         } else if sampling.is_none() {
