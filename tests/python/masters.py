@@ -151,11 +151,11 @@ def with_kickcat(ifname):
 
     ms = lambda n: datetime.timedelta(milliseconds=n)
     link = kickcat.create_link(ifname, "")
-    # Room for the host's stalls, in each frame's answer and in the whole init: at 100 ms a
+    # Room for the host's stalls, in each frame's answer and in the whole init: at 100 ms (and once at 200 ms) a
     # frame and 2 s the init, a CI run with both cores loaded timed out in init (kickcat makes
     # the init's timeout the drives' watchdog too, 16 bits of 100 µs: at most 6.5 s, or
     # "Invalid watchdog"). Longer still once mapped, so a stall does not pass for a lost frame.
-    link.set_timeout(ms(200))
+    link.set_timeout(ms(500))
     bus = kickcat.Bus(link)
     bus.init(ms(5000))
     slaves = bus.slaves()
