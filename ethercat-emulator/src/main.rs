@@ -29,6 +29,13 @@ struct Args {
     /// MainDevice writes its own (registers 0x0400, 0x0420). A real ESC starts with 100.
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u16).range(0..=6553))]
     pd_watchdog_ms: u16,
+    /// Cable redundancy: the interface the line's last SubDevice is cabled to, whose other end
+    /// is a MainDevice's second port. A frame that passed the line leaves there instead of
+    /// going back out of `--interface`; a frame the MainDevice sends into it passes back
+    /// through the line unprocessed (an ESC processes only what enters its port 0) and leaves
+    /// on `--interface`.
+    #[arg(long, value_name = "IFACE")]
+    ring: Option<String>,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -139,6 +146,36 @@ fn main() -> ExitCode {
         names.len(),
         names.join(", ")
     );
+    let ring = match args
+        .ring
+        .as_deref()
+        .map(|i| Wire::open(i, Duration::from_millis(5)))
+    {
+        None => None,
+        Some(Ok(w)) => Some(w),
+        Some(Err(e)) => {
+            eprintln!("error: --ring: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    std::thread::scope(|s| {
+        let back = ring.as_ref().map(|ring| s.spawn(|| pass_back(ring, &wire)));
+        let code = answer(
+            &wire,
+            ring.as_ref().unwrap_or(&wire),
+            &mut bus,
+            args.loopback,
+        );
+        match back.map(|b| b.join()) {
+            Some(Ok(false) | Err(_)) => ExitCode::FAILURE,
+            _ => code,
+        }
+    })
+}
+
+/// Answers the frames that come in on `wire`: each passes the line and leaves on `out` (the
+/// same wire, or the ring's). Until SIGTERM or SIGINT.
+fn answer(wire: &Wire, out: &Wire, bus: &mut Bus, loopback: bool) -> ExitCode {
     let mut buf = vec![0u8; 9216];
     let (mut answered, mut refused) = (0u64, 0u64);
     while !STOP.load(Ordering::SeqCst) {
@@ -150,6 +187,7 @@ fn main() -> ExitCode {
             }
             Err(e) => {
                 tracing::error!("{e}");
+                STOP.store(true, Ordering::SeqCst);
                 return ExitCode::FAILURE;
             }
         };
@@ -159,10 +197,10 @@ fn main() -> ExitCode {
         let frame = &mut buf[..n];
         match bus.handle(frame) {
             Ok(_) => {
-                if args.loopback {
-                    loop_back(&mut bus);
+                if loopback {
+                    loop_back(bus);
                 }
-                if let Err(e) = wire.send(frame) {
+                if let Err(e) = out.send(frame) {
                     tracing::warn!("{e}");
                 }
                 answered += 1;
@@ -175,4 +213,28 @@ fn main() -> ExitCode {
     }
     tracing::info!("stopped: {answered} frames answered, {refused} dropped");
     ExitCode::SUCCESS
+}
+
+/// The ring's way back: what the MainDevice's second port sends into the line's last
+/// SubDevice comes out of the first one's port 0 as it went in. Until the emulator stops;
+/// false if the ring's interface failed (the emulator stops then).
+fn pass_back(ring: &Wire, wire: &Wire) -> bool {
+    let mut buf = vec![0u8; 9216];
+    let mut passed = 0u64;
+    while !STOP.load(Ordering::SeqCst) {
+        match ring.receive(&mut buf) {
+            Ok(Received::Frame(n)) => match wire.send(&buf[..n]) {
+                Ok(()) => passed += 1,
+                Err(e) => tracing::warn!("{e}"),
+            },
+            Ok(Received::Nothing) => {}
+            Err(e) => {
+                tracing::error!("{e}");
+                STOP.store(true, Ordering::SeqCst);
+                return false;
+            }
+        }
+    }
+    tracing::info!("ring: {passed} frames passed back unprocessed");
+    true
 }

@@ -1,4 +1,7 @@
-"""Masters we did not write, against the emulated line: `masters.py pysoem|kickcat IFACE`.
+"""Masters we did not write, against the emulated line: `masters.py pysoem|kickcat IFACE [IFACE2]`.
+
+kickcat takes the line as a ring, with its second port on IFACE2 (the emulator's --ring):
+without one it waits out its link timeout after each of its init's frames.
 
 The line is an EK1100, an EL1008, an EL2008 and a CiA 402 drive. Each master scans it, reads
 the drive's identity (0x1018), supported modes (0x6502), statusword (0x6041) and mode display
@@ -146,11 +149,14 @@ def with_pysoem(ifname):
     }
 
 
-def with_kickcat(ifname):
+def with_kickcat(ifname, ring):
     import kickcat
 
     ms = lambda n: datetime.timedelta(milliseconds=n)
-    link = kickcat.create_link(ifname, "")
+    # Cable redundancy: kickcat sends every frame out of both ports and reads both. Without a
+    # second port its `writeThenRead` (the init's broadcasts) waits out the link timeout on
+    # the port that has nothing to read: 70 s of a 72-s test at 500 ms.
+    link = kickcat.create_link(ifname, ring)
     # Room for the host's stalls, in each frame's answer and in the whole init: at 100 ms (and once at 200 ms) a
     # frame and 2 s the init, a CI run with both cores loaded timed out in init (kickcat makes
     # the init's timeout the drives' watchdog too, 16 bits of 100 µs: at most 6.5 s, or
@@ -223,5 +229,8 @@ def with_kickcat(ifname):
 
 if __name__ == "__main__":
     master, ifname = sys.argv[1], sys.argv[2]
-    result = with_pysoem(ifname) if master == "pysoem" else with_kickcat(ifname)
+    if master == "pysoem":
+        result = with_pysoem(ifname)
+    else:
+        result = with_kickcat(ifname, sys.argv[3] if len(sys.argv) > 3 else "")
     print(json.dumps(result))

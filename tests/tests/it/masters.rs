@@ -1,20 +1,21 @@
 //! The `ethercat-emulator` process checked by two EtherCAT masters we did not write, from
 //! PyPI: SOEM (pysoem) and kickcat (`tests/python/masters.py`), each on one end of a veth pair
-//! in a network namespace of its own, the emulator on the other. Here rather than in the
-//! emulator's crate so that they run beside the other tests: kickcat's scan waits out its
-//! link timeout after every frame (about 14 s of the test, idle). Needs root (CI is).
+//! in a network namespace of its own, the emulator on the other (kickcat on a ring: a second
+//! veth pair from the line's end back to kickcat's second port). Needs root (CI is).
 
 use integration_tests::{EmulatedLine, bin, needed};
 use std::process::Command;
 
-/// Runs `tests/python/masters.py MASTER m0` in the line's namespace; its JSON (the last line
-/// of its stdout).
-fn master(line: &EmulatedLine, name: &str) -> serde_json::Value {
+/// Runs `tests/python/masters.py MASTER PORTS` in the line's namespace; its JSON (the last
+/// line of its stdout).
+fn master(line: &EmulatedLine, name: &str, ports: &[&str]) -> serde_json::Value {
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/masters.py");
     let out = needed(
-        Command::new("ip").args([
-            "netns", "exec", &line.ns, "timeout", "120", "python3", script, name, "m0",
-        ]),
+        Command::new("ip")
+            .args([
+                "netns", "exec", &line.ns, "timeout", "120", "python3", script, name,
+            ])
+            .args(ports),
         "pip install pysoem==1.1.13 kickcat==2.5; .ci/run does",
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -28,11 +29,12 @@ fn master(line: &EmulatedLine, name: &str) -> serde_json::Value {
     })
 }
 
-/// Master `name` on an emulated line of its own ([`LINE`], of test `test`): its JSON; it
-/// found the line's four SubDevices.
-fn scan(test: &str, name: &str) -> serde_json::Value {
-    let line = EmulatedLine::up(&bin("ethercat-emulator"), test, LINE);
-    let r = master(&line, name);
+/// Master `name` on an emulated line of its own ([`LINE`] and `args`, of test `test`), on
+/// `ports` of it: its JSON; it found the line's four SubDevices.
+fn scan(test: &str, name: &str, args: &[&str], ports: &[&str]) -> serde_json::Value {
+    let args = [LINE, args].concat();
+    let line = EmulatedLine::up(&bin("ethercat-emulator"), test, &args);
+    let r = master(&line, name, ports);
     assert_eq!(r["found"], 4, "{r}");
     r
 }
@@ -96,7 +98,7 @@ fn the_drive_answered_and_enabled(name: &str, r: &serde_json::Value) {
 #[test]
 fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
     integration_tests::attributable(|| {
-        let r = scan("masters-soem", "pysoem");
+        let r = scan("masters-soem", "pysoem", &[], &["m0"]);
         let expected = [
             ("EK1100", 2, 0x044C_2C52u32),
             ("EL1008", 2, 0x03F0_3052),
@@ -145,7 +147,16 @@ fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data(
 #[test]
 fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
     integration_tests::attributable(|| {
-        let r = scan("masters-kickcat", "kickcat");
+        // As a ring: kickcat sends each frame out of both its ports and adds up the working
+        // counters of the two copies it reads back. The line processes what enters from m0
+        // and sends it on to m1; what enters from m1 comes back to m0 as it went in (a copy
+        // processed twice would count twice, and kickcat refuses a wrong working counter).
+        let r = scan(
+            "masters-kickcat",
+            "kickcat",
+            &["--ring", "s1"],
+            &["m0", "m1"],
+        );
         assert_eq!(
             r["sizes"],
             serde_json::json!([[0, 0], [1, 0], [0, 1], [19, 19]]),
