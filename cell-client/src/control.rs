@@ -315,7 +315,7 @@ pub fn io(instance: &str, name: Option<&str>, value: Option<&str>) -> Result<Str
                 "IO {name}: give a value, 0 or 1 (or no name to list the IO)"
             )));
         };
-        let output = IoDirection::from_u32(cell.io[k].direction) == Some(IoDirection::Output);
+        let output = IoDirection::from_wire(cell.io[k].direction) == Some(IoDirection::Output);
         let port = Pub::<IoWriteV1>::new(
             node,
             &instance,

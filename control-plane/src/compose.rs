@@ -64,11 +64,11 @@ pub fn io_status(cell: &CellConfigV6, io: Option<&DigitalIoV1>) -> IoStatus {
         .map(|(k, e)| {
             let name = str_of(&e.name).to_string();
             let value = io.map(|i| u8::from(i.values & (1 << k) != 0));
-            match IoDirection::from_u32(e.direction) {
+            match IoDirection::from_wire(e.direction) {
                 Some(IoDirection::Output) => IoEntry::Output {
                     name,
                     value,
-                    safe: match shm_schema::SafeValue::from_u32(e.safe) {
+                    safe: match shm_schema::SafeValue::from_wire(e.safe) {
                         Some(shm_schema::SafeValue::On) => SafeValue::Level(1),
                         Some(shm_schema::SafeValue::Hold) => SafeValue::Hold(HoldWord::Hold),
                         _ => SafeValue::Level(0),
@@ -91,7 +91,7 @@ pub fn io_status(cell: &CellConfigV6, io: Option<&DigitalIoV1>) -> IoStatus {
 }
 
 fn proc_state(state: u32) -> ProcState {
-    match shm_schema::ProcState::from_u32(state) {
+    match shm_schema::ProcState::from_wire(state) {
         Some(shm_schema::ProcState::Starting) => ProcState::Starting,
         Some(shm_schema::ProcState::Cyclic) => ProcState::Cyclic,
         Some(shm_schema::ProcState::Stopping) => ProcState::Stopping,
@@ -178,7 +178,7 @@ fn estop_status(snap: &Snapshot) -> Option<EstopStatus> {
 /// trajgen's program: state, line, motion time.
 fn program_status(snap: &Snapshot) -> Option<ProgramStatus> {
     let sp = snap.setpoint.as_ref()?;
-    let state = match shm_schema::MotionState::from_u32(sp.state) {
+    let state = match shm_schema::MotionState::from_wire(sp.state) {
         Some(shm_schema::MotionState::Idle) => MotionState::Idle,
         Some(shm_schema::MotionState::Moving) => MotionState::Moving,
         Some(shm_schema::MotionState::Done) => MotionState::Done,

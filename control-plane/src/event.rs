@@ -52,7 +52,7 @@ pub enum Severity {
 impl From<u32> for Severity {
     fn from(v: u32) -> Self {
         use shm_schema::Severity as S;
-        match S::from_u32(v) {
+        match S::from_wire(v) {
             Some(S::Info) => Self::Info,
             Some(S::Warning) => Self::Warning,
             Some(S::Error) => Self::Error,
@@ -122,7 +122,7 @@ fn value_text(info: Option<&CodeInfo>, v: f64, unit: &str) -> String {
 /// One line: time since `t0_ns`, severity, source, code name, axis, value against limit, text.
 pub fn line(e: &EventV1, axes: &Axes, t0_ns: u64) -> String {
     let info = shm_event::info(e.code);
-    let sev = shm_schema::Severity::from_u32(e.severity).map_or("?", shm_schema::Severity::name);
+    let sev = shm_schema::Severity::from_wire(e.severity).map_or("?", shm_schema::Severity::name);
     let t = (e.stamp_ns as i128 - t0_ns as i128) as f64 * 1e-9;
     let (axis, unit) = axes
         .get(e.axis)

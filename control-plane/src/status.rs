@@ -93,7 +93,7 @@ pub enum Origin {
 impl From<u32> for Origin {
     fn from(v: u32) -> Self {
         use shm_schema::EstopOrigin as O;
-        match O::from_u32(v) {
+        match O::from_wire(v) {
             Some(O::Device) => Self::Device,
             Some(O::External) => Self::External,
             Some(O::Host) => Self::Host,
@@ -330,7 +330,7 @@ pub enum Power {
 impl From<u8> for Power {
     fn from(v: u8) -> Self {
         use shm_schema::Power as P;
-        match P::from_u8(v) {
+        match P::from_wire(v) {
             Some(P::Disabled) => Self::Disabled,
             Some(P::Enabling) => Self::Enabling,
             Some(P::Enabled) => Self::Enabled,

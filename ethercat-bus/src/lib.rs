@@ -272,7 +272,7 @@ impl BusIo {
             };
             let name = shm_schema::str_of(&cfg.name);
             let sd = bus.subdevices().get(position).map_or("?", |s| s.name());
-            let input = IoDirection::from_u32(cfg.direction) == Some(IoDirection::Input);
+            let input = IoDirection::from_wire(cfg.direction) == Some(IoDirection::Input);
             let slot = layout
                 .slots
                 .get(position)

@@ -241,7 +241,7 @@ impl Wiring {
             .iter()
             .filter_map(|m| {
                 let e = io.get(usize::from(m.entry))?;
-                let input = shm_schema::IoDirection::from_u32(e.direction)
+                let input = shm_schema::IoDirection::from_wire(e.direction)
                     == Some(shm_schema::IoDirection::Input);
                 if input && e.sim != 0 {
                     inputs |= 1 << m.entry;

@@ -44,7 +44,7 @@ impl DigitalIo {
             outputs_safe: false,
         };
         for (k, e) in cell.io().iter().enumerate() {
-            match IoDirection::from_u32(e.direction) {
+            match IoDirection::from_wire(e.direction) {
                 Some(IoDirection::Input) => {
                     io.inputs |= bit(k);
                     if e.estop != 0 {
@@ -153,7 +153,7 @@ impl DigitalIo {
                 if self.outputs & bit(k) == 0 {
                     continue;
                 }
-                match SafeValue::from_u32(self.entries[k].safe) {
+                match SafeValue::from_wire(self.entries[k].safe) {
                     Some(SafeValue::On) => self.values |= bit(k),
                     Some(SafeValue::Hold) => {}
                     Some(SafeValue::Off) | None => self.values &= !bit(k),

@@ -39,7 +39,7 @@ impl Field {
             source,
         };
         for (k, e) in cell.io().iter().enumerate() {
-            let input = IoDirection::from_u32(e.direction) == Some(IoDirection::Input);
+            let input = IoDirection::from_wire(e.direction) == Some(IoDirection::Input);
             if let (true, Ok(out)) = (input, usize::try_from(e.follows))
                 && out < MAX_IO
             {

@@ -349,7 +349,7 @@ impl Registers {
             .io()
             .iter()
             .enumerate()
-            .filter(|(_, e)| IoDirection::from_u32(e.direction) == Some(IoDirection::Output))
+            .filter(|(_, e)| IoDirection::from_wire(e.direction) == Some(IoDirection::Output))
             .fold(0u64, |m, (k, _)| m | 1 << k);
         Self {
             input,
@@ -419,7 +419,7 @@ pub fn markdown(cell: &CellConfigV6) -> String {
     );
     out.push_str("### Discrete inputs (function 2) and coils (functions 1, 5, 15): the named IO\n\nAddress k is entry k of `[[io]]`, in the order of the configuration. Discrete inputs read every entry; coils read every entry too and take writes to outputs only.\n\n| address | name | direction | coil write |\n|---:|---|---|---|\n");
     for (k, e) in cell.io().iter().enumerate() {
-        let output = IoDirection::from_u32(e.direction) == Some(IoDirection::Output);
+        let output = IoDirection::from_wire(e.direction) == Some(IoDirection::Output);
         let _ = writeln!(
             out,
             "| {k} | `{}` | {} | {} |",

@@ -455,7 +455,7 @@ impl Generator {
         // with its first commands starts it paused.
         let begun = self.state == MotionState::Moving;
         let running = begun || self.queue.len > 0;
-        match ControlKind::from_u32(c.kind) {
+        match ControlKind::from_wire(c.kind) {
             Some(ControlKind::Pause) if running => self.target_speed = 0.0,
             Some(ControlKind::Resume) if !self.aborting => self.target_speed = self.speed_override,
             Some(ControlKind::Abort) if begun => {
@@ -586,7 +586,7 @@ impl Generator {
             return fault::SEQUENCE_GAP;
         }
         let time_ok = |t: f64, max: f64| t.is_finite() && (0.0..=max).contains(&t);
-        match CommandKind::from_u32(c.kind) {
+        match CommandKind::from_wire(c.kind) {
             None => fault::BAD_COMMAND,
             Some(k @ (CommandKind::Move | CommandKind::MoveJ)) => {
                 // A Cartesian target's joints depend on the path to it: the supervisor's
@@ -698,7 +698,7 @@ impl Generator {
     fn start_from_rest(&mut self, now_ns: u64, rest_s: Option<f64>, cmd: &MotionCommandV2) {
         let new = self.begin_program(now_ns, cmd);
         let at = self.rest_time(now_ns, rest_s, new);
-        let space = Self::space_of(CommandKind::from_u32(cmd.kind));
+        let space = Self::space_of(CommandKind::from_wire(cmd.kind));
         if space != self.space {
             // At rest, the resting point changes space: the same point, other coordinates.
             match self.convert_rest(space) {
@@ -1165,7 +1165,7 @@ impl Generator {
     /// queue; returns the next one that does not, without taking it.
     fn look_ahead(&mut self) -> Option<(MotionCommandV2, Option<CommandKind>)> {
         while let Some(c) = self.queue.front().copied() {
-            let kind = CommandKind::from_u32(c.kind);
+            let kind = CommandKind::from_wire(c.kind);
             match kind {
                 Some(CommandKind::Out) => {
                     let bit = 1u64 << c.io;

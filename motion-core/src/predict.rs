@@ -213,7 +213,7 @@ fn run(
             drawn = drawn.or_else(|| source.draw());
             drawn.is_none()
         };
-        let outcome = match MotionState::from_u32(sp.state) {
+        let outcome = match MotionState::from_wire(sp.state) {
             Some(MotionState::Done) if none_left() => Some(Outcome::Done),
             Some(MotionState::Fault) => Some(Outcome::Fault {
                 code: sp.fault,

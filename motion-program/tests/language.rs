@@ -110,7 +110,7 @@ fn every_instruction_of_a_pick_and_place_program() {
 
 fn kinds(cmds: &[MotionCommandV2]) -> Vec<CommandKind> {
     cmds.iter()
-        .map(|c| CommandKind::from_u32(c.kind).expect("kind"))
+        .map(|c| CommandKind::from_wire(c.kind).expect("kind"))
         .collect()
 }
 
@@ -137,9 +137,9 @@ fn loops_unroll_into_numbered_commands_as_they_are_drawn() {
     let first: Vec<MotionCommandV2> = it.by_ref().take(1 + 9 * 1000).collect();
     assert_eq!(first.len(), 9001);
     assert_eq!(it.iterations(), vec![1000]);
-    assert_eq!(CommandKind::from_u32(first[0].kind), Some(Speed));
+    assert_eq!(CommandKind::from_wire(first[0].kind), Some(Speed));
     assert!((first[0].speed - 0.8).abs() < 1e-12);
-    assert_eq!(CommandKind::from_u32(first[9000].kind), Some(Delay));
+    assert_eq!(CommandKind::from_wire(first[9000].kind), Some(Delay));
     // A count of zero never comes from the parser; an empty body never either.
 }
 

@@ -63,7 +63,7 @@ impl EstopWatch {
         let reaction = cell
             .processes()
             .get(index)
-            .and_then(|p| EstopReaction::from_u32(p.network_estop_config))
+            .and_then(|p| EstopReaction::from_wire(p.network_estop_config))
             .unwrap_or(EstopReaction::Stop);
         Ok(Self {
             triggers: Sub::new(node, instance, ServiceId::Estop, 64)?,
@@ -224,7 +224,7 @@ impl EstopWatch {
         if e.kind != EstopKind::Trigger as u32 {
             return false;
         }
-        let origin = EstopOrigin::from_u32(e.origin).unwrap_or(EstopOrigin::Host);
+        let origin = EstopOrigin::from_wire(e.origin).unwrap_or(EstopOrigin::Host);
         let mine = e.source == self.index;
         let applies = mine || origin.propagates(self.propagate_estop, self.propagate_external);
         if !self.view.latched {

@@ -420,7 +420,7 @@ impl Controller {
                 &[why],
             ));
         };
-        match RequestKind::from_u32(r.kind) {
+        match RequestKind::from_wire(r.kind) {
             Some(RequestKind::Enable) => {
                 if self.estop.is_some() {
                     refuse("enable refused: the e-stop is latched, reset first", events);

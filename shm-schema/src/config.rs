@@ -83,30 +83,22 @@ impl Default for ModbusConfigV1 {
     }
 }
 
-/// A process' reaction to an e-stop it did not raise itself (`network_estop_config`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum EstopReaction {
-    /// Its safe reaction: servo brakes the axes to rest within the e-stop stop time and
-    /// disables the drives; trajgen drops the program; iobridge sets its outputs to their safe
-    /// values. The default.
-    Stop = 0,
-    /// servo brakes the axes to rest and holds them, drives enabled (a stop of category 2);
-    /// any other process reacts as with `Stop`.
-    Hold = 1,
-    /// No reaction: the process sees the e-stop and goes on (a logger, a monitor).
-    Ignore = 2,
+wire_enum! {
+    /// A process' reaction to an e-stop it did not raise itself (`network_estop_config`).
+    pub enum EstopReaction: u32 {
+        /// Its safe reaction: servo brakes the axes to rest within the e-stop stop time and
+        /// disables the drives; trajgen drops the program; iobridge sets its outputs to their safe
+        /// values. The default.
+        Stop = 0,
+        /// servo brakes the axes to rest and holds them, drives enabled (a stop of category 2);
+        /// any other process reacts as with `Stop`.
+        Hold = 1,
+        /// No reaction: the process sees the e-stop and goes on (a logger, a monitor).
+        Ignore = 2,
+    }
 }
 
 impl EstopReaction {
-    /// Every reaction.
-    pub const ALL: [Self; 3] = [Self::Stop, Self::Hold, Self::Ignore];
-
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        Self::ALL.into_iter().find(|r| *r as u32 == v)
-    }
-
     /// The configuration's spelling.
     pub fn name(self) -> &'static str {
         match self {

@@ -107,34 +107,22 @@ pub mod servo_status {
     pub const INITIALIZED: u32 = 256;
 }
 
-/// Power state of the arm and of each axis (seed 001's `LLI_state`), in
-/// [`ServoStateV3::power`] and [`ServoStateV3::axis_power`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Power {
-    /// No torque: the drive's power stage is off (or its motor not controlled).
-    Disabled = 0,
-    /// An enable request is stepping the drive through its states.
-    Enabling = 1,
-    /// Operation enabled: the axis follows servo.
-    Enabled = 2,
-    /// A disable request or a cut is taking power off.
-    Disabling = 3,
+wire_enum! {
+    /// Power state of the arm and of each axis (seed 001's `LLI_state`), in
+    /// [`ServoStateV3::power`] and [`ServoStateV3::axis_power`].
+    pub enum Power: u8 {
+        /// No torque: the drive's power stage is off (or its motor not controlled).
+        Disabled = 0,
+        /// An enable request is stepping the drive through its states.
+        Enabling = 1,
+        /// Operation enabled: the axis follows servo.
+        Enabled = 2,
+        /// A disable request or a cut is taking power off.
+        Disabling = 3,
+    }
 }
 
 impl Power {
-    /// Decodes the wire value.
-    pub fn from_u8(v: u8) -> Option<Self> {
-        [
-            Self::Disabled,
-            Self::Enabling,
-            Self::Enabled,
-            Self::Disabling,
-        ]
-        .into_iter()
-        .find(|p| *p as u8 == v)
-    }
-
     /// Lower-case name, as in reports.
     pub fn name(self) -> &'static str {
         match self {
@@ -209,31 +197,22 @@ pub struct ServoStateV3 {
     pub peak_following_error: [f64; MAX_AXES],
 }
 
-/// What a [`ServoRequestV1`] asks for (seed 001's `LLI_enable`, `LLI_disable`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum RequestKind {
-    /// Start the enabling sequence of every axis.
-    Enable = 1,
-    /// Start the disabling sequence; aborts a pending enable.
-    Disable = 2,
-    /// Clear a latched fault (and reset the drives' faults) if its cause is gone. Power
-    /// stays off: an enable must follow.
-    Reset = 3,
-    /// Commissioning: offset the reference of `axis` by `value` (axis unit) from the next
-    /// cycle, a step; 0 removes the offset (a step back). Taken only while enabled, at rest,
-    /// with |value| at most half the axis' following-error limit and the result within its
-    /// range: the one position step command validation lets through. Any power change or
-    /// fault clears the offset.
-    Step = 4,
-}
-
-impl RequestKind {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Enable, Self::Disable, Self::Reset, Self::Step]
-            .into_iter()
-            .find(|k| *k as u32 == v)
+wire_enum! {
+    /// What a [`ServoRequestV1`] asks for (seed 001's `LLI_enable`, `LLI_disable`).
+    pub enum RequestKind: u32 {
+        /// Start the enabling sequence of every axis.
+        Enable = 1,
+        /// Start the disabling sequence; aborts a pending enable.
+        Disable = 2,
+        /// Clear a latched fault (and reset the drives' faults) if its cause is gone. Power
+        /// stays off: an enable must follow.
+        Reset = 3,
+        /// Commissioning: offset the reference of `axis` by `value` (axis unit) from the next
+        /// cycle, a step; 0 removes the offset (a step back). Taken only while enabled, at rest,
+        /// with |value| at most half the axis' following-error limit and the result within its
+        /// range: the one position step command validation lets through. Any power change or
+        /// fault clears the offset.
+        Step = 4,
     }
 }
 

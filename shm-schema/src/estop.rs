@@ -20,39 +20,32 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 /// Bytes of [`EstopV1::reason`].
 pub const REASON_LEN: usize = 64;
 
-/// What an [`EstopV1`] record does.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum EstopKind {
-    /// Raises the e-stop (latched until a reset).
-    Trigger = 1,
-    /// Clears it (the supervisor only, after checking that every cause is gone).
-    Reset = 2,
+wire_enum! {
+    /// What an [`EstopV1`] record does.
+    pub enum EstopKind: u32 {
+        /// Raises the e-stop (latched until a reset).
+        Trigger = 1,
+        /// Clears it (the supervisor only, after checking that every cause is gone).
+        Reset = 2,
+    }
 }
 
-/// Who raised an e-stop: seed 002's three sources.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum EstopOrigin {
-    /// A process of the cell, about itself (servo's following error, a drive fault): it has
-    /// reacted already; the others react only with `propagate_estop`.
-    Device = 1,
-    /// The user: `supervisor estop` (seed 002's `trigger_estop`), an e-stop input. The others
-    /// react with `propagate_estop` or `propagate_external_estop`.
-    External = 2,
-    /// The host: a process died or stalled, a health detector expired, the supervisor
-    /// stopped beating. Always propagated, whatever the configuration.
-    Host = 3,
+wire_enum! {
+    /// Who raised an e-stop: seed 002's three sources.
+    pub enum EstopOrigin: u32 {
+        /// A process of the cell, about itself (servo's following error, a drive fault): it has
+        /// reacted already; the others react only with `propagate_estop`.
+        Device = 1,
+        /// The user: `supervisor estop` (seed 002's `trigger_estop`), an e-stop input. The others
+        /// react with `propagate_estop` or `propagate_external_estop`.
+        External = 2,
+        /// The host: a process died or stalled, a health detector expired, the supervisor
+        /// stopped beating. Always propagated, whatever the configuration.
+        Host = 3,
+    }
 }
 
 impl EstopOrigin {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Device, Self::External, Self::Host]
-            .into_iter()
-            .find(|o| *o as u32 == v)
-    }
-
     /// Lower-case name.
     pub fn name(self) -> &'static str {
         match self {
@@ -139,14 +132,14 @@ impl EstopV1 {
     }
 }
 
-/// State of the cell's e-stop, in [`HostStateV1::estop`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum EstopState {
-    /// No e-stop.
-    Clear = 0,
-    /// Latched: raised and not reset.
-    Latched = 1,
+wire_enum! {
+    /// State of the cell's e-stop, in [`HostStateV1::estop`].
+    pub enum EstopState: u32 {
+        /// No e-stop.
+        Clear = 0,
+        /// Latched: raised and not reset.
+        Latched = 1,
+    }
 }
 
 /// The supervisor's heartbeat and the latched e-stop, on `<i>/host/state` every tick.

@@ -16,26 +16,20 @@ pub const EVENT_TEXT_LEN: usize = 64;
 /// Source of an event that is not a real-time process: the supervisor.
 pub const SOURCE_SUPERVISOR: u32 = 100;
 
-/// How bad an event is, in [`EventV1::severity`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-#[repr(u32)]
-pub enum Severity {
-    /// Something changed as asked (a drive state, power on).
-    Info = 0,
-    /// Something the user should look at; nothing was stopped by it.
-    Warning = 1,
-    /// A refusal or a fault: power was cut, or a command was refused.
-    Error = 2,
+wire_enum! {
+    /// How bad an event is, in [`EventV1::severity`].
+    #[derive(PartialOrd, Ord)]
+    pub enum Severity: u32 {
+        /// Something changed as asked (a drive state, power on).
+        Info = 0,
+        /// Something the user should look at; nothing was stopped by it.
+        Warning = 1,
+        /// A refusal or a fault: power was cut, or a command was refused.
+        Error = 2,
+    }
 }
 
 impl Severity {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Info, Self::Warning, Self::Error]
-            .into_iter()
-            .find(|s| *s as u32 == v)
-    }
-
     /// Lower-case name.
     pub fn name(self) -> &'static str {
         match self {

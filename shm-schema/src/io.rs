@@ -17,43 +17,25 @@ pub const MAX_IO: usize = 64;
 /// Bytes of an IO name, NUL included.
 pub const IO_NAME_LEN: usize = 24;
 
-/// Whether an IO entry is read from the field or written to it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum IoDirection {
-    /// Read from the field (a sensor, the e-stop circuit).
-    Input = 1,
-    /// Written to the field (a solenoid, a lamp).
-    Output = 2,
-}
-
-impl IoDirection {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Input, Self::Output]
-            .into_iter()
-            .find(|d| *d as u32 == v)
+wire_enum! {
+    /// Whether an IO entry is read from the field or written to it.
+    pub enum IoDirection: u32 {
+        /// Read from the field (a sensor, the e-stop circuit).
+        Input = 1,
+        /// Written to the field (a solenoid, a lamp).
+        Output = 2,
     }
 }
 
-/// What an output becomes when iobridge reacts to an e-stop.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum SafeValue {
-    /// Switched off (a conveyor, a lamp): the default.
-    Off = 0,
-    /// Switched on (a brake that holds when energised).
-    On = 1,
-    /// Kept as it is (a gripper holding a part must not drop it).
-    Hold = 2,
-}
-
-impl SafeValue {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Off, Self::On, Self::Hold]
-            .into_iter()
-            .find(|d| *d as u32 == v)
+wire_enum! {
+    /// What an output becomes when iobridge reacts to an e-stop.
+    pub enum SafeValue: u32 {
+        /// Switched off (a conveyor, a lamp): the default.
+        Off = 0,
+        /// Switched on (a brake that holds when energised).
+        On = 1,
+        /// Kept as it is (a gripper holding a part must not drop it).
+        Hold = 2,
     }
 }
 

@@ -15,6 +15,39 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
+/// Defines an enum that crosses a process boundary as its integer (a `u32` or `u8` field of a
+/// payload), its variants written once: the enum with `#[repr]` and its values, `ALL` (every
+/// variant, in order) and `from_wire` (the variant of a wire value, `None` for a value this
+/// version does not know).
+macro_rules! wire_enum {
+    (
+        $(#[$attr:meta])*
+        pub enum $name:ident: $repr:ident {
+            $($(#[$vattr:meta])* $variant:ident = $value:literal,)+
+        }
+    ) => {
+        $(#[$attr])*
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        #[repr($repr)]
+        pub enum $name {
+            $($(#[$vattr])* $variant = $value,)+
+        }
+
+        impl $name {
+            /// Every variant, in their order.
+            pub const ALL: &'static [Self] = &[$(Self::$variant),+];
+
+            /// Decodes the wire value; `None` for a value this version does not know.
+            pub fn from_wire(v: $repr) -> Option<Self> {
+                match v {
+                    $($value => Some(Self::$variant),)+
+                    _ => None,
+                }
+            }
+        }
+    };
+}
+
 pub mod config;
 pub mod drive;
 pub mod estop;
@@ -93,5 +126,36 @@ mod tests {
         let g: [u8; 4] = fixed_str("abcdef");
         assert_eq!(str_of(&g), "abc");
         assert_eq!(g[3], 0);
+    }
+
+    #[test]
+    fn every_wire_enum_decodes_its_own_values_and_nothing_else() {
+        macro_rules! check {
+            ($($t:ty),+) => {$(
+                for v in <$t>::ALL {
+                    assert_eq!(<$t>::from_wire(*v as _), Some(*v), "{v:?}");
+                }
+                let known = |w| <$t>::ALL.iter().any(|v| *v as i64 == w);
+                for w in (0..=255).filter(|w| !known(*w)) {
+                    assert_eq!(<$t>::from_wire(w as _), None, "{} {w}", stringify!($t));
+                }
+            )+};
+        }
+        check!(
+            Power,
+            RequestKind,
+            estop::EstopKind,
+            EstopOrigin,
+            estop::EstopState,
+            EstopReaction,
+            Severity,
+            IoDirection,
+            SafeValue,
+            CommandKind,
+            ControlKind,
+            MotionState,
+            ProcState
+        );
+        assert_eq!(CommandKind::ALL.len(), 8);
     }
 }

@@ -4,43 +4,25 @@ use crate::MAX_AXES;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
-/// What a [`MotionCommandV2`] asks for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum CommandKind {
-    /// `MOVE`: towards the Cartesian `target`; the axes blend into the next segment.
-    Move = 1,
-    /// Stop exactly on the previous target (the same as repeating it).
-    Stop = 2,
-    /// End of program: stop exactly on the last target, then report `Done`.
-    End = 3,
-    /// `MOVEJ`: towards the joint `target`, blended in joint space.
-    MoveJ = 4,
-    /// `OUT`: set output `io` to `value` when the look-ahead reads it.
-    Out = 5,
-    /// `WAIT`: at rest, until input `io` reads `value` (`time_s` a timeout, 0 none).
-    Wait = 6,
-    /// `DELAY`: at rest for `time_s`.
-    Delay = 7,
-    /// `SPEED`: the moves that follow at `speed` (0.01..=1) of vmax.
-    Speed = 8,
-}
-
-impl CommandKind {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [
-            Self::Move,
-            Self::Stop,
-            Self::End,
-            Self::MoveJ,
-            Self::Out,
-            Self::Wait,
-            Self::Delay,
-            Self::Speed,
-        ]
-        .into_iter()
-        .find(|k| *k as u32 == v)
+wire_enum! {
+    /// What a [`MotionCommandV2`] asks for.
+    pub enum CommandKind: u32 {
+        /// `MOVE`: towards the Cartesian `target`; the axes blend into the next segment.
+        Move = 1,
+        /// Stop exactly on the previous target (the same as repeating it).
+        Stop = 2,
+        /// End of program: stop exactly on the last target, then report `Done`.
+        End = 3,
+        /// `MOVEJ`: towards the joint `target`, blended in joint space.
+        MoveJ = 4,
+        /// `OUT`: set output `io` to `value` when the look-ahead reads it.
+        Out = 5,
+        /// `WAIT`: at rest, until input `io` reads `value` (`time_s` a timeout, 0 none).
+        Wait = 6,
+        /// `DELAY`: at rest for `time_s`.
+        Delay = 7,
+        /// `SPEED`: the moves that follow at `speed` (0.01..=1) of vmax.
+        Speed = 8,
     }
 }
 
@@ -79,28 +61,19 @@ pub struct MotionCommandV2 {
     pub target: [f64; MAX_AXES],
 }
 
-/// What a [`MotionControlV2`] asks for. None of them is an e-stop: the axes stay enabled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum ControlKind {
-    /// Decelerate along the path to rest within the blend time `t_acc`, and hold there.
-    Pause = 1,
-    /// Go on along the same path, accelerating within `t_acc` to the speed override.
-    Resume = 2,
-    /// Come to rest along the path within `t_acc`, then drop the rest of the program (the
-    /// setpoint reports [`trajgen_fault::ABORTED`]).
-    Abort = 3,
-    /// The live speed override: the path is travelled at `value` (0.01..=1) of the
-    /// programmed speed from now on, ramping within `t_acc`; the path itself never changes.
-    Speed = 4,
-}
-
-impl ControlKind {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Pause, Self::Resume, Self::Abort, Self::Speed]
-            .into_iter()
-            .find(|k| *k as u32 == v)
+wire_enum! {
+    /// What a [`MotionControlV2`] asks for. None of them is an e-stop: the axes stay enabled.
+    pub enum ControlKind: u32 {
+        /// Decelerate along the path to rest within the blend time `t_acc`, and hold there.
+        Pause = 1,
+        /// Go on along the same path, accelerating within `t_acc` to the speed override.
+        Resume = 2,
+        /// Come to rest along the path within `t_acc`, then drop the rest of the program (the
+        /// setpoint reports [`trajgen_fault::ABORTED`]).
+        Abort = 3,
+        /// The live speed override: the path is travelled at `value` (0.01..=1) of the
+        /// programmed speed from now on, ramping within `t_acc`; the path itself never changes.
+        Speed = 4,
     }
 }
 
@@ -175,26 +148,17 @@ pub struct TrajgenHandoverV2 {
     pub reserved: u32,
 }
 
-/// State of the motion in a [`SetpointV2`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum MotionState {
-    /// No motion since start: the reference holds still.
-    Idle = 0,
-    /// A program is moving the axes.
-    Moving = 1,
-    /// The program reached its end; the reference is at rest on the last target.
-    Done = 2,
-    /// A command was refused (see [`SetpointV2::fault`]); the reference is at rest.
-    Fault = 3,
-}
-
-impl MotionState {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Idle, Self::Moving, Self::Done, Self::Fault]
-            .into_iter()
-            .find(|s| *s as u32 == v)
+wire_enum! {
+    /// State of the motion in a [`SetpointV2`].
+    pub enum MotionState: u32 {
+        /// No motion since start: the reference holds still.
+        Idle = 0,
+        /// A program is moving the axes.
+        Moving = 1,
+        /// The program reached its end; the reference is at rest on the last target.
+        Done = 2,
+        /// A command was refused (see [`SetpointV2::fault`]); the reference is at rest.
+        Fault = 3,
     }
 }
 

@@ -83,26 +83,17 @@ impl core::fmt::Display for ProcessName {
     }
 }
 
-/// Life-cycle state of a process, in [`ProcessStatusV1::state`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum ProcState {
-    /// Set up, not yet running its cycle.
-    Starting = 0,
-    /// Running its periodic cycle.
-    Cyclic = 1,
-    /// Asked to stop; leaving the cycle.
-    Stopping = 2,
-    /// Stopped on an error it cannot recover from.
-    Fault = 3,
-}
-
-impl ProcState {
-    /// Decodes the wire value.
-    pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Starting, Self::Cyclic, Self::Stopping, Self::Fault]
-            .into_iter()
-            .find(|s| *s as u32 == v)
+wire_enum! {
+    /// Life-cycle state of a process, in [`ProcessStatusV1::state`].
+    pub enum ProcState: u32 {
+        /// Set up, not yet running its cycle.
+        Starting = 0,
+        /// Running its periodic cycle.
+        Cyclic = 1,
+        /// Asked to stop; leaving the cycle.
+        Stopping = 2,
+        /// Stopped on an error it cannot recover from.
+        Fault = 3,
     }
 }
 

@@ -686,7 +686,7 @@ impl Cell {
             self.estop = Some((e, Instant::now()));
             self.host.estop = EstopState::Latched as u32;
             self.host.cause = e;
-            let origin = EstopOrigin::from_u32(e.origin).map_or("?", EstopOrigin::name);
+            let origin = EstopOrigin::from_wire(e.origin).map_or("?", EstopOrigin::name);
             tracing::warn!(
                 "e-stop ({origin}) raised by {}: {}",
                 self.axes.source_name(e.source),
@@ -818,7 +818,7 @@ impl Cell {
                 continue;
             }
             if let Some(s) = self.statuses[k]
-                && ProcState::from_u32(s.state) == Some(ProcState::Fault)
+                && ProcState::from_wire(s.state) == Some(ProcState::Fault)
             {
                 self.flagged[k] = true;
                 if self.critical[k] {
@@ -1119,7 +1119,7 @@ impl Cell {
             return Some(self.servo_cut(e.code, axis, cause));
         }
         Some(Failure::Estop {
-            origin: EstopOrigin::from_u32(e.origin)
+            origin: EstopOrigin::from_wire(e.origin)
                 .map_or("?", EstopOrigin::name)
                 .to_string(),
             by: self.axes.source_name(e.source).to_string(),

@@ -376,7 +376,7 @@ impl Job {
                     what: trajgen_fault::text(sp.fault).to_string(),
                 }));
             }
-            match MotionState::from_u32(sp.state) {
+            match MotionState::from_wire(sp.state) {
                 Some(MotionState::Moving) => self.keep(sp),
                 Some(MotionState::Done) if self.done.is_none() => {
                     self.keep(sp);
@@ -425,7 +425,9 @@ impl Job {
                 }
                 cell.take_events();
                 return Err(RunError::failed(Failure::Disabled {
-                    power: Power::from_u8(s.power).map_or("?", Power::name).to_string(),
+                    power: Power::from_wire(s.power)
+                        .map_or("?", Power::name)
+                        .to_string(),
                 }));
             }
             if s.status & st::SETPOINT_JUMP != 0 {
