@@ -45,6 +45,33 @@ impl std::fmt::Display for Instance {
     }
 }
 
+/// `supervisor exec`'s arguments.
+#[derive(clap::Args, Debug)]
+struct ExecArgs {
+    /// Program file.
+    program: PathBuf,
+    #[command(flatten)]
+    instance: Instance,
+    #[command(flatten)]
+    remote: Remote,
+    /// Wait until the program ends and print the report `run` prints.
+    #[arg(long)]
+    wait: bool,
+    /// With --wait: one JSON object on stdout instead of the summary.
+    #[arg(long, requires = "wait")]
+    json: bool,
+    /// With --wait: write the CSV trace.
+    #[arg(long, requires = "wait")]
+    trace: Option<PathBuf>,
+    /// With --wait: record every service of the cell into this MCAP file while the
+    /// program runs.
+    #[arg(long, requires = "wait")]
+    record: Option<PathBuf>,
+    /// With --wait: write the PNG `run --plot` writes.
+    #[arg(long, requires = "wait")]
+    plot: Option<PathBuf>,
+}
+
 /// `--remote CELL`: a cell of the line (docs/network.md) instead of this host's instance; the
 /// command goes to the cell's gateway through `gateway line`.
 #[derive(clap::Args, Clone, Debug)]
@@ -146,30 +173,7 @@ enum Cmd {
         instance: Instance,
     },
     /// Validate a program and run it on a cell that is up.
-    Exec {
-        /// Program file.
-        program: PathBuf,
-        #[command(flatten)]
-        instance: Instance,
-        #[command(flatten)]
-        remote: Remote,
-        /// Wait until the program ends and print the report `run` prints.
-        #[arg(long)]
-        wait: bool,
-        /// With --wait: one JSON object on stdout instead of the summary.
-        #[arg(long, requires = "wait")]
-        json: bool,
-        /// With --wait: write the CSV trace.
-        #[arg(long, requires = "wait")]
-        trace: Option<PathBuf>,
-        /// With --wait: record every service of the cell into this MCAP file while the
-        /// program runs.
-        #[arg(long, requires = "wait")]
-        record: Option<PathBuf>,
-        /// With --wait: write the PNG `run --plot` writes.
-        #[arg(long, requires = "wait")]
-        plot: Option<PathBuf>,
-    },
+    Exec(ExecArgs),
     /// The live speed override: run the path at PERCENT (1..=100) of its programmed speed
     /// from now on, smoothly (within t_acc), without leaving it.
     Speed {
@@ -421,12 +425,12 @@ fn remote_of(cmd: &Cmd) -> Option<OnTheLine> {
             }
             at(remote, &args)
         }
-        Cmd::Exec {
+        Cmd::Exec(ExecArgs {
             remote,
             program,
             wait,
             ..
-        } => {
+        }) => {
             remote.remote.as_ref()?;
             if *wait {
                 return Some(Err(
@@ -795,13 +799,11 @@ fn main() -> ExitCode {
     }
     match cli.cmd {
         Cmd::Cells { line, json, watch } => {
-            let mut args = vec!["cells".to_string()];
-            if json {
-                args.push("--json".into());
-            }
-            if watch {
-                args.push("--watch".into());
-            }
+            let flags = [(json, "--json"), (watch, "--watch")];
+            let args = std::iter::once("cells")
+                .chain(flags.iter().filter(|(on, _)| *on).map(|(_, f)| *f))
+                .map(str::to_string)
+                .collect::<Vec<_>>();
             on_the_line(line.as_deref(), &args)
         }
         Cmd::Status {
@@ -846,83 +848,8 @@ fn main() -> ExitCode {
             }
             Err(e) => run_failed(&e, false),
         },
-        Cmd::Down { instance } => {
-            let code = ctl_call(&instance, Request::Down);
-            if code == ExitCode::SUCCESS
-                && let Ok(i) = shm_schema::InstanceName::new(&instance)
-            {
-                // Until the supervisor has stopped everything and let go of the instance.
-                while ctl::is_up(&i) {
-                    std::thread::sleep(std::time::Duration::from_millis(20));
-                }
-                println!("instance {i} is down");
-            }
-            code
-        }
-        Cmd::Exec {
-            program,
-            instance,
-            wait,
-            json,
-            trace,
-            record,
-            plot,
-            ..
-        } => {
-            let i = match instance_of(&instance) {
-                Ok(i) => i,
-                Err(c) => return c,
-            };
-            for (path, flag) in [
-                (&trace, "--trace"),
-                (&plot, "--plot"),
-                (&record, "--record"),
-            ] {
-                if let Some(Err(e)) = path.as_deref().map(|p| supervisor::out::writable(p, flag)) {
-                    eprint!("{}", errors(&e));
-                    return ExitCode::from(2);
-                }
-            }
-            let mut recorder = match record
-                .as_deref()
-                .map(|f| recorder::Background::start(&i, f, &mut || {}))
-                .transpose()
-            {
-                Ok(r) => r,
-                Err(e) => return run_failed(&RunError::from(e), json),
-            };
-            let source = match std::fs::read(&program) {
-                Ok(s) => s,
-                Err(e) => {
-                    eprintln!("error: {}: cannot read: {e}", program.display());
-                    return ExitCode::from(2);
-                }
-            };
-            let req = Request::Exec {
-                name: program.display().to_string(),
-                source,
-                wait,
-                trace: trace.is_some(),
-                figures: plot.is_some(),
-            };
-            let code = match ctl::call(&i, &req) {
-                Ok(r) => ctl_reply(r, json, trace.as_deref(), plot.as_deref()),
-                Err(e) => {
-                    eprint!("{}", errors(&e));
-                    ExitCode::from(e.exit_code())
-                }
-            };
-            match recorder.as_mut().map(|r| r.stop()) {
-                Some(Ok(summary)) => eprint!("{summary}"),
-                // The program ran; its recording did not: the command fails (exit 1).
-                Some(Err(e)) => {
-                    eprintln!("error: {e}");
-                    return ExitCode::FAILURE;
-                }
-                None => {}
-            }
-            code
-        }
+        Cmd::Down { instance } => down(&instance),
+        Cmd::Exec(args) => exec(&args),
         Cmd::Pause { instance, .. } => ctl_call(&instance, Request::Pause),
         Cmd::Speed {
             percent, instance, ..
@@ -963,50 +890,24 @@ fn main() -> ExitCode {
             instance,
             json,
             plot,
-        } => {
-            let opts = supervisor::tune::TuneOptions {
+        } => tune(
+            &supervisor::tune::TuneOptions {
                 config,
                 instance,
                 axis,
                 step,
                 ramp,
-                plot: plot.clone(),
+                plot,
                 progress: !json,
-            };
-            match supervisor::tune::tune(&opts) {
-                Ok(report) => {
-                    if let Some(path) = &plot {
-                        match report.plot().and_then(|png| {
-                            std::fs::write(path, png)
-                                .map_err(|e| format!("{}: {e}", path.display()))
-                        }) {
-                            Ok(()) => {}
-                            Err(e) => {
-                                eprint!("{}", errors(&e));
-                                return ExitCode::FAILURE;
-                            }
-                        }
-                    }
-                    printed(json, || report.to_json().to_string(), || report.human())
-                }
-                Err(e) => run_failed(&e, json),
-            }
-        }
+            },
+            json,
+        ),
         Cmd::Events {
             instance,
             follow,
             json,
             ..
-        } => match shm_schema::InstanceName::new(&instance)
-            .map_err(|e| format!("--instance {instance:?}: {e}"))
-            .and_then(|i| cell_client::events::follow(&i, follow, json))
-        {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => {
-                eprint!("{}", errors(&e));
-                ExitCode::from(2)
-            }
-        },
+        } => events(&instance, follow, json),
         Cmd::Inject {
             instance,
             axis,
@@ -1031,24 +932,7 @@ fn main() -> ExitCode {
             print!("{DEFAULT_TOML}");
             ExitCode::SUCCESS
         }
-        Cmd::CheckConfig { config } => match Config::load(config.as_deref()) {
-            Ok(c) => {
-                println!(
-                    "ok: {} axes ({})",
-                    c.axis.len(),
-                    c.axis
-                        .iter()
-                        .map(|a| a.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-                ExitCode::SUCCESS
-            }
-            Err(e) => {
-                eprint!("{}", errors(&e));
-                ExitCode::from(2)
-            }
-        },
+        Cmd::CheckConfig { config } => check_config(config.as_deref()),
         Cmd::Run {
             program,
             config,
@@ -1073,6 +957,125 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// `supervisor down`: asked, then waited for until the supervisor has stopped everything and
+/// let go of the instance.
+fn down(instance: &str) -> ExitCode {
+    let code = ctl_call(instance, Request::Down);
+    if code == ExitCode::SUCCESS
+        && let Ok(i) = shm_schema::InstanceName::new(instance)
+    {
+        while ctl::is_up(&i) {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        println!("instance {i} is down");
+    }
+    code
+}
+
+/// `supervisor tune`: the report, and its figure if asked for.
+fn tune(opts: &supervisor::tune::TuneOptions, json: bool) -> ExitCode {
+    let report = match supervisor::tune::tune(opts) {
+        Ok(r) => r,
+        Err(e) => return run_failed(&e, json),
+    };
+    if let Some(path) = &opts.plot
+        && let Err(e) = report.plot().and_then(|png| {
+            std::fs::write(path, png).map_err(|e| format!("{}: {e}", path.display()))
+        })
+    {
+        eprint!("{}", errors(&e));
+        return ExitCode::FAILURE;
+    }
+    printed(json, || report.to_json().to_string(), || report.human())
+}
+
+/// `supervisor events`.
+fn events(instance: &str, follow: bool, json: bool) -> ExitCode {
+    match shm_schema::InstanceName::new(instance)
+        .map_err(|e| format!("--instance {instance:?}: {e}"))
+        .and_then(|i| cell_client::events::follow(&i, follow, json))
+    {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprint!("{}", errors(&e));
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// `supervisor check-config`: the axes of a valid configuration, or every error in it.
+fn check_config(config: Option<&std::path::Path>) -> ExitCode {
+    match Config::load(config) {
+        Ok(c) => {
+            let names: Vec<&str> = c.axis.iter().map(|a| a.name.as_str()).collect();
+            println!("ok: {} axes ({})", c.axis.len(), names.join(", "));
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprint!("{}", errors(&e));
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// `supervisor exec`: the outputs checked before the program is sent, the recording around it.
+fn exec(a: &ExecArgs) -> ExitCode {
+    let i = match instance_of(&a.instance) {
+        Ok(i) => i,
+        Err(c) => return c,
+    };
+    for (path, flag) in [
+        (&a.trace, "--trace"),
+        (&a.plot, "--plot"),
+        (&a.record, "--record"),
+    ] {
+        if let Some(Err(e)) = path.as_deref().map(|p| supervisor::out::writable(p, flag)) {
+            eprint!("{}", errors(&e));
+            return ExitCode::from(2);
+        }
+    }
+    let mut recorder = match a
+        .record
+        .as_deref()
+        .map(|f| recorder::Background::start(&i, f, &mut || {}))
+        .transpose()
+    {
+        Ok(r) => r,
+        Err(e) => return run_failed(&RunError::from(e), a.json),
+    };
+    let source = match std::fs::read(&a.program) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {}: cannot read: {e}", a.program.display());
+            return ExitCode::from(2);
+        }
+    };
+    let req = Request::Exec {
+        name: a.program.display().to_string(),
+        source,
+        wait: a.wait,
+        trace: a.trace.is_some(),
+        figures: a.plot.is_some(),
+    };
+    let code = match ctl::call(&i, &req) {
+        Ok(r) => ctl_reply(r, a.json, a.trace.as_deref(), a.plot.as_deref()),
+        Err(e) => {
+            eprint!("{}", errors(&e));
+            ExitCode::from(e.exit_code())
+        }
+    };
+    match recorder.as_mut().map(|r| r.stop()) {
+        Some(Ok(summary)) => eprint!("{summary}"),
+        // The program ran; its recording did not: the command fails (exit 1).
+        Some(Err(e)) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+        None => {}
+    }
+    code
 }
 
 /// `supervisor record`.

@@ -163,6 +163,8 @@ impl Swap {
     }
 
     /// Takes the next step, on this tick's `incidents`; `job` is the program it carries.
+    /// Each stage waits for its condition, fails when the process is lost or its time is up,
+    /// or goes on to the next stage.
     pub(crate) fn step(
         &mut self,
         cell: &mut Cell,
@@ -170,76 +172,23 @@ impl Swap {
         incidents: &[Incident],
         job: Option<&mut Job>,
     ) -> Step {
-        let k = self.k;
-        let lost = incidents
-            .iter()
-            .find(|i| concerns(i, &self.name))
-            .map(ToString::to_string);
-        let motion_limit = Duration::from_secs_f64(cfg.motion.t_acc + 2.0);
-        let startup = Duration::from_secs_f64(cfg.supervisor.startup_timeout);
-        let late = |since: Instant, limit: Duration| {
-            (since.elapsed() > limit).then(|| format!("not within {:.1} s", limit.as_secs_f64()))
+        let t = Tick {
+            lost: incidents
+                .iter()
+                .find(|i| concerns(i, &self.name))
+                .map(ToString::to_string),
+            motion_limit: Duration::from_secs_f64(cfg.motion.t_acc + 2.0),
+            startup: Duration::from_secs_f64(cfg.supervisor.startup_timeout),
         };
-        match std::mem::replace(
+        let stage = std::mem::replace(
             &mut self.stage,
             Stage::Disabling {
                 since: Instant::now(),
             },
-        ) {
-            Stage::Disabling { since } => {
-                let off = cell
-                    .last_servo
-                    .is_some_and(|s| s.power == Power::Disabled as u8);
-                let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 2.0);
-                if let Some(why) = lost.or_else(|| (!off).then(|| late(since, limit)).flatten()) {
-                    return self.fail(
-                        cell,
-                        format!("{}: the drives did not disable: {why}", self.name),
-                    );
-                }
-                if !off {
-                    self.stage = Stage::Disabling { since };
-                    return Step::Going;
-                }
-                match self.replace(cell, cfg) {
-                    Ok(stage) => self.stage = stage,
-                    Err(e) => return self.fail(cell, e),
-                }
-                Step::Going
-            }
-            Stage::Beside { new, since } => {
-                let why = lost.or_else(|| {
-                    if cell.cyclic(k) {
-                        None
-                    } else {
-                        late(since, startup)
-                    }
-                });
-                if let Some(why) = why {
-                    // Break nothing: the new one goes, the old one stays.
-                    let _ = cell.stop_pid(new);
-                    let old = self.old.map_or(0, |p| p);
-                    return self.fail(
-                        cell,
-                        format!(
-                            "the new {} did not become cyclic ({why}); the old one (pid {old}) keeps running",
-                            self.name
-                        ),
-                    );
-                }
-                if !cell.cyclic(k) {
-                    self.stage = Stage::Beside { new, since };
-                    return Step::Going;
-                }
-                if let Some(problem) = cell.stop_process(k) {
-                    tracing::warn!("the old {} {problem}", self.name);
-                }
-                self.stage = Stage::Alone {
-                    new,
-                    since: Instant::now(),
-                };
-                Step::Going
-            }
+        );
+        match stage {
+            Stage::Disabling { since } => self.disabling(cell, cfg, t, since),
+            Stage::Beside { new, since } => self.beside(cell, t, new, since),
             Stage::Alone { new, since } => {
                 if since.elapsed() < 5 * TICK {
                     self.stage = Stage::Alone { new, since };
@@ -248,10 +197,10 @@ impl Swap {
                 self.done(cell, new)
             }
             Stage::Replacing { new, since } => {
-                if lost.is_none() && cell.cyclic(k) {
+                if t.lost.is_none() && cell.cyclic(self.k) {
                     return self.done(cell, new);
                 }
-                if let Some(why) = lost.or_else(|| late(since, startup)) {
+                if let Some(why) = t.lost.or_else(|| late(since, t.startup)) {
                     return self.fail(
                         cell,
                         format!("the new {} did not become cyclic: {why}", self.name),
@@ -260,130 +209,227 @@ impl Swap {
                 self.stage = Stage::Replacing { new, since };
                 Step::Going
             }
-            Stage::Pausing { seq, since } => {
-                let paused = cell
-                    .last_sp
-                    .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0);
-                if lost.is_none() && paused {
-                    self.stage = Stage::Recording {
-                        since: Instant::now(),
-                        seen: None,
-                    };
-                    return Step::Going;
-                }
-                match lost.or_else(|| late(since, motion_limit)) {
-                    Some(why) => self.not_paused(cell, why),
-                    None => {
-                        self.stage = Stage::Pausing { seq, since };
-                        Step::Going
-                    }
-                }
-            }
-            Stage::Recording { since, seen } => {
-                let program_id = self.program.as_ref().map_or(0, |p| p.1);
-                let seen = cell.handover_sub.latest().or(seen);
-                let record = seen.filter(|h| h.valid == 1 && h.program_id == program_id);
-                let record = match (lost, record) {
-                    (None, Some(record)) => record,
-                    (lost, _) => {
-                        return match lost.or_else(|| late(since, motion_limit)) {
-                            Some(why) => self.not_paused(cell, why),
-                            None => {
-                                self.stage = Stage::Recording { since, seen };
-                                Step::Going
-                            }
-                        };
-                    }
-                };
-                cell.set_handover(k, true);
-                if let Some(problem) = cell.stop_process(k) {
-                    tracing::warn!("the old trajgen {problem}");
-                }
-                let started_ns = runtime::time::now_ns();
-                cell.offer_handover(&record);
-                if let Err(e) = cell.start_process(k, cfg) {
-                    return self.program_lost(
-                        cell,
-                        format!("the new trajgen did not take the motion over: {e}"),
-                    );
-                }
-                self.stage = Stage::TakingOver {
-                    record,
-                    started_ns,
-                    since: Instant::now(),
-                };
-                Step::Going
-            }
+            Stage::Pausing { seq, since } => self.pausing(cell, t, seq, since),
+            Stage::Recording { since, seen } => self.recording(cell, cfg, t, since, seen),
             Stage::TakingOver {
                 record,
                 started_ns,
                 since,
-            } => {
-                let program_id = record.program_id;
-                let holds = lost.is_none()
-                    && cell.cyclic(k)
-                    && cell.last_sp.is_some_and(|sp| {
-                        sp.stamp_ns > started_ns
-                            && sp.program_id == program_id
-                            && sp.path_speed == 0.0
-                    });
-                if !holds {
-                    if let Some(why) = lost.or_else(|| late(since, startup)) {
-                        return self.program_lost(
-                            cell,
-                            format!("the new trajgen did not take the motion over: {why}"),
-                        );
-                    }
-                    self.stage = Stage::TakingOver {
-                        record,
-                        started_ns,
-                        since,
-                    };
-                    return Step::Going;
-                }
-                cell.set_handover(k, false);
-                // Withdrawn: a trajgen started later (a restart) must not take an old motion
-                // over.
-                cell.offer_handover(&TrajgenHandoverV2::default());
-                if let Some(job) = job {
-                    job.rewind_to(record.command_seq);
-                }
-                let seq = cell.motion_control(ControlKind::Resume);
-                self.stage = Stage::Resuming {
-                    record,
-                    seq,
-                    since: Instant::now(),
-                };
-                Step::Going
+            } => self.taking_over(cell, job, t, record, started_ns, since),
+            Stage::Resuming { record, seq, since } => self.resuming(cell, t, record, seq, since),
+        }
+    }
+
+    /// Brakes on: until servo reports the drives disabled, then the process is replaced.
+    fn disabling(&mut self, cell: &mut Cell, cfg: &Config, t: Tick, since: Instant) -> Step {
+        let off = cell
+            .last_servo
+            .is_some_and(|s| s.power == Power::Disabled as u8);
+        let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 2.0);
+        if let Some(why) = t
+            .lost
+            .or_else(|| (!off).then(|| late(since, limit)).flatten())
+        {
+            return self.fail(
+                cell,
+                format!("{}: the drives did not disable: {why}", self.name),
+            );
+        }
+        if !off {
+            self.stage = Stage::Disabling { since };
+            return Step::Going;
+        }
+        match self.replace(cell, cfg) {
+            Ok(stage) => self.stage = stage,
+            Err(e) => return self.fail(cell, e),
+        }
+        Step::Going
+    }
+
+    /// Make before break: until the new process is cyclic, then the old one stops.
+    fn beside(&mut self, cell: &mut Cell, t: Tick, new: u32, since: Instant) -> Step {
+        let k = self.k;
+        let why = t.lost.or_else(|| {
+            if cell.cyclic(k) {
+                None
+            } else {
+                late(since, t.startup)
             }
-            Stage::Resuming { record, seq, since } => {
-                if lost.is_none() && cell.last_sp.is_some_and(|sp| sp.control_seq >= seq) {
-                    cell.restarts[k] += 1;
-                    let new = cell.children.get(k).map_or(0, |p| p.pid());
-                    let program = self.program.as_ref().map_or("", |p| p.0.as_str());
-                    tracing::info!(
-                        "trajgen {} during {program} (pid {:?} → {new})",
-                        self.what(),
-                        self.old
-                    );
-                    return Step::Done(Replaced {
-                        process: self.name.clone(),
-                        swapped: self.swap,
-                        took_ms: self.start.elapsed().as_secs_f64() * 1e3,
-                        old_pid: self.old,
-                        new_pid: new,
-                        image: None,
-                        program: Some((program.to_string(), record.line)),
-                        reenabling: false,
-                    });
-                }
-                if let Some(why) = lost.or_else(|| late(since, motion_limit)) {
-                    return Step::Failed(format!("the new trajgen did not resume: {why}"));
-                }
-                self.stage = Stage::Resuming { record, seq, since };
+        });
+        if let Some(why) = why {
+            // Break nothing: the new one goes, the old one stays.
+            let _ = cell.stop_pid(new);
+            let old = self.old.map_or(0, |p| p);
+            return self.fail(
+                cell,
+                format!(
+                    "the new {} did not become cyclic ({why}); the old one (pid {old}) keeps running",
+                    self.name
+                ),
+            );
+        }
+        if !cell.cyclic(k) {
+            self.stage = Stage::Beside { new, since };
+            return Step::Going;
+        }
+        if let Some(problem) = cell.stop_process(k) {
+            tracing::warn!("the old {} {problem}", self.name);
+        }
+        self.stage = Stage::Alone {
+            new,
+            since: Instant::now(),
+        };
+        Step::Going
+    }
+
+    /// trajgen during a program: until the path speed is 0 on the path.
+    fn pausing(&mut self, cell: &mut Cell, t: Tick, seq: u64, since: Instant) -> Step {
+        let paused = cell
+            .last_sp
+            .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0);
+        if t.lost.is_none() && paused {
+            self.stage = Stage::Recording {
+                since: Instant::now(),
+                seen: None,
+            };
+            return Step::Going;
+        }
+        match t.lost.or_else(|| late(since, t.motion_limit)) {
+            Some(why) => self.not_paused(cell, why),
+            None => {
+                self.stage = Stage::Pausing { seq, since };
                 Step::Going
             }
         }
+    }
+
+    /// Until the old trajgen's handover record of the program; then the old one stops and
+    /// the new one starts with the record.
+    fn recording(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        t: Tick,
+        since: Instant,
+        seen: Option<TrajgenHandoverV2>,
+    ) -> Step {
+        let k = self.k;
+        let program_id = self.program.as_ref().map_or(0, |p| p.1);
+        let seen = cell.handover_sub.latest().or(seen);
+        let record = seen.filter(|h| h.valid == 1 && h.program_id == program_id);
+        let record = match (t.lost, record) {
+            (None, Some(record)) => record,
+            (lost, _) => {
+                return match lost.or_else(|| late(since, t.motion_limit)) {
+                    Some(why) => self.not_paused(cell, why),
+                    None => {
+                        self.stage = Stage::Recording { since, seen };
+                        Step::Going
+                    }
+                };
+            }
+        };
+        cell.set_handover(k, true);
+        if let Some(problem) = cell.stop_process(k) {
+            tracing::warn!("the old trajgen {problem}");
+        }
+        let started_ns = runtime::time::now_ns();
+        cell.offer_handover(&record);
+        if let Err(e) = cell.start_process(k, cfg) {
+            return self.program_lost(
+                cell,
+                format!("the new trajgen did not take the motion over: {e}"),
+            );
+        }
+        self.stage = Stage::TakingOver {
+            record,
+            started_ns,
+            since: Instant::now(),
+        };
+        Step::Going
+    }
+
+    /// Until the new trajgen holds the motion, paused; then the program's commands after the
+    /// record are sent again and the motion resumed.
+    fn taking_over(
+        &mut self,
+        cell: &mut Cell,
+        job: Option<&mut Job>,
+        t: Tick,
+        record: TrajgenHandoverV2,
+        started_ns: u64,
+        since: Instant,
+    ) -> Step {
+        let k = self.k;
+        let program_id = record.program_id;
+        let holds = t.lost.is_none()
+            && cell.cyclic(k)
+            && cell.last_sp.is_some_and(|sp| {
+                sp.stamp_ns > started_ns && sp.program_id == program_id && sp.path_speed == 0.0
+            });
+        if !holds {
+            if let Some(why) = t.lost.or_else(|| late(since, t.startup)) {
+                return self.program_lost(
+                    cell,
+                    format!("the new trajgen did not take the motion over: {why}"),
+                );
+            }
+            self.stage = Stage::TakingOver {
+                record,
+                started_ns,
+                since,
+            };
+            return Step::Going;
+        }
+        cell.set_handover(k, false);
+        // Withdrawn: a trajgen started later (a restart) must not take an old motion over.
+        cell.offer_handover(&TrajgenHandoverV2::default());
+        if let Some(job) = job {
+            job.rewind_to(record.command_seq);
+        }
+        let seq = cell.motion_control(ControlKind::Resume);
+        self.stage = Stage::Resuming {
+            record,
+            seq,
+            since: Instant::now(),
+        };
+        Step::Going
+    }
+
+    /// Until trajgen took the resume: the swap is done.
+    fn resuming(
+        &mut self,
+        cell: &mut Cell,
+        t: Tick,
+        record: TrajgenHandoverV2,
+        seq: u64,
+        since: Instant,
+    ) -> Step {
+        if t.lost.is_none() && cell.last_sp.is_some_and(|sp| sp.control_seq >= seq) {
+            cell.restarts[self.k] += 1;
+            let new = cell.children.get(self.k).map_or(0, |p| p.pid());
+            let program = self.program.as_ref().map_or("", |p| p.0.as_str());
+            tracing::info!(
+                "trajgen {} during {program} (pid {:?} → {new})",
+                self.what(),
+                self.old
+            );
+            return Step::Done(Replaced {
+                process: self.name.clone(),
+                swapped: self.swap,
+                took_ms: self.start.elapsed().as_secs_f64() * 1e3,
+                old_pid: self.old,
+                new_pid: new,
+                image: None,
+                program: Some((program.to_string(), record.line)),
+                reenabling: false,
+            });
+        }
+        if let Some(why) = t.lost.or_else(|| late(since, t.motion_limit)) {
+            return Step::Failed(format!("the new trajgen did not resume: {why}"));
+        }
+        self.stage = Stage::Resuming { record, seq, since };
+        Step::Going
     }
 
     /// Stops the old process and starts the new one: beside it outside the motion path
@@ -491,6 +537,19 @@ impl GapMeter {
     fn result(&self) -> Option<(u64, u64)> {
         (self.count > 1).then_some((self.max_ns, self.count))
     }
+}
+
+/// What a step sees of its tick: the incident that concerns the process, if any, and the
+/// stages' time limits.
+struct Tick {
+    lost: Option<String>,
+    motion_limit: Duration,
+    startup: Duration,
+}
+
+/// `Some(why)` once `limit` has passed since `since`.
+fn late(since: Instant, limit: Duration) -> Option<String> {
+    (since.elapsed() > limit).then(|| format!("not within {:.1} s", limit.as_secs_f64()))
 }
 
 fn concerns(i: &Incident, name: &str) -> bool {
