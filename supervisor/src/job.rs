@@ -25,6 +25,15 @@ use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
+/// Whether servo's states began the job's ending on the e-stop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Ending {
+    /// No: the job goes on.
+    No,
+    /// Yes: the job waits for the e-stop's reactions, then fails with it.
+    Began,
+}
+
 /// The longest stretch of a program the supervisor records for its trace and figures (s):
 /// a program that runs for hours keeps bounded memory; the report says the trace was cut.
 pub(crate) const MAX_RECORD_S: f64 = 600.0;
@@ -310,6 +319,8 @@ impl Job {
         }
     }
 
+    /// One tick of the job: the e-stop's reaction waited for, the incidents, the setpoints
+    /// and servo's states read, commands sent as trajgen has room, the settling judged.
     fn step_inner(
         &mut self,
         cell: &mut Cell,
@@ -317,20 +328,7 @@ impl Job {
         incidents: &[Incident],
     ) -> Result<Option<Report>, RunError> {
         if let Some(since) = self.ending {
-            // Wait (the loop beats meanwhile) until every process that reacts to the e-stop
-            // completed its reaction (servo: axes at rest, drives disabled), at most the
-            // e-stop stop time and a second: the job ends on a cell at rest.
-            let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 1.0);
-            // The stop itself belongs on the figures: the axes braking to rest.
-            self.record(cell);
-            if cell.reactions_pending() && since.elapsed() < limit {
-                return Ok(None);
-            }
-            return Err(RunError::failed(cell.estop_failure().unwrap_or_else(
-                || Failure::System {
-                    what: "e-stop".into(),
-                },
-            )));
+            return self.end_on_estop(cell, cfg, since);
         }
         if let Some(i) = incidents.first() {
             return Err(i.error());
@@ -347,8 +345,77 @@ impl Job {
                 return Ok(None);
             }
         }
-        let n = cfg.axis.len();
-        // Setpoints of our motion.
+        if let Some(newest) = self.take_setpoints(cell)? {
+            self.feed(cell, &newest)?;
+        }
+        if self.take_servo_states(cell, cfg)? == Ending::Began {
+            return Ok(None);
+        }
+        let (moving, im) = (self.last.is_some(), &mut self.images);
+        cell.drain_images(|img| {
+            if moving {
+                let d = img.written_ns.saturating_sub(img.measured_ns);
+                *im = (im.0 + 1, im.1 + d, im.2.max(d));
+            }
+        });
+        if let Some(t) = self.done_at
+            && self.settled_at.is_none()
+            && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout
+        {
+            let following_error = cell.last_servo.map_or(Vec::new(), |s| {
+                cfg.axis
+                    .iter()
+                    .zip(s.following_error)
+                    .map(|(a, value)| AxisValue {
+                        axis: a.name.clone(),
+                        value,
+                        unit: a.unit.clone(),
+                    })
+                    .collect()
+            });
+            return Err(RunError::failed(Failure::NotSettled {
+                timeout_s: cfg.motion.settle_timeout,
+                following_error,
+            }));
+        }
+        let Some((settle_start, final_state)) = self.settled_at else {
+            return Ok(None);
+        };
+        self.progress.finish();
+        if let Some(estop) = cell.estop_failure() {
+            cell.take_events();
+            return Err(RunError::failed(Failure::LatchedAfterMotion {
+                estop: Box::new(estop),
+            }));
+        }
+        Ok(Some(self.report(cell, cfg, settle_start, &final_state)))
+    }
+
+    /// The job ends on the e-stop: waited for (the loop beats meanwhile) until every process
+    /// that reacts to it completed its reaction (servo: axes at rest, drives disabled), at
+    /// most the e-stop stop time and a second, so that the job ends on a cell at rest.
+    fn end_on_estop(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        since: Instant,
+    ) -> Result<Option<Report>, RunError> {
+        let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 1.0);
+        // The stop itself belongs on the figures: the axes braking to rest.
+        self.record(cell);
+        if cell.reactions_pending() && since.elapsed() < limit {
+            return Ok(None);
+        }
+        Err(RunError::failed(cell.estop_failure().unwrap_or_else(
+            || Failure::System {
+                what: "e-stop".into(),
+            },
+        )))
+    }
+
+    /// The setpoints trajgen published since the last tick: this program's kept for the
+    /// figures, its end noted, its abort or trajgen's refusal an error. The newest of all.
+    fn take_setpoints(&mut self, cell: &mut Cell) -> Result<Option<SetpointV2>, RunError> {
         let mut newest = None;
         while let Some(sp) = cell.setpoint_sub.next() {
             newest = Some(sp);
@@ -386,22 +453,31 @@ impl Job {
                 _ => {}
             }
         }
-        // Flow control: never more in flight than trajgen has free places.
-        if let Some(sp) = newest {
-            // Until trajgen runs this program, its count may be a previous session's: take
-            // everything sent as in flight (never more than the queue holds).
-            let in_flight = if self.last.is_some() {
-                self.sent_seq - sp.commands_taken.min(self.sent_seq)
-            } else {
-                self.sent_seq
-            };
-            let credit = (sp.queue_free as u64).saturating_sub(in_flight) as usize;
-            self.send(cell, credit)?;
-            if sp.program_id == self.program_id {
-                self.progress.show(&sp);
-            }
+        Ok(newest)
+    }
+
+    /// Flow control: sends the next commands, never more in flight than trajgen has free
+    /// places by its `newest` setpoint.
+    fn feed(&mut self, cell: &mut Cell, newest: &SetpointV2) -> Result<(), RunError> {
+        // Until trajgen runs this program, its count may be a previous session's: take
+        // everything sent as in flight (never more than the queue holds).
+        let in_flight = if self.last.is_some() {
+            self.sent_seq - newest.commands_taken.min(self.sent_seq)
+        } else {
+            self.sent_seq
+        };
+        let credit = (newest.queue_free as u64).saturating_sub(in_flight) as usize;
+        self.send(cell, credit)?;
+        if newest.program_id == self.program_id {
+            self.progress.show(newest);
         }
-        // Servo: following error, drive faults, settling.
+        Ok(())
+    }
+
+    /// servo's states since the last tick, once the program runs: kept for the figures; a
+    /// latched fault, the drives off or a setpoint jump an error (the drives off by the
+    /// e-stop begins the job's ending instead); the settling judged after the motion's end.
+    fn take_servo_states(&mut self, cell: &mut Cell, cfg: &Config) -> Result<Ending, RunError> {
         let settle_ns = (cfg.motion.settle_time * 1e9) as u64;
         while let Some(s) = cell.servo_sub.next() {
             cell.last_servo = Some(s);
@@ -421,7 +497,7 @@ impl Job {
                 cell.poll_estop();
                 if cell.estop.is_some() {
                     self.ending = Some(Instant::now());
-                    return Ok(None);
+                    return Ok(Ending::Began);
                 }
                 cell.take_events();
                 return Err(RunError::failed(Failure::Disabled {
@@ -435,9 +511,9 @@ impl Job {
                 return Err(RunError::failed(Failure::SetpointJump));
             }
             if let Some(d) = &self.done {
-                let inside = (0..n).all(|i| {
-                    s.following_error[i].abs() <= cfg.axis[i].in_position
-                        && s.act_velocity[i].abs() <= cfg.axis[i].settle_velocity()
+                let inside = cfg.axis.iter().enumerate().all(|(i, a)| {
+                    s.following_error[i].abs() <= a.in_position
+                        && s.act_velocity[i].abs() <= a.settle_velocity()
                 });
                 let used_final = s.setpoint_seq >= d.seq;
                 match (inside && used_final, self.in_pos_since) {
@@ -450,42 +526,7 @@ impl Job {
                 }
             }
         }
-        let (moving, im) = (self.last.is_some(), &mut self.images);
-        cell.drain_images(|img| {
-            if moving {
-                let d = img.written_ns.saturating_sub(img.measured_ns);
-                *im = (im.0 + 1, im.1 + d, im.2.max(d));
-            }
-        });
-        if let Some(t) = self.done_at
-            && self.settled_at.is_none()
-            && t.elapsed().as_secs_f64() > cfg.motion.settle_timeout
-        {
-            let following_error = cell.last_servo.map_or(Vec::new(), |s| {
-                (0..n)
-                    .map(|i| AxisValue {
-                        axis: cfg.axis[i].name.clone(),
-                        value: s.following_error[i],
-                        unit: cfg.axis[i].unit.clone(),
-                    })
-                    .collect()
-            });
-            return Err(RunError::failed(Failure::NotSettled {
-                timeout_s: cfg.motion.settle_timeout,
-                following_error,
-            }));
-        }
-        let Some((settle_start, final_state)) = self.settled_at else {
-            return Ok(None);
-        };
-        self.progress.finish();
-        if let Some(estop) = cell.estop_failure() {
-            cell.take_events();
-            return Err(RunError::failed(Failure::LatchedAfterMotion {
-                estop: Box::new(estop),
-            }));
-        }
-        Ok(Some(self.report(cell, cfg, settle_start, &final_state)))
+        Ok(Ending::No)
     }
 
     fn report(
