@@ -275,69 +275,8 @@ impl Loop<'_> {
                 return Some(self.failed_to_come_up(i.error()));
             }
         }
-        if let Some((en, waiters)) = &mut self.enabling {
-            let outcome = if run && let Some(i) = incidents.first() {
-                Some(Err(i.error()))
-            } else {
-                en.step(self.cell)
-            };
-            if let Some(result) = outcome {
-                let waiters = std::mem::take(waiters);
-                self.enabling = None;
-                let result = match result {
-                    Err(e) if !run && !self.came_up => {
-                        for c in waiters {
-                            self.server.reply(c, &Reply::Failed(e.cause()));
-                        }
-                        return Some(self.failed_to_come_up(e));
-                    }
-                    r => r,
-                };
-                match &result {
-                    Ok(_) => {
-                        tracing::info!("the drives are enabled, holding");
-                        for c in waiters {
-                            self.server
-                                .reply(c, &Reply::Done("the drives are enabled, holding".into()));
-                        }
-                    }
-                    Err(e) => {
-                        tracing::error!("the arm is not enabled: {e}");
-                        let reply = match e {
-                            RunError::Input(m) => {
-                                Reply::Refused(Refusal::Enable { error: m.clone() })
-                            }
-                            e => Reply::Failed(e.cause()),
-                        };
-                        for c in waiters {
-                            self.server.reply(c, &reply);
-                        }
-                    }
-                }
-                match (result, self.queued.take()) {
-                    (Ok(sp), Some(First::Tune(mut t))) => {
-                        t.begin(&sp);
-                        self.tuning = Some(t);
-                    }
-                    (Err(e), Some(First::Tune(_))) => {
-                        return Some(End::Tuned(Box::new(Err(self.with_events(e, 0)))));
-                    }
-                    (Ok(sp), Some(First::Program(p))) => {
-                        let n = self.cfg.axis.len();
-                        let then = Then::Run {
-                            progress: p.progress,
-                            plot: p.plot,
-                        };
-                        if let Err(e) = self.validate(p.program, &sp.position[..n], then) {
-                            return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
-                        }
-                    }
-                    (Err(e), Some(_)) => {
-                        return Some(End::Program(Box::new(Err(self.with_events(e, 0)))));
-                    }
-                    _ => {}
-                }
-            }
+        if let Some(end) = self.step_enabling(incidents, run) {
+            return Some(end);
         }
         // A process lost, stalled or in fault while a program is validated: it does not
         // start (a running job would fail on the same incident).
@@ -371,44 +310,105 @@ impl Loop<'_> {
             r.job.record(self.cell);
             return None;
         }
-        if let Some(r) = &mut self.running
-            && let Some(result) = r.job.step(self.cell, self.cfg, incidents)
-        {
-            let r = self.running.take().expect("checked");
-            let result = match result {
-                Ok(mut report) => {
-                    self.cell.take_events();
-                    report.run.events = self.events_json(r.events_from);
-                    if !run {
-                        self.cell.refresh_latency();
-                        report.add_cell_figures(
-                            process_reports(self.cell),
-                            latency_figures(self.cell),
-                            self.cell.sense_to_command.as_deref(),
-                        );
-                    }
-                    Ok(report)
+        self.step_job(incidents, run)
+    }
+
+    /// The enabling, a step; once it is over, whoever asked is told and what waited for it
+    /// (a tuning session, a program) begins. `Some` when `run` or `up` is over.
+    fn step_enabling(&mut self, incidents: &[Incident], run: bool) -> Option<End> {
+        let (en, waiters) = self.enabling.as_mut()?;
+        let outcome = if run && let Some(i) = incidents.first() {
+            Some(Err(i.error()))
+        } else {
+            en.step(self.cell)
+        };
+        let result = outcome?;
+        let waiters = std::mem::take(waiters);
+        self.enabling = None;
+        let result = match result {
+            Err(e) if !run && !self.came_up => {
+                for c in waiters {
+                    self.server.reply(c, &Reply::Failed(e.cause()));
                 }
-                Err(e) => {
-                    // trajgen must not go on with a program nobody follows any more (its
-                    // OUTs, its queue): it comes to rest along the path and drops it.
-                    if self
-                        .cell
-                        .last_sp
-                        .is_some_and(|sp| sp.state == shm_schema::MotionState::Moving as u32)
-                    {
-                        self.cell.motion_control(ControlKind::Abort);
-                    }
-                    let e = self.with_events(e, r.events_from);
-                    Err(self.with_figures(e, &r.job))
-                }
-            };
-            self.finish(&r, &result);
-            if run {
-                return Some(End::Program(Box::new(result)));
+                return Some(self.failed_to_come_up(e));
             }
+            r => r,
+        };
+        let reply = match &result {
+            Ok(_) => {
+                tracing::info!("the drives are enabled, holding");
+                Reply::Done("the drives are enabled, holding".into())
+            }
+            Err(e) => {
+                tracing::error!("the arm is not enabled: {e}");
+                match e {
+                    RunError::Input(m) => Reply::Refused(Refusal::Enable { error: m.clone() }),
+                    e => Reply::Failed(e.cause()),
+                }
+            }
+        };
+        for c in waiters {
+            self.server.reply(c, &reply);
         }
-        None
+        match (result, self.queued.take()) {
+            (Ok(sp), Some(First::Tune(mut t))) => {
+                t.begin(&sp);
+                self.tuning = Some(t);
+                None
+            }
+            (Ok(sp), Some(First::Program(p))) => {
+                let n = self.cfg.axis.len();
+                let then = Then::Run {
+                    progress: p.progress,
+                    plot: p.plot,
+                };
+                let e = self.validate(p.program, &sp.position[..n], then).err()?;
+                Some(End::Program(Box::new(Err(self.with_events(e, 0)))))
+            }
+            (Err(e), Some(First::Tune(_))) => {
+                Some(End::Tuned(Box::new(Err(self.with_events(e, 0)))))
+            }
+            (Err(e), Some(_)) => Some(End::Program(Box::new(Err(self.with_events(e, 0))))),
+            (_, None) => None,
+        }
+    }
+
+    /// The running job, a step; once it is over, its report (or its failure, with the events
+    /// and figures) to whoever waits. `Some` when `run` is over.
+    fn step_job(&mut self, incidents: &[Incident], run: bool) -> Option<End> {
+        let r = self.running.as_mut()?;
+        let result = r.job.step(self.cell, self.cfg, incidents)?;
+        let r = self.running.take().expect("running: stepped above");
+        let result = match result {
+            Ok(mut report) => {
+                self.cell.take_events();
+                report.run.events = self.events_json(r.events_from);
+                if !run {
+                    self.cell.refresh_latency();
+                    report.add_cell_figures(
+                        process_reports(self.cell),
+                        latency_figures(self.cell),
+                        self.cell.sense_to_command.as_deref(),
+                    );
+                }
+                Ok(report)
+            }
+            Err(e) => {
+                // trajgen must not go on with a program nobody follows any more (its
+                // OUTs, its queue): it comes to rest along the path and drops it.
+                if self
+                    .cell
+                    .last_sp
+                    .is_some_and(|sp| sp.state == shm_schema::MotionState::Moving as u32)
+                {
+                    self.cell.motion_control(ControlKind::Abort);
+                }
+                let e = self.with_events(e, r.events_from);
+                Err(self.with_figures(e, &r.job))
+            }
+        };
+        self.finish(&r, &result);
+        run.then(|| End::Program(Box::new(result)))
     }
 
     /// Starts going down: whoever waits is told; a moving program comes to rest along its

@@ -44,11 +44,12 @@ def take(args, topic, n):
             (str(s.key_expr), s.payload.to_bytes(),
              s.attachment.to_bytes() if s.attachment is not None else None)))
         samples = []
+        # Room for the host's stalls: the cell publishes every status period (0.5 s).
         try:
             while len(samples) < n:
-                samples.append(got.get(timeout=10))
+                samples.append(got.get(timeout=30))
         except queue.Empty:
-            fail(f"{len(samples)} samples on {key} in 10 s")
+            fail(f"{len(samples)} samples on {key}, then none in 30 s")
         sub.undeclare()
     return samples
 
@@ -118,7 +119,7 @@ def graph(args, data_keys):
     ns = "%" + args.namespace
     with zenoh.open(conf) as session:
         tokens = sorted({str(r.ok.key_expr)
-                         for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**", timeout=5)
+                         for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**", timeout=20)
                          if r.ok is not None})
     nodes = [t.split("/") for t in tokens if t.split("/")[5:6] == ["NN"]]
     pubs = [t.split("/") for t in tokens if t.split("/")[5:6] == ["MP"]]
