@@ -677,6 +677,159 @@ fn locate(src: &str, path: &[Seg]) -> Option<Range<usize>> {
     span
 }
 
+/// The key path of axis `i`'s keys.
+#[derive(Clone, Copy)]
+struct AxisAt(usize);
+
+impl AxisAt {
+    /// `axis[i].k`.
+    fn key(self, k: &'static str) -> Vec<Seg> {
+        vec![Seg::Key("axis"), Seg::Index(self.0), Seg::Key(k)]
+    }
+
+    /// `axis[i].table.k`.
+    fn sub(self, table: &'static str, k: &'static str) -> Vec<Seg> {
+        vec![
+            Seg::Key("axis"),
+            Seg::Index(self.0),
+            Seg::Key(table),
+            Seg::Key(k),
+        ]
+    }
+}
+
+/// An axis' range (min below max, the start within) and its positive figures (vmax, the
+/// following-error limit, the in-position band, narrower than the limit).
+fn axis_range(a: &Axis, at: AxisAt) -> Result<(), Problem> {
+    if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
+        return Err((
+            at.key("max"),
+            format!(
+                "axis {}: max ({}) must be greater than min ({})",
+                a.name, a.max, a.min
+            ),
+        ));
+    }
+    if !(a.start >= a.min && a.start <= a.max) {
+        return Err((
+            at.key("start"),
+            format!(
+                "axis {}: start {} lies outside {} .. {}",
+                a.name, a.start, a.min, a.max
+            ),
+        ));
+    }
+    for (k, v) in [
+        ("vmax", a.vmax),
+        ("following_error_limit", a.following_error_limit),
+        ("in_position", a.in_position),
+    ] {
+        if !positive(v) {
+            return Err((
+                at.key(k),
+                format!("axis {}: {k} = {v} must be positive", a.name),
+            ));
+        }
+    }
+    if a.in_position >= a.following_error_limit {
+        return Err((
+            at.key("in_position"),
+            format!(
+                "axis {}: in_position must be smaller than following_error_limit",
+                a.name
+            ),
+        ));
+    }
+    if let Some(v) = a.settle_velocity
+        && !positive(v)
+    {
+        return Err((
+            at.key("settle_velocity"),
+            format!("axis {}: settle_velocity = {v} must be positive", a.name),
+        ));
+    }
+    Ok(())
+}
+
+/// An axis' servo gains: 0 or more.
+fn axis_gains(a: &Axis, at: AxisAt) -> Result<(), Problem> {
+    let g = &a.servo;
+    for (k, v) in [
+        ("kp", g.kp),
+        ("ki", g.ki),
+        ("kd", g.kd),
+        ("kvff", g.kvff),
+        ("kaff", g.kaff),
+        ("integral_limit", g.integral_limit),
+    ] {
+        if !non_negative(v) {
+            return Err((
+                at.sub("servo", k),
+                format!("axis {}: servo {k} = {v} must be 0 or more", a.name),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An axis' simulated mechanics: inertia, effort limit and encoder resolution positive,
+/// friction 0 or more.
+fn axis_model(a: &Axis, at: AxisAt) -> Result<(), Problem> {
+    let s = &a.sim;
+    for (k, v, pos) in [
+        ("inertia", s.inertia, true),
+        ("viscous", s.viscous, false),
+        ("coulomb", s.coulomb, false),
+        ("effort_limit", s.effort_limit, true),
+        ("encoder_resolution", s.encoder_resolution, true),
+    ] {
+        if !(if pos { positive(v) } else { non_negative(v) }) {
+            let need = if pos { "positive" } else { "0 or more" };
+            return Err((
+                at.sub("sim", k),
+                format!("axis {}: sim {k} = {v} must be {need}", a.name),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An axis' drive: a quick stop option CiA 402 has, its gains 0 or more, a velocity gain for
+/// the modes in which the drive closes a loop.
+fn axis_drive(a: &Axis, at: AxisAt) -> Result<(), Problem> {
+    let d = &a.drive;
+    if cia402::QuickStopOption::from_i16(d.quick_stop_option as i16).is_none()
+        || !(0..=8).contains(&d.quick_stop_option)
+    {
+        return Err((
+            at.sub("drive", "quick_stop_option"),
+            format!(
+                "axis {}: drive quick_stop_option = {} must be 0, 1, 2 or 6",
+                a.name, d.quick_stop_option
+            ),
+        ));
+    }
+    for (k, v) in [("kp", d.kp), ("ki", d.ki), ("kd", d.kd)] {
+        if !non_negative(v) {
+            return Err((
+                at.sub("drive", k),
+                format!("axis {}: drive {k} = {v} must be 0 or more", a.name),
+            ));
+        }
+    }
+    if d.mode != DriveMode::Cst && d.kd <= 0.0 {
+        return Err((
+            at.sub("drive", "kd"),
+            format!(
+                "axis {}: drive mode {} needs the drive's own velocity gain kd > 0",
+                a.name,
+                d.mode.name()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A problem found by validation: the key path where it is, and what is wrong.
 type Problem = (Vec<Seg>, String);
 
@@ -790,8 +943,9 @@ impl Config {
     }
 
     /// Every problem of the configuration, each at its key path: the sections and the entries
-    /// are checked independently (an entry stops at its first problem), and what depends on
-    /// the process table (the periods) only once the table is sound.
+    /// are checked independently (an entry stops at its first problem, an axis at the first
+    /// of each of its parts), and what depends on the process table (the periods) only once
+    /// the table is sound.
     fn validate(&self) -> Vec<Problem> {
         let mut found: Vec<Problem> = Vec::new();
         found.extend(self.validate_motion().err());
@@ -836,7 +990,7 @@ impl Config {
             ));
         } else {
             for i in 0..self.axis.len() {
-                found.extend(self.validate_axis(i, table_sound).err());
+                found.extend(self.validate_axis(i, table_sound));
             }
         }
         found.extend(self.validate_supervisor());
@@ -957,150 +1111,61 @@ impl Config {
         found
     }
 
-    /// Axis `i`: its name, range, limits, gains, drive and model; with `periods` (the process
-    /// table is sound), what the servo period bounds and the loop's stability.
-    fn validate_axis(&self, i: usize, periods: bool) -> Result<(), Problem> {
-        use Seg::{Index as Idx, Key as K};
+    /// Axis `i`: every problem of its name, range, gains, model and drive (each part stops at
+    /// its first: a later check of a part depends on the earlier ones); then, with `periods`
+    /// (the process table is sound) and only if none was found (they derive from all of it),
+    /// what the servo period bounds and the loop's stability.
+    fn validate_axis(&self, i: usize, periods: bool) -> Vec<Problem> {
         let a = &self.axis[i];
-        let at = |k: &'static str| vec![K("axis"), Idx(i), K(k)];
-        let sub = |t: &'static str, k: &'static str| vec![K("axis"), Idx(i), K(t), K(k)];
-        let bad = |path: Vec<Seg>, msg: String| Err((path, msg));
-        if a.name.is_empty()
-            || a.name.len() > 15
-            || !a
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '_')
-        {
-            return bad(
-                at("name"),
+        let at = AxisAt(i);
+        let found: Vec<Problem> = [
+            self.axis_name(i, at),
+            axis_range(a, at),
+            axis_gains(a, at),
+            axis_model(a, at),
+            axis_drive(a, at),
+        ]
+        .into_iter()
+        .filter_map(Result::err)
+        .collect();
+        if !found.is_empty() || !periods {
+            return found;
+        }
+        self.axis_limits(a, at).err().into_iter().collect()
+    }
+
+    /// An axis' name (unique) and unit.
+    fn axis_name(&self, i: usize, at: AxisAt) -> Result<(), Problem> {
+        let a = &self.axis[i];
+        let valid = |c: char| c.is_ascii_alphanumeric() || c == '_';
+        if a.name.is_empty() || a.name.len() > 15 || !a.name.chars().all(valid) {
+            return Err((
+                at.key("name"),
                 format!(
                     "axis name {:?} must be 1 to 15 letters, digits or '_'",
                     a.name
                 ),
-            );
+            ));
         }
         if self.axis[..i].iter().any(|b| b.name == a.name) {
-            return bad(at("name"), format!("axis name {:?} is used twice", a.name));
+            return Err((
+                at.key("name"),
+                format!("axis name {:?} is used twice", a.name),
+            ));
         }
         if a.unit.is_empty() || a.unit.len() > 7 {
-            return bad(
-                at("unit"),
+            return Err((
+                at.key("unit"),
                 format!("unit {:?} must be 1 to 7 bytes", a.unit),
-            );
+            ));
         }
-        if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
-            return bad(
-                at("max"),
-                format!(
-                    "axis {}: max ({}) must be greater than min ({})",
-                    a.name, a.max, a.min
-                ),
-            );
-        }
-        if !(a.start >= a.min && a.start <= a.max) {
-            return bad(
-                at("start"),
-                format!(
-                    "axis {}: start {} lies outside {} .. {}",
-                    a.name, a.start, a.min, a.max
-                ),
-            );
-        }
-        for (k, v) in [
-            ("vmax", a.vmax),
-            ("following_error_limit", a.following_error_limit),
-            ("in_position", a.in_position),
-        ] {
-            if !positive(v) {
-                return bad(
-                    at(k),
-                    format!("axis {}: {k} = {v} must be positive", a.name),
-                );
-            }
-        }
-        if a.in_position >= a.following_error_limit {
-            return bad(
-                at("in_position"),
-                format!(
-                    "axis {}: in_position must be smaller than following_error_limit",
-                    a.name
-                ),
-            );
-        }
-        let g = &a.servo;
-        for (k, v) in [
-            ("kp", g.kp),
-            ("ki", g.ki),
-            ("kd", g.kd),
-            ("kvff", g.kvff),
-            ("kaff", g.kaff),
-            ("integral_limit", g.integral_limit),
-        ] {
-            if !non_negative(v) {
-                return bad(
-                    sub("servo", k),
-                    format!("axis {}: servo {k} = {v} must be 0 or more", a.name),
-                );
-            }
-        }
-        let s = &a.sim;
-        for (k, v, pos) in [
-            ("inertia", s.inertia, true),
-            ("viscous", s.viscous, false),
-            ("coulomb", s.coulomb, false),
-            ("effort_limit", s.effort_limit, true),
-            ("encoder_resolution", s.encoder_resolution, true),
-        ] {
-            if !(if pos { positive(v) } else { non_negative(v) }) {
-                let need = if pos { "positive" } else { "0 or more" };
-                return bad(
-                    sub("sim", k),
-                    format!("axis {}: sim {k} = {v} must be {need}", a.name),
-                );
-            }
-        }
-        if let Some(v) = a.settle_velocity
-            && !positive(v)
-        {
-            return bad(
-                at("settle_velocity"),
-                format!("axis {}: settle_velocity = {v} must be positive", a.name),
-            );
-        }
-        let d = &a.drive;
-        if cia402::QuickStopOption::from_i16(d.quick_stop_option as i16).is_none()
-            || !(0..=8).contains(&d.quick_stop_option)
-        {
-            return bad(
-                sub("drive", "quick_stop_option"),
-                format!(
-                    "axis {}: drive quick_stop_option = {} must be 0, 1, 2 or 6",
-                    a.name, d.quick_stop_option
-                ),
-            );
-        }
-        for (k, v) in [("kp", d.kp), ("ki", d.ki), ("kd", d.kd)] {
-            if !non_negative(v) {
-                return bad(
-                    sub("drive", k),
-                    format!("axis {}: drive {k} = {v} must be 0 or more", a.name),
-                );
-            }
-        }
-        if d.mode != DriveMode::Cst && d.kd <= 0.0 {
-            return bad(
-                sub("drive", "kd"),
-                format!(
-                    "axis {}: drive mode {} needs the drive's own velocity gain kd > 0",
-                    a.name,
-                    d.mode.name()
-                ),
-            );
-        }
-        if !periods {
-            return Ok(());
-        }
+        Ok(())
+    }
+
+    /// What the servo period and t_acc make of an axis' limits (each must be positive, the
+    /// velocity limit at least vmax, a stop within the velocity step), and the stability of
+    /// its loop at the servo period.
+    fn axis_limits(&self, a: &Axis, at: AxisAt) -> Result<(), Problem> {
         let servo_period_s = self.period_s("servo");
         let t_acc = self.motion.t_acc;
         if !positive(t_acc) {
@@ -1116,50 +1181,48 @@ impl Config {
             ("stop_deceleration", a.stop_deceleration(t_acc)),
         ] {
             if !positive(v) {
-                return bad(
-                    sub("limits", k),
+                return Err((
+                    at.sub("limits", k),
                     format!("axis {}: limits {k} = {v} must be positive", a.name),
-                );
+                ));
             }
         }
         if a.velocity_limit() < a.vmax {
-            return bad(
-                sub("limits", "velocity"),
+            return Err((
+                at.sub("limits", "velocity"),
                 format!(
                     "axis {}: limits velocity = {} is below vmax = {}: every move would be refused",
                     a.name,
                     a.velocity_limit(),
                     a.vmax
                 ),
-            );
+            ));
         }
         if a.stop_deceleration(t_acc) * servo_period_s
             > a.velocity_step_limit(servo_period_s, t_acc)
         {
-            return bad(
-                sub("limits", "stop_deceleration"),
+            return Err((
+                at.sub("limits", "stop_deceleration"),
                 format!(
                     "axis {}: stop_deceleration = {} changes the velocity by more than limits velocity_step = {} per servo period: coming to rest would cut power",
                     a.name,
                     a.stop_deceleration(t_acc),
                     a.velocity_step_limit(servo_period_s, t_acc)
                 ),
-            );
+            ));
         }
         if !positive(a.quick_stop_deceleration(t_acc)) {
-            return bad(
-                sub("drive", "quick_stop_deceleration"),
+            return Err((
+                at.sub("drive", "quick_stop_deceleration"),
                 format!(
                     "axis {}: drive quick_stop_deceleration must be positive",
                     a.name
                 ),
-            );
+            ));
         }
         let machine_step_s = self.period_s("drives") / self.drives.substeps.max(1) as f64;
-        if let Err(why) = stability::check(a, d.mode.into(), servo_period_s, machine_step_s) {
-            return bad(vec![K("axis"), Idx(i), K("sim"), K("inertia")], why);
-        }
-        Ok(())
+        stability::check(a, a.drive.mode.into(), servo_period_s, machine_step_s)
+            .map_err(|why| (at.sub("sim", "inertia"), why))
     }
 
     /// `[supervisor]` and `[health_config]`: each value within its range.

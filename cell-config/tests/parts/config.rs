@@ -29,15 +29,27 @@ fn check(from: &str, to: &str, want: &str) {
     assert!(got.starts_with(want), "\n got: {got}\nwant: {want}");
 }
 
+/// The default file with each `(from, to)` of `edits` made (at its first place, which must
+/// exist): its error, and the error's text.
+fn refused(edits: &[(&str, &str)]) -> (ConfigError, String) {
+    let mut src = DEFAULT_TOML.to_string();
+    for (from, to) in edits {
+        assert!(src.contains(from), "{from:?} not in the default file");
+        src = src.replacen(from, to, 1);
+    }
+    let e = Config::parse(&src, "cell.toml").expect_err("refused");
+    let text = e.to_string();
+    (e, text)
+}
+
 #[test]
 fn every_problem_is_reported_at_once_in_the_files_order() {
-    let src = DEFAULT_TOML
-        .replacen("stop_timeout = 3.0", "stop_timeout = 1e20", 1)
-        .replacen("priority = 60", "priority = 120", 1)
-        .replacen("vmax = 16.0", "vmax = 0.0", 1)
-        .replacen("t_acc = 0.525", "t_acc = -1.0", 1);
-    let e = Config::parse(&src, "cell.toml").expect_err("four problems");
-    let text = e.to_string();
+    let (e, text) = refused(&[
+        ("stop_timeout = 3.0", "stop_timeout = 1e20"),
+        ("priority = 60", "priority = 120"),
+        ("vmax = 16.0", "vmax = 0.0"),
+        ("t_acc = 0.525", "t_acc = -1.0"),
+    ]);
     assert_eq!(e.problems.len(), 4, "{text}");
     let lines: Vec<usize> = e.problems.iter().map(|p| p.line).collect();
     assert!(lines.windows(2).all(|w| w[0] < w[1]), "{text}");
@@ -50,6 +62,31 @@ fn every_problem_is_reported_at_once_in_the_files_order() {
         assert!(text.contains(needle), "{needle:?} in\n{text}");
     }
     assert_eq!(text.lines().count(), 4, "one line each:\n{text}");
+}
+
+#[test]
+fn each_part_of_one_axis_says_its_own_problem_and_a_derived_check_waits_for_them() {
+    // Axis x: its unit, its range, a servo gain and its mechanics, each wrong.
+    let (e, text) = refused(&[
+        ("unit = \"mm\"", "unit = \"millimetre\""),
+        ("start = 40.0 ", "start = 400.0"),
+        ("kp = 125.0", "kp = -1.0"),
+        ("coulomb = 3.0", "coulomb = -3.0"),
+    ]);
+    for needle in [
+        "unit \"millimetre\" must be 1 to 7 bytes",
+        "axis x: start 400 lies outside 0 .. 200",
+        "axis x: servo kp = -1 must be 0 or more",
+        "axis x: sim coulomb = -3 must be 0 or more",
+    ] {
+        assert!(text.contains(needle), "{needle:?} in\n{text}");
+    }
+    // None from the limits or the loop's stability, which derive from all of these.
+    assert_eq!(e.problems.len(), 4, "{text}");
+    // Alone, a gain the loop cannot hold is found by the stability check.
+    let (e, text) = refused(&[("kp = 125.0", "kp = 1e9")]);
+    assert_eq!(e.problems.len(), 1, "{text}");
+    assert!(text.contains("axis x"), "{text}");
 }
 
 /// Like [`check`]: the one error is on `line` and says `needle`.
