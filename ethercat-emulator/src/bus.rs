@@ -146,6 +146,14 @@ impl Bus {
         bus
     }
 
+    /// Cable redundancy: the last SubDevice's port 1 is cabled (back to the MainDevice's
+    /// second port), so it has a link and its loop is open, as on the others (DL status).
+    pub fn close_ring(&mut self) {
+        if let Some(last) = self.devices.last_mut() {
+            last.esc.set_links(true, true);
+        }
+    }
+
     /// One frame through the line, changed in place into the reply: the devices first put
     /// their inputs in their ESCs, then every datagram passes every SubDevice, then the
     /// devices take their outputs. A frame that does not add up is refused (and dropped: the

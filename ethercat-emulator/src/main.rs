@@ -131,21 +131,13 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let names: Vec<String> = line.iter().map(|t| t.name().to_string()).collect();
-    let mut bus = Bus::new(line);
-    for d in &mut bus.devices {
-        // Increments of 100 µs (the default divider).
-        d.esc.write(
-            ethercat_emulator::esc::reg::WATCHDOG_TIME_PD,
-            &(args.pd_watchdog_ms * 10).to_le_bytes(),
+    if args.ring.as_deref() == Some(args.interface.as_str()) {
+        eprintln!(
+            "error: --ring {} is --interface: a ring needs a second interface",
+            args.interface
         );
+        return ExitCode::from(2);
     }
-    tracing::info!(
-        "answering on {}: {} SubDevice(s): {}",
-        args.interface,
-        names.len(),
-        names.join(", ")
-    );
     let ring = match args
         .ring
         .as_deref()
@@ -158,6 +150,27 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    let names: Vec<String> = line.iter().map(|t| t.name().to_string()).collect();
+    let mut bus = Bus::new(line);
+    if ring.is_some() {
+        bus.close_ring();
+    }
+    for d in &mut bus.devices {
+        // Increments of 100 µs (the default divider).
+        d.esc.write(
+            ethercat_emulator::esc::reg::WATCHDOG_TIME_PD,
+            &(args.pd_watchdog_ms * 10).to_le_bytes(),
+        );
+    }
+    tracing::info!(
+        "answering on {}{}: {} SubDevice(s): {}",
+        args.interface,
+        args.ring
+            .as_deref()
+            .map_or(String::new(), |r| format!(" (a ring back on {r})")),
+        names.len(),
+        names.join(", ")
+    );
     std::thread::scope(|s| {
         let back = ring.as_ref().map(|ring| s.spawn(|| pass_back(ring, &wire)));
         let code = answer(

@@ -107,3 +107,29 @@ fn ethercrab_brings_the_emulated_line_to_op_and_exchanges_its_process_data() {
     let _ = unsafe { maindevice.release_all() };
     wire.join().expect("the wire thread");
 }
+
+/// DL status (0x0110) as a MainDevice reads the line's topology from it: link on port 0
+/// everywhere, on port 1 except at the line's end, whose loop is closed; on a ring
+/// (`close_ring`, the emulator's `--ring`) the last port 1 has its link and is open too.
+#[test]
+fn the_dl_status_shows_where_the_line_ends_and_a_ring_has_no_end() {
+    let link1 = 1 << 5;
+    let closed1 = 1 << 10;
+    let terminals = || [Terminal::Ek1100, Terminal::El1008 { inputs: 0 }];
+    let status = |bus: &mut Bus, k: usize| {
+        let mut b = [0u8; 2];
+        assert!(bus.devices[k].esc.read(0x0110, &mut b, false));
+        u16::from_le_bytes(b)
+    };
+    let mut line = Bus::new(terminals());
+    for k in 0..2 {
+        assert_ne!(status(&mut line, k) & 1 << 4, 0, "port 0 has a link at {k}");
+    }
+    assert_eq!(status(&mut line, 0) & (link1 | closed1), link1);
+    assert_eq!(status(&mut line, 1) & (link1 | closed1), closed1);
+    let mut ring = Bus::new(terminals());
+    ring.close_ring();
+    for k in 0..2 {
+        assert_eq!(status(&mut ring, k) & (link1 | closed1), link1, "at {k}");
+    }
+}
