@@ -48,6 +48,8 @@ const EVENT_QUEUE: usize = 1024;
 
 /// How often the network thread asks the supervisor again for `[network]` before it answers.
 const ASK_AGAIN: Duration = Duration::from_millis(500);
+/// How often the network thread and the events' thread look whether the gateway is leaving.
+const LOOK_AGAIN: Duration = Duration::from_millis(50);
 
 /// Commands waiting for the control thread at most.
 const CONTROL_QUEUE: usize = 64;
@@ -198,7 +200,7 @@ fn line(
     instance: InstanceName,
     axes: Axes,
     kin: Option<ForwardKinematics>,
-    events: Receiver<(EventV1, u64)>,
+    mut events: Receiver<(EventV1, u64)>,
     note: SyncSender<Note>,
 ) {
     let off = |why: String| {
@@ -253,7 +255,7 @@ fn line(
             axes: &axes,
             kin: kin.as_deref(),
         };
-        match serve(&session, &instance, &name, &net, &users, &cell, &events) {
+        match serve(&session, &instance, &name, &net, &users, &cell, &mut events) {
             Ok(()) => return,
             Err(e) => {
                 let why = format!("the gateway left the line: {e}");
@@ -274,7 +276,7 @@ fn serve(
     net: &NetworkSettings,
     users: &Users,
     cell: &Cell<'_>,
-    events: &Receiver<(EventV1, u64)>,
+    events: &mut Receiver<(EventV1, u64)>,
 ) -> zenoh::Result<()> {
     let axes = cell.axes;
     let host = nix::unistd::gethostname()
@@ -304,7 +306,8 @@ fn serve(
         })
         .wait()?;
     // No event dropped on the way unsaid: the publications wait for a slow subscriber (a
-    // dropped last one would go unnoticed, nothing numbered coming after it); meanwhile the
+    // dropped last one would go unnoticed, nothing numbered coming after it), on a thread of
+    // their own (the status and the ROS 2 topics go on at their period); meanwhile the
     // cycle's queue fills, and what it cannot take is counted and said (`lost`). A link that
     // stays blocked 5 s is closed by Zenoh (`wait_before_close`): that peer has to join again.
     let event_pub = session
@@ -409,59 +412,87 @@ fn serve(
                 return Err(format!("cannot start {what}'s thread: {e}").into());
             }
         }
+        let publishing = std::thread::Builder::new()
+            .name("events".into())
+            .spawn_scoped(scope, || publish_events(&event_pub, events, axes, &leaving));
+        let publishing = match publishing {
+            Ok(p) => p,
+            Err(e) => {
+                leaving.store(true, Ordering::Relaxed);
+                return Err(format!("cannot start the events' thread: {e}").into());
+            }
+        };
         let result = (|| -> zenoh::Result<()> {
             let period = Duration::from_secs_f64(net.status_period);
             let mut next_status = Instant::now();
-            let mut seq = 0u64;
-            let started_ms = now_ms();
-            let t0 = runtime::time::now_ns();
             loop {
-                if runtime::signals::stop_requested() {
+                // The events' thread ends when the cell's events end.
+                if runtime::signals::stop_requested() || publishing.is_finished() {
                     return Ok(());
                 }
                 let wait = next_status.saturating_duration_since(Instant::now());
-                match events.recv_timeout(wait) {
-                    Ok((e, lost)) => {
-                        seq += 1;
-                        let m = EventMessage {
-                            gateway_started_ms: started_ms,
-                            seq,
-                            lost,
-                            event: control_plane::event::event(&e, axes, t0),
-                        };
-                        event_pub
-                            .put(serde_json::to_vec(&m).unwrap_or_default())
-                            .wait()?;
-                    }
-                    Err(RecvTimeoutError::Timeout) => {}
-                    Err(RecvTimeoutError::Disconnected) => return Ok(()),
+                if !wait.is_zero() {
+                    std::thread::sleep(wait.min(LOOK_AGAIN));
+                    continue;
                 }
-                if Instant::now() >= next_status {
-                    next_status += period;
-                    if next_status < Instant::now() {
-                        next_status = Instant::now() + period;
+                next_status += period;
+                if next_status < Instant::now() {
+                    next_status = Instant::now() + period;
+                }
+                if let Ok(Reply::Status(s)) = channel::call(instance, &Request::Status) {
+                    let m = StatusMessage {
+                        cell: name.to_string(),
+                        host: host.clone(),
+                        status: s,
+                    };
+                    let bytes = serde_json::to_vec(&m).unwrap_or_default();
+                    if let Some(r) = &mut ros {
+                        r.publish(&m.status)?;
                     }
-                    if let Ok(Reply::Status(s)) = channel::call(instance, &Request::Status) {
-                        let m = StatusMessage {
-                            cell: name.to_string(),
-                            host: host.clone(),
-                            status: s,
-                        };
-                        let bytes = serde_json::to_vec(&m).unwrap_or_default();
-                        if let Some(r) = &mut ros {
-                            r.publish(&m.status)?;
-                        }
-                        if let Ok(mut g) = latest.lock() {
-                            *g = Some((bytes.clone(), m.status));
-                        }
-                        status_pub.put(bytes).wait()?;
+                    if let Ok(mut g) = latest.lock() {
+                        *g = Some((bytes.clone(), m.status));
                     }
+                    status_pub.put(bytes).wait()?;
                 }
             }
         })();
         leaving.store(true, Ordering::Relaxed);
-        result
+        // A panic aborts the process: a thread that ended has its result.
+        let published = publishing.join().unwrap_or(Ok(()));
+        result.and(published)
     })
+}
+
+/// The cell's events onto the line, numbered, each with the count lost just before it; until
+/// the gateway leaves (`leaving`) or the cell's events end.
+fn publish_events(
+    event_pub: &zenoh::pubsub::Publisher<'_>,
+    events: &mut Receiver<(EventV1, u64)>,
+    axes: &Axes,
+    leaving: &AtomicBool,
+) -> zenoh::Result<()> {
+    let started_ms = now_ms();
+    let t0 = runtime::time::now_ns();
+    let mut seq = 0u64;
+    while !leaving.load(Ordering::Relaxed) {
+        match events.recv_timeout(LOOK_AGAIN) {
+            Ok((e, lost)) => {
+                seq += 1;
+                let m = EventMessage {
+                    gateway_started_ms: started_ms,
+                    seq,
+                    lost,
+                    event: control_plane::event::event(&e, axes, t0),
+                };
+                event_pub
+                    .put(serde_json::to_vec(&m).unwrap_or_default())
+                    .wait()?;
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => return Ok(()),
+        }
+    }
+    Ok(())
 }
 
 /// A cell's forward kinematics, shared with the network thread.
