@@ -11,13 +11,14 @@ attachments' sequence numbers and GID; with --pose also one tool pose
 (geometry_msgs/msg/PoseStamped on tool_pose, checked the same way); and "graph": the node
 and publisher tokens in ROS 2's graph (liveliness `@ros2_lv/<domain>/...`), each checked
 against the layout of rmw_zenoh's design document and the data keys. Exit 1 with the reason
-on stderr if anything differs from what rmw_zenoh writes or nothing arrives within 10 s.
+on stderr if anything differs from what rmw_zenoh writes or nothing arrives within 30 s.
 """
 import argparse
 import json
 import queue
 import struct
 import sys
+import time
 
 import zenoh
 from rosbags.typesys import Stores, get_typestore
@@ -117,10 +118,18 @@ def graph(args, data_keys):
     conf.insert_json5("connect/endpoints", json.dumps(args.connect))
     conf.insert_json5("scouting/multicast/enabled", "false")
     ns = "%" + args.namespace
+    # Asked again until the node's token is there: a question sent while the new session is
+    # still joining finds nobody to answer it (30 s at most).
+    deadline = time.monotonic() + 30
     with zenoh.open(conf) as session:
-        tokens = sorted({str(r.ok.key_expr)
-                         for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**", timeout=20)
-                         if r.ok is not None})
+        while True:
+            tokens = sorted({str(r.ok.key_expr)
+                             for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**",
+                                                               timeout=5)
+                             if r.ok is not None})
+            if any(t.split("/")[5:6] == ["NN"] for t in tokens) or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
     nodes = [t.split("/") for t in tokens if t.split("/")[5:6] == ["NN"]]
     pubs = [t.split("/") for t in tokens if t.split("/")[5:6] == ["MP"]]
     if len(nodes) != 1:
