@@ -329,51 +329,7 @@ fn serve(
         .name("control".into())
         .spawn(move || {
             while let Ok(q) = control.recv() {
-                let payload = q
-                    .payload()
-                    .map(|p| p.to_bytes().to_vec())
-                    .unwrap_or_default();
-                let signature = q
-                    .attachment()
-                    .and_then(|a| a.try_to_string().ok().map(|s| s.to_string()))
-                    .unwrap_or_default();
-                let now = now_ms();
-                let verdict = budget.take(now);
-                if let Some(n) = verdict.held_before {
-                    tracing::warn!(
-                        "{n} more commands from the line not logged (at most {LOG_LINES} in {} s)",
-                        budget.window_s()
-                    );
-                }
-                let answer = match gate.admit(&payload, &signature, now) {
-                    Ok(a) => {
-                        if verdict.log {
-                            tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
-                        }
-                        match a.command {
-                            Command::Status {} => for_control
-                                .lock()
-                                .ok()
-                                .and_then(|g| g.as_ref().map(|m| m.1.clone()))
-                                .map_or_else(
-                                    || Answer::Failed {
-                                        reason: "no status of the cell yet".into(),
-                                    },
-                                    |status| Answer::Status { status },
-                                ),
-                            ref other => ask(&control_instance, other),
-                        }
-                    }
-                    Err(refusal) => {
-                        if verdict.log {
-                            tracing::warn!("a command refused: {refusal}");
-                        }
-                        Answer::Refused {
-                            by: RefusedBy::Gateway,
-                            reason: refusal.to_string(),
-                        }
-                    }
-                };
+                let answer = answer(&q, &mut gate, &mut budget, &control_instance, &for_control);
                 let bytes = serde_json::to_vec(&answer).unwrap_or_default();
                 let _ = q.reply(q.key_expr().clone(), bytes).wait();
             }
@@ -461,6 +417,63 @@ fn serve(
         let published = publishing.join().unwrap_or(Ok(()));
         result.and(published)
     })
+}
+
+/// The answer to a question on the cell's control key: who asks checked by `gate` (signed,
+/// fresh, allowed) before anything is done; the status from the latest one published, any
+/// other command asked of the supervisor. Logged within `budget`.
+fn answer(
+    q: &zenoh::query::Query,
+    gate: &mut Gate,
+    budget: &mut LogBudget,
+    instance: &InstanceName,
+    latest: &Latest,
+) -> Answer {
+    let payload = q
+        .payload()
+        .map(|p| p.to_bytes().to_vec())
+        .unwrap_or_default();
+    let signature = q
+        .attachment()
+        .and_then(|a| a.try_to_string().ok().map(|s| s.to_string()))
+        .unwrap_or_default();
+    let now = now_ms();
+    let verdict = budget.take(now);
+    if let Some(n) = verdict.held_before {
+        tracing::warn!(
+            "{n} more commands from the line not logged (at most {LOG_LINES} in {} s)",
+            budget.window_s()
+        );
+    }
+    match gate.admit(&payload, &signature, now) {
+        Ok(a) => {
+            if verdict.log {
+                tracing::info!("{} ({:?}) asks: {}", a.user, a.role, a.command.op());
+            }
+            match a.command {
+                Command::Status {} => latest
+                    .lock()
+                    .ok()
+                    .and_then(|g| g.as_ref().map(|m| m.1.clone()))
+                    .map_or_else(
+                        || Answer::Failed {
+                            reason: "no status of the cell yet".into(),
+                        },
+                        |status| Answer::Status { status },
+                    ),
+                ref other => ask(instance, other),
+            }
+        }
+        Err(refusal) => {
+            if verdict.log {
+                tracing::warn!("a command refused: {refusal}");
+            }
+            Answer::Refused {
+                by: RefusedBy::Gateway,
+                reason: refusal.to_string(),
+            }
+        }
+    }
 }
 
 /// The cell's events onto the line, numbered, each with the count lost just before it; until

@@ -18,7 +18,6 @@ import json
 import queue
 import struct
 import sys
-import time
 
 import zenoh
 from rosbags.typesys import Stores, get_typestore
@@ -118,18 +117,10 @@ def graph(args, data_keys):
     conf.insert_json5("connect/endpoints", json.dumps(args.connect))
     conf.insert_json5("scouting/multicast/enabled", "false")
     ns = "%" + args.namespace
-    # Asked again until the node's token is there: a question sent while the new session is
-    # still joining finds nobody to answer it (30 s at most).
-    deadline = time.monotonic() + 30
     with zenoh.open(conf) as session:
-        while True:
-            tokens = sorted({str(r.ok.key_expr)
-                             for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**",
-                                                               timeout=5)
-                             if r.ok is not None})
-            if any(t.split("/")[5:6] == ["NN"] for t in tokens) or time.monotonic() > deadline:
-                break
-            time.sleep(0.2)
+        tokens = sorted({str(r.ok.key_expr)
+                         for r in session.liveliness().get(f"@ros2_lv/{args.domain}/**", timeout=20)
+                         if r.ok is not None})
     nodes = [t.split("/") for t in tokens if t.split("/")[5:6] == ["NN"]]
     pubs = [t.split("/") for t in tokens if t.split("/")[5:6] == ["MP"]]
     if len(nodes) != 1:
@@ -153,8 +144,11 @@ def graph(args, data_keys):
         found[leaf] = {"token": "/".join(p), "qos": p[12]}
     if sorted(found) != sorted(data_keys):
         fail(f"graph: publishers {sorted(found)}, topics {sorted(data_keys)}")
-    if len(zid) != 32 or any(c not in "0123456789abcdef" for c in zid):
-        fail(f"graph: session id {zid!r} is not 32 hex digits")
+    # rmw_zenoh writes `zenoh::Id::to_string()`, Zenoh's own string of the 128-bit id: lower-case
+    # hex without leading zeros (31 digits one time in 16).
+    if not (1 <= len(zid) <= 32 and all(c in "0123456789abcdef" for c in zid)
+            and not zid.startswith("0")):
+        fail(f"graph: session id {zid!r} is not Zenoh's hex string of an id")
     return {"node": "/".join(node), "name": name, "publishers": found}
 
 
