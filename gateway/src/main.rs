@@ -564,8 +564,8 @@ struct RosTopics<'a> {
     frame: String,
     /// Each axis' name and how many m or rad its unit is.
     axes: Vec<(String, f64)>,
-    /// The publisher's GID in rmw_zenoh's attachment: the session's Zenoh id.
-    gid: [u8; 16],
+    /// The joint states' and the tool pose's GIDs in rmw_zenoh's attachment ([`ros2::gid`]).
+    gids: [[u8; 16]; 2],
     seq: i64,
     /// The node and its publishers in ROS 2's graph, for as long as they publish.
     _graph: Vec<zenoh::liveliness::LivelinessToken>,
@@ -591,8 +591,7 @@ impl<'a> RosTopics<'a> {
             None => None,
         };
         let zid = session.zid().to_string();
-        let mut graph = vec![ros2::node_token(r.domain, &zid, &frame)];
-        graph.push(ros2::publisher_token(
+        let joints_token = ros2::publisher_token(
             r.domain,
             &zid,
             1,
@@ -600,17 +599,20 @@ impl<'a> RosTopics<'a> {
             ros2::JOINT_STATES,
             ros2::JOINT_STATE_TYPE,
             ros2::JOINT_STATE_HASH,
-        ));
+        );
+        let pose_token = ros2::publisher_token(
+            r.domain,
+            &zid,
+            2,
+            &frame,
+            ros2::TOOL_POSE,
+            ros2::POSE_STAMPED_TYPE,
+            ros2::POSE_STAMPED_HASH,
+        );
+        let gids = [ros2::gid(&joints_token), ros2::gid(&pose_token)];
+        let mut graph = vec![ros2::node_token(r.domain, &zid, &frame), joints_token];
         if pose.is_some() {
-            graph.push(ros2::publisher_token(
-                r.domain,
-                &zid,
-                2,
-                &frame,
-                ros2::TOOL_POSE,
-                ros2::POSE_STAMPED_TYPE,
-                ros2::POSE_STAMPED_HASH,
-            ));
+            graph.push(pose_token);
         }
         let graph = (graph.into_iter())
             .map(|key| session.liveliness().declare_token(key).wait())
@@ -629,7 +631,7 @@ impl<'a> RosTopics<'a> {
             axes: (cell.axes.axes.iter())
                 .map(|(n, u)| (n.clone(), cell_config::network::ros_scale(u).unwrap_or(1.0)))
                 .collect(),
-            gid: session.zid().to_le_bytes(),
+            gids,
             seq: 0,
             _graph: graph,
         })
@@ -650,7 +652,7 @@ impl<'a> RosTopics<'a> {
         self.seq += 1;
         self.publisher
             .put(ros2::joint_state(stamp_ns, &self.frame, &joints))
-            .attachment(ros2::attachment(self.seq, stamp_ns as i64, &self.gid))
+            .attachment(ros2::attachment(self.seq, stamp_ns as i64, &self.gids[0]))
             .wait()?;
         // The tool pose of the same joints, in the cell's units (mm, deg) for the kinematics.
         let Some((publisher, kin)) = &self.pose else {
@@ -664,12 +666,9 @@ impl<'a> RosTopics<'a> {
             return Ok(());
         };
         let (position, yaw) = tool_pose(kin.coords(), &p);
-        // Its own GID: the session's Zenoh id, the last byte turned.
-        let mut gid = self.gid;
-        gid[15] ^= 1;
         publisher
             .put(ros2::pose_stamped(stamp_ns, &self.frame, position, yaw))
-            .attachment(ros2::attachment(self.seq, stamp_ns as i64, &gid))
+            .attachment(ros2::attachment(self.seq, stamp_ns as i64, &self.gids[1]))
             .wait()
     }
 }

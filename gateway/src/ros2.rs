@@ -128,6 +128,13 @@ pub fn joint_state(stamp_ns: u64, frame_id: &str, joints: &[(&str, f64)]) -> Vec
     w.bytes
 }
 
+/// A publisher's GID as rmw_zenoh makes it (`liveliness::Entity`): the XXH3 128-bit hash of
+/// its graph token's key, the low 64 bits then the high 64 bits, each little-endian. The same
+/// in every attachment of the publisher and in what ROS 2 learns of it from the graph.
+pub fn gid(token: &str) -> [u8; 16] {
+    xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
+}
+
 /// rmw_zenoh's attachment (since 0.2.4): the sequence number and the source time stamp (ns
 /// since the Unix epoch), each an i64 little-endian, then the GID's length (16, one byte) and
 /// the GID.
@@ -240,6 +247,30 @@ mod tests {
 #[cfg(test)]
 mod graph {
     use super::*;
+
+    /// Against xxHash's reference implementation (PyPI `xxhash` 3.5.0, `xxh3_128_intdigest`
+    /// as 16 little-endian bytes), for the design document's talker and a token of ours.
+    #[test]
+    fn a_gid_is_the_xxh3_of_the_token_as_rmw_zenoh_makes_it() {
+        let talker = "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/0/11/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18/::,7:,:,:,,";
+        let ours = publisher_token(
+            42,
+            "f44629142c9669e40414ac10d485415",
+            1,
+            "press_0",
+            JOINT_STATES,
+            JOINT_STATE_TYPE,
+            JOINT_STATE_HASH,
+        );
+        let hex = |g: [u8; 16]| g.iter().map(|b| format!("{b:02x}")).collect::<String>();
+        assert_eq!(hex(gid(talker)), "d2e5f27410cee403e2615e7eee6bcfef");
+        assert_eq!(ours.len(), 216, "{ours}");
+        assert_eq!(
+            hex(gid(&ours)),
+            "94b1435c6cdcabf5e2e2fea3ebc80cd2",
+            "{ours}"
+        );
+    }
 
     #[test]
     fn the_graph_tokens_are_rmw_zenohs() {

@@ -7,7 +7,8 @@ same) and computes the type hash the key must carry.
     ros2_joint_states.py --connect tcp/HOST:PORT --domain D --namespace NS [--samples N] [--pose]
 
 Prints one JSON object: the key, the frame, the names, the positions, the stamps (s), the
-attachments' sequence numbers and GID; with --pose also one tool pose
+attachments' sequence numbers and GID (its publisher's, as rmw_zenoh makes it: XXH3-128 of
+the publisher's graph token, PyPI xxhash); with --pose also one tool pose
 (geometry_msgs/msg/PoseStamped on tool_pose, checked the same way); and "graph": the node
 and publisher tokens in ROS 2's graph (liveliness `@ros2_lv/<domain>/...`), each checked
 against the layout of rmw_zenoh's design document and the data keys. Exit 1 with the reason
@@ -19,6 +20,7 @@ import queue
 import struct
 import sys
 
+import xxhash
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
@@ -102,12 +104,13 @@ def main():
     out["gids"] = sorted(out["gids"])
     if args.pose:
         out["pose"] = tool_pose(args, store)
+    gids = {"joint_states": out["gids"], **({"tool_pose": [out["pose"]["gid"]]} if args.pose else {})}
     out["graph"] = graph(args, {"joint_states": out["key"],
-                                **({"tool_pose": out["pose"]["key"]} if args.pose else {})})
+                                **({"tool_pose": out["pose"]["key"]} if args.pose else {})}, gids)
     print(json.dumps(out))
 
 
-def graph(args, data_keys):
+def graph(args, data_keys, gids):
     """The cell's node and publishers in ROS 2's graph, as rmw_zenoh's design document lays
     its liveliness tokens out: `@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/<enclave>/<ns>/<node>`
     and `@ros2_lv/<domain>/<zid>/<nid>/<eid>/MP/<enclave>/<ns>/<node>/<topic>/<type>/<hash>/<qos>`,
@@ -141,7 +144,13 @@ def graph(args, data_keys):
         want = data_keys[leaf].split("/")[-2:]
         if p[10:12] != want:
             fail(f"graph: {topic} declared as {p[10:12]}, published as {want}")
-        found[leaf] = {"token": "/".join(p), "qos": p[12]}
+        token = "/".join(p)
+        # rmw_zenoh's GID of a publisher: XXH3-128 of its token, low then high 64 bits, each
+        # little-endian (`liveliness::Entity`); the same in each of its messages' attachments.
+        gid = xxhash.xxh3_128_intdigest(token.encode()).to_bytes(16, "little").hex()
+        if gids.get(leaf) != [gid]:
+            fail(f"graph: {topic}'s messages carry GID {gids.get(leaf)}, its token hashes to {gid}")
+        found[leaf] = {"token": token, "qos": p[12], "gid": gid}
     if sorted(found) != sorted(data_keys):
         fail(f"graph: publishers {sorted(found)}, topics {sorted(data_keys)}")
     # rmw_zenoh writes `zenoh::Id::to_string()`, Zenoh's own string of the 128-bit id: lower-case
