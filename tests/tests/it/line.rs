@@ -341,7 +341,10 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     }
     // Each publisher's messages carry the GID rmw_zenoh gives it: its token's XXH3-128 (the
     // checker compares them; a GID of another making fails it).
-    assert_eq!(graph["publishers"]["joint_states"]["gid"], j["gids"][0], "{j}");
+    assert_eq!(
+        graph["publishers"]["joint_states"]["gid"], j["gids"][0],
+        "{j}"
+    );
     assert_eq!(graph["publishers"]["tool_pose"]["gid"], pose["gid"], "{j}");
 
     // A viewer may read, not command: refused by the gateway, with why; the cell untouched.
