@@ -771,6 +771,19 @@ impl Cell {
     pub(crate) fn tick(&mut self, cfg: &Config) -> Vec<Incident> {
         let mut out = Vec::new();
         self.beat();
+        self.reap(cfg, &mut out);
+        self.update_connections();
+        self.take_events();
+        self.poll_estop();
+        self.watch(cfg, &mut out);
+        self.forgive_stable();
+        self.restart_due(cfg);
+        out
+    }
+
+    /// The processes that exited since the last tick: a critical one an incident; each lost
+    /// (restarted by its policy), but one of two during a swap.
+    fn reap(&mut self, cfg: &Config, out: &mut Vec<Incident>) {
         while let Some((p, status)) = self.children.exited() {
             let k = p.index;
             let text = status.to_string();
@@ -794,14 +807,22 @@ impl Cell {
                 status.code().map_or(-1.0, f64::from),
             );
         }
+    }
+
+    /// History for subscribers that connected since the last tick.
+    fn update_connections(&self) {
         self.config_pub.update_connections();
         if let Some(p) = &self.ethercat_pub {
             p.update_connections();
         }
         self.host_pub.update_connections();
         self.handover_pub.update_connections();
-        self.take_events();
-        self.poll_estop();
+    }
+
+    /// Each process' status since the last tick: its heartbeat (its cycle count going on), a
+    /// fault it reports, a stall beyond the heartbeat timeout (the e-stop if it is critical;
+    /// ended, to be restarted, by its policy).
+    fn watch(&mut self, cfg: &Config, out: &mut Vec<Incident>) {
         let timeout = Duration::from_secs_f64(cfg.supervisor.heartbeat_timeout);
         for k in 0..self.names.len() {
             while let Some(s) = self.status_subs[k].next() {
@@ -851,8 +872,11 @@ impl Cell {
                 }
             }
         }
-        // A process that is not critical and has run a while since its last restart starts
-        // its restart count afresh (no e-stop reset does it for such a process).
+    }
+
+    /// A process that is not critical and has run a while since its last restart starts its
+    /// restart count afresh (no e-stop reset does it for such a process).
+    fn forgive_stable(&mut self) {
         for k in 0..self.names.len() {
             if !self.critical[k]
                 && self.streak[k] > 0
@@ -862,7 +886,10 @@ impl Cell {
                 self.streak[k] = 0;
             }
         }
-        // Restarts that are due.
+    }
+
+    /// The restarts that are due, each said in the log and in an event.
+    fn restart_due(&mut self, cfg: &Config) {
         for k in 0..self.names.len() {
             if let Life::Restarting(at) = self.life[k]
                 && Instant::now() >= at
@@ -889,7 +916,6 @@ impl Cell {
                 }
             }
         }
-        out
     }
 
     /// Takes the setpoints, servo states and images that arrived, keeping the newest (when
