@@ -754,40 +754,52 @@ fn axis_range(a: &Axis, at: AxisAt) -> Result<(), Problem> {
 /// An axis' servo gains: 0 or more.
 fn axis_gains(a: &Axis, at: AxisAt) -> Result<(), Problem> {
     let g = &a.servo;
-    for (k, v) in [
-        ("kp", g.kp),
-        ("ki", g.ki),
-        ("kd", g.kd),
-        ("kvff", g.kvff),
-        ("kaff", g.kaff),
-        ("integral_limit", g.integral_limit),
-    ] {
-        if !non_negative(v) {
-            return Err((
-                at.sub("servo", k),
-                format!("axis {}: servo {k} = {v} must be 0 or more", a.name),
-            ));
-        }
-    }
-    Ok(())
+    bounded(
+        a,
+        at,
+        "servo",
+        &[
+            ("kp", g.kp, false),
+            ("ki", g.ki, false),
+            ("kd", g.kd, false),
+            ("kvff", g.kvff, false),
+            ("kaff", g.kaff, false),
+            ("integral_limit", g.integral_limit, false),
+        ],
+    )
 }
 
 /// An axis' simulated mechanics: inertia, effort limit and encoder resolution positive,
 /// friction 0 or more.
 fn axis_model(a: &Axis, at: AxisAt) -> Result<(), Problem> {
     let s = &a.sim;
-    for (k, v, pos) in [
-        ("inertia", s.inertia, true),
-        ("viscous", s.viscous, false),
-        ("coulomb", s.coulomb, false),
-        ("effort_limit", s.effort_limit, true),
-        ("encoder_resolution", s.encoder_resolution, true),
-    ] {
+    bounded(
+        a,
+        at,
+        "sim",
+        &[
+            ("inertia", s.inertia, true),
+            ("viscous", s.viscous, false),
+            ("coulomb", s.coulomb, false),
+            ("effort_limit", s.effort_limit, true),
+            ("encoder_resolution", s.encoder_resolution, true),
+        ],
+    )
+}
+
+/// The first of `values` of an axis' table out of its bound: positive (`true`) or 0 or more.
+fn bounded(
+    a: &Axis,
+    at: AxisAt,
+    table: &'static str,
+    values: &[(&'static str, f64, bool)],
+) -> Result<(), Problem> {
+    for &(k, v, pos) in values {
         if !(if pos { positive(v) } else { non_negative(v) }) {
             let need = if pos { "positive" } else { "0 or more" };
             return Err((
-                at.sub("sim", k),
-                format!("axis {}: sim {k} = {v} must be {need}", a.name),
+                at.sub(table, k),
+                format!("axis {}: {table} {k} = {v} must be {need}", a.name),
             ));
         }
     }
@@ -809,14 +821,16 @@ fn axis_drive(a: &Axis, at: AxisAt) -> Result<(), Problem> {
             ),
         ));
     }
-    for (k, v) in [("kp", d.kp), ("ki", d.ki), ("kd", d.kd)] {
-        if !non_negative(v) {
-            return Err((
-                at.sub("drive", k),
-                format!("axis {}: drive {k} = {v} must be 0 or more", a.name),
-            ));
-        }
-    }
+    bounded(
+        a,
+        at,
+        "drive",
+        &[
+            ("kp", d.kp, false),
+            ("ki", d.ki, false),
+            ("kd", d.kd, false),
+        ],
+    )?;
     if d.mode != DriveMode::Cst && d.kd <= 0.0 {
         return Err((
             at.sub("drive", "kd"),

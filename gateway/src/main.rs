@@ -74,7 +74,9 @@ struct Bridge {
     lost: u64,
     /// Each source's last event number (the supervisor's and its tools' share theirs: no
     /// gap is counted in them). A source's events before the first one this process saw are
-    /// not counted: they cannot be told from those published before it subscribed.
+    /// not counted: they cannot be told from those published before it subscribed. Sized in
+    /// set-up for every process of the cell and as many foreign sources: the cycle does not
+    /// grow it unless more sources than that publish.
     last_seq: std::collections::HashMap<u32, u64>,
     /// This process' source number, for its own note of a loss.
     source: u32,
@@ -160,7 +162,7 @@ fn main() -> ExitCode {
                 events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
                 tx,
                 lost: 0,
-                last_seq: std::collections::HashMap::new(),
+                last_seq: std::collections::HashMap::with_capacity(2 * shm_schema::MAX_PROCESSES),
                 source: ctx.index as u32,
                 notes,
             })

@@ -25,15 +25,6 @@ use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
-/// Whether servo's states began the job's ending on the e-stop.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Ending {
-    /// No: the job goes on.
-    No,
-    /// Yes: the job waits for the e-stop's reactions, then fails with it.
-    Began,
-}
-
 /// The longest stretch of a program the supervisor records for its trace and figures (s):
 /// a program that runs for hours keeps bounded memory; the report says the trace was cut.
 pub(crate) const MAX_RECORD_S: f64 = 600.0;
@@ -348,7 +339,9 @@ impl Job {
         if let Some(newest) = self.take_setpoints(cell)? {
             self.feed(cell, &newest)?;
         }
-        if self.take_servo_states(cell, cfg)? == Ending::Began {
+        self.take_servo_states(cell, cfg)?;
+        if self.ending.is_some() {
+            // servo's states began the job's ending on the e-stop.
             return Ok(None);
         }
         let (moving, im) = (self.last.is_some(), &mut self.images);
@@ -477,7 +470,7 @@ impl Job {
     /// servo's states since the last tick, once the program runs: kept for the figures; a
     /// latched fault, the drives off or a setpoint jump an error (the drives off by the
     /// e-stop begins the job's ending instead); the settling judged after the motion's end.
-    fn take_servo_states(&mut self, cell: &mut Cell, cfg: &Config) -> Result<Ending, RunError> {
+    fn take_servo_states(&mut self, cell: &mut Cell, cfg: &Config) -> Result<(), RunError> {
         let settle_ns = (cfg.motion.settle_time * 1e9) as u64;
         while let Some(s) = cell.servo_sub.next() {
             cell.last_servo = Some(s);
@@ -497,7 +490,7 @@ impl Job {
                 cell.poll_estop();
                 if cell.estop.is_some() {
                     self.ending = Some(Instant::now());
-                    return Ok(Ending::Began);
+                    return Ok(());
                 }
                 cell.take_events();
                 return Err(RunError::failed(Failure::Disabled {
@@ -526,7 +519,7 @@ impl Job {
                 }
             }
         }
-        Ok(Ending::No)
+        Ok(())
     }
 
     fn report(

@@ -635,9 +635,9 @@ pub fn until_it_says(child: &mut std::process::Child, name: &str, words: &str, w
 /// The `ethercat-emulator` process alone on a line of its own: a network namespace
 /// `rtc-ecat-<pid>-<test>` with a veth pair, the emulator on `s0` (with `args`), the
 /// MainDevice's end `m0`, and a second pair `s1`-`m1` for a ring (the emulator's `--ring s1`,
-/// a MainDevice's second port on `m1`); up once the emulator says it answers (its log goes on to the test's
-/// stderr). Dropped: the emulator stopped (SIGTERM, then SIGKILL after 10 s) and the namespace
-/// removed. Needs root and iproute2.
+/// a MainDevice's second port on `m1`); up once the emulator says it answers (its log goes on
+/// to the test's stderr). Dropped: the emulator stopped (SIGTERM, then SIGKILL after 10 s) and
+/// the namespace removed. Needs root and iproute2.
 #[derive(Debug)]
 pub struct EmulatedLine {
     /// The namespace's name.

@@ -174,6 +174,21 @@ fn room(hosts: &Hosts, file: &Path, args: &[&str]) -> Output {
     run_with_watchdog(&mut cmd, WATCHDOG)
 }
 
+/// `gateway line --json --line <file> <args>` started in the room, going on (`--watch`,
+/// `events`): its stdout piped, its stderr dropped.
+fn following(hosts: &Hosts, file: &Path, args: &[&str]) -> std::process::Child {
+    Command::new("ip")
+        .args(["netns", "exec", &hosts.room])
+        .arg(integration_tests::bin("gateway"))
+        .args(["line", "--json", "--line"])
+        .arg(file)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("gateway line in the room")
+}
+
 /// [`room`], which must succeed; its output.
 fn ok(hosts: &Hosts, file: &Path, args: &[&str]) -> Output {
     let out = room(hosts, file, args);
@@ -505,16 +520,7 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     );
 
     // A control room's screen, watching the line from here on: the cells as they come and go.
-    let mut watcher = Command::new("ip")
-        .args(["netns", "exec", &hosts.room])
-        .arg(integration_tests::bin("gateway"))
-        .args(["line", "--json", "--line"])
-        .arg(&victor)
-        .args(["cells", "--watch"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("a watcher");
+    let mut watcher = following(&hosts, &victor, &["cells", "--watch"]);
     let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::<Value>::new()));
     let lines = std::io::BufReader::new(watcher.stdout.take().expect("piped"));
     let into = seen.clone();
@@ -789,16 +795,7 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
 #[test]
 fn an_event_burst_reaches_the_room_whole_or_says_how_many_were_lost() {
     let (hosts, a, victor) = one_cell_and_a_viewer("line_burst");
-    let mut follower = Command::new("ip")
-        .args(["netns", "exec", &hosts.room])
-        .arg(integration_tests::bin("gateway"))
-        .args(["line", "--json", "--line"])
-        .arg(&victor)
-        .args(["events", "press-0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("the follower");
+    let mut follower = following(&hosts, &victor, &["events", "press-0"]);
     // What the room saw: burst events, and how many it was told were lost.
     let seen = std::sync::Arc::new(std::sync::Mutex::new((0u64, 0u64, false)));
     let lines = std::io::BufReader::new(follower.stdout.take().expect("piped"));
