@@ -28,6 +28,18 @@ def open_session(endpoints):
     return zenoh.open(conf)
 
 
+def linked(session, patience_s=15.0):
+    """Whether the session has a peer or a router: the links come up after it opens, so
+    asked until one is there, or `patience_s` passed."""
+    end = time.monotonic() + patience_s
+    while True:
+        if list(session.info.peers_zid()) + list(session.info.routers_zid()):
+            return True
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.05)
+
+
 def get_json(session, key, **kw):
     """Every reply of a get, as (key, parsed JSON); error replies are skipped."""
     out = []
@@ -101,7 +113,7 @@ def main():
     with open(a.secret_file, encoding="utf-8") as f:
         secret = f.readline().rstrip("\r\n")
     with open_session(a.connect) as session:
-        if not list(session.info.peers_zid()) + list(session.info.routers_zid()):
+        if not linked(session):
             print(json.dumps({"answer": "failed", "reason": "no endpoint of the line let us in"}))
             return 1
         if a.cmd == "cells":
