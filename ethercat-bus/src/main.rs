@@ -131,6 +131,145 @@ struct Bus {
 }
 
 impl Bus {
+    /// The bus brought up to SAFE-OP, the cycle's frames to take it to OP. Set-up only.
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let i = &ctx.instance;
+        let bus = bus_config(ctx)?;
+        let wire = Arc::new(open_wire(bus.interface())?);
+        let axes = &ctx.cell.axis[..ctx.cell.axes as usize];
+        let mut master = Master::new()?;
+        let timing = Timing {
+            period_ns: ctx.own.period_ns,
+            phase_ns: ctx.own.phase_ns,
+        };
+        let up = master
+            .bring_up(&bus, axes, timing, &wire, &runtime::signals::stop_requested)
+            .map_err(|e| -> SetupError {
+                match e {
+                    BringUpError::Refused(m) => Box::new(process::Refused(m)),
+                    BringUpError::Failed(m) => m.into(),
+                }
+            })?;
+        tell_emergencies(&up);
+        let frame = CyclicFrame::new(up.layout, up.dc.map(|d| d.station))?;
+        if let Some(dc) = &up.dc {
+            let positions: Vec<String> = (0..MAX_SUBDEVICES)
+                .filter(|k| dc.on_sync0 & (1 << k) != 0)
+                .map(|k| k.to_string())
+                .collect();
+            tracing::info!(
+                "Distributed Clocks: reference clock position {} ({}); SYNC0 every {} µs on position(s) {}, the first {} µs after the bus process wakes",
+                dc.reference,
+                up.names.get(dc.reference).map_or("?", String::as_str),
+                dc.cycle_ns / 1000,
+                positions.join(", "),
+                dc.shift_ns / 1000
+            );
+        }
+        let dc_again = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
+        let io = BusIo::new(&bus, ctx.cell.io(), &up.layout)
+            .map_err(|m| -> SetupError { Box::new(process::Refused(m)) })?;
+        // The cycle waits for its reply at most half a period.
+        wire.set_timeout(
+            Duration::from_nanos(ctx.own.period_ns / 4).max(Duration::from_micros(50)),
+        )?;
+        let modes: Vec<i8> = axes.iter().map(|a| a.mode as i8).collect();
+        let watchdog_ns = if bus.pd_watchdog_ns > 0 {
+            bus.pd_watchdog_ns
+        } else {
+            100_000_000
+        };
+        tracing::info!(
+            "bus on {} in SAFE-OP: {} (working counter {}); the cycle asks for OP",
+            bus.interface(),
+            up.names.join(", "),
+            up.layout.expected_wkc
+        );
+        let wire_owner = Arc::new(AtomicU8::new(owner::CYCLE));
+        let quit = Arc::new(AtomicBool::new(false));
+        // Spawned before the process takes its real-time priority: the thread keeps the
+        // ordinary one.
+        let recovery = std::thread::Builder::new()
+            .name("bus-recovery".into())
+            .spawn({
+                let r = Recovery {
+                    master,
+                    wire: wire.clone(),
+                    bus,
+                    axes: axes.to_vec(),
+                    timing,
+                    layout: up.layout,
+                    dc: up.dc,
+                    dc_again: dc_again.clone(),
+                    owner: wire_owner.clone(),
+                    quit: quit.clone(),
+                };
+                move || r.run()
+            })?;
+        let mut startup_emergencies = [(0, 0, 0); STARTUP_EMERGENCIES];
+        for (slot, e) in startup_emergencies.iter_mut().zip(&up.emergencies) {
+            *slot = *e;
+        }
+        let mut bus = Bus {
+            wire,
+            interface: bus.interface().to_string(),
+            announce: "",
+            reaching_op: None,
+            startup_emergencies,
+            startup_emergency_count: up.emergencies.len().min(STARTUP_EMERGENCIES),
+            wire_owner,
+            quit,
+            recovery: Some(recovery),
+            recoveries: 0,
+            degraded_since_ns: None,
+            degraded_wait_ns: ctx.cell.estop_stop_time_ns,
+            latched_while_recovering: false,
+            names: {
+                let mut n = [[0u8; 16]; MAX_SUBDEVICES];
+                for (slot, s) in n.iter_mut().zip(bus.subdevices()) {
+                    *slot = s.name;
+                }
+                n
+            },
+            in_op: [false; MAX_SUBDEVICES],
+            frame,
+            drives: Drives::new(&bus, ctx.cell.axes as usize, &modes),
+            lost: 0,
+            lost_limit: watchdog_ns.div_ceil(ctx.own.period_ns).max(1),
+            last_lost_event_ns: 0,
+            last_wkc_event_ns: 0,
+            bus_lost_raised: false,
+            seq: 0,
+            reply_wait_ns: ctx.own.period_ns / 2,
+            buf: [0; 1536],
+            command_fresh: Freshness::new(ctx.period_of("servo")?),
+            command_timeout_ns: ctx.cell.drive_command_timeout_ns,
+            last_command_ns: None,
+            command: None,
+            last_applied_seq: 0,
+            sense_to_command: SenseToCommand::new(&ctx.node, i)?,
+            round_trip: Box::default(),
+            io,
+            io_image: None,
+            io_reported: None,
+            dc: up.dc,
+            dc_again,
+            last_sync0_cycle: None,
+            sync0_late: 0,
+            sync0_late_untold: 0,
+            last_sync0_event_ns: 0,
+            sync0_lead: Box::default(),
+            source: ctx.index as u32,
+            io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
+            field_inputs: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
+            commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
+            feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
+        };
+        // In SAFE-OP: the cycle's frames take the bus to OP.
+        bus.ask_for_op(runtime::time::now_ns(), "in OP on ");
+        Ok(bus)
+    }
+
     /// Publishes feedback with every position NaN and no state: the drives cannot be vouched
     /// for (the bus is lost, or being brought up again).
     ///
@@ -753,142 +892,6 @@ fn main() -> ExitCode {
     process::run(
         "drives",
         "the cell's EtherCAT MainDevice: CiA 402 drives on a bus",
-        |ctx: &Context| {
-            let i = &ctx.instance;
-            let bus = bus_config(ctx)?;
-            let wire = Arc::new(open_wire(bus.interface())?);
-            let axes = &ctx.cell.axis[..ctx.cell.axes as usize];
-            let mut master = Master::new()?;
-            let timing = Timing {
-                period_ns: ctx.own.period_ns,
-                phase_ns: ctx.own.phase_ns,
-            };
-            let up = master
-                .bring_up(&bus, axes, timing, &wire, &runtime::signals::stop_requested)
-                .map_err(|e| -> SetupError {
-                    match e {
-                        BringUpError::Refused(m) => Box::new(process::Refused(m)),
-                        BringUpError::Failed(m) => m.into(),
-                    }
-                })?;
-            tell_emergencies(&up);
-            let frame = CyclicFrame::new(up.layout, up.dc.map(|d| d.station))?;
-            if let Some(dc) = &up.dc {
-                let positions: Vec<String> = (0..MAX_SUBDEVICES)
-                    .filter(|k| dc.on_sync0 & (1 << k) != 0)
-                    .map(|k| k.to_string())
-                    .collect();
-                tracing::info!(
-                    "Distributed Clocks: reference clock position {} ({}); SYNC0 every {} µs on position(s) {}, the first {} µs after the bus process wakes",
-                    dc.reference,
-                    up.names.get(dc.reference).map_or("?", String::as_str),
-                    dc.cycle_ns / 1000,
-                    positions.join(", "),
-                    dc.shift_ns / 1000
-                );
-            }
-            let dc_again = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
-            let io = BusIo::new(&bus, ctx.cell.io(), &up.layout)
-                .map_err(|m| -> SetupError { Box::new(process::Refused(m)) })?;
-            // The cycle waits for its reply at most half a period.
-            wire.set_timeout(
-                Duration::from_nanos(ctx.own.period_ns / 4).max(Duration::from_micros(50)),
-            )?;
-            let modes: Vec<i8> = axes.iter().map(|a| a.mode as i8).collect();
-            let watchdog_ns = if bus.pd_watchdog_ns > 0 {
-                bus.pd_watchdog_ns
-            } else {
-                100_000_000
-            };
-            tracing::info!(
-                "bus on {} in SAFE-OP: {} (working counter {}); the cycle asks for OP",
-                bus.interface(),
-                up.names.join(", "),
-                up.layout.expected_wkc
-            );
-            let wire_owner = Arc::new(AtomicU8::new(owner::CYCLE));
-            let quit = Arc::new(AtomicBool::new(false));
-            // Spawned before the process takes its real-time priority: the thread keeps the
-            // ordinary one.
-            let recovery = std::thread::Builder::new()
-                .name("bus-recovery".into())
-                .spawn({
-                    let r = Recovery {
-                        master,
-                        wire: wire.clone(),
-                        bus,
-                        axes: axes.to_vec(),
-                        timing,
-                        layout: up.layout,
-                        dc: up.dc,
-                        dc_again: dc_again.clone(),
-                        owner: wire_owner.clone(),
-                        quit: quit.clone(),
-                    };
-                    move || r.run()
-                })?;
-            let mut startup_emergencies = [(0, 0, 0); STARTUP_EMERGENCIES];
-            for (slot, e) in startup_emergencies.iter_mut().zip(&up.emergencies) {
-                *slot = *e;
-            }
-            let mut bus = Bus {
-                wire,
-                interface: bus.interface().to_string(),
-                announce: "",
-                reaching_op: None,
-                startup_emergencies,
-                startup_emergency_count: up.emergencies.len().min(STARTUP_EMERGENCIES),
-                wire_owner,
-                quit,
-                recovery: Some(recovery),
-                recoveries: 0,
-                degraded_since_ns: None,
-                degraded_wait_ns: ctx.cell.estop_stop_time_ns,
-                latched_while_recovering: false,
-                names: {
-                    let mut n = [[0u8; 16]; MAX_SUBDEVICES];
-                    for (slot, s) in n.iter_mut().zip(bus.subdevices()) {
-                        *slot = s.name;
-                    }
-                    n
-                },
-                in_op: [false; MAX_SUBDEVICES],
-                frame,
-                drives: Drives::new(&bus, ctx.cell.axes as usize, &modes),
-                lost: 0,
-                lost_limit: watchdog_ns.div_ceil(ctx.own.period_ns).max(1),
-                last_lost_event_ns: 0,
-                last_wkc_event_ns: 0,
-                bus_lost_raised: false,
-                seq: 0,
-                reply_wait_ns: ctx.own.period_ns / 2,
-                buf: [0; 1536],
-                command_fresh: Freshness::new(ctx.period_of("servo")?),
-                command_timeout_ns: ctx.cell.drive_command_timeout_ns,
-                last_command_ns: None,
-                command: None,
-                last_applied_seq: 0,
-                sense_to_command: SenseToCommand::new(&ctx.node, i)?,
-                round_trip: Box::default(),
-                io,
-                io_image: None,
-                io_reported: None,
-                dc: up.dc,
-                dc_again,
-                last_sync0_cycle: None,
-                sync0_late: 0,
-                sync0_late_untold: 0,
-                last_sync0_event_ns: 0,
-                sync0_lead: Box::default(),
-                source: ctx.index as u32,
-                io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
-                field_inputs: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
-                commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
-                feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-            };
-            // In SAFE-OP: the cycle's frames take the bus to OP.
-            bus.ask_for_op(runtime::time::now_ns(), "in OP on ");
-            Ok::<_, SetupError>(bus)
-        },
+        Bus::new,
     )
 }

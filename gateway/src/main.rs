@@ -38,6 +38,8 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 use zenoh::qos::CongestionControl;
 
+use crate::recording::OnTheLine;
+
 mod client;
 mod line_web;
 mod recording;
@@ -349,8 +351,7 @@ fn serve(
     // The recording stream and the web view beside the rest, ended with it.
     let leaving = AtomicBool::new(false);
     std::thread::scope(|scope| {
-        type Stream =
-            fn(&zenoh::Session, &InstanceName, &CellName, &AtomicBool) -> zenoh::Result<()>;
+        type Stream = fn(OnTheLine<'_>) -> zenoh::Result<()>;
         let streams: [(&str, &str, Stream); 2] = [
             ("record", "the recording", recording::serve),
             ("view-line", "the web view", viewing::serve),
@@ -360,7 +361,13 @@ fn serve(
             let started = std::thread::Builder::new()
                 .name(thread.into())
                 .spawn_scoped(scope, move || {
-                    if let Err(e) = serve(session, instance, name, leaving) {
+                    let line = OnTheLine {
+                        session,
+                        instance,
+                        name,
+                        leaving,
+                    };
+                    if let Err(e) = serve(line) {
                         tracing::error!("{what} on the line ended: {e}");
                     }
                 });

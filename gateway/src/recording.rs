@@ -64,14 +64,37 @@ struct Running {
     sent: Instant,
 }
 
-/// Serves the recording stream until `leaving` (the gateway leaves the line) or the process is
-/// asked to stop, or the session fails.
-pub fn serve(
-    session: &zenoh::Session,
-    instance: &InstanceName,
-    name: &CellName,
-    leaving: &AtomicBool,
-) -> zenoh::Result<()> {
+/// What a stream of the gateway's own thread serves from: the cell's Zenoh session, its
+/// instance and its name on the line, and whether the gateway is leaving the line.
+#[derive(Clone, Copy, Debug)]
+pub struct OnTheLine<'a> {
+    /// The gateway's session.
+    pub session: &'a zenoh::Session,
+    /// The cell's instance (its shared memory).
+    pub instance: &'a InstanceName,
+    /// The cell's name on the line (its keys).
+    pub name: &'a CellName,
+    /// Set when the gateway leaves the line.
+    pub leaving: &'a AtomicBool,
+}
+
+impl OnTheLine<'_> {
+    /// Whether the stream should end: the gateway leaves the line or the process was asked to
+    /// stop.
+    pub fn over(&self) -> bool {
+        runtime::signals::stop_requested() || self.leaving.load(Ordering::Relaxed)
+    }
+}
+
+/// Serves the recording stream until the gateway leaves the line or the process is asked to
+/// stop, or the session fails.
+pub fn serve(line: OnTheLine<'_>) -> zenoh::Result<()> {
+    let OnTheLine {
+        session,
+        instance,
+        name,
+        ..
+    } = line;
     // Reliable (Zenoh's default), and blocking rather than dropping.
     let stream = session
         .declare_publisher(name.record())
@@ -94,7 +117,7 @@ pub fn serve(
     let mut said = String::new();
     let mut retry_at: Option<Instant> = None;
     loop {
-        if runtime::signals::stop_requested() || leaving.load(Ordering::Relaxed) {
+        if line.over() {
             return Ok(());
         }
         let now = Instant::now();

@@ -8,8 +8,8 @@
 //! A thread of the gateway's own at the ordinary priority; the frames are dropped rather than
 //! queued when the network is slower (the next one says everything again).
 
-use gateway::keys::{CellKeys, CellName};
-use shm_schema::InstanceName;
+use crate::recording::OnTheLine;
+use gateway::keys::CellKeys;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -42,22 +42,19 @@ impl Drop for Sampling {
     }
 }
 
-/// Serves the view until `leaving` or the process is asked to stop, or the session fails.
-pub fn serve(
-    session: &zenoh::Session,
-    instance: &InstanceName,
-    name: &CellName,
-    leaving: &AtomicBool,
-) -> zenoh::Result<()> {
-    let stream = session
-        .declare_publisher(name.view())
+/// Serves the view until the gateway leaves the line or the process is asked to stop, or the
+/// session fails.
+pub fn serve(line: OnTheLine<'_>) -> zenoh::Result<()> {
+    let stream = line
+        .session
+        .declare_publisher(line.name.view())
         .congestion_control(CongestionControl::Drop)
         .wait()?;
     let mut sampling: Option<Sampling> = None;
     // The sampler runs on a moment after the last subscriber left, as the recording does.
     let mut demand = crate::recording::Demand::default();
     loop {
-        if runtime::signals::stop_requested() || leaving.load(Ordering::Relaxed) {
+        if line.over() {
             return Ok(());
         }
         let wanted = demand.wanted(stream.matching_status().wait().is_ok_and(|m| m.matching()));
@@ -66,7 +63,7 @@ pub fn serve(
         } else if sampling.is_none() {
             let view = View::default();
             let stop = Arc::new(AtomicBool::new(false));
-            let (v, i, s) = (view.clone(), *instance, stop.clone());
+            let (v, i, s) = (view.clone(), *line.instance, stop.clone());
             let thread = std::thread::Builder::new()
                 .name("view".into())
                 .spawn(move || web_view::sample(i, &v, &s))

@@ -70,41 +70,46 @@ impl Task for Bridge {
     }
 }
 
+impl Bridge {
+    /// The bridge with its IO taken over from a predecessor, if any, and its ports opened. Set-up only.
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let i = &ctx.instance;
+        let io_seen = Sub::<DigitalIoV1>::new(&ctx.node, i, ServiceId::IoState, 1)?;
+        let mut io = DigitalIo::new(&ctx.cell);
+        // A predecessor's image (it still runs during a swap; its publisher keeps the last
+        // one): its IO carries over, so a swap neither drops the gripper's part nor
+        // forgets an open e-stop circuit. Its publisher delivers the image on its next
+        // cycle; a cell starting afresh has none and waits this long for nothing.
+        let until = Instant::now() + ADOPT_WAIT;
+        while Instant::now() < until {
+            if let Some(image) = io_seen.latest() {
+                if io.adopt(&image) {
+                    tracing::info!("took over the IO of the previous iobridge's image");
+                }
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        drop(io_seen);
+        Ok(Self {
+            seq: 0,
+            cycles: 0,
+            servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
+            last: None,
+            servo_fresh: Freshness::new(ctx.period_of("servo")?),
+            output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
+            io,
+            field: Sub::new(&ctx.node, i, ServiceId::FieldInputs, 64)?,
+            requests: Sub::new(&ctx.node, i, ServiceId::IoRequest, 64)?,
+            io_state: Pub::new(&ctx.node, i, ServiceId::IoState)?,
+        })
+    }
+}
+
 fn main() -> ExitCode {
     process::run(
         "iobridge",
         "fieldbus output image with measurement timestamps, and the named digital IO",
-        |ctx: &Context| {
-            let i = &ctx.instance;
-            let io_seen = Sub::<DigitalIoV1>::new(&ctx.node, i, ServiceId::IoState, 1)?;
-            let mut io = DigitalIo::new(&ctx.cell);
-            // A predecessor's image (it still runs during a swap; its publisher keeps the last
-            // one): its IO carries over, so a swap neither drops the gripper's part nor
-            // forgets an open e-stop circuit. Its publisher delivers the image on its next
-            // cycle; a cell starting afresh has none and waits this long for nothing.
-            let until = Instant::now() + ADOPT_WAIT;
-            while Instant::now() < until {
-                if let Some(image) = io_seen.latest() {
-                    if io.adopt(&image) {
-                        tracing::info!("took over the IO of the previous iobridge's image");
-                    }
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(2));
-            }
-            drop(io_seen);
-            Ok::<_, SetupError>(Bridge {
-                seq: 0,
-                cycles: 0,
-                servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 8)?,
-                last: None,
-                servo_fresh: Freshness::new(ctx.period_of("servo")?),
-                output: Pub::new(&ctx.node, i, ServiceId::FieldbusOutput)?,
-                io,
-                field: Sub::new(&ctx.node, i, ServiceId::FieldInputs, 64)?,
-                requests: Sub::new(&ctx.node, i, ServiceId::IoRequest, 64)?,
-                io_state: Pub::new(&ctx.node, i, ServiceId::IoState)?,
-            })
-        },
+        Bridge::new,
     )
 }

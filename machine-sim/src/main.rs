@@ -60,24 +60,25 @@ impl Task for Sim {
     }
 }
 
+impl Sim {
+    /// The drives and mechanics of the cell, their ports opened. Set-up only.
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let i = &ctx.instance;
+        Ok(Self {
+            machine: Machine::new(&ctx.cell, ctx.own.period_ns),
+            sense_to_command: SenseToCommand::new(&ctx.node, i)?,
+            command_fresh: Freshness::new(ctx.period_of("servo")?),
+            last_command_ns: None,
+            commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
+            injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
+            feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
+            field: Field::new(&ctx.cell, ctx.index as u32),
+            io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
+            sensors: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
+        })
+    }
+}
+
 fn main() -> ExitCode {
-    process::run(
-        "drives",
-        "simulated CiA 402 drives and mechanics",
-        |ctx: &Context| {
-            let i = &ctx.instance;
-            Ok::<_, SetupError>(Sim {
-                machine: Machine::new(&ctx.cell, ctx.own.period_ns),
-                sense_to_command: SenseToCommand::new(&ctx.node, i)?,
-                command_fresh: Freshness::new(ctx.period_of("servo")?),
-                last_command_ns: None,
-                commands: Sub::new(&ctx.node, i, ServiceId::DriveCommand, 8)?,
-                injections: Sub::new(&ctx.node, i, ServiceId::FaultInjection, 16)?,
-                feedback: Pub::new(&ctx.node, i, ServiceId::DriveFeedback)?,
-                field: Field::new(&ctx.cell, ctx.index as u32),
-                io_state: Sub::new(&ctx.node, i, ServiceId::IoState, 1)?,
-                sensors: Pub::new(&ctx.node, i, ServiceId::FieldInputs)?,
-            })
-        },
-    )
+    process::run("drives", "simulated CiA 402 drives and mechanics", Sim::new)
 }

@@ -47,6 +47,44 @@ struct Gateway {
 }
 
 impl Gateway {
+    /// The server started on its own thread and the ports opened. Set-up only.
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let i = &ctx.instance;
+        let m = &ctx.cell.modbus;
+        let listen: SocketAddr = str_of(&m.listen).parse().map_err(|_| {
+            SetupError::from(format!(
+                "[modbus] listen = {:?} is not an IP:port address",
+                str_of(&m.listen)
+            ))
+        })?;
+        let settings = Settings {
+            listen,
+            max_connections: m.max_connections.clamp(1, 64) as usize,
+            idle_timeout: Duration::from_nanos(m.idle_timeout_ns.max(100_000_000)),
+            writes: m.writes != 0,
+        };
+        let regs: Shared = Arc::new(Mutex::new(Arc::new(Registers::default())));
+        // Bounded: a client writing faster than the cycle takes writes gets exception 6.
+        let (tx, rx) = std::sync::mpsc::sync_channel(WRITE_QUEUE);
+        server::spawn(settings, regs.clone(), tx)
+            .map_err(|e| SetupError::from(format!("cannot start the server: {e}")))?;
+        Ok(Self {
+            cell: ctx.cell,
+            index: ctx.index as u32,
+            image: Sub::new(&ctx.node, i, ServiceId::FieldbusOutput, 8)?,
+            servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 64)?,
+            setpoint: Sub::new(&ctx.node, i, ServiceId::Setpoint, 16)?,
+            io: Sub::new(&ctx.node, i, ServiceId::IoState, 8)?,
+            io_request: Pub::new(&ctx.node, i, ServiceId::IoRequest)?,
+            control: Pub::new(&ctx.node, i, ServiceId::MotionControl)?,
+            recent: [None; RECENT],
+            samples: Samples::default(),
+            regs,
+            rx,
+            control_seq: 0,
+        })
+    }
+
     /// Takes what arrived; true when the registers should be rebuilt.
     fn take_samples(&mut self, cx: &Cycle<'_>) -> bool {
         let mut fresh = false;
@@ -196,41 +234,6 @@ fn main() -> ExitCode {
     process::run(
         "modbus",
         "the cell's Modbus TCP server: positions with their measurement time, the cell's state and the named IO",
-        |ctx: &Context| {
-            let i = &ctx.instance;
-            let m = &ctx.cell.modbus;
-            let listen: SocketAddr = str_of(&m.listen).parse().map_err(|_| {
-                SetupError::from(format!(
-                    "[modbus] listen = {:?} is not an IP:port address",
-                    str_of(&m.listen)
-                ))
-            })?;
-            let settings = Settings {
-                listen,
-                max_connections: m.max_connections.clamp(1, 64) as usize,
-                idle_timeout: Duration::from_nanos(m.idle_timeout_ns.max(100_000_000)),
-                writes: m.writes != 0,
-            };
-            let regs: Shared = Arc::new(Mutex::new(Arc::new(Registers::default())));
-            // Bounded: a client writing faster than the cycle takes writes gets exception 6.
-            let (tx, rx) = std::sync::mpsc::sync_channel(WRITE_QUEUE);
-            server::spawn(settings, regs.clone(), tx)
-                .map_err(|e| SetupError::from(format!("cannot start the server: {e}")))?;
-            Ok::<_, SetupError>(Gateway {
-                cell: ctx.cell,
-                index: ctx.index as u32,
-                image: Sub::new(&ctx.node, i, ServiceId::FieldbusOutput, 8)?,
-                servo: Sub::new(&ctx.node, i, ServiceId::ServoState, 64)?,
-                setpoint: Sub::new(&ctx.node, i, ServiceId::Setpoint, 16)?,
-                io: Sub::new(&ctx.node, i, ServiceId::IoState, 8)?,
-                io_request: Pub::new(&ctx.node, i, ServiceId::IoRequest)?,
-                control: Pub::new(&ctx.node, i, ServiceId::MotionControl)?,
-                recent: [None; RECENT],
-                samples: Samples::default(),
-                regs,
-                rx,
-                control_seq: 0,
-            })
-        },
+        Gateway::new,
     )
 }

@@ -89,23 +89,12 @@ wire_enum! {
         /// Its safe reaction: servo brakes the axes to rest within the e-stop stop time and
         /// disables the drives; trajgen drops the program; iobridge sets its outputs to their safe
         /// values. The default.
-        Stop = 0,
+        Stop = 0 as "stop",
         /// servo brakes the axes to rest and holds them, drives enabled (a stop of category 2);
         /// any other process reacts as with `Stop`.
-        Hold = 1,
+        Hold = 1 as "hold",
         /// No reaction: the process sees the e-stop and goes on (a logger, a monitor).
-        Ignore = 2,
-    }
-}
-
-impl EstopReaction {
-    /// The configuration's spelling.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Stop => "stop",
-            Self::Hold => "hold",
-            Self::Ignore => "ignore",
-        }
+        Ignore = 2 as "ignore",
     }
 }
 

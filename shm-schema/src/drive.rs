@@ -112,25 +112,13 @@ wire_enum! {
     /// [`ServoStateV3::power`] and [`ServoStateV3::axis_power`].
     pub enum Power: u8 {
         /// No torque: the drive's power stage is off (or its motor not controlled).
-        Disabled = 0,
+        Disabled = 0 as "disabled",
         /// An enable request is stepping the drive through its states.
-        Enabling = 1,
+        Enabling = 1 as "enabling",
         /// Operation enabled: the axis follows servo.
-        Enabled = 2,
+        Enabled = 2 as "enabled",
         /// A disable request or a cut is taking power off.
-        Disabling = 3,
-    }
-}
-
-impl Power {
-    /// Lower-case name, as in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Disabled => "disabled",
-            Self::Enabling => "enabling",
-            Self::Enabled => "enabled",
-            Self::Disabling => "disabling",
-        }
+        Disabling = 3 as "disabling",
     }
 }
 

@@ -35,26 +35,17 @@ wire_enum! {
     pub enum EstopOrigin: u32 {
         /// A process of the cell, about itself (servo's following error, a drive fault): it has
         /// reacted already; the others react only with `propagate_estop`.
-        Device = 1,
+        Device = 1 as "device",
         /// The user: `supervisor estop` (seed 002's `trigger_estop`), an e-stop input. The others
         /// react with `propagate_estop` or `propagate_external_estop`.
-        External = 2,
+        External = 2 as "external",
         /// The host: a process died or stalled, a health detector expired, the supervisor
         /// stopped beating. Always propagated, whatever the configuration.
-        Host = 3,
+        Host = 3 as "host",
     }
 }
 
 impl EstopOrigin {
-    /// Lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Device => "device",
-            Self::External => "external",
-            Self::Host => "host",
-        }
-    }
-
     /// Whether a process other than the source reacts to an e-stop of this origin, given the
     /// cell's `propagate_estop` and `propagate_external_estop` (seed 002).
     pub fn propagates(self, propagate_estop: bool, propagate_external_estop: bool) -> bool {

@@ -21,22 +21,11 @@ wire_enum! {
     #[derive(PartialOrd, Ord)]
     pub enum Severity: u32 {
         /// Something changed as asked (a drive state, power on).
-        Info = 0,
+        Info = 0 as "info",
         /// Something the user should look at; nothing was stopped by it.
-        Warning = 1,
+        Warning = 1 as "warning",
         /// A refusal or a fault: power was cut, or a command was refused.
-        Error = 2,
-    }
-}
-
-impl Severity {
-    /// Lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Info => "info",
-            Self::Warning => "warning",
-            Self::Error => "error",
-        }
+        Error = 2 as "error",
     }
 }
 

@@ -18,8 +18,31 @@
 /// Defines an enum that crosses a process boundary as its integer (a `u32` or `u8` field of a
 /// payload), its variants written once: the enum with `#[repr]` and its values, `ALL` (every
 /// variant, in order) and `from_wire` (the variant of a wire value, `None` for a value this
-/// version does not know).
+/// version does not know). Variants written `Name = value as "name"` give the enum a `name()`
+/// too: how reports, events and the configuration spell it.
 macro_rules! wire_enum {
+    (
+        $(#[$attr:meta])*
+        pub enum $name:ident: $repr:ident {
+            $($(#[$vattr:meta])* $variant:ident = $value:literal as $text:literal,)+
+        }
+    ) => {
+        wire_enum! {
+            $(#[$attr])*
+            pub enum $name: $repr {
+                $($(#[$vattr])* $variant = $value,)+
+            }
+        }
+
+        impl $name {
+            /// Its name in lower case: how reports, events and the configuration spell it.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(Self::$variant => $text,)+
+                }
+            }
+        }
+    };
     (
         $(#[$attr:meta])*
         pub enum $name:ident: $repr:ident {
@@ -157,5 +180,19 @@ mod tests {
             ProcState
         );
         assert_eq!(CommandKind::ALL.len(), 8);
+    }
+
+    #[test]
+    fn every_named_wire_enum_has_one_lower_case_name_per_variant() {
+        macro_rules! check {
+            ($($t:ty),+) => {$(
+                let names: std::vec::Vec<_> = <$t>::ALL.iter().map(|v| v.name()).collect();
+                for (k, n) in names.iter().enumerate() {
+                    assert!(!n.is_empty() && *n == n.to_lowercase(), "{n:?}");
+                    assert!(!names[..k].contains(n), "{} {n:?} twice", stringify!($t));
+                }
+            )+};
+        }
+        check!(Power, EstopOrigin, EstopReaction, Severity);
     }
 }
