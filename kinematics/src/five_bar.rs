@@ -88,6 +88,16 @@ impl FiveBar {
     /// The parameter names a configuration may give.
     pub const PARAMS: &'static [&'static str] = &["l1", "l2", "l3", "l4", "l5", "assembly"];
 
+    /// Parameters that make a working one: `examples/five-bar.toml`'s.
+    pub const EXAMPLE: &'static [(&'static str, f64)] = &[
+        ("l1", 200.0),
+        ("l2", 150.0),
+        ("l3", 100.0),
+        ("l4", 200.0),
+        ("l5", 100.0),
+        ("assembly", -1.0),
+    ];
+
     /// The seed's lengths L1 … L5 (mm): `MC_KIN_TYPE_12_XY`'s defaults. With L1 = L4 and
     /// L3 = L5 they make O, T, E, W a parallelogram (`docs/kinematics.md`).
     pub const SEED_LENGTHS: [f64; 5] = [200.0, 150.0, 100.0, 200.0, 100.0];

@@ -38,6 +38,9 @@ impl Gantry {
     /// The parameter names a configuration may give.
     pub const PARAMS: &'static [&'static str] = &["axes"];
 
+    /// Parameters that make a working one: the default cell's three axes.
+    pub const EXAMPLE: &'static [(&'static str, f64)] = &[("axes", 3.0)];
+
     /// A gantry of `axes` axes: x, then y, then θ.
     ///
     /// # Errors

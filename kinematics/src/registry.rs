@@ -21,29 +21,60 @@ pub struct Entry {
     /// Every parameter it takes (required or optional): a key beside `type` outside this
     /// list is refused, so a typo cannot pass unnoticed.
     pub params: &'static [&'static str],
+    /// Parameters that make a working one (the example cell's): what the crate's tests build
+    /// every registered kinematics with, to check it against garbage and that its computing
+    /// methods never allocate.
+    pub example: &'static [(&'static str, f64)],
     /// Makes it.
     pub build: Builder,
 }
 
 impl Entry {
-    /// The entry `name`, taking `params`, made by `build`.
-    pub const fn new(name: &'static str, params: &'static [&'static str], build: Builder) -> Self {
+    /// The entry `name`, taking `params`, working with `example`, made by `build`.
+    pub const fn new(
+        name: &'static str,
+        params: &'static [&'static str],
+        example: &'static [(&'static str, f64)],
+        build: Builder,
+    ) -> Self {
         Entry {
             name,
             params,
+            example,
             build,
         }
+    }
+
+    /// Builds it from its [`example`](Entry::example) parameters.
+    ///
+    /// # Errors
+    ///
+    /// What [`build`] says of them (an entry whose example does not build is a mistake the
+    /// crate's tests find).
+    pub fn build_example(&self) -> Result<Boxed, BuildError> {
+        build(self.name, &Params(self.example))
     }
 }
 
 /// Every kinematics a cell's configuration can select.
 pub const REGISTRY: &[Entry] = &[
-    Entry::new("gantry", Gantry::PARAMS, gantry::build),
-    Entry::new("scara", Scara::PARAMS, scara::build),
-    Entry::new("five-bar", FiveBar::PARAMS, five_bar::build),
+    Entry::new("gantry", Gantry::PARAMS, Gantry::EXAMPLE, gantry::build),
+    Entry::new("scara", Scara::PARAMS, Scara::EXAMPLE, scara::build),
+    Entry::new(
+        "five-bar",
+        FiveBar::PARAMS,
+        FiveBar::EXAMPLE,
+        five_bar::build,
+    ),
     // Users' own kinematics, one line each: the name a configuration's `type` gives, the
-    // parameter names, the builder (docs/kinematics.md, "Adding your own kinematics").
-    Entry::new("polar", user::polar::Polar::PARAMS, user::polar::build),
+    // parameter names, an example of them, the builder (docs/kinematics.md, "Adding your own
+    // kinematics").
+    Entry::new(
+        "polar",
+        user::polar::Polar::PARAMS,
+        user::polar::Polar::EXAMPLE,
+        user::polar::build,
+    ),
 ];
 
 /// A kinematics' parameters as a configuration gives them: the numeric keys beside

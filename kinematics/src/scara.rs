@@ -55,6 +55,9 @@ impl Scara {
     /// The parameter names a configuration may give.
     pub const PARAMS: &'static [&'static str] = &["l1", "l2"];
 
+    /// Parameters that make a working one: `examples/scara.toml`'s arm.
+    pub const EXAMPLE: &'static [(&'static str, f64)] = &[("l1", 200.0), ("l2", 150.0)];
+
     /// A SCARA with upper arm `l1` and forearm `l2` (mm).
     ///
     /// # Errors

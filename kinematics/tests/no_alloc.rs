@@ -4,7 +4,7 @@
 //! of this (only) test's thread while counting is on.
 
 use kinematics::{
-    JointLimit, KinError, MAX_COORDS, MAX_JOINTS, Params, Solutions, build, cartesian_to_axes,
+    JointLimit, KinError, MAX_COORDS, MAX_JOINTS, REGISTRY, Solutions, cartesian_to_axes,
     joint_velocity,
 };
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -46,19 +46,10 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn the_cycles_computations_never_allocate() {
-    let seed = [
-        ("l1", 200.0),
-        ("l2", 150.0),
-        ("l3", 100.0),
-        ("l4", 200.0),
-        ("l5", 100.0),
-    ];
-    let all = [
-        build("gantry", &Params(&[])).expect("gantry"),
-        build("scara", &Params(&[("l1", 250.0), ("l2", 150.0)])).expect("scara"),
-        build("five-bar", &Params(&seed)).expect("five-bar"),
-        build("polar", &Params(&[])).expect("polar"),
-    ];
+    let all: Vec<_> = REGISTRY
+        .iter()
+        .map(|e| e.build_example().expect("the example builds"))
+        .collect();
     let tight = [JointLimit::new(-1.0, 1.0); MAX_JOINTS];
     let wide = [JointLimit::new(-400.0, 400.0); MAX_JOINTS];
     let values = [

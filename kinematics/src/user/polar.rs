@@ -51,6 +51,10 @@ impl Polar {
     /// The parameter names a configuration may give.
     pub const PARAMS: &'static [&'static str] = &["offset"];
 
+    /// Parameters that make a working one (the registry's tests build it with them):
+    /// `examples/polar.toml`'s.
+    pub const EXAMPLE: &'static [(&'static str, f64)] = &[("offset", 100.0)];
+
     /// A polar arm whose tool is at radius `offset` (mm) when `r = 0`.
     ///
     /// # Errors

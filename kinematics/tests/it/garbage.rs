@@ -3,7 +3,7 @@
 
 use crate::common::config;
 use kinematics::{
-    JointLimit, Joints, KinError, MAX_COORDS, MAX_JOINTS, Params, Pose, Solutions, build,
+    JointLimit, Joints, KinError, MAX_COORDS, MAX_JOINTS, Params, Pose, REGISTRY, Solutions, build,
     cartesian_to_axes, joint_velocity,
 };
 use proptest::prelude::*;
@@ -38,21 +38,12 @@ fn array<const N: usize>(values: &[f64]) -> [f64; N] {
     a
 }
 
-/// Every registered kinematics with sensible parameters.
+/// Every registered kinematics, built from its example parameters.
 fn every_kinematics() -> Vec<kinematics::Boxed> {
-    let seed = [
-        ("l1", 200.0),
-        ("l2", 150.0),
-        ("l3", 100.0),
-        ("l4", 200.0),
-        ("l5", 100.0),
-    ];
-    vec![
-        build("gantry", &Params(&[])).expect("gantry"),
-        build("scara", &Params(&[("l1", 250.0), ("l2", 150.0)])).expect("scara"),
-        build("five-bar", &Params(&seed)).expect("five-bar"),
-        build("polar", &Params(&[("offset", 10.0)])).expect("polar"),
-    ]
+    REGISTRY
+        .iter()
+        .map(|e| e.build_example().expect("the example builds"))
+        .collect()
 }
 
 fn all_finite(values: &[f64]) -> bool {

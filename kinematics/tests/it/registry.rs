@@ -4,33 +4,21 @@
 use kinematics::{BuildError, FiveBar, Kinematics, ParamError, Params, REGISTRY, build};
 
 #[test]
-fn every_registered_kinematics_builds_by_its_name() {
-    let cases: [(&str, &[(&str, f64)]); 4] = [
-        ("gantry", &[("axes", 3.0)]),
-        ("scara", &[("l1", 250.0), ("l2", 150.0)]),
-        (
-            "five-bar",
-            &[
-                ("l1", 200.0),
-                ("l2", 150.0),
-                ("l3", 100.0),
-                ("l4", 200.0),
-                ("l5", 100.0),
-                ("assembly", -1.0),
-            ],
-        ),
-        ("polar", &[("offset", 5.0)]),
-    ];
-    assert_eq!(
-        REGISTRY.len(),
-        cases.len(),
-        "a registered kinematics is not tested here"
-    );
-    for (name, params) in cases {
-        let k = build(name, &Params(params)).unwrap_or_else(|e| panic!("{name}: {e}"));
+fn every_registered_kinematics_builds_by_its_name_from_its_example() {
+    for entry in REGISTRY {
+        let name = entry.name;
+        let k = entry
+            .build_example()
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(k.name(), name);
         assert!(k.joints() >= 1 && !k.coords().is_empty());
+        // The example gives only parameters the entry takes.
+        for (param, _) in entry.example {
+            assert!(entry.params.contains(param), "{name}: {param}");
+        }
     }
+    let names: Vec<_> = REGISTRY.iter().map(|e| e.name).collect();
+    assert_eq!(names, ["gantry", "scara", "five-bar", "polar"]);
 }
 
 #[test]
@@ -132,16 +120,12 @@ fn each_parameter_mistake_is_named() {
             expected: "1, 2 or 3 (x, y, theta)",
         },
     );
+    let mut flat = FiveBar::EXAMPLE.to_vec();
+    flat.retain(|(name, _)| *name != "assembly");
+    flat.push(("assembly", 0.0));
     check(
         "five-bar",
-        &[
-            ("l1", 200.0),
-            ("l2", 150.0),
-            ("l3", 100.0),
-            ("l4", 200.0),
-            ("l5", 100.0),
-            ("assembly", 0.0),
-        ],
+        &flat,
         ParamError::Invalid {
             name: "assembly",
             value: 0.0,
