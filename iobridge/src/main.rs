@@ -41,7 +41,12 @@ impl Task for Bridge {
         cx.pending_overruns(self.servo_fresh.check(now, self.last.map(|s| s.stamp_ns)));
         if let Some(s) = &self.last {
             self.seq += 1;
-            self.output.send(&write_image(self.seq, now, s));
+            // Stamped as it is written (the vDSO's clock, no system call), not at the wake-up:
+            // iobridge runs below the drives and servo, and a state servo published while
+            // this cycle waited for the CPU holds positions measured after the wake-up. The
+            // image's age (written minus measured) is never negative.
+            let written = runtime::time::now_ns();
+            self.output.send(&write_image(self.seq, written, s));
         }
         // The field first, then the e-stop reaction, then the requests: a request never
         // overrides a safe value in the cycle that set it.
