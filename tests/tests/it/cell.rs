@@ -34,7 +34,10 @@ pub(crate) fn check_run(j: &serde_json::Value, target: [f64; 3]) {
     };
     let (measured, theoretical, period) =
         (f("measured_s"), f("theoretical_s"), f("trajgen_period_s"));
-    assert!((f("predicted_s") - theoretical).abs() < 1e-9, "{j}");
+    assert!(
+        integration_tests::same_motion_time(f("predicted_s"), theoretical),
+        "{j}"
+    );
     // The seed's bar: the measured motion time equals the theoretical one, within one
     // trajgen period (never shorter: the last setpoint is at or after the end), and the
     // stall trajgen measured, if any (the end is seen by the first cycle after it: a host

@@ -5,8 +5,8 @@
 
 use crate::drives::{WATCHDOG, events_named};
 use integration_tests::{
-    assert_clean, default_cell, instance, json_of, run_with_watchdog, scratch, supervisor,
-    with_stall_room,
+    assert_clean, default_cell, instance, json_of, run_with_watchdog, same_motion_time, scratch,
+    supervisor, with_stall_room,
 };
 
 /// Picks at P1, places at P2, twice: the gripper is an output, its position sensor an input
@@ -151,8 +151,11 @@ fn the_prediction_is_the_generators_own_timing_exactly() {
             "MOVE(140, 40, 0)\nMOVEJ(140, 40, 0)\nMOVE(90, 126, 0)\nEND\n",
         );
         let f = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} in {j}"));
-        assert!((f("predicted_s") - 14.775).abs() < 1e-9, "{j}");
-        assert!((f("theoretical_s") - f("predicted_s")).abs() < 1e-9, "{j}");
+        assert!(same_motion_time(f("predicted_s"), 14.775), "{j}");
+        assert!(
+            same_motion_time(f("theoretical_s"), f("predicted_s")),
+            "{j}"
+        );
         // Holds that end at once take no time: 20 WAITs met and DELAY(0)s, then the OUT at
         // motion time 0 (it was predicted at 0.020 s, a cycle each).
         let program = "REPEAT 20\n  WAIT(estop_ok, 1)\n  DELAY(0)\nENDREPEAT\nOUT(gripper, 1)\nMOVE(60, 40, 0)\nEND\n";
@@ -167,8 +170,10 @@ fn the_prediction_is_the_generators_own_timing_exactly() {
         );
         let j = run_as_predicted("prog-zero", &default_cell(), program);
         assert!(
-            (j["theoretical_s"].as_f64().expect("t") - j["predicted_s"].as_f64().expect("p")).abs()
-                < 1e-9,
+            same_motion_time(
+                j["theoretical_s"].as_f64().expect("t"),
+                j["predicted_s"].as_f64().expect("p")
+            ),
             "{j}"
         );
     });
