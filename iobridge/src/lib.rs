@@ -20,11 +20,12 @@ pub const STAMP_BYTES: usize = 8;
 /// Axes that fit in the image.
 pub const IMAGE_AXES: usize = (FIELDBUS_IMAGE_LEN - STAMP_BYTES) / 4;
 
-/// Writes the output image for `state` at `now_ns`.
+/// Writes the output image for `state`, stamped `written_ns`: the time it is written, read after
+/// `state` (never before `state.measured_stamp_ns`).
 ///
 /// # Real-time
 /// Arithmetic and byte copies only.
-pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV3) -> FieldbusImageV1 {
+pub fn write_image(seq: u64, written_ns: u64, state: &ServoStateV3) -> FieldbusImageV1 {
     let axes = (state.axes as usize).min(IMAGE_AXES);
     let mut image = [0u8; FIELDBUS_IMAGE_LEN];
     image[..STAMP_BYTES].copy_from_slice(&(state.measured_stamp_ns / 1000).to_le_bytes());
@@ -34,7 +35,7 @@ pub fn write_image(seq: u64, now_ns: u64, state: &ServoStateV3) -> FieldbusImage
     }
     FieldbusImageV1 {
         seq,
-        written_ns: now_ns,
+        written_ns,
         measured_ns: state.measured_stamp_ns,
         source_seq: state.seq,
         len: (STAMP_BYTES + 4 * axes) as u32,

@@ -32,7 +32,8 @@ struct Bridge {
 
 impl Task for Bridge {
     /// # Real-time
-    /// IPC calls, [`write_image`] and [`DigitalIo`]; nothing else.
+    /// IPC calls, [`write_image`], [`DigitalIo`] and a read of the clock
+    /// (`runtime::time::now_ns`, the vDSO's: no system call); nothing else.
     fn cycle(&mut self, cx: &mut Cycle<'_>) {
         let now = cx.now_ns();
         if let Some(s) = self.servo.latest() {

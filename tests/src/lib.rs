@@ -156,10 +156,10 @@ pub fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
 }
 
-/// Whether two motion times are the same but for the generator's clock: it counts whole
-/// nanoseconds, so a motion ends on the first nanosecond at or after its theoretical end (up
-/// to 1 ns later), and each time is a sum of `f64`s besides (a run of the EtherCAT cell
-/// started at x = 62.718 predicted 5.8698750010000005 s for 5.869875 s).
+/// Whether two motion times are the same but for the generator's clock, within 2 ns either
+/// way: it counts whole nanoseconds, so a motion ends on the first nanosecond at or after its
+/// theoretical end (up to 1 ns later), and each time is a sum of `f64`s besides (a run of the
+/// EtherCAT cell started at x = 62.718 predicted 5.8698750010000005 s for 5.869875 s).
 pub fn same_motion_time(a: f64, b: f64) -> bool {
     (a - b).abs() < 2e-9
 }

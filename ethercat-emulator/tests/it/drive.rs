@@ -81,8 +81,12 @@ fn ethercrab_maps_enables_and_moves_the_emulated_drives_and_their_watchdogs_stop
                 sd.sdo_write(assign, 1, pdo).await.expect("assign");
                 sd.sdo_write(assign, 0, 1u8).await.expect("assignment on");
             }
-            // The process data watchdog: 15 000 increments of 100 µs on x, off on y.
-            let time: u16 = if k == 0 { 15_000 } else { 0 };
+            // The process data watchdog in increments of 100 µs on x, off on y.
+            let time = if k == 0 {
+                u16::try_from(WATCHDOG_NS / 100_000).expect("fits the register")
+            } else {
+                0
+            };
             sd.register_write(0x0420u16, time)
                 .await
                 .expect("watchdog time");
@@ -165,24 +169,44 @@ fn ethercrab_maps_enables_and_moves_the_emulated_drives_and_their_watchdogs_stop
         );
         // Back to 40 at 10 units/s; half way the master goes silent (the emulator's idle
         // ticks run the ESCs and the models).
+        // The last frame is sent after `silent`: each watchdog counts from it or later.
+        let mut silent = std::time::Instant::now();
         for k in 0..=250 {
             let target = 45.0 - 5.0 * f64::from(k) / 500.0;
+            silent = std::time::Instant::now();
             exchange(0x0F, scaling.counts(target)).await;
         }
         // Until both watchdogs have tripped and the drives are where the checks below look
-        // for them (x stopped to Switch on disabled, y in Fault), or 10 s of silence.
-        let silent = std::time::Instant::now();
+        // for them (x stopped to Switch on disabled, y in Fault), or 10 s of silence; when
+        // each drive left Operation enabled.
+        let mut left: [Option<Duration>; 2] = [None; 2];
         loop {
             std::thread::sleep(Duration::from_millis(10));
             let mut b = bus.lock().expect("bus");
             b.idle();
             let state = |k: usize| match &b.devices[k].terminal {
-                Terminal::Drive(d) => d.dictionary().u16(obj::STATUSWORD) & 0x4F,
+                Terminal::Drive(d) => d.dictionary().u16(obj::STATUSWORD),
                 _ => unreachable!("two drives"),
             };
-            if (state(0), state(1)) == (0x40, 0x08) || silent.elapsed() > Duration::from_secs(10) {
+            for (k, at) in left.iter_mut().enumerate() {
+                if at.is_none() && state(k) & 0x6F != 0x27 {
+                    *at = Some(silent.elapsed());
+                }
+            }
+            let ended = (state(0) & 0x4F, state(1) & 0x4F) == (0x40, 0x08);
+            if ended || silent.elapsed() > Duration::from_secs(10) {
                 break;
             }
+        }
+        // Neither watchdog tripped before its time (a host stall makes the silence longer,
+        // never shorter).
+        let watchdog = Duration::from_nanos(WATCHDOG_NS);
+        for (k, at) in left.iter().enumerate() {
+            let at = at.unwrap_or_else(|| panic!("drive {k} still enabled after 10 s of silence"));
+            assert!(
+                at >= watchdog,
+                "drive {k} left Operation enabled after {at:?} of silence"
+            );
         }
         let b = bus.lock().expect("bus");
         let drive = |k: usize| match &b.devices[k].terminal {

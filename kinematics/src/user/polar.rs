@@ -2,7 +2,7 @@
 //!
 //! This file is all a user writes for a mechanism of their own, besides `pub mod polar;` in
 //! `user/mod.rs` and one line in [`REGISTRY`](crate::REGISTRY): the type, its parameter
-//! names, its builder, the six required methods of [`Kinematics`]. The jacobian and the
+//! names and an example of them, its builder, the six required methods of [`Kinematics`]. The jacobian and the
 //! singularity check are the trait's defaults (central differences of `axes_to_cartesian`,
 //! and the jacobian's singular values); a mechanism whose singularities are known
 //! analytically may override them. The crate is `no_std`: scalar maths comes from

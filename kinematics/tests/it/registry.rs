@@ -19,6 +19,11 @@ fn every_registered_kinematics_builds_by_its_name_from_its_example() {
     }
     let names: Vec<_> = REGISTRY.iter().map(|e| e.name).collect();
     assert_eq!(names, ["gantry", "scara", "five-bar", "polar"]);
+    // Those whose parameters are all optional build from their defaults too.
+    for name in ["gantry", "polar"] {
+        let k = build(name, &Params(&[])).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(k.name(), name);
+    }
 }
 
 #[test]
