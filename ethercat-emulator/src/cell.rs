@@ -109,6 +109,99 @@ impl Emulator {
     }
 }
 
+impl Emulator {
+    /// The emulated line answering on its interface's peer: the bus configuration waited
+    /// for, the SubDevices built, the frames' thread started. Set-up only.
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let Some(bus_config) = process::wait_for::<EthercatConfigV1>(
+            &ctx.node,
+            &ctx.instance,
+            ServiceId::EthercatConfig,
+            "the cell has no [ethercat] section",
+        )?
+        else {
+            return Err("stopped before the bus configuration arrived".into());
+        };
+        let terminals = line(&bus_config, ctx)?;
+        let interface = bus_config.interface().to_string();
+        let peer = format!("{interface}{PEER_SUFFIX}");
+        if peer.len() > 15 {
+            return Err(format!(
+                "interface {interface:?}: the emulator's end {peer:?} would be over 15 bytes"
+            )
+            .into());
+        }
+        match (exists(&interface), exists(&peer)) {
+            (false, _) => {
+                if exists(&peer) {
+                    ip(&["link", "del", &peer])?;
+                }
+                ip(&[
+                    "link", "add", &interface, "type", "veth", "peer", "name", &peer,
+                ])?;
+            }
+            // Our own pair, left by an emulator that was killed.
+            (true, true) => {}
+            (true, false) => {
+                return Err(format!(
+                    "interface {interface:?} exists and is not the emulator's veth pair: the emulator makes its own"
+                )
+                .into());
+            }
+        }
+        let wire = Wire::open(&peer, Duration::from_millis(5))?;
+        // The ESCs start with an ET1100's 100 ms process data watchdog; the bus process
+        // writes its own.
+        let bus = Bus::new(terminals);
+        // An EtherCAT link carries nothing else: no IPv6 neighbour or router discovery
+        // (what a real bus' interface should be set to as well, docs/ethercat.md).
+        for end in [&interface, &peer] {
+            let knob = format!("/proc/sys/net/ipv6/conf/{end}/disable_ipv6");
+            if std::path::Path::new(&knob).exists() {
+                std::fs::write(&knob, "1").map_err(|e| format!("{knob}: {e}"))?;
+            }
+        }
+        ip(&["link", "set", &peer, "up"])?;
+        ip(&["link", "set", &interface, "up"])?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let answered = Arc::new(AtomicU64::new(0));
+        let (orders, orders_rx) = std::sync::mpsc::sync_channel(32);
+        let wiring = Wiring::new(&bus_config, &ctx.cell, ctx.index as u32);
+        let mut drive_of_axis = [None; shm_schema::MAX_AXES];
+        for (k, s) in bus_config.subdevices().iter().enumerate() {
+            if let Some(slot) = s.axis().and_then(|a| drive_of_axis.get_mut(a)) {
+                *slot = Some(k);
+            }
+        }
+        let priority = ctx.own.priority;
+        let thread = {
+            let (stop, answered) = (stop.clone(), answered.clone());
+            std::thread::Builder::new()
+                .name("frames".into())
+                .spawn(move || {
+                    // The SubDevices answer as hardware does: at once, whatever else runs.
+                    rt::setup_thread(RtRequest {
+                        priority,
+                        cpu: None,
+                    });
+                    answer(&wire, bus, wiring, &stop, &answered, &orders_rx);
+                })?
+        };
+        tracing::info!("answering on {peer} for the bus on {interface}");
+        Ok(Self {
+            stop,
+            answered,
+            thread: Some(thread),
+            interface,
+            faults: Sub::new(&ctx.node, &ctx.instance, ServiceId::EmulatorFault, 32)?,
+            injections: Sub::new(&ctx.node, &ctx.instance, ServiceId::FaultInjection, 32)?,
+            orders,
+            last_fault_seq: 0,
+            drive_of_axis,
+        })
+    }
+}
+
 impl Task for Emulator {
     /// Hands the faults it is told to make to the frames thread (a test device: the frames
     /// are answered by that thread).
@@ -405,94 +498,7 @@ pub fn main() -> ExitCode {
     process::run(
         "emulator",
         "emulated EtherCAT SubDevices for a cell without hardware",
-        |ctx: &Context| {
-            let Some(bus_config) = process::wait_for::<EthercatConfigV1>(
-                &ctx.node,
-                &ctx.instance,
-                ServiceId::EthercatConfig,
-                "the cell has no [ethercat] section",
-            )?
-            else {
-                return Err("stopped before the bus configuration arrived".into());
-            };
-            let terminals = line(&bus_config, ctx)?;
-            let interface = bus_config.interface().to_string();
-            let peer = format!("{interface}{PEER_SUFFIX}");
-            if peer.len() > 15 {
-                return Err(format!(
-                    "interface {interface:?}: the emulator's end {peer:?} would be over 15 bytes"
-                )
-                .into());
-            }
-            match (exists(&interface), exists(&peer)) {
-                (false, _) => {
-                    if exists(&peer) {
-                        ip(&["link", "del", &peer])?;
-                    }
-                    ip(&[
-                        "link", "add", &interface, "type", "veth", "peer", "name", &peer,
-                    ])?;
-                }
-                // Our own pair, left by an emulator that was killed.
-                (true, true) => {}
-                (true, false) => {
-                    return Err(format!(
-                        "interface {interface:?} exists and is not the emulator's veth pair: the emulator makes its own"
-                    )
-                    .into());
-                }
-            }
-            let wire = Wire::open(&peer, Duration::from_millis(5))?;
-            // The ESCs start with an ET1100's 100 ms process data watchdog; the bus process
-            // writes its own.
-            let bus = Bus::new(terminals);
-            // An EtherCAT link carries nothing else: no IPv6 neighbour or router discovery
-            // (what a real bus' interface should be set to as well, docs/ethercat.md).
-            for end in [&interface, &peer] {
-                let knob = format!("/proc/sys/net/ipv6/conf/{end}/disable_ipv6");
-                if std::path::Path::new(&knob).exists() {
-                    std::fs::write(&knob, "1").map_err(|e| format!("{knob}: {e}"))?;
-                }
-            }
-            ip(&["link", "set", &peer, "up"])?;
-            ip(&["link", "set", &interface, "up"])?;
-            let stop = Arc::new(AtomicBool::new(false));
-            let answered = Arc::new(AtomicU64::new(0));
-            let (orders, orders_rx) = std::sync::mpsc::sync_channel(32);
-            let wiring = Wiring::new(&bus_config, &ctx.cell, ctx.index as u32);
-            let mut drive_of_axis = [None; shm_schema::MAX_AXES];
-            for (k, s) in bus_config.subdevices().iter().enumerate() {
-                if let Some(slot) = s.axis().and_then(|a| drive_of_axis.get_mut(a)) {
-                    *slot = Some(k);
-                }
-            }
-            let priority = ctx.own.priority;
-            let thread = {
-                let (stop, answered) = (stop.clone(), answered.clone());
-                std::thread::Builder::new()
-                    .name("frames".into())
-                    .spawn(move || {
-                        // The SubDevices answer as hardware does: at once, whatever else runs.
-                        rt::setup_thread(RtRequest {
-                            priority,
-                            cpu: None,
-                        });
-                        answer(&wire, bus, wiring, &stop, &answered, &orders_rx);
-                    })?
-            };
-            tracing::info!("answering on {peer} for the bus on {interface}");
-            Ok::<_, SetupError>(Emulator {
-                stop,
-                answered,
-                thread: Some(thread),
-                interface,
-                faults: Sub::new(&ctx.node, &ctx.instance, ServiceId::EmulatorFault, 32)?,
-                injections: Sub::new(&ctx.node, &ctx.instance, ServiceId::FaultInjection, 32)?,
-                orders,
-                last_fault_seq: 0,
-                drive_of_axis,
-            })
-        },
+        Emulator::new,
     )
 }
 

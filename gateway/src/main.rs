@@ -94,6 +94,30 @@ enum Note {
     Failed(String),
 }
 
+impl Bridge {
+    /// The network thread started (it joins the line) and the cell's events subscribed to.
+    /// Set-up only.
+    fn new(ctx: &Context) -> Result<Self, SetupError> {
+        let (tx, rx) = sync_channel(EVENT_QUEUE);
+        let (note, notes) = sync_channel(16);
+        let instance = ctx.instance;
+        let axes = Axes::of_cell(&ctx.cell);
+        let kin = forward_kinematics(&ctx.cell);
+        std::thread::Builder::new()
+            .name("line".into())
+            .spawn(move || line(instance, axes, kin, rx, note))
+            .map_err(|e| SetupError::from(format!("cannot start the network thread: {e}")))?;
+        Ok(Self {
+            events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
+            tx,
+            lost: 0,
+            last_seq: std::collections::HashMap::with_capacity(2 * shm_schema::MAX_PROCESSES),
+            source: ctx.index as u32,
+            notes,
+        })
+    }
+}
+
 impl Task for Bridge {
     fn cycle(&mut self, cx: &mut Cycle<'_>) {
         // The line's state as the cell's events (`supervisor status` shows where it listens),
@@ -150,25 +174,7 @@ fn main() -> ExitCode {
     process::run(
         "gateway",
         "the cell on a line of cells: its presence, status, events and commands on Zenoh",
-        |ctx: &Context| {
-            let (tx, rx) = sync_channel(EVENT_QUEUE);
-            let (note, notes) = sync_channel(16);
-            let instance = ctx.instance;
-            let axes = Axes::of_cell(&ctx.cell);
-            let kin = forward_kinematics(&ctx.cell);
-            std::thread::Builder::new()
-                .name("line".into())
-                .spawn(move || line(instance, axes, kin, rx, note))
-                .map_err(|e| SetupError::from(format!("cannot start the network thread: {e}")))?;
-            Ok::<_, SetupError>(Bridge {
-                events: Sub::new(&ctx.node, &ctx.instance, ServiceId::Events, 1024)?,
-                tx,
-                lost: 0,
-                last_seq: std::collections::HashMap::with_capacity(2 * shm_schema::MAX_PROCESSES),
-                source: ctx.index as u32,
-                notes,
-            })
-        },
+        Bridge::new,
     )
 }
 
