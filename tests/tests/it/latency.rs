@@ -196,7 +196,7 @@ fn status_reports_the_running_cell_and_its_latency() {
         let prog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/triangle.prog");
         let mut run = supervisor()
             .args(["run", "--instance", &inst, "--config"])
-            .arg(integration_tests::default_cell_file("status"))
+            .arg(integration_tests::default_cell_with_room_file("status"))
             .arg(&prog)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
