@@ -42,10 +42,9 @@ impl Task for Bridge {
         cx.pending_overruns(self.servo_fresh.check(now, self.last.map(|s| s.stamp_ns)));
         if let Some(s) = &self.last {
             self.seq += 1;
-            // Stamped as it is written (the vDSO's clock, no system call), not at the wake-up:
-            // iobridge runs below the drives and servo, and a state servo published while
-            // this cycle waited for the CPU holds positions measured after the wake-up. The
-            // image's age (written minus measured) is never negative.
+            // Stamped as it is written, not at the wake-up: iobridge runs below the drives and
+            // servo, and a state servo published while this cycle waited for the CPU holds
+            // positions measured after the wake-up. The image's age is never negative.
             let written = runtime::time::now_ns();
             self.output.send(&write_image(self.seq, written, s));
         }
@@ -77,7 +76,8 @@ impl Task for Bridge {
 }
 
 impl Bridge {
-    /// The bridge with its IO taken over from a predecessor, if any, and its ports opened. Set-up only.
+    /// The bridge with its IO taken over from a predecessor, if any, and its ports opened.
+    /// Set-up only.
     fn new(ctx: &Context) -> Result<Self, SetupError> {
         let i = &ctx.instance;
         let io_seen = Sub::<DigitalIoV1>::new(&ctx.node, i, ServiceId::IoState, 1)?;

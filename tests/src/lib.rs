@@ -192,13 +192,18 @@ pub fn default_cell_file(test: &str) -> PathBuf {
     scratch(test, "default-cell.toml", &default_cell())
 }
 
-/// [`default_cell`] [`with_stall_room`], written into a scratch file of `test`: for a test of
-/// something else than the default cell's tolerance of the host's stalls. The default's
-/// tightest room is far below what [`attributable`] attributes to a stall (250 ms): its
-/// pending-sequence detector expires on about 75 ms without servo's samples (iobridge counts
-/// them at 250 Hz, 30 % of its rate), and a stall in between would fail the test unattributed.
+/// [`default_cell`] [`with_stall_room`], to edit: for a test of something else than the
+/// default cell's tolerance of the host's stalls. The default's tightest room is far below
+/// what [`attributable`] attributes to a stall (250 ms): its pending-sequence detector expires
+/// on about 75 ms without servo's samples (iobridge counts them at 250 Hz, 30 % of its rate),
+/// and a stall in between would fail the test unattributed.
+pub fn default_cell_with_room() -> CellToml {
+    CellToml::parse(&with_stall_room(&default_cell()))
+}
+
+/// [`default_cell_with_room`] written into a scratch file of `test`.
 pub fn default_cell_with_room_file(test: &str) -> PathBuf {
-    scratch(test, "default-cell.toml", &with_stall_room(&default_cell()))
+    default_cell_with_room().write(test, "default-cell.toml")
 }
 
 /// `src` (a cell configuration) with room for the host's stalls where a test checks something

@@ -2,10 +2,10 @@
 //!
 //! This file is all a user writes for a mechanism of their own, besides `pub mod polar;` in
 //! `user/mod.rs` and one line in [`REGISTRY`](crate::REGISTRY): the type, its parameter
-//! names and an example of them, its builder, the six required methods of [`Kinematics`]. The jacobian and the
-//! singularity check are the trait's defaults (central differences of `axes_to_cartesian`,
-//! and the jacobian's singular values); a mechanism whose singularities are known
-//! analytically may override them. The crate is `no_std`: scalar maths comes from
+//! names and an example of them, its builder, the six required methods of [`Kinematics`].
+//! The jacobian and the singularity check are the trait's defaults (central differences of
+//! `axes_to_cartesian`, and the jacobian's singular values); a mechanism whose singularities
+//! are known analytically may override them. The crate is `no_std`: scalar maths comes from
 //! `crate::math` (sin, cos, atan2, hypot, sqrt, … over nalgebra's `libm`), never `f64::sin`.
 
 use crate::math::{atan2, cos, deg, hypot, rad, sin};

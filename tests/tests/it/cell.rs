@@ -347,14 +347,12 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
     integration_tests::attributable(|| {
         let inst = instance("kill");
         let wrapped = format!("exec {} --instance {{instance}}", bin("iobridge").display());
-        let cfg = integration_tests::CellToml::parse(&integration_tests::with_stall_room(
-            &integration_tests::default_cell(),
-        ))
-        .set(
-            "process[iobridge].command",
-            integration_tests::toml::strings(&["sh", "-c", &wrapped]),
-        )
-        .write("kill", "cell.toml");
+        let cfg = integration_tests::default_cell_with_room()
+            .set(
+                "process[iobridge].command",
+                integration_tests::toml::strings(&["sh", "-c", &wrapped]),
+            )
+            .write("kill", "cell.toml");
         let prog = scratch("kill", "long.prog", "MOVE(190,140,0)\nMOVE(10,10,0)\nEND\n");
         let child = supervisor()
             .args(["run", "--instance", &inst, "--config"])

@@ -116,11 +116,9 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         inject.insert("axis", toml_edit::value("y"));
         inject.insert("fault", toml_edit::value("over-current"));
         inject.insert("at", toml_edit::value(2.0));
-        let cfg = integration_tests::CellToml::parse(&integration_tests::with_stall_room(
-            &integration_tests::default_cell(),
-        ))
-        .push("drives.inject", inject)
-        .write("inject-cfg", "cell.toml");
+        let cfg = integration_tests::default_cell_with_room()
+            .push("drives.inject", inject)
+            .write("inject-cfg", "cell.toml");
         let plot = scratch("inject-cfg", "failed.png", "");
         let out = run_with_watchdog(
             supervisor()

@@ -283,14 +283,12 @@ fn a_long_validation_never_blinds_the_control_channel() {
 fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_down() {
     integration_tests::attributable(|| {
         let test = "never-up";
-        let cfg = integration_tests::CellToml::parse(&integration_tests::with_stall_room(
-            &integration_tests::default_cell(),
-        ))
-        .set(
-            "process[iobridge].command",
-            toml_edit::Value::from_iter(["false"]),
-        )
-        .write(test, "cell.toml");
+        let cfg = integration_tests::default_cell_with_room()
+            .set(
+                "process[iobridge].command",
+                toml_edit::Value::from_iter(["false"]),
+            )
+            .write(test, "cell.toml");
         succeeded_within(supervisor().arg("check-config").arg(&cfg), WATCHDOG);
         let inst = instance(test);
         let out = run_with_watchdog(
@@ -307,11 +305,9 @@ fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_dow
         integration_tests::assert_clean(&inst);
 
         let test = "lost-for-good";
-        let cfg = integration_tests::CellToml::parse(&integration_tests::with_stall_room(
-            &integration_tests::default_cell(),
-        ))
-        .add("process[iobridge].restart", "never")
-        .write(test, "cell.toml");
+        let cfg = integration_tests::default_cell_with_room()
+            .add("process[iobridge].restart", "never")
+            .write(test, "cell.toml");
         let up = Up::start(test, &cfg);
         up.kill("iobridge");
         up.until("iobridge down for good", |s| {

@@ -7,7 +7,7 @@
 
 use crate::drives::WATCHDOG;
 use crate::up::{Up, process_in};
-use integration_tests::{CellToml, ip, run_with_watchdog, scratch, with_stall_room};
+use integration_tests::{ip, run_with_watchdog, scratch};
 use serde_json::Value;
 use std::f64::consts::PI;
 use std::os::unix::fs::PermissionsExt;
@@ -138,7 +138,7 @@ fn cell_config_with(test: &str, k: usize, users: &Path, proto: &str, more: &str)
     network.insert("plain", value(proto == "tcp"));
     network.insert("users", value(users.display().to_string()));
     network.insert("lease", value(LEASE_S));
-    let src = CellToml::parse(&with_stall_room(&integration_tests::default_cell()))
+    let src = integration_tests::default_cell_with_room()
         .push("process", gateway)
         .to_string();
     let src = format!("{src}\n[network]\n{network}\n{more}");

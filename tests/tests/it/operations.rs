@@ -5,8 +5,8 @@
 use crate::drives::{WATCHDOG, pid_of};
 use crate::up::{Up, cell, io_value, moving, process_in};
 use integration_tests::{
-    CellToml, assert_clean, default_cell, exited, instance, run_with_watchdog, scratch,
-    succeeded_within, supervisor, toml, wait_output, with_stall_room,
+    assert_clean, exited, instance, run_with_watchdog, scratch, succeeded_within, supervisor, toml,
+    wait_output,
 };
 use serde_json::Value;
 use std::process::Stdio;
@@ -415,7 +415,7 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
         let test = "ops-python";
         let script = integration_tests::examples().join("python/iobridge.py");
         let script = script.to_str().expect("utf-8");
-        let cfg = CellToml::parse(&with_stall_room(&default_cell()))
+        let cfg = integration_tests::default_cell_with_room()
             .set(
                 "process[iobridge].command",
                 toml::strings(&[
@@ -562,7 +562,7 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
 /// `propagate_external_estop`; iobridge, which raised it, sets its outputs safe either way;
 /// reset refuses while the input stays open, and the cell recovers once it closes.
 fn an_estop_input_mid_motion(test: &str, external: bool) {
-    let cfg = CellToml::parse(&with_stall_room(&default_cell()))
+    let cfg = integration_tests::default_cell_with_room()
         .set("behaviour.propagate_estop", false)
         .set("behaviour.propagate_external_estop", external)
         .write(test, "cell.toml");

@@ -3,8 +3,7 @@
 
 use crate::drives::WATCHDOG;
 use integration_tests::{
-    assert_clean, default_cell, instance, run_with_watchdog, scratch, supervisor, wait_output,
-    with_stall_room,
+    assert_clean, instance, run_with_watchdog, scratch, supervisor, wait_output,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -346,7 +345,7 @@ pub(crate) fn io_value(s: &Value, name: &str) -> Option<u64> {
 /// tests run side by side), and the keys `set` names set to its values
 /// (`("modbus.max_connections", 2.into())`).
 pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
-    let mut cell = integration_tests::CellToml::parse(&with_stall_room(&default_cell()));
+    let mut cell = integration_tests::default_cell_with_room();
     for (path, value) in set {
         cell = cell.set(path, value.clone());
     }
