@@ -178,6 +178,45 @@ fn delay_holds_at_rest_for_its_time_and_counts_in_the_theoretical_time() {
 }
 
 #[test]
+fn the_prediction_leaps_a_delay_and_ends_where_the_generator_stepping_through_it_does() {
+    // Five minutes' DELAY between two moves: the generator stepped every millisecond, as
+    // trajgen steps it, against the prediction, which goes from the DELAY's first step
+    // straight to its end (nothing moves in between).
+    let src = "MOVE(140,40,0)\nDELAY(300)\nMOVE(40,40,0)\nEND";
+    let mut g = loaded(src);
+    let stepped = run(&mut g, |_| 0);
+    let done = stepped.last().expect("done");
+    assert_eq!(done.state, MotionState::Done as u32);
+    let mut seen: Vec<SetpointV2> = Vec::new();
+    let p = simulate(params(), &START, commands(src), 0.001, 3600.0, &mut |sp| {
+        seen.push(*sp)
+    });
+    assert_eq!(p.outcome, Outcome::Done);
+    assert_eq!(p.duration_s, done.motion_time_s);
+    assert_eq!(p.theoretical_s, done.theoretical_s);
+    let last = seen.last().expect("setpoints");
+    assert_eq!(last.position, done.position);
+    // The setpoints are the stepped run's but for those inside the DELAY: each of the
+    // prediction's is one of the run's, at the same time.
+    let at: std::collections::HashMap<u64, &SetpointV2> = stepped
+        .iter()
+        .map(|s| (s.motion_time_s.to_bits(), s))
+        .collect();
+    for s in &seen {
+        let twin = at
+            .get(&s.motion_time_s.to_bits())
+            .expect("a step of the run");
+        assert_eq!((s.position, s.velocity), (twin.position, twin.velocity));
+    }
+    assert!(
+        seen.len() * 10 < stepped.len(),
+        "{} steps predicted, {} stepped",
+        seen.len(),
+        stepped.len()
+    );
+}
+
+#[test]
 fn speed_stretches_the_segment_times_that_follow() {
     let full = simulate(
         params(),

@@ -41,8 +41,11 @@ impl Task for Probe {
 fn runner(instance: &InstanceName, raise_at: u64) -> Runner<Probe> {
     let name = ProcessName::new("servo").expect("name");
     let mut cell = cell_config::Config::default_cell().to_shm();
-    // No supervisor beats in this test.
+    // No supervisor beats in this test, and no health detector (all limits 0: off): a stall
+    // of the host (other tests' cells run beside this one) would expire one, whose e-stop
+    // would come before the task's.
     cell.supervisor_timeout_ns = 0;
+    cell.health = shm_schema::HealthConfigV1::default();
     let node = ipc::node(instance, name.as_str()).expect("node");
     let ctx = Context::of(*instance, name, node, cell).expect("servo is in the default cell");
     let mut r = Runner::new(ctx, |_| {

@@ -18,6 +18,11 @@ pub use toml::CellToml;
 /// own build, not `cargo build --bins`: without the dev-dependencies some crates would get
 /// other features (proptest's regex-syntax, which Zenoh's logging uses too), and every
 /// binary would be built again while the tests run.
+///
+/// Under cargo-nextest, which runs each test in a process of its own, the first test of a run
+/// builds and the others find the run's mark (`NEXTEST_RUN_ID`) beside the binaries, under a
+/// file lock: one `cargo` for the run, not one for each test (0.45 s each, one at a time on
+/// cargo's own lock).
 pub fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -28,36 +33,66 @@ pub fn bin_dir() -> &'static Path {
             .and_then(Path::parent)
             .expect("target dir")
             .to_path_buf();
-        let release = dir.file_name().is_some_and(|n| n == "release");
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let mut cmd = Command::new(cargo);
-        cmd.args(["test", "--no-run", "--workspace"]);
-        // Not the variables cargo set for this test's run: a build script that reads one
-        // (ring's reads CARGO_PKG_NAME) would see it changed, and everything above it would
-        // be built again.
-        for (key, _) in std::env::vars_os() {
-            let k = key.to_string_lossy();
-            if k.starts_with("CARGO_PKG_")
-                || k.starts_with("CARGO_BIN_")
-                || k.starts_with("CARGO_MANIFEST_")
-                || [
-                    "CARGO_CRATE_NAME",
-                    "CARGO_PRIMARY_PACKAGE",
-                    "CARGO_TARGET_TMPDIR",
-                    "OUT_DIR",
-                ]
-                .contains(&k.as_ref())
-            {
-                cmd.env_remove(&key);
-            }
+        let Some(run) = std::env::var_os("NEXTEST_RUN_ID") else {
+            build_bins(&dir);
+            return dir;
+        };
+        let mark = dir.join(".integration-tests-built");
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .read(true)
+            .write(true)
+            .open(&mark)
+            .unwrap_or_else(|e| panic!("{}: {e}", mark.display()));
+        file.lock()
+            .unwrap_or_else(|e| panic!("lock {}: {e}", mark.display()));
+        if std::fs::read(&mark).ok().as_deref() != Some(run.as_encoded_bytes()) {
+            build_bins(&dir);
+            // A new run: the last one's inconclusive failures go.
+            let _ = std::fs::remove_file(dir.join(INCONCLUSIVE_LOG));
+            std::fs::write(&mark, run.as_encoded_bytes())
+                .unwrap_or_else(|e| panic!("{}: {e}", mark.display()));
         }
-        if release {
-            cmd.arg("--release");
-        }
-        let status = cmd.status().expect("run cargo test --no-run");
-        assert!(status.success(), "cargo test --no-run failed");
         dir
     })
+}
+
+/// Under cargo-nextest, the failures [`attributable`] attributed to stalls in this run, in
+/// this file of [`bin_dir`]: nextest shows a passing test's output only when asked
+/// (`--success-output`), so `.ci/run` prints the file after the tests.
+pub const INCONCLUSIVE_LOG: &str = "inconclusive.log";
+
+/// `cargo test --no-run --workspace` for the binaries in `dir` (see [`bin_dir`]).
+fn build_bins(dir: &Path) {
+    let release = dir.file_name().is_some_and(|n| n == "release");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    cmd.args(["test", "--no-run", "--workspace"]);
+    // Not the variables cargo set for this test's run: a build script that reads one
+    // (ring's reads CARGO_PKG_NAME) would see it changed, and everything above it would
+    // be built again.
+    for (key, _) in std::env::vars_os() {
+        let k = key.to_string_lossy();
+        if k.starts_with("CARGO_PKG_")
+            || k.starts_with("CARGO_BIN_")
+            || k.starts_with("CARGO_MANIFEST_")
+            || [
+                "CARGO_CRATE_NAME",
+                "CARGO_PRIMARY_PACKAGE",
+                "CARGO_TARGET_TMPDIR",
+                "OUT_DIR",
+            ]
+            .contains(&k.as_ref())
+        {
+            cmd.env_remove(&key);
+        }
+    }
+    if release {
+        cmd.arg("--release");
+    }
+    let status = cmd.status().expect("run cargo test --no-run");
+    assert!(status.success(), "cargo test --no-run failed");
 }
 
 /// Fails the test unless `python3` has iceoryx2's bindings, which the processes written in
@@ -606,14 +641,14 @@ pub fn attributable(test: impl FnOnce()) {
         return;
     };
     if stalled_ms >= STALL_BEYOND_ROOM_MS {
-        // Straight to stderr, past the test harness' capture: a test that passes this way is
-        // seen in the log of every run.
+        // Straight to stderr, past the test harness' capture, and under nextest into the
+        // run's INCONCLUSIVE_LOG too: a test that passes this way is seen in the log of
+        // every run.
         use std::io::Write;
-        let _ = writeln!(
-            std::io::stderr(),
+        let report = format!(
             "INCONCLUSIVE: {}: a failure attributed to the machine's stalls the run measured: \
              real-time work held off a CPU {stalled_ms:.0} ms in {} s ({stalls} stalls, the \
-             longest {:.0} ms); the failure:\n{}",
+             longest {:.0} ms); the failure:\n{}\n",
             std::thread::current().name().unwrap_or("a test"),
             STALL_WINDOW.as_secs(),
             longest.as_secs_f64() * 1e3,
@@ -626,6 +661,14 @@ pub fn attributable(test: impl FnOnce()) {
                 .take(2000)
                 .collect::<String>()
         );
+        let _ = std::io::stderr().write_all(report.as_bytes());
+        if std::env::var_os("NEXTEST_RUN_ID").is_some() {
+            let _ = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(bin_dir().join(INCONCLUSIVE_LOG))
+                .and_then(|mut f| f.write_all(report.as_bytes()));
+        }
         return;
     }
     std::panic::resume_unwind(panic);

@@ -26,6 +26,14 @@ fn ip(args: &[&str]) {
     );
 }
 
+/// Whether `link` in namespace `ns` is operationally up (`ip link` says "state UP").
+fn operational(ns: &str, link: &str) -> bool {
+    Command::new("ip")
+        .args(["-n", ns, "-o", "link", "show", "dev", link])
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains(" state UP "))
+}
+
 /// The namespace, removed when dropped.
 pub struct Netns(pub String);
 
@@ -58,6 +66,21 @@ impl Line {
         ]);
         ip(&["-n", &ns.0, "link", "set", "s0", "up"]);
         ip(&["-n", &ns.0, "link", "set", "m0", "up"]);
+        // Frames go out once the kernel's link watch has seen the carrier (it attaches the
+        // queues and says "state UP"); before, they are dropped. It can lag behind while other
+        // tests make and remove links of their own, and a scan's first frame lost is a failed
+        // bring-up.
+        for end in ["m0", "s0"] {
+            let start = std::time::Instant::now();
+            while !operational(&ns.0, end) {
+                assert!(
+                    start.elapsed() < Duration::from_secs(60),
+                    "{end} in {} not up after 60 s",
+                    ns.0
+                );
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
         let stop = Arc::new(AtomicBool::new(false));
         let (ready, answers) = std::sync::mpsc::channel();
         let answering = {
