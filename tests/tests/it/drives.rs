@@ -255,7 +255,9 @@ fn an_absurd_inertia_is_refused_before_anything_starts() {
 fn csp_axes_follow_the_small_triangle_on_the_real_processes() {
     integration_tests::attributable(|| {
         let inst = instance("csp");
-        let cfg = integration_tests::cell_in_csp();
+        // Room for stalls: the test is about CSP, not the cell's tolerance of them (a
+        // supervisor held off a CPU 500 ms by the tests beside it failed it once).
+        let cfg = integration_tests::with_stall_room(&integration_tests::cell_in_csp());
         let cfg = scratch("csp", "cell.toml", &cfg);
         let j = small_triangle_json("csp", &inst, &cfg);
         on_target(&j);
@@ -459,10 +461,12 @@ fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
 /// The default cell with a supervisor heartbeat of 5 s, so a test can stall one process for
 /// a while without the supervisor ending the run first.
 fn patient_config(test: &str) -> std::path::PathBuf {
-    // The stall is for servo's own rules to catch, not for the supervisor's heartbeat or the
+    // The stall is for servo's own rules to catch, not for the supervisor's heartbeat (either
+    // way: a supervisor held off a CPU by the tests beside it stops no process) or the
     // health detectors (tested on their own in `health`).
     integration_tests::default_cell_toml()
         .set("supervisor.heartbeat_timeout", 5.0)
+        .set("supervisor.supervisor_timeout", 2.0)
         .set(
             "health_config.pending_sequence_overrun_percent_limit",
             100.0,

@@ -102,9 +102,11 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
     integration_tests::attributable(|| {
         let inst = instance("estop-stall");
         // The supervisor's heartbeat watch is made slower than the detector, so the detector is
-        // what catches the stall.
+        // what catches the stall; nor do the processes take a supervisor held off a CPU by
+        // the tests beside it for lost.
         let cfg = integration_tests::default_cell_toml()
             .set("supervisor.heartbeat_timeout", 30.0)
+            .set("supervisor.supervisor_timeout", 2.0)
             .write("estop-stall", "cell.toml");
         let mut run = triangle_in_background_as(&inst, Some(&cfg), true);
         let client = Client::when_moving(&inst, &mut run);

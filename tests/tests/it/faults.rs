@@ -1210,16 +1210,22 @@ impl PrivateShm {
         String::from_utf8_lossy(&out.stdout).into_owned()
     }
 
-    /// Fills the tmpfs: a file takes every free page.
+    /// Fills the tmpfs: files take every free page. The running cell may take pages between
+    /// the count of the free ones and the file that takes them all, which then fails whole
+    /// (seen on a loaded machine): once more with the new count, until none is free.
     fn fill(&self) {
-        self.sh("fallocate -l $(( $(stat -f -c '%a * %S' /dev/shm) )) /dev/shm/filler");
+        self.sh("for k in $(seq 100); do \
+               free=$(stat -f -c '%a * %S' /dev/shm); \
+               [ $(( $free )) -eq 0 ] && break; \
+               fallocate -l $(( $free )) /dev/shm/filler-$k || true; \
+             done");
         let free = self.sh("stat -f -c %a /dev/shm");
         assert_eq!(free.trim(), "0", "/dev/shm not full");
     }
 
     /// Frees what [`PrivateShm::fill`] took.
     fn free(&self) {
-        self.sh("rm /dev/shm/filler");
+        self.sh("rm /dev/shm/filler-*");
     }
 
     /// The names in the tmpfs.

@@ -461,10 +461,12 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
         // 30 % of its rate, 75 missed periods, leaking one every 50 ms. The supervisor's
         // heartbeat watch is made slower than the detector, so the detector is what catches
         // the stall; the wake-up detector gets room for the host's stalls (it tripped servo
-        // on a busy host, which is not what this test is about).
+        // on a busy host, which is not what this test is about), and the processes' watch of
+        // the supervisor too.
         let test = "ops-iostall";
         let cfg = integration_tests::default_cell_toml()
             .set("supervisor.heartbeat_timeout", 30.0)
+            .set("supervisor.supervisor_timeout", 2.0)
             .set(
                 "health_config.thread_offset_variance_overrun_percent_limit",
                 100.0,
