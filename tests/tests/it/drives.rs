@@ -286,7 +286,11 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
                     "5",
                     "--plot",
                 ])
-                .arg(&png),
+                .arg(&png)
+                // Room for stalls: the test is about tune's figures (the axis' response does
+                // not depend on the detectors' limits).
+                .arg("--config")
+                .arg(integration_tests::default_cell_with_room_file(&inst)),
             WATCHDOG,
         );
         let j = json_of(&out);
@@ -345,9 +349,13 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
 fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
     integration_tests::attributable(|| {
         let inst = instance("tune-busy");
+        // Room for stalls: no detector may trip on the way down, and this test is about the
+        // control channel (the drives' pending-sequence detector tripped once, the machine
+        // loaded by the tests beside it).
         let mut tune = supervisor()
             .args(["tune", "--instance", &inst, "--axis", "x", "--step", "0.2"])
-            .args(["--ramp", "30"])
+            .args(["--ramp", "30", "--config"])
+            .arg(integration_tests::default_cell_with_room_file(&inst))
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
