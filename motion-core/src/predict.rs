@@ -241,7 +241,7 @@ fn run(
             Some(t) if t > now && t < next => t,
             // Nothing moves during a DELAY: straight to its end, the step trajgen takes there
             // too. The samples in between would repeat this one (a day's DELAY was 86.4
-            // million of them, 3.9 s of `supervisor check`).
+            // million of them, 7.7 s of `supervisor check`).
             Some(t) if t > now && matches!(g.phase(), Phase::Delaying { .. }) => t,
             _ => next,
         };
