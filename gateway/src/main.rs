@@ -38,12 +38,32 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 use zenoh::qos::CongestionControl;
 
-use crate::recording::OnTheLine;
-
 mod client;
 mod line_web;
 mod recording;
 mod viewing;
+
+/// What a stream of the gateway's own thread serves from: the cell's Zenoh session, its
+/// instance and its name on the line, and whether the gateway is leaving the line.
+#[derive(Clone, Copy, Debug)]
+struct OnTheLine<'a> {
+    /// The gateway's session.
+    session: &'a zenoh::Session,
+    /// The cell's instance (its shared memory).
+    instance: &'a InstanceName,
+    /// The cell's name on the line (its keys).
+    name: &'a CellName,
+    /// Set when the gateway leaves the line.
+    leaving: &'a AtomicBool,
+}
+
+impl OnTheLine<'_> {
+    /// Whether the stream should end: the gateway leaves the line or the process was asked to
+    /// stop.
+    fn over(&self) -> bool {
+        runtime::signals::stop_requested() || self.leaving.load(Ordering::Relaxed)
+    }
+}
 
 /// Events queued between the cycle and the network at most.
 const EVENT_QUEUE: usize = 1024;

@@ -10,12 +10,11 @@
 //! falls behind, and what the cell's shared memory no longer holds is counted per topic as
 //! lost, as a local recording counts it. The cell never waits.
 
-use gateway::keys::{CellKeys, CellName};
+use crate::OnTheLine;
+use gateway::keys::CellKeys;
 use gateway::wire::{RecordBatch, RecordFlushed, RecordTopics};
 use recorder::Source;
 use serde_json::value::RawValue;
-use shm_schema::InstanceName;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 use zenoh::qos::CongestionControl;
@@ -62,28 +61,6 @@ struct Running {
     topics: RecordTopics,
     seq: u64,
     sent: Instant,
-}
-
-/// What a stream of the gateway's own thread serves from: the cell's Zenoh session, its
-/// instance and its name on the line, and whether the gateway is leaving the line.
-#[derive(Clone, Copy, Debug)]
-pub struct OnTheLine<'a> {
-    /// The gateway's session.
-    pub session: &'a zenoh::Session,
-    /// The cell's instance (its shared memory).
-    pub instance: &'a InstanceName,
-    /// The cell's name on the line (its keys).
-    pub name: &'a CellName,
-    /// Set when the gateway leaves the line.
-    pub leaving: &'a AtomicBool,
-}
-
-impl OnTheLine<'_> {
-    /// Whether the stream should end: the gateway leaves the line or the process was asked to
-    /// stop.
-    pub fn over(&self) -> bool {
-        runtime::signals::stop_requested() || self.leaving.load(Ordering::Relaxed)
-    }
 }
 
 /// Serves the recording stream until the gateway leaves the line or the process is asked to

@@ -8,7 +8,7 @@
 //! A thread of the gateway's own at the ordinary priority; the frames are dropped rather than
 //! queued when the network is slower (the next one says everything again).
 
-use crate::recording::OnTheLine;
+use crate::OnTheLine;
 use gateway::keys::CellKeys;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
