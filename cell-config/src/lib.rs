@@ -582,6 +582,9 @@ pub struct SupervisorSettings {
     pub restart_backoff: f64,
     /// Restarts in a row after which a process is left dead. Default 3.
     pub restart_limit: u32,
+    /// `SCHED_FIFO` priority of the supervisor's loop, which publishes the heartbeat; below
+    /// every real-time process of the table; 0 for `SCHED_OTHER`. Default 10.
+    pub priority: i32,
 }
 
 impl Default for SupervisorSettings {
@@ -593,6 +596,7 @@ impl Default for SupervisorSettings {
             supervisor_timeout: 0.5,
             restart_backoff: 0.5,
             restart_limit: 3,
+            priority: 10,
         }
     }
 }
@@ -1262,6 +1266,29 @@ impl Config {
             found.push((
                 vec![K("supervisor"), K("restart_limit")],
                 format!("restart_limit = {} must be 0..=1000", s.restart_limit),
+            ));
+        }
+        if !(0..=99).contains(&s.priority) {
+            found.push((
+                vec![K("supervisor"), K("priority")],
+                format!("priority = {} must be 0..=99 (0: SCHED_OTHER)", s.priority),
+            ));
+        } else if s.priority > 0
+            && let Some(p) = self
+                .process
+                .iter()
+                .filter(|p| p.priority > 0)
+                .min_by_key(|p| p.priority)
+            && p.priority <= s.priority
+        {
+            // At or above a process's priority, the loop's work (a request, a report) would
+            // delay that process's cycle.
+            found.push((
+                vec![K("supervisor"), K("priority")],
+                format!(
+                    "priority = {} must be below every real-time process's: process {} has {}",
+                    s.priority, p.name, p.priority
+                ),
             ));
         }
         for (k, v, hi) in self.health_config.entries() {

@@ -170,6 +170,46 @@ pub fn setup_thread(req: RtRequest) -> RtReport {
     report
 }
 
+/// Puts the calling thread under `SCHED_FIFO` at `priority` with `SCHED_RESET_ON_FORK`, for
+/// a thread that watches real-time work rather than doing it (the supervisor's loop, which
+/// publishes the heartbeat every process of the cell leaves without): ordinary work (a
+/// build, a browser) can no longer hold it off a CPU, and whatever it starts (the cell's
+/// processes, which set their own priorities, and its own threads: a program's validation,
+/// the recorder) starts under `SCHED_OTHER`. Nothing else of [`setup`] (no memory locking,
+/// no pinning): a late heartbeat is what this guards against, not a late cycle. The thread
+/// goes back to `SCHED_OTHER` when the guard drops. Refused (not root): warned about, and
+/// the report says `SCHED_OTHER`; `priority` 0 asks for nothing.
+pub fn setup_watching_thread(priority: i32) -> (RtReport, RtGuard) {
+    let mut report = RtReport {
+        cpu: -1,
+        ..RtReport::default()
+    };
+    if priority > 0 {
+        let param = libc::sched_param {
+            sched_priority: priority,
+        };
+        let policy = libc::SCHED_FIFO | libc::SCHED_RESET_ON_FORK;
+        // SAFETY: plain system call with a valid parameter block; 0 is the calling thread.
+        if unsafe { libc::sched_setscheduler(0, policy, &param) } == 0 {
+            report.policy = 1;
+            report.priority = priority;
+            report.flags |= rt_flags::SCHED;
+        } else {
+            tracing::warn!(
+                "SCHED_FIFO priority {priority} refused ({}): the supervisor's loop runs under \
+                 SCHED_OTHER, and a loaded machine can hold its heartbeat back",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    let guard = RtGuard {
+        _dma_latency: None,
+        fifo: report.policy == 1,
+        _same_thread: std::marker::PhantomData,
+    };
+    (report, guard)
+}
+
 /// Opens `/dev/cpu_dma_latency` and writes a 32-bit 0: the CPUs stay out of deep idle
 /// states while the file is open (halves p99 wake-up latency on this machine).
 fn hold_dma_latency_zero() -> Option<File> {
@@ -219,7 +259,9 @@ pub fn sched_of(pid: i32) -> Option<(u32, i32)> {
         if libc::sched_getparam(pid, &mut param) != 0 {
             return None;
         }
-        let p = match policy {
+        // The policy comes with `SCHED_RESET_ON_FORK` or-ed in where it is set
+        // ([`setup_watching_thread`]).
+        let p = match policy & !libc::SCHED_RESET_ON_FORK {
             libc::SCHED_FIFO => 1,
             libc::SCHED_RR => 2,
             _ => 0,

@@ -356,6 +356,9 @@ pub(crate) struct Cell {
     latency_subs: Vec<Sub<LatencyHistogramV1>>,
     exec_subs: Vec<Sub<LatencyHistogramV1>>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
+    /// This thread's `SCHED_FIFO` priority (`[supervisor] priority`), given back when the
+    /// cell is closed: a supervisor that leaves must not spin at it (`runtime::rt::RtGuard`).
+    _fifo: runtime::rt::RtGuard,
 }
 
 impl Cell {
@@ -405,6 +408,15 @@ impl Cell {
             ..HostStateV1::default()
         };
         host_pub.send(&host);
+        // The heartbeat's thread above ordinary work from the first process on; what it
+        // starts starts under SCHED_OTHER.
+        let (sched, fifo) = runtime::rt::setup_watching_thread(cfg.supervisor.priority);
+        if sched.policy == 1 {
+            tracing::info!(
+                "the supervisor's loop runs under SCHED_FIFO {}; what it starts, under SCHED_OTHER",
+                sched.priority
+            );
+        }
         let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
         for (index, p) in cfg.process.iter().enumerate() {
             children
@@ -468,6 +480,7 @@ impl Cell {
             latency_subs,
             exec_subs,
             _node: node,
+            _fifo: fifo,
         })
     }
 

@@ -593,6 +593,47 @@ fn estop_stop_time_and_the_restart_settings_are_checked_as_config_md_says() {
     }
 }
 
+/// `[supervisor] priority`: 10 by default, 0..=99, and below every real-time process of the
+/// table (the loop's work must never delay a cycle); a process under `SCHED_OTHER` (0) does
+/// not count.
+#[test]
+fn the_supervisors_priority_stays_below_every_real_time_process() {
+    let s = line_of("priority = 10 ");
+    assert_eq!(Config::default_cell().supervisor.priority, 10);
+    for (to, want) in [
+        (
+            "priority = 100",
+            "priority = 100 must be 0..=99 (0: SCHED_OTHER)",
+        ),
+        (
+            "priority = -1",
+            "priority = -1 must be 0..=99 (0: SCHED_OTHER)",
+        ),
+        (
+            "priority = 60",
+            "priority = 60 must be below every real-time process's: process iobridge has 60",
+        ),
+    ] {
+        let e = Config::parse(
+            &DEFAULT_TOML.replacen("priority = 10 ", &format!("{to} "), 1),
+            "cell.toml",
+        )
+        .expect_err(to);
+        assert_eq!(e.problems.len(), 1, "{e}");
+        assert_eq!(e.to_string(), format!("cell.toml:{s}:1: {want}"));
+    }
+    for v in [0, 1, 59] {
+        let src = DEFAULT_TOML.replacen("priority = 10 ", &format!("priority = {v} "), 1);
+        let c = Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{v}: {e}"));
+        assert_eq!(c.supervisor.priority, v);
+    }
+    // iobridge under SCHED_OTHER: the lowest real-time process is servo, at 70.
+    let src = DEFAULT_TOML
+        .replacen("priority = 60", "priority = 0", 1)
+        .replacen("priority = 10 ", "priority = 69 ", 1);
+    Config::parse(&src, "cell.toml").expect("below servo's 70");
+}
+
 #[test]
 fn a_missing_file_is_named() {
     let e =

@@ -218,7 +218,7 @@ fn status_reports_the_running_cell_and_its_latency() {
                 let ready = ["drives", "servo", "trajgen", "iobridge"].iter().all(|p| {
                     j["processes"][p]["state"] == "cyclic"
                         && j["processes"][p]["wakeup_latency_us"]["samples"].as_u64() > Some(0)
-                });
+                }) && j["processes"]["modbus"]["state"] == "cyclic";
                 if ready {
                     break j;
                 }
@@ -236,6 +236,18 @@ fn status_reports_the_running_cell_and_its_latency() {
             assert!(proc_["cycles"].as_u64() > Some(0), "{p}: {proc_}");
             check_figures(p, &proc_["wakeup_latency_us"]);
         }
+        // The supervisor's loop, which publishes the heartbeat, runs above ordinary work
+        // (`[supervisor] priority`, 10), where the host grants it; modbus (priority 0),
+        // started from that loop, runs under SCHED_OTHER all the same (SCHED_RESET_ON_FORK).
+        let me = runtime::rt::sched_of(run.id() as i32);
+        assert_eq!(
+            me,
+            Some((1, 10)),
+            "the supervisor's loop: (policy, priority)"
+        );
+        assert_eq!(typed.processes["modbus"].policy, "SCHED_OTHER");
+        let modbus = typed.processes["modbus"].pid as i32;
+        assert_eq!(runtime::rt::sched_of(modbus), Some((0, 0)), "modbus");
         let table = run_with_watchdog(supervisor().args(["status", "--instance", &inst]), WATCHDOG);
         let text = String::from_utf8_lossy(&table.stdout);
         assert!(
