@@ -14,6 +14,12 @@ pub struct Info {
     pub pid: u32,
     /// `supervisor up` or `supervisor run`.
     pub mode: Mode,
+    /// The scheduling policy of the supervisor's loop, which publishes the heartbeat
+    /// (`SCHED_FIFO` as `[supervisor] priority` asks, where the host grants it; else
+    /// `SCHED_OTHER`).
+    pub policy: String,
+    /// Its `SCHED_FIFO` priority; 0 under `SCHED_OTHER`.
+    pub priority: i32,
     /// E-stop resets since the cell started.
     pub resets: u64,
     /// The latched e-stop; `null` when clear.
@@ -154,9 +160,11 @@ impl Info {
     /// its life and restarts.
     pub fn lines(&self) -> String {
         let mut out = format!(
-            "supervisor pid {} ({}), e-stop resets {}\n",
+            "supervisor pid {} ({}, loop {} {}), e-stop resets {}\n",
             self.pid,
             crate::word(&self.mode),
+            self.policy,
+            self.priority,
             self.resets
         );
         match &self.estop {

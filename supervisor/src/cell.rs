@@ -356,6 +356,8 @@ pub(crate) struct Cell {
     latency_subs: Vec<Sub<LatencyHistogramV1>>,
     exec_subs: Vec<Sub<LatencyHistogramV1>>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
+    /// The loop's scheduling as the kernel granted it (`status`).
+    sched: runtime::rt::RtReport,
     /// This thread's `SCHED_FIFO` priority (`[supervisor] priority`), given back when the
     /// cell is closed: a supervisor that leaves must not spin at it (`runtime::rt::RtGuard`).
     _fifo: runtime::rt::RtGuard,
@@ -480,6 +482,7 @@ impl Cell {
             latency_subs,
             exec_subs,
             _node: node,
+            sched,
             _fifo: fifo,
         })
     }
@@ -1213,6 +1216,8 @@ impl Cell {
                 Mode::Run => info::Mode::Run,
                 Mode::Up => info::Mode::Up,
             },
+            policy: runtime::rt::policy_name(self.sched.policy).to_string(),
+            priority: self.sched.priority,
             resets: self.host.resets,
             estop,
             arm,

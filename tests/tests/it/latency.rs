@@ -245,6 +245,8 @@ fn status_reports_the_running_cell_and_its_latency() {
             Some((1, 10)),
             "the supervisor's loop: (policy, priority)"
         );
+        let loop_ = (typed.supervisor.policy.as_str(), typed.supervisor.priority);
+        assert_eq!(loop_, ("SCHED_FIFO", 10), "status says so");
         assert_eq!(typed.processes["modbus"].policy, "SCHED_OTHER");
         let modbus = typed.processes["modbus"].pid as i32;
         assert_eq!(runtime::rt::sched_of(modbus), Some((0, 0)), "modbus");
@@ -252,6 +254,10 @@ fn status_reports_the_running_cell_and_its_latency() {
         let text = String::from_utf8_lossy(&table.stdout);
         assert!(
             text.contains("p99.99") && text.lines().any(|l| l.starts_with("servo")),
+            "{text}"
+        );
+        assert!(
+            text.contains("loop SCHED_FIFO 10), e-stop resets"),
             "{text}"
         );
 
