@@ -2,7 +2,6 @@
 //! the `supervisor` part of `status --json`. The processes' own view (their cycle counts,
 //! latency, servo's axes) is read from shared memory: [`crate::status`].
 
-use crate::status::Origin;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -53,6 +52,33 @@ pub enum Mode {
     Run,
     /// `supervisor up`: until `supervisor down`.
     Up,
+}
+
+/// Who raised an e-stop (seed 002's three origins).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Origin {
+    /// A process of the cell, about itself.
+    Device,
+    /// The user, an e-stop input.
+    External,
+    /// The host: a process lost or stalled, a health detector, the supervisor's heartbeat.
+    Host,
+    /// A value this version does not know.
+    #[serde(rename = "?")]
+    Unknown,
+}
+
+impl From<u32> for Origin {
+    fn from(v: u32) -> Self {
+        use shm_schema::EstopOrigin as O;
+        match O::from_wire(v) {
+            Some(O::Device) => Self::Device,
+            Some(O::External) => Self::External,
+            Some(O::Host) => Self::Host,
+            None => Self::Unknown,
+        }
+    }
 }
 
 /// The latched e-stop as the supervisor saw it raised.

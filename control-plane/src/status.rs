@@ -4,6 +4,8 @@
 //! generated from these types, is `docs/schema/status.schema.json`.
 
 use crate::info::Info;
+/// Who raised an e-stop: declared with the supervisor's view of it ([`crate::info`]).
+pub use crate::info::Origin;
 use indexmap::IndexMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -73,33 +75,6 @@ pub struct Status {
     pub sense_to_command_us: Option<Percentiles>,
     /// The supervisor's own view.
     pub supervisor: Info,
-}
-
-/// Who raised an e-stop (seed 002's three origins).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum Origin {
-    /// A process of the cell, about itself.
-    Device,
-    /// The user, an e-stop input.
-    External,
-    /// The host: a process lost or stalled, a health detector, the supervisor's heartbeat.
-    Host,
-    /// A value this version does not know.
-    #[serde(rename = "?")]
-    Unknown,
-}
-
-impl From<u32> for Origin {
-    fn from(v: u32) -> Self {
-        use shm_schema::EstopOrigin as O;
-        match O::from_wire(v) {
-            Some(O::Device) => Self::Device,
-            Some(O::External) => Self::External,
-            Some(O::Host) => Self::Host,
-            None => Self::Unknown,
-        }
-    }
 }
 
 /// The cell's e-stop.

@@ -344,7 +344,7 @@ pub(crate) struct Cell {
     pub(crate) servo_sub: Sub<ServoStateV3>,
     pub(crate) image_sub: Sub<FieldbusImageV1>,
     /// While a swap measures the fieldbus image's gaps: every image read is seen by it.
-    pub(crate) image_gaps: Option<crate::swap::GapMeter>,
+    pub(crate) image_gaps: Option<GapMeter>,
     pub(crate) handover_sub: Sub<TrajgenHandoverV2>,
     /// The supervisor hands a paused motion to a new trajgen (the old one's publisher, and
     /// its history, die with it).
@@ -1230,5 +1230,30 @@ impl Cell {
             tuning: None,
             going_down: false,
         }
+    }
+}
+
+/// The largest interval between consecutive fieldbus images seen (ns), and their count.
+#[derive(Debug, Default)]
+pub(crate) struct GapMeter {
+    last_ns: Option<u64>,
+    max_ns: u64,
+    count: u64,
+}
+
+impl GapMeter {
+    /// An image written at `written_ns`.
+    pub(crate) fn see(&mut self, written_ns: u64) {
+        if let Some(t) = self.last_ns
+            && written_ns > t
+        {
+            self.max_ns = self.max_ns.max(written_ns - t);
+        }
+        self.last_ns = Some(self.last_ns.map_or(written_ns, |t| t.max(written_ns)));
+        self.count += 1;
+    }
+
+    pub(crate) fn result(&self) -> Option<(u64, u64)> {
+        (self.count > 1).then_some((self.max_ns, self.count))
     }
 }

@@ -12,4 +12,5 @@ pub mod run;
 pub mod serve;
 pub mod swap;
 pub mod tune;
+pub mod tuning;
 pub mod up;

@@ -7,7 +7,7 @@
 //! 3. takes the control channel's requests and answers those that are complete.
 //!
 //! `run` is this loop with one program queued at the start, ending with it; `tune` the same
-//! with a tuning session ([`crate::tune::Tuning`]); `up` is this loop until `down` or a signal.
+//! with a tuning session ([`crate::tuning::Tuning`]); `up` is this loop until `down` or a signal.
 //!
 //! Going down (`down`, SIGTERM, SIGINT) is a controlled stop, never a stop through a fault: a
 //! program that moves comes to rest along its path first (as `abort` does), then servo disables
@@ -21,7 +21,7 @@ use crate::launch::cpu_seconds;
 use crate::program::{Checked, Predicted, Validation};
 use crate::report::{Report, process_report};
 use crate::swap::{Step, Swap};
-use crate::tune::{Measured, Tuning};
+use crate::tuning::{Measured, Tuning};
 use cell_config::Config;
 use control_plane::channel::{ConnId, Server};
 use control_plane::event as events;

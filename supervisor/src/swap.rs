@@ -22,7 +22,7 @@
 //! first step, [`Swap::step`] one more every tick, and meanwhile the loop beats, watches the
 //! processes and answers the control channel (a request that would change the cell waits
 //! for the swap's end: it is refused "busy", `down` is kept for after it).
-use crate::cell::{Cell, Incident, TICK};
+use crate::cell::{Cell, GapMeter, Incident, TICK};
 use crate::job::Job;
 use cell_config::Config;
 use control_plane::Replaced;
@@ -511,31 +511,6 @@ impl Swap {
         Step::ProgramLost(format!(
             "{why}; the program is lost, the axes rest on its path"
         ))
-    }
-}
-
-/// The largest interval between consecutive fieldbus images seen (ns), and their count.
-#[derive(Debug, Default)]
-pub(crate) struct GapMeter {
-    last_ns: Option<u64>,
-    max_ns: u64,
-    count: u64,
-}
-
-impl GapMeter {
-    /// An image written at `written_ns`.
-    pub(crate) fn see(&mut self, written_ns: u64) {
-        if let Some(t) = self.last_ns
-            && written_ns > t
-        {
-            self.max_ns = self.max_ns.max(written_ns - t);
-        }
-        self.last_ns = Some(self.last_ns.map_or(written_ns, |t| t.max(written_ns)));
-        self.count += 1;
-    }
-
-    fn result(&self) -> Option<(u64, u64)> {
-        (self.count > 1).then_some((self.max_ns, self.count))
     }
 }
 

@@ -2,6 +2,9 @@
 //! the run with its events; a fault injected from another shell is reported as it happens; an
 //! absurd axis is refused before anything starts; CSP axes follow the triangle.
 
+use control_plane::channel::call;
+use control_plane::status::Power;
+use control_plane::{Refusal, Reply, Request};
 use iceoryx2::prelude::Node;
 use integration_tests::{
     assert_clean, assert_gone, examples, exited, instance, json_of, pids_with, run_with_watchdog,
@@ -185,8 +188,8 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
                 .args(["status", "--json", "--instance", &inst])
                 .output()
                 .expect("status");
-            let text = String::from_utf8_lossy(&status.stdout);
-            if text.contains("\"power\":\"enabled\"") {
+            let s = serde_json::from_slice::<control_plane::status::Status>(&status.stdout);
+            if s.is_ok_and(|s| s.servo.is_some_and(|v| v.power == Power::Enabled)) {
                 break;
             }
             std::thread::sleep(Duration::from_millis(100));
@@ -361,17 +364,18 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
             .spawn()
             .expect("tune");
         let start = Instant::now();
+        let name = InstanceName::new(&inst).expect("an instance name");
         let mut busy = None;
         while busy.is_none() && tune.try_wait().expect("tune").is_none() {
             assert!(start.elapsed() < WATCHDOG, "tune did not end");
-            let out = supervisor()
-                .args(["pause", "--instance", &inst])
-                .output()
-                .expect("pause");
-            let err = String::from_utf8_lossy(&out.stderr).to_string();
-            if err.contains("busy: axis x is being tuned") {
-                assert_eq!(out.status.code(), Some(2), "{err}");
-                busy = Some(err);
+            // Before the session has the cell, a pause is refused for other causes (the
+            // drives being enabled, no program): the variant says which.
+            if let Ok(Reply::Refused(r @ Refusal::Tuning { .. })) = call(&name, &Request::Pause) {
+                assert_eq!(r, Refusal::Tuning { axis: "x".into() });
+                let words =
+                    "busy: axis x is being tuned (`supervisor tune`); `supervisor down` ends it";
+                assert_eq!(r.to_string(), words);
+                busy = Some(r);
             }
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -385,6 +389,12 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
             let j = json_of(&status);
             assert_eq!(j["supervisor"]["arm"]["enabled"], true, "{j}");
             assert_eq!(j["supervisor"]["tuning"], "x", "{j}");
+            // The CLI says a refusal with exit status 2.
+            let out = supervisor()
+                .args(["pause", "--instance", &inst])
+                .output()
+                .expect("pause");
+            assert_eq!(out.status.code(), Some(2), "{out:?}");
             // `down` ends the session: a controlled stop, not a fault; tune fails saying so.
             succeeded(supervisor().args(["down", "--instance", &inst]));
             let err = exited(&tune.wait_with_output().expect("tune"), 1);
