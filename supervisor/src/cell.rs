@@ -800,6 +800,13 @@ impl Cell {
     /// The processes that exited since the last tick: a critical one an incident; each lost
     /// (restarted by its policy), but one of two during a swap.
     fn reap(&mut self, cfg: &Config, out: &mut Vec<Incident>) {
+        // The ones told to stop (a swap's old process), as they leave: expected, no incident.
+        for left in self.children.reap() {
+            match left.problem {
+                Some(problem) => tracing::warn!("{} (pid {}) {problem}", left.name, left.pid),
+                None => tracing::debug!("{} (pid {}) left", left.name, left.pid),
+            }
+        }
         while let Some((p, status)) = self.children.exited() {
             let k = p.index;
             let text = status.to_string();
@@ -976,19 +983,9 @@ impl Cell {
         self.beating(|c, tick| c.stop_all(tick))
     }
 
-    /// Stops the process with pid `pid` alone (the new one of a failed swap).
-    pub(crate) fn stop_pid(&mut self, pid: u32) -> Option<String> {
-        self.beating(|c, tick| c.stop_pid(pid, tick))
-    }
-
     /// The command process `k` runs now (`None`: the configured one).
     pub(crate) fn command_of(&self, k: usize) -> Option<Vec<String>> {
         self.commands[k].clone()
-    }
-
-    /// Stops process `k` alone.
-    pub(crate) fn stop_process(&mut self, k: usize) -> Option<String> {
-        self.beating(|c, tick| c.stop(k, tick))
     }
 
     /// Offers `h` to a new trajgen (history 1); `valid` 0 withdraws the offer.

@@ -36,10 +36,33 @@ impl Running {
     }
 }
 
+/// A process told to stop (SIGTERM to its group) that has not left yet.
+#[derive(Debug)]
+struct Leaving {
+    p: Running,
+    /// SIGKILL after this.
+    deadline: Instant,
+    /// It was past its deadline and got SIGKILL.
+    killed: bool,
+}
+
+/// A process that left after it was told to ([`Children::reap`]).
+#[derive(Debug)]
+pub struct Left {
+    /// Its name in the process table.
+    pub name: String,
+    /// Its pid.
+    pub pid: u32,
+    /// `Some(problem)` if it did not exit cleanly (status 0) or was killed.
+    pub problem: Option<String>,
+}
+
 /// The processes of one run; stops them all when dropped.
 #[derive(Debug, Default)]
 pub struct Children {
     procs: Vec<Running>,
+    /// Told to stop ([`Children::dismiss`]), not gone yet.
+    leaving: Vec<Leaving>,
     stop_timeout: Duration,
 }
 
@@ -59,6 +82,7 @@ impl Children {
         }
         Self {
             procs: Vec::new(),
+            leaving: Vec::new(),
             stop_timeout,
         }
     }
@@ -125,27 +149,76 @@ impl Children {
         self.procs.iter().find(|p| p.index == index)
     }
 
-    /// Descriptors that become readable when a process exits.
+    /// Descriptors that become readable when a process exits (a leaving one's too).
     pub fn fds(&self) -> Vec<BorrowedFd<'_>> {
         self.procs
             .iter()
+            .chain(self.leaving.iter().map(|l| &l.p))
             .filter_map(|p| p.pidfd.as_ref().map(|f| f.as_fd()))
             .collect()
     }
 
-    /// Stops the process of table index `index` (SIGTERM to its group, SIGKILL after the
-    /// stop timeout), `tick` running meanwhile; `Some(problem)` if it did not exit cleanly.
-    pub fn stop(&mut self, index: usize, tick: &mut dyn FnMut()) -> Option<String> {
-        let k = self.procs.iter().position(|p| p.index == index)?;
-        let mut p = self.procs.remove(k);
-        stop_one(&mut p, self.stop_timeout, tick)
+    /// Tells the process with pid `pid` to stop (SIGTERM to its group) and lets it leave in
+    /// the background: [`Children::reap`] takes it once it has exited, and kills it after the
+    /// stop timeout. Nobody waits here, so the supervisor's loop goes on meanwhile (a swap's
+    /// old process stopping, a failed new one). False if no such process runs.
+    pub fn dismiss(&mut self, pid: u32) -> bool {
+        let Some(k) = self.procs.iter().position(|p| p.pid() == pid) else {
+            return false;
+        };
+        let p = self.procs.remove(k);
+        let _ = killpg(Pid::from_raw(pid as i32), Signal::SIGTERM);
+        self.leaving.push(Leaving {
+            p,
+            deadline: Instant::now() + self.stop_timeout,
+            killed: false,
+        });
+        true
     }
 
-    /// Stops the process with pid `pid` (one of two with the same index, during a swap).
-    pub fn stop_pid(&mut self, pid: u32, tick: &mut dyn FnMut()) -> Option<String> {
-        let k = self.procs.iter().position(|p| p.pid() == pid)?;
-        let mut p = self.procs.remove(k);
-        stop_one(&mut p, self.stop_timeout, tick)
+    /// The process with pid `pid` was dismissed and has not left yet.
+    pub fn is_leaving(&self, pid: u32) -> bool {
+        self.leaving.iter().any(|l| l.p.pid() == pid)
+    }
+
+    /// Takes the dismissed processes that have left, and kills those past the stop timeout
+    /// (they are taken on a later call, once gone).
+    pub fn reap(&mut self) -> Vec<Left> {
+        let mut left = Vec::new();
+        let now = Instant::now();
+        let mut k = 0;
+        while k < self.leaving.len() {
+            let l = &mut self.leaving[k];
+            let group = Pid::from_raw(l.p.pid() as i32);
+            match l.p.child.try_wait() {
+                Ok(Some(status)) => {
+                    // Anything it left in its group goes too.
+                    let _ = killpg(group, Signal::SIGKILL);
+                    let l = self.leaving.remove(k);
+                    left.push(Left {
+                        name: l.p.name.clone(),
+                        pid: l.p.pid(),
+                        problem: if l.killed {
+                            Some(format!(
+                                "did not stop within {:.1} s of SIGTERM and was killed",
+                                self.stop_timeout.as_secs_f64()
+                            ))
+                        } else {
+                            (!status.success())
+                                .then(|| format!("exited with {status} after SIGTERM"))
+                        },
+                    });
+                    continue;
+                }
+                Ok(None) if now >= l.deadline && !l.killed => {
+                    let _ = killpg(group, Signal::SIGKILL);
+                    l.killed = true;
+                }
+                _ => {}
+            }
+            k += 1;
+        }
+        left
     }
 
     /// Kills the group of the process of table index `index` at once (a stalled process);
@@ -186,6 +259,18 @@ impl Children {
         while let Some(mut p) = self.procs.pop() {
             if let Some(problem) = stop_one(&mut p, self.stop_timeout, tick) {
                 problems.push((p.name.clone(), problem));
+            }
+        }
+        // What was dismissed and is still leaving: waited for (and killed) too.
+        while !self.leaving.is_empty() {
+            for l in self.reap() {
+                if let Some(problem) = l.problem {
+                    problems.push((l.name, problem));
+                }
+            }
+            if !self.leaving.is_empty() {
+                tick();
+                std::thread::sleep(Duration::from_millis(5));
             }
         }
         problems

@@ -53,9 +53,13 @@ enum Stage {
     Disabling { since: Instant },
     /// Make before break: the new one started beside the old one; until it is cyclic.
     Beside { new: u32, since: Instant },
-    /// The old one stopped: a few ticks of the image from the new one alone.
+    /// The old one told to stop: until it has left, then a few ticks of the image from the
+    /// new one alone.
     Alone { new: u32, since: Instant },
-    /// The old one stopped and the new one started; until it is cyclic.
+    /// On the motion path: the old one told to stop; until it has left, then the new one
+    /// starts.
+    Vacating { old: u32 },
+    /// The old one gone and the new one started; until it is cyclic.
     Replacing { new: u32, since: Instant },
     /// trajgen during a program: until the path speed is 0 on the path.
     Pausing { seq: u64, since: Instant },
@@ -64,6 +68,9 @@ enum Stage {
         since: Instant,
         seen: Option<TrajgenHandoverV2>,
     },
+    /// The old trajgen told to stop, the record taken; until it has left, then the new one
+    /// starts with the record.
+    HandingOver { record: TrajgenHandoverV2, old: u32 },
     /// The new trajgen started with the record; until it holds the motion, paused.
     TakingOver {
         record: TrajgenHandoverV2,
@@ -190,11 +197,27 @@ impl Swap {
             Stage::Disabling { since } => self.disabling(cell, cfg, t, since),
             Stage::Beside { new, since } => self.beside(cell, t, new, since),
             Stage::Alone { new, since } => {
-                if since.elapsed() < 5 * TICK {
+                // The ticks alone count from the old one's exit.
+                let gone = self.old.is_none_or(|old| !cell.children.is_leaving(old));
+                let since = if gone { since } else { Instant::now() };
+                if !gone || since.elapsed() < 5 * TICK {
                     self.stage = Stage::Alone { new, since };
                     return Step::Going;
                 }
                 self.done(cell, new)
+            }
+            Stage::Vacating { old } => {
+                if cell.children.is_leaving(old) {
+                    self.stage = Stage::Vacating { old };
+                    return Step::Going;
+                }
+                match self.start_new(cell, cfg) {
+                    Ok(stage) => {
+                        self.stage = stage;
+                        Step::Going
+                    }
+                    Err(e) => Step::Failed(e),
+                }
             }
             Stage::Replacing { new, since } => {
                 if t.lost.is_none() && cell.cyclic(self.k) {
@@ -210,7 +233,8 @@ impl Swap {
                 Step::Going
             }
             Stage::Pausing { seq, since } => self.pausing(cell, t, seq, since),
-            Stage::Recording { since, seen } => self.recording(cell, cfg, t, since, seen),
+            Stage::Recording { since, seen } => self.recording(cell, t, since, seen),
+            Stage::HandingOver { record, old } => self.handing_over(cell, cfg, record, old),
             Stage::TakingOver {
                 record,
                 started_ns,
@@ -258,7 +282,7 @@ impl Swap {
         });
         if let Some(why) = why {
             // Break nothing: the new one goes, the old one stays.
-            let _ = cell.stop_pid(new);
+            cell.children.dismiss(new);
             let old = self.old.map_or(0, |p| p);
             return self.fail(
                 cell,
@@ -272,8 +296,10 @@ impl Swap {
             self.stage = Stage::Beside { new, since };
             return Step::Going;
         }
-        if let Some(problem) = cell.stop_process(k) {
-            tracing::warn!("the old {} {problem}", self.name);
+        if let Some(old) = self.old {
+            // It leaves in the background; the loop goes on meanwhile (the cell's tick reaps
+            // it, and warns if it does not stop cleanly).
+            cell.children.dismiss(old);
         }
         self.stage = Stage::Alone {
             new,
@@ -303,12 +329,11 @@ impl Swap {
         }
     }
 
-    /// Until the old trajgen's handover record of the program; then the old one stops and
-    /// the new one starts with the record.
+    /// Until the old trajgen's handover record of the program; then the old one is told to
+    /// stop.
     fn recording(
         &mut self,
         cell: &mut Cell,
-        cfg: &Config,
         t: Tick,
         since: Instant,
         seen: Option<TrajgenHandoverV2>,
@@ -330,12 +355,27 @@ impl Swap {
             }
         };
         cell.set_handover(k, true);
-        if let Some(problem) = cell.stop_process(k) {
-            tracing::warn!("the old trajgen {problem}");
+        let old = cell.children.get(k).map_or(0, |p| p.pid());
+        cell.children.dismiss(old);
+        self.stage = Stage::HandingOver { record, old };
+        Step::Going
+    }
+
+    /// Until the old trajgen has left; then the new one starts with the record.
+    fn handing_over(
+        &mut self,
+        cell: &mut Cell,
+        cfg: &Config,
+        record: TrajgenHandoverV2,
+        old: u32,
+    ) -> Step {
+        if cell.children.is_leaving(old) {
+            self.stage = Stage::HandingOver { record, old };
+            return Step::Going;
         }
         let started_ns = runtime::time::now_ns();
         cell.offer_handover(&record);
-        if let Err(e) = cell.start_process(k, cfg) {
+        if let Err(e) = cell.start_process(self.k, cfg) {
             return self.program_lost(
                 cell,
                 format!("the new trajgen did not take the motion over: {e}"),
@@ -445,13 +485,23 @@ impl Swap {
                 .inspect_err(|_| self.undo(cell))?;
             return Ok(Stage::Beside { new, since });
         }
-        if let Some(problem) = cell.stop_process(k) {
-            tracing::warn!("the old {} {problem}", self.name);
+        // On the motion path the old one leaves first, in the background.
+        if let Some(old) = cell.children.get(k).map(|p| p.pid()) {
+            cell.children.dismiss(old);
+            return Ok(Stage::Vacating { old });
         }
+        self.start_new(cell, cfg)
+    }
+
+    /// The old one gone: the new one starts in its place.
+    fn start_new(&self, cell: &mut Cell, cfg: &Config) -> Result<Stage, String> {
         let new = cell
-            .start_process(k, cfg)
+            .start_process(self.k, cfg)
             .inspect_err(|_| self.undo(cell))?;
-        Ok(Stage::Replacing { new, since })
+        Ok(Stage::Replacing {
+            new,
+            since: Instant::now(),
+        })
     }
 
     fn what(&self) -> &'static str {

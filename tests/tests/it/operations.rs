@@ -350,6 +350,79 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     });
 }
 
+/// A process of the table that takes 6 s to leave after SIGTERM (its shell waits that long
+/// once it ended), swapped: the old one leaves in the background, and the control channel
+/// answers meanwhile (it was deaf until the old process had gone, up to `stop_timeout`).
+#[test]
+fn the_control_channel_answers_while_a_swapped_process_takes_its_time_to_leave() {
+    integration_tests::attributable(|| {
+        let test = "ops-slow-leave";
+        let iobridge = integration_tests::bin("iobridge");
+        let slow = format!(
+            "trap 'sleep 6' TERM; {} --instance {{instance}}",
+            iobridge.display()
+        );
+        let command = toml_edit::Array::from_iter(["sh", "-c", slow.as_str()]);
+        let up = Up::start(
+            test,
+            &cell(
+                test,
+                &[
+                    ("process[iobridge].command", command.into()),
+                    ("supervisor.stop_timeout", 20.0.into()),
+                ],
+            ),
+        );
+        let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
+        let info = || match control_plane::channel::call(&instance, &control_plane::Request::Info) {
+            Ok(control_plane::Reply::Info(info)) => info,
+            other => panic!("Info: {other:?}"),
+        };
+        let pid = |i: &control_plane::Info| {
+            let p = i.processes.iter().find(|p| p.name == "iobridge");
+            p.and_then(|p| p.pid).expect("iobridge runs")
+        };
+        let old = pid(&info());
+        // Alive, not a zombie waiting to be reaped.
+        let alive = |pid: u32| {
+            std::fs::read_to_string(format!("/proc/{pid}/stat"))
+                .ok()
+                .and_then(|s| s.rsplit(") ").next().map(|r| !r.starts_with('Z')))
+                .unwrap_or(false)
+        };
+        let mut swap = up
+            .command()
+            .args(["swap", "iobridge", "--instance", &up.inst])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("swap");
+        let start = Instant::now();
+        let mut answered = None;
+        while answered.is_none() && swap.try_wait().expect("swap").is_none() {
+            assert!(start.elapsed() < WATCHDOG, "the swap never ended");
+            let i = info();
+            // The new one in the table, the swap not over, the old one still leaving.
+            if i.swapping.as_deref() == Some("iobridge") && pid(&i) != old && alive(old) {
+                answered = Some(pid(&i));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let out = swap.wait_with_output().expect("swap");
+        assert!(out.status.success(), "swap: {out:?}\nlog:\n{}", up.log());
+        assert!(
+            answered.is_some(),
+            "no answer while the old iobridge (pid {old}) was leaving\nlog:\n{}",
+            up.log()
+        );
+        assert!(
+            !alive(old),
+            "the old iobridge is gone once the swap is done"
+        );
+        up.down();
+    });
+}
+
 #[test]
 fn another_user_is_refused_by_the_control_channel() {
     integration_tests::attributable(|| {
