@@ -1098,6 +1098,13 @@ impl Background {
     /// [`RecordError::Failed`] when the recorder did not end well (it failed while recording,
     /// or had to be killed).
     pub fn stop(&mut self) -> Result<String, RecordError> {
+        self.stop_beating(&mut || {})
+    }
+
+    /// [`Background::stop`], `tick` running every 10 ms while the recorder finishes its file
+    /// (the supervisor's heartbeat: a long recording's index takes a while to write, and the
+    /// cell's processes leave after `supervisor_timeout` without a heartbeat).
+    pub fn stop_beating(&mut self, tick: &mut dyn FnMut()) -> Result<String, RecordError> {
         use std::io::Read;
         let Some(mut child) = self.child.take() else {
             return Ok(String::new());
@@ -1110,6 +1117,7 @@ impl Background {
         // killed (its file then lacks its index: readers that stream still read it).
         let until = Instant::now() + Duration::from_secs(10);
         while child.try_wait().ok().flatten().is_none() && Instant::now() < until {
+            tick();
             std::thread::sleep(Duration::from_millis(10));
         }
         if child.try_wait().ok().flatten().is_none() {

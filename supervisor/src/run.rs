@@ -87,7 +87,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     let processes = serve::process_reports(&cell);
     let latency_figures = serve::latency_figures(&cell);
     let sense_to_command = cell.sense_to_command.take();
-    let recorded = recorder.as_mut().map(|r| r.stop()).transpose();
+    let recorded = recorder
+        .as_mut()
+        .map(|r| r.stop_beating(&mut || cell.keep_alive()))
+        .transpose();
     if let Ok(Some(summary)) = &recorded {
         crate::out::line(summary.trim_end());
     }

@@ -36,7 +36,10 @@ pub fn up(
             .join(", ")
     );
     let end = serve(&cfg, &mut cell, &mut server, None);
-    match recorder.as_mut().map(|r| r.stop()) {
+    match recorder
+        .as_mut()
+        .map(|r| r.stop_beating(&mut || cell.keep_alive()))
+    {
         Some(Ok(summary)) => tracing::info!("{}", summary.trim_end()),
         Some(Err(e)) => tracing::error!("{e}"),
         None => {}
