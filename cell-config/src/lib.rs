@@ -966,7 +966,7 @@ impl Config {
     /// the table is sound.
     fn validate(&self) -> Vec<Problem> {
         let mut found: Vec<Problem> = Vec::new();
-        found.extend(self.validate_motion().err());
+        found.extend(self.validate_motion());
         found.extend(io::validate(&self.io));
         found.extend(kinematics::validate(&self.kinematics, &self.axis));
         found.extend(modbus::validate(&self.modbus));
@@ -1015,22 +1015,23 @@ impl Config {
         found
     }
 
-    /// `[motion]` on its own.
-    fn validate_motion(&self) -> Result<(), Problem> {
+    /// `[motion]` on its own: each key's problem, all of them.
+    fn validate_motion(&self) -> Vec<Problem> {
         use Seg::Key as K;
         let m = &self.motion;
         let at = |k: &'static str| vec![K("motion"), K(k)];
+        let mut found = Vec::new();
         if !positive(m.t_acc) {
-            return Err((
+            found.push((
                 at("t_acc"),
                 format!("t_acc = {} s must be positive", m.t_acc),
             ));
         }
         if !non_negative(m.settle_time) {
-            return Err((at("settle_time"), "settle_time must be 0 s or more".into()));
+            found.push((at("settle_time"), "settle_time must be 0 s or more".into()));
         }
         if !(m.estop_stop_time.is_finite() && (0.01..=60.0).contains(&m.estop_stop_time)) {
-            return Err((
+            found.push((
                 at("estop_stop_time"),
                 format!(
                     "estop_stop_time = {} s must be 0.01..=60 s",
@@ -1039,12 +1040,12 @@ impl Config {
             ));
         }
         if !positive(m.settle_timeout) {
-            return Err((
+            found.push((
                 at("settle_timeout"),
                 "settle_timeout must be positive".into(),
             ));
         }
-        Ok(())
+        found
     }
 
     /// What the processes' periods bound: the setpoint timeout, `[drives]`' timeouts and

@@ -64,6 +64,24 @@ fn every_problem_is_reported_at_once_in_the_files_order() {
     assert_eq!(text.lines().count(), 4, "one line each:\n{text}");
 }
 
+/// `[motion]`'s own keys: each problem at once, not the first one only.
+#[test]
+fn every_problem_of_the_motion_section_is_reported_at_once() {
+    let (e, text) = refused(&[
+        ("t_acc = 0.525", "t_acc = 0.0"),
+        ("settle_time = 0.1 ", "settle_time = -0.1 "),
+        ("settle_timeout = 5.0", "settle_timeout = 0.0"),
+    ]);
+    for needle in [
+        "t_acc = 0 s must be positive",
+        "settle_time must be 0 s or more",
+        "settle_timeout must be positive",
+    ] {
+        assert!(text.contains(needle), "{needle:?} in\n{text}");
+    }
+    assert_eq!(e.problems.len(), 3, "{text}");
+}
+
 #[test]
 fn each_part_of_one_axis_says_its_own_problem_and_a_derived_check_waits_for_them() {
     // Axis x: its unit, its range, a servo gain and its mechanics, each wrong.
