@@ -234,16 +234,27 @@ messages! {
 impl Message for FieldbusImageV1 {
     const NAME: &'static str = "rtc.FieldbusImageV1";
     fn json(&self, axes: &[String]) -> Value {
-        let img = self;
+        // Every field, recorded or said not to be (a field added to the payload does not
+        // compile here until it is): the image is recorded decoded, its measurement time
+        // being `measured_ns` and its positions `position`; `len` (bytes in use) is not.
+        let FieldbusImageV1 {
+            seq,
+            written_ns,
+            measured_ns,
+            source_seq,
+            len: _,
+            axes: n,
+            image: _,
+        } = *self;
         let pos: Map<String, Value> = axes
             .iter()
             .enumerate()
-            .take(img.axes as usize)
-            .map(|(k, a)| (a.clone(), json!(img.position(k))))
+            .take(n as usize)
+            .map(|(k, a)| (a.clone(), json!(self.position(k))))
             .collect();
         json!({
-            "seq": img.seq, "written_ns": img.written_ns, "measured_ns": img.measured_ns,
-            "source_seq": img.source_seq, "axes": img.axes, "position": pos,
+            "seq": seq, "written_ns": written_ns, "measured_ns": measured_ns,
+            "source_seq": source_seq, "axes": n, "position": pos,
         })
     }
     fn schema(axes: &[String]) -> Value {
@@ -1145,6 +1156,39 @@ impl Drop for Background {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The image is recorded by hand (decoded): what it writes is what its schema says, key
+    /// for key, and the positions are the image's own.
+    #[test]
+    fn the_decoded_image_is_what_its_schema_says() {
+        let axes = ["x".to_string(), "y".to_string()];
+        let mut img = FieldbusImageV1 {
+            seq: 7,
+            written_ns: 2_000,
+            measured_ns: 1_000,
+            source_seq: 6,
+            len: 16,
+            axes: 2,
+            image: [0; shm_schema::drive::FIELDBUS_IMAGE_LEN],
+        };
+        img.image[8..12].copy_from_slice(&12_345i32.to_le_bytes());
+        img.image[12..16].copy_from_slice(&shm_schema::drive::IMAGE_INVALID.to_le_bytes());
+        let j = img.json(&axes);
+        let schema = FieldbusImageV1::schema(&axes);
+        let keys = |v: &Value| -> Vec<String> {
+            let mut k: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
+            k.sort();
+            k
+        };
+        assert_eq!(keys(&j), keys(&schema["properties"]), "{j}");
+        assert_eq!(
+            keys(&j["position"]),
+            keys(&schema["properties"]["position"]["properties"])
+        );
+        assert_eq!(j["position"]["x"], 12.345);
+        assert!(j["position"]["y"].is_null(), "no valid measurement: {j}");
+        assert_eq!((j["seq"].as_u64(), j["axes"].as_u64()), (Some(7), Some(2)));
+    }
 
     #[test]
     fn every_field_of_every_recorded_payload_is_recorded_or_said_not_to_be() {
