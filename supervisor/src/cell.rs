@@ -281,35 +281,42 @@ fn await_orphans(cfg: &Config, instance: &InstanceName) -> Result<(), RunError> 
 /// to start again from 0.
 const STABLE: Duration = Duration::from_secs(60);
 
+/// One process of the table, as the supervisor keeps it.
+pub(crate) struct Proc {
+    pub(crate) name: String,
+    /// Whether the cell's safety depends on it (`critical`). A process that is not critical
+    /// is restarted on a loss without an e-stop and never ends a job.
+    critical: bool,
+    /// Its latest status, latency and execution-time histograms.
+    pub(crate) status: Option<ProcessStatusV2>,
+    pub(crate) latency: Option<Box<LatencyHistogramV1>>,
+    pub(crate) exec_time: Option<Box<LatencyHistogramV1>>,
+    /// The cycle count last seen and when it last advanced.
+    beat: (u64, Instant),
+    pub(crate) life: Life,
+    pub(crate) restarts: u32,
+    /// Restarts since the operator last reset the e-stop (the limit's count).
+    streak: u32,
+    /// The pid whose statuses are ignored (the old one, during a swap).
+    ignore_pid: Option<u32>,
+    /// The command it runs now (`swap --command`), `None` for the configured.
+    command: Option<Vec<String>>,
+    /// An incident (stall, fault) already reported for its current life.
+    flagged: bool,
+    /// The network address it announced it serves on (`listening` events).
+    pub(crate) listening: Option<String>,
+    /// When it was last started.
+    started: Instant,
+    status_sub: Sub<ProcessStatusV2>,
+    latency_sub: Sub<LatencyHistogramV1>,
+    exec_sub: Sub<LatencyHistogramV1>,
+}
+
 /// The supervisor's ports and the processes of the cell.
 pub(crate) struct Cell {
     pub(crate) instance: InstanceName,
     pub(crate) mode: Mode,
     pub(crate) children: Children,
-    /// Per process of the table: its latest status, latency and execution-time histograms.
-    pub(crate) statuses: Vec<Option<ProcessStatusV2>>,
-    pub(crate) latencies: Vec<Option<Box<LatencyHistogramV1>>>,
-    pub(crate) exec_times: Vec<Option<Box<LatencyHistogramV1>>>,
-    /// Per process: the cycle count last seen and when it last advanced.
-    beats: Vec<(u64, Instant)>,
-    pub(crate) names: Vec<String>,
-    pub(crate) life: Vec<Life>,
-    pub(crate) restarts: Vec<u32>,
-    /// Per process: restarts since the operator last reset the e-stop (the limit's count).
-    streak: Vec<u32>,
-    /// Per process: the pid whose statuses are ignored (the old one, during a swap).
-    ignore_pid: Vec<Option<u32>>,
-    /// Per process: the command it runs now (`swap --command`), `None` for the configured.
-    commands: Vec<Option<Vec<String>>>,
-    /// Per process: an incident (stall, fault) already reported for its current life.
-    flagged: Vec<bool>,
-    /// Per process: whether the cell's safety depends on it (`critical`). A process that
-    /// is not critical is restarted on a loss without an e-stop and never ends a job.
-    critical: Vec<bool>,
-    /// Per process: the network address it announced it serves on (`listening` events).
-    pub(crate) listening: Vec<Option<String>>,
-    /// Per process: when it was last started.
-    started: Vec<Instant>,
     /// The first e-stop trigger since the last reset, and when it was seen.
     pub(crate) estop: Option<(EstopV1, Instant)>,
     host: HostStateV1,
@@ -352,9 +359,9 @@ pub(crate) struct Cell {
     io_sub: Sub<DigitalIoV1>,
     /// Gaps between heartbeats, and where they went.
     stalls: StallWatch,
-    status_subs: Vec<Sub<ProcessStatusV2>>,
-    latency_subs: Vec<Sub<LatencyHistogramV1>>,
-    exec_subs: Vec<Sub<LatencyHistogramV1>>,
+    /// The process table, in its order: what the supervisor keeps of each process, its
+    /// ports among it (before the node: field order is drop order).
+    pub(crate) procs: Vec<Proc>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
     /// The loop's scheduling as the kernel granted it (`status`).
     sched: runtime::rt::RtReport,
@@ -385,14 +392,28 @@ impl Cell {
         let handover_sub = Sub::new(&node, i, ServiceId::TrajgenHandover, 1).map_err(f)?;
         let handover_pub = Pub::new(&node, i, ServiceId::TrajgenHandover).map_err(f)?;
         let io_sub = Sub::new(&node, i, ServiceId::IoState, 1).map_err(f)?;
-        let mut status_subs = Vec::new();
-        let mut latency_subs = Vec::new();
-        let mut exec_subs = Vec::new();
+        let mut procs = Vec::new();
         for p in &cfg.process {
             let name = ProcessName::new(&p.name).map_err(|e| RunError::Input(e.to_string()))?;
-            exec_subs.push(Sub::new(&node, i, ServiceId::ExecTime(name), 1).map_err(f)?);
-            status_subs.push(Sub::new(&node, i, ServiceId::Status(name), 64).map_err(f)?);
-            latency_subs.push(Sub::new(&node, i, ServiceId::Latency(name), 1).map_err(f)?);
+            procs.push(Proc {
+                name: p.name.clone(),
+                critical: p.critical,
+                status: None,
+                latency: None,
+                exec_time: None,
+                beat: (0, Instant::now()),
+                life: Life::Running,
+                restarts: 0,
+                streak: 0,
+                ignore_pid: None,
+                command: None,
+                flagged: false,
+                listening: None,
+                started: Instant::now(),
+                exec_sub: Sub::new(&node, i, ServiceId::ExecTime(name), 1).map_err(f)?,
+                status_sub: Sub::new(&node, i, ServiceId::Status(name), 64).map_err(f)?,
+                latency_sub: Sub::new(&node, i, ServiceId::Latency(name), 1).map_err(f)?,
+            });
         }
         let cell = cfg.to_shm();
         config_pub.send(&cell);
@@ -425,25 +446,10 @@ impl Cell {
                 .spawn(p, index, None, &instance)
                 .map_err(RunError::system)?;
         }
-        let n = cfg.process.len();
         Ok(Self {
             instance,
             mode,
             children,
-            statuses: vec![None; n],
-            latencies: vec![None; n],
-            exec_times: vec![None; n],
-            beats: vec![(0, Instant::now()); n],
-            names: cfg.process.iter().map(|p| p.name.clone()).collect(),
-            life: vec![Life::Running; n],
-            restarts: vec![0; n],
-            streak: vec![0; n],
-            ignore_pid: vec![None; n],
-            commands: vec![None; n],
-            flagged: vec![false; n],
-            critical: cfg.process.iter().map(|p| p.critical).collect(),
-            listening: vec![None; n],
-            started: vec![Instant::now(); n],
             estop: None,
             host,
             sense_to_command: None,
@@ -478,9 +484,7 @@ impl Cell {
             stalls: StallWatch::new(Duration::from_secs_f64(
                 (cfg.supervisor.supervisor_timeout / 4.0).min(STALL_REPORTED_S),
             )),
-            status_subs,
-            latency_subs,
-            exec_subs,
+            procs,
             _node: node,
             sched,
             _fifo: fifo,
@@ -518,20 +522,18 @@ impl Cell {
 
     /// Index of process `name` in the table.
     pub(crate) fn index_of(&self, name: &str) -> Option<usize> {
-        self.names.iter().position(|n| n == name)
+        self.procs.iter().position(|p| p.name == name)
     }
 
     /// Takes the newest latency histogram of every process (they publish about every 100 ms)
     /// and the drives' sense-to-command histogram.
     pub(crate) fn refresh_latency(&mut self) {
-        for (k, sub) in self.latency_subs.iter().enumerate() {
-            if let Some(h) = sub.latest() {
-                self.latencies[k] = Some(Box::new(h));
+        for p in &mut self.procs {
+            if let Some(h) = p.latency_sub.latest() {
+                p.latency = Some(Box::new(h));
             }
-        }
-        for (k, sub) in self.exec_subs.iter().enumerate() {
-            if let Some(h) = sub.latest() {
-                self.exec_times[k] = Some(Box::new(h));
+            if let Some(h) = p.exec_sub.latest() {
+                p.exec_time = Some(Box::new(h));
             }
         }
         if let Some(h) = self.sense_sub.latest() {
@@ -547,14 +549,14 @@ impl Cell {
         if let Some(io) = self.io_sub.latest() {
             self.io = Some(io);
         }
-        let processes = (0..self.names.len())
-            .filter(|&k| matches!(self.life[k], Life::Running))
+        let processes = (0..self.procs.len())
+            .filter(|&k| matches!(self.procs[k].life, Life::Running))
             .filter_map(|k| {
                 Some(Seen {
-                    name: self.names[k].clone(),
-                    status: self.statuses[k]?,
-                    latency: self.latencies[k].clone(),
-                    exec_time: self.exec_times[k].clone(),
+                    name: self.procs[k].name.clone(),
+                    status: self.procs[k].status?,
+                    latency: self.procs[k].latency.clone(),
+                    exec_time: self.procs[k].exec_time.clone(),
                 })
             })
             .collect();
@@ -586,7 +588,11 @@ impl Cell {
                     _ => tracing::info!("{line}"),
                 },
             }
-            if let Some(k) = self.listening.get_mut(e.source as usize) {
+            if let Some(k) = self
+                .procs
+                .get_mut(e.source as usize)
+                .map(|p| &mut p.listening)
+            {
                 match e.code {
                     code::LISTENING => *k = Some(e.text().to_string()),
                     code::LISTEN_FAILED => *k = None,
@@ -730,13 +736,13 @@ impl Cell {
 
     /// A process was lost: the host e-stop, its resources, its restart.
     fn lost(&mut self, k: usize, cfg: &Config, why: &str, exit_code: f64) {
-        let name = self.names[k].clone();
-        self.listening[k] = None;
-        if !self.critical[k] {
+        let name = self.procs[k].name.clone();
+        self.procs[k].listening = None;
+        if !self.procs[k].critical {
             // Its last status must not hold a reset back while it restarts.
-            self.statuses[k] = None;
+            self.procs[k].status = None;
         }
-        if self.critical[k] {
+        if self.procs[k].critical {
             self.event(code::PROCESS_LOST, exit_code, &[&name, ": ", why]);
             self.raise(EstopOrigin::Host, code::PROCESS_LOST, &[&name, " lost"]);
         } else {
@@ -745,20 +751,21 @@ impl Cell {
         let _ = ipc::remove_dead_nodes(&self.instance);
         let p = &cfg.process[k];
         // A run ends with a lost critical process; one that is not critical restarts.
-        self.life[k] = if self.mode == Mode::Run && self.critical[k] {
+        self.procs[k].life = if self.mode == Mode::Run && self.procs[k].critical {
             Life::Down(format!("lost: {why}"))
         } else if p.restart == RestartPolicy::Never {
             Life::Down(format!("lost: {why}; restart = \"never\""))
-        } else if self.streak[k] >= cfg.supervisor.restart_limit {
+        } else if self.procs[k].streak >= cfg.supervisor.restart_limit {
             Life::Down(format!(
                 "lost: {why}; restart limit of {} reached",
                 cfg.supervisor.restart_limit
             ))
         } else {
-            let backoff = cfg.supervisor.restart_backoff * f64::from(1u32 << self.streak[k].min(6));
+            let backoff =
+                cfg.supervisor.restart_backoff * f64::from(1u32 << self.procs[k].streak.min(6));
             Life::Restarting(Instant::now() + Duration::from_secs_f64(backoff))
         };
-        match &self.life[k] {
+        match &self.procs[k].life {
             Life::Down(why) => tracing::error!("{name} {why}"),
             Life::Restarting(at) => tracing::warn!(
                 "{name} lost ({why}); restarting in {:.2} s",
@@ -770,15 +777,15 @@ impl Cell {
 
     /// Starts process `k` (again), with its current command.
     pub(crate) fn start_process(&mut self, k: usize, cfg: &Config) -> Result<u32, String> {
-        let command = self.commands[k].clone();
+        let command = self.procs[k].command.clone();
         let pid = self
             .children
             .spawn(&cfg.process[k], k, command.as_deref(), &self.instance)?;
-        self.life[k] = Life::Running;
-        self.started[k] = Instant::now();
-        self.beats[k] = (0, Instant::now());
-        self.statuses[k] = None;
-        self.flagged[k] = false;
+        self.procs[k].life = Life::Running;
+        self.procs[k].started = Instant::now();
+        self.procs[k].beat = (0, Instant::now());
+        self.procs[k].status = None;
+        self.procs[k].flagged = false;
         Ok(pid)
     }
 
@@ -810,7 +817,7 @@ impl Cell {
         while let Some((p, status)) = self.children.exited() {
             let k = p.index;
             let text = status.to_string();
-            if self.critical[k] {
+            if self.procs[k].critical {
                 out.push(Incident::Exited {
                     name: p.name.clone(),
                     pid: p.pid(),
@@ -847,37 +854,37 @@ impl Cell {
     /// ended, to be restarted, by its policy).
     fn watch(&mut self, cfg: &Config, out: &mut Vec<Incident>) {
         let timeout = Duration::from_secs_f64(cfg.supervisor.heartbeat_timeout);
-        for k in 0..self.names.len() {
-            while let Some(s) = self.status_subs[k].next() {
-                if self.ignore_pid[k] == Some(s.pid) {
+        for k in 0..self.procs.len() {
+            while let Some(s) = self.procs[k].status_sub.next() {
+                if self.procs[k].ignore_pid == Some(s.pid) {
                     continue;
                 }
-                let b = &mut self.beats[k];
+                let b = &mut self.procs[k].beat;
                 if s.stats.cycles != b.0 {
                     *b = (s.stats.cycles, Instant::now());
                 }
-                self.statuses[k] = Some(s);
+                self.procs[k].status = Some(s);
             }
-            if self.life[k] != Life::Running || self.flagged[k] {
+            if self.procs[k].life != Life::Running || self.procs[k].flagged {
                 continue;
             }
-            if let Some(s) = self.statuses[k]
+            if let Some(s) = self.procs[k].status
                 && ProcState::from_wire(s.state) == Some(ProcState::Fault)
             {
-                self.flagged[k] = true;
-                if self.critical[k] {
+                self.procs[k].flagged = true;
+                if self.procs[k].critical {
                     out.push(Incident::Fault {
-                        name: self.names[k].clone(),
+                        name: self.procs[k].name.clone(),
                         fault: s.fault,
                     });
                 }
             }
-            let (cycles, at) = self.beats[k];
+            let (cycles, at) = self.procs[k].beat;
             if cycles > 0 && at.elapsed() > timeout && self.host.handover & (1 << k) == 0 {
-                self.flagged[k] = true;
+                self.procs[k].flagged = true;
                 let for_s = at.elapsed().as_secs_f64();
-                let name = self.names[k].clone();
-                if self.critical[k] {
+                let name = self.procs[k].name.clone();
+                if self.procs[k].critical {
                     out.push(Incident::Stalled {
                         name: name.clone(),
                         for_s,
@@ -887,7 +894,7 @@ impl Cell {
                 } else {
                     self.event(code::NOT_CRITICAL_FAILED, -1.0, &[&name, ": stalled"]);
                 }
-                if (self.mode == Mode::Up || !self.critical[k])
+                if (self.mode == Mode::Up || !self.procs[k].critical)
                     && cfg.process[k].restart == RestartPolicy::OnFailure
                 {
                     // Alive but not cycling: end it; its exit restarts it.
@@ -900,41 +907,41 @@ impl Cell {
     /// A process that is not critical and has run a while since its last restart starts its
     /// restart count afresh (no e-stop reset does it for such a process).
     fn forgive_stable(&mut self) {
-        for k in 0..self.names.len() {
-            if !self.critical[k]
-                && self.streak[k] > 0
+        for k in 0..self.procs.len() {
+            if !self.procs[k].critical
+                && self.procs[k].streak > 0
                 && self.cyclic(k)
-                && self.started[k].elapsed() > STABLE
+                && self.procs[k].started.elapsed() > STABLE
             {
-                self.streak[k] = 0;
+                self.procs[k].streak = 0;
             }
         }
     }
 
     /// The restarts that are due, each said in the log and in an event.
     fn restart_due(&mut self, cfg: &Config) {
-        for k in 0..self.names.len() {
-            if let Life::Restarting(at) = self.life[k]
+        for k in 0..self.procs.len() {
+            if let Life::Restarting(at) = self.procs[k].life
                 && Instant::now() >= at
             {
-                self.restarts[k] += 1;
-                self.streak[k] += 1;
+                self.procs[k].restarts += 1;
+                self.procs[k].streak += 1;
                 match self.start_process(k, cfg) {
                     Ok(pid) => {
-                        let name = self.names[k].clone();
+                        let name = self.procs[k].name.clone();
                         tracing::warn!(
                             "{name} restarted (pid {pid}, restart {})",
-                            self.restarts[k]
+                            self.procs[k].restarts
                         );
                         self.event(
                             code::PROCESS_RESTARTED,
-                            f64::from(self.restarts[k]),
+                            f64::from(self.procs[k].restarts),
                             &[&name, " restarted"],
                         );
                     }
                     Err(e) => {
                         tracing::error!("{e}");
-                        self.life[k] = Life::Down(e);
+                        self.procs[k].life = Life::Down(e);
                     }
                 }
             }
@@ -985,7 +992,7 @@ impl Cell {
 
     /// The command process `k` runs now (`None`: the configured one).
     pub(crate) fn command_of(&self, k: usize) -> Option<Vec<String>> {
-        self.commands[k].clone()
+        self.procs[k].command.clone()
     }
 
     /// Offers `h` to a new trajgen (history 1); `valid` 0 withdraws the offer.
@@ -1005,17 +1012,17 @@ impl Cell {
 
     /// Ignores the statuses of `pid` for process `k` (the old one during a swap).
     pub(crate) fn ignore_statuses_of(&mut self, k: usize, pid: Option<u32>) {
-        self.ignore_pid[k] = pid;
+        self.procs[k].ignore_pid = pid;
     }
 
     /// Sets the command process `k` runs from its next start.
     pub(crate) fn set_command(&mut self, k: usize, command: Option<Vec<String>>) {
-        self.commands[k] = command;
+        self.procs[k].command = command;
     }
 
     /// Whether the cell's safety depends on process `k` (`critical`).
     pub(crate) fn critical(&self, k: usize) -> bool {
-        self.critical[k]
+        self.procs[k].critical
     }
 
     /// E-stop resets since the cell started.
@@ -1026,8 +1033,10 @@ impl Cell {
     /// The first critical process lost for good (restart policy `never`, or its restart
     /// limit reached), and why.
     pub(crate) fn lost_for_good(&self) -> Option<(String, String)> {
-        (0..self.names.len()).find_map(|k| match &self.life[k] {
-            Life::Down(why) if self.critical[k] => Some((self.names[k].clone(), why.clone())),
+        (0..self.procs.len()).find_map(|k| match &self.procs[k].life {
+            Life::Down(why) if self.procs[k].critical => {
+                Some((self.procs[k].name.clone(), why.clone()))
+            }
             _ => None,
         })
     }
@@ -1035,24 +1044,26 @@ impl Cell {
     /// Every critical process is cyclic (one that is not critical, the Modbus server, is not
     /// waited for).
     pub(crate) fn critical_cyclic(&self) -> bool {
-        (0..self.names.len()).all(|k| self.cyclic(k) || !self.critical[k])
+        (0..self.procs.len()).all(|k| self.cyclic(k) || !self.procs[k].critical)
     }
 
     /// True when process `k` is cyclic and its cycles advance.
     pub(crate) fn cyclic(&self, k: usize) -> bool {
-        self.life[k] == Life::Running
-            && self.statuses[k]
+        self.procs[k].life == Life::Running
+            && self.procs[k]
+                .status
                 .is_some_and(|s| s.state == ProcState::Cyclic as u32 && s.stats.cycles > 0)
     }
 
     /// The reasons the e-stop cannot be cleared now (empty: it can).
     pub(crate) fn reset_blockers(&self) -> Vec<String> {
         let mut out = Vec::new();
-        for (k, name) in self.names.iter().enumerate() {
-            if !self.critical[k] {
+        for (k, p) in self.procs.iter().enumerate() {
+            let name = &p.name;
+            if !p.critical {
                 continue; // the e-stop does not wait for it
             }
-            match &self.life[k] {
+            match &self.procs[k].life {
                 Life::Down(why) => out.push(format!(
                     "{name} is not running ({why}): `supervisor restart {name}` first"
                 )),
@@ -1078,7 +1089,7 @@ impl Cell {
         r.code = self.host.resets as u32;
         self.estop_pub.send(&r);
         self.event(code::ESTOP_RESET, self.host.resets as f64, &["reset"]);
-        self.streak.iter_mut().for_each(|s| *s = 0);
+        self.procs.iter_mut().for_each(|p| p.streak = 0);
         self.request(RequestKind::Reset)?;
         Ok(self.host.resets)
     }
@@ -1086,19 +1097,23 @@ impl Cell {
     /// The processes still showing the e-stop latched after a reset.
     pub(crate) fn still_latched(&self) -> Vec<String> {
         // A process that is not critical is not waited for (its status may be a lost one's).
-        (0..self.names.len())
-            .filter(|&k| self.critical[k] && self.life[k] == Life::Running)
-            .filter(|&k| self.statuses[k].is_some_and(|s| s.estop & estop_seen::LATCHED != 0))
-            .map(|k| self.names[k].clone())
+        (0..self.procs.len())
+            .filter(|&k| self.procs[k].critical && self.procs[k].life == Life::Running)
+            .filter(|&k| {
+                self.procs[k]
+                    .status
+                    .is_some_and(|s| s.estop & estop_seen::LATCHED != 0)
+            })
+            .map(|k| self.procs[k].name.clone())
             .collect()
     }
 
     /// True while a process that reacts to the e-stop has not completed its reaction.
     pub(crate) fn reactions_pending(&self) -> bool {
-        (0..self.names.len())
-            .filter(|&k| self.critical[k])
+        (0..self.procs.len())
+            .filter(|&k| self.procs[k].critical)
             .any(|k| {
-                self.statuses[k].is_some_and(|s| {
+                self.procs[k].status.is_some_and(|s| {
                     s.estop & estop_seen::REACTING != 0 && s.estop & estop_seen::SAFE == 0
                 })
             })
@@ -1106,17 +1121,20 @@ impl Cell {
 
     /// True when process `name` reacts to the e-stop.
     pub(crate) fn reacting(&self, name: &str) -> bool {
-        self.index_of(name)
-            .is_some_and(|k| self.statuses[k].is_some_and(|s| s.estop & estop_seen::REACTING != 0))
+        self.index_of(name).is_some_and(|k| {
+            self.procs[k]
+                .status
+                .is_some_and(|s| s.estop & estop_seen::REACTING != 0)
+        })
     }
 
     /// True for servo's own device e-stop: a latched fault, which servo's state explains.
     pub(crate) fn is_servo_fault(&self, e: &EstopV1) -> bool {
         e.origin == EstopOrigin::Device as u32
             && self
-                .names
+                .procs
                 .get(e.source as usize)
-                .is_some_and(|n| n == "servo")
+                .is_some_and(|p| p.name == "servo")
     }
 
     /// The latched fault servo reports, with the event that explains it.
@@ -1175,23 +1193,23 @@ impl Cell {
     /// The supervisor's view for `status --json`: per process its pid, life and restarts;
     /// the arm; the e-stop. The loop adds what runs on the cell ([`crate::serve`]).
     pub(crate) fn info(&self) -> Info {
-        let processes = (0..self.names.len())
+        let processes = (0..self.procs.len())
             .map(|k| {
-                let (life, why) = match &self.life[k] {
+                let (life, why) = match &self.procs[k].life {
                     Life::Running if self.cyclic(k) => (info::Life::Running, None),
                     Life::Running => (info::Life::Starting, None),
                     Life::Restarting(_) => (info::Life::Restarting, None),
                     Life::Down(w) => (info::Life::Down, Some(w.clone())),
                 };
                 info::ProcessInfo {
-                    name: self.names[k].clone(),
+                    name: self.procs[k].name.clone(),
                     pid: self.children.get(k).map(|p| p.pid()),
                     life,
                     why,
-                    restarts: self.restarts[k],
-                    command: self.commands[k].clone(),
-                    critical: self.critical[k],
-                    listening: self.listening[k].clone(),
+                    restarts: self.procs[k].restarts,
+                    command: self.procs[k].command.clone(),
+                    critical: self.procs[k].critical,
+                    listening: self.procs[k].listening.clone(),
                 }
             })
             .collect();

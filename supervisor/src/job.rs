@@ -95,9 +95,9 @@ impl Enabling {
             return Some(Ok(sp));
         }
         if self.start.elapsed() > self.timeout {
-            let mut missing: Vec<String> = (0..cell.names.len())
+            let mut missing: Vec<String> = (0..cell.procs.len())
                 .filter(|k| !cell.cyclic(*k) && cell.critical(*k))
-                .map(|k| format!("{} is not cyclic", cell.names[k]))
+                .map(|k| format!("{} is not cyclic", cell.procs[k].name))
                 .collect();
             if cell.last_sp.is_none() {
                 missing.push("trajgen publishes no setpoint".into());

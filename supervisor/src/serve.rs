@@ -1138,7 +1138,7 @@ impl Loop<'_> {
         let Some(k) = self.cell.index_of(process) else {
             return Some(Reply::Refused(Refusal::NoSuchProcess {
                 process: process.to_string(),
-                known: self.cell.names.clone(),
+                known: self.cell.procs.iter().map(|p| p.name.clone()).collect(),
             }));
         };
         if let Some(c) = &command {
@@ -1247,14 +1247,13 @@ impl Loop<'_> {
 
 /// Per process, its wake-up latency histogram over its life, for the run's figures.
 pub(crate) fn latency_figures(cell: &Cell) -> Vec<control_plane::figures::ProcessLatency> {
-    cell.names
+    cell.procs
         .iter()
-        .zip(&cell.latencies)
         .enumerate()
         .filter(|(k, _)| cell.children.get(*k).is_some())
-        .filter_map(|(_, (name, h))| {
-            let h = h.as_deref().filter(|h| h.count > 0)?;
-            Some(control_plane::figures::ProcessLatency::of(name, h))
+        .filter_map(|(_, p)| {
+            let h = p.latency.as_deref().filter(|h| h.count > 0)?;
+            Some(control_plane::figures::ProcessLatency::of(&p.name, h))
         })
         .collect()
 }
@@ -1262,25 +1261,27 @@ pub(crate) fn latency_figures(cell: &Cell) -> Vec<control_plane::figures::Proces
 /// Per process, its figures from the cell's view (for the report).
 pub(crate) fn process_reports(cell: &Cell) -> Vec<ProcessReport> {
     let mut out = Vec::new();
-    for k in 0..cell.names.len() {
+    for k in 0..cell.procs.len() {
         let Some(p) = cell.children.get(k) else {
             continue;
         };
         let pid = p.pid();
-        let status = cell.statuses[k].unwrap_or_default();
+        let status = cell.procs[k].status.unwrap_or_default();
         let (policy, priority) = sched_of(pid as i32).unwrap_or((status.policy, status.priority));
         let mut r = process_report(
-            &cell.names[k],
+            &cell.procs[k].name,
             pid,
             policy,
             priority,
             &status,
             cpu_seconds(pid),
         );
-        r.wakeup_latency_us = cell.latencies[k]
+        r.wakeup_latency_us = cell.procs[k]
+            .latency
             .as_deref()
             .map(latency::report::Summary::of);
-        r.exec_time_us = cell.exec_times[k]
+        r.exec_time_us = cell.procs[k]
+            .exec_time
             .as_deref()
             .filter(|h| h.count > 0)
             .map(latency::report::Summary::of);

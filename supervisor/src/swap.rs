@@ -110,7 +110,7 @@ impl Swap {
         swap: bool,
         job: Option<&Job>,
     ) -> Result<Self, String> {
-        let name = cell.names[k].clone();
+        let name = cell.procs[k].name.clone();
         let previous = cell.command_of(k);
         let motion = matches!(name.as_str(), "trajgen" | "servo" | "drives");
         let mut s = Self {
@@ -446,7 +446,7 @@ impl Swap {
         since: Instant,
     ) -> Step {
         if t.lost.is_none() && cell.last_sp.is_some_and(|sp| sp.control_seq >= seq) {
-            cell.restarts[self.k] += 1;
+            cell.procs[self.k].restarts += 1;
             let new = cell.children.get(self.k).map_or(0, |p| p.pid());
             let program = self.program.as_ref().map_or("", |p| p.0.as_str());
             tracing::info!(
@@ -513,7 +513,7 @@ impl Swap {
         let k = self.k;
         cell.set_handover(k, false);
         cell.ignore_statuses_of(k, None);
-        cell.restarts[k] += 1;
+        cell.procs[k].restarts += 1;
         let image = cell
             .image_gaps
             .take()
