@@ -8,45 +8,29 @@ use shm_schema::config::LISTEN_LEN;
 use shm_schema::{ModbusConfigV1, fixed_str};
 use std::net::SocketAddr;
 
-/// `[modbus]`.
+/// `[modbus]`: every key may be left out, for its default ([`Default`], where each is written
+/// once).
 #[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct ModbusSettings {
     /// `IP:port` to listen on. Default `127.0.0.1:1502` (this machine only); `0.0.0.0:502`
     /// opens it to the network; port 0 takes any free port (announced in `supervisor status`).
-    #[serde(default = "default_listen")]
     pub listen: String,
     /// Connections served at once, 1..=64. Default 8.
-    #[serde(default = "default_max_connections")]
     pub max_connections: u32,
     /// A connection that sends no request for this long is closed (s), 0.1..=86400. Default 60.
-    #[serde(default = "default_idle_timeout")]
     pub idle_timeout: f64,
     /// Whether the writable coils and holding registers take writes. Default true.
-    #[serde(default = "default_writes")]
     pub writes: bool,
-}
-
-fn default_listen() -> String {
-    "127.0.0.1:1502".into()
-}
-fn default_max_connections() -> u32 {
-    8
-}
-fn default_idle_timeout() -> f64 {
-    60.0
-}
-fn default_writes() -> bool {
-    true
 }
 
 impl Default for ModbusSettings {
     fn default() -> Self {
         Self {
-            listen: default_listen(),
-            max_connections: default_max_connections(),
-            idle_timeout: default_idle_timeout(),
-            writes: default_writes(),
+            listen: "127.0.0.1:1502".into(),
+            max_connections: 8,
+            idle_timeout: 60.0,
+            writes: true,
         }
     }
 }

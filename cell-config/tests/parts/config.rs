@@ -126,6 +126,21 @@ fn line_of(needle: &str) -> usize {
 
 #[test]
 fn the_modbus_settings_and_critical_are_checked_where_they_are_written() {
+    // A key left out takes its documented default; an empty section is all defaults.
+    let src = DEFAULT_TOML.replacen("max_connections = 8\n", "", 1);
+    let c = Config::parse(&src, "cell.toml").expect("max_connections left out");
+    assert_eq!(c.modbus.max_connections, 8);
+    let d = cell_config::modbus::ModbusSettings::default();
+    assert_eq!(
+        (
+            d.listen.as_str(),
+            d.max_connections,
+            d.idle_timeout,
+            d.writes
+        ),
+        ("127.0.0.1:1502", 8, 60.0, true),
+        "docs/fieldbus.md's defaults"
+    );
     let l = line_of("listen = \"127.0.0.1:1502\"");
     check(
         "listen = \"127.0.0.1:1502\"",
