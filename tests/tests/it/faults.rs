@@ -1127,13 +1127,7 @@ fn a_client_whose_reader_stops_early_ends_quietly() {
     integration_tests::attributable(|| {
         use std::os::unix::process::ExitStatusExt;
         let up = Up::default_cell("closed-pipe");
-        let mut watch = up
-            .command()
-            .args(["status", "--watch", "--instance", &up.inst])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("status --watch");
+        let mut watch = up.spawn(&["status", "--watch"]);
         let mut first = [0u8; 64];
         let n = watch
             .stdout

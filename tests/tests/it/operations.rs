@@ -390,13 +390,7 @@ fn the_control_channel_answers_while_a_swapped_process_takes_its_time_to_leave()
                 .and_then(|s| s.rsplit(") ").next().map(|r| !r.starts_with('Z')))
                 .unwrap_or(false)
         };
-        let mut swap = up
-            .command()
-            .args(["swap", "iobridge", "--instance", &up.inst])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("swap");
+        let mut swap = up.spawn(&["swap", "iobridge"]);
         let start = Instant::now();
         let mut answered = None;
         while answered.is_none() && swap.try_wait().expect("swap").is_none() {

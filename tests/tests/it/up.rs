@@ -251,6 +251,17 @@ impl Up {
         }
     }
 
+    /// `supervisor <args> --instance <inst>` in the background, its output piped.
+    pub(crate) fn spawn(&self, args: &[&str]) -> Child {
+        self.command()
+            .args(args)
+            .args(["--instance", &self.inst])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"))
+    }
+
     /// `exec --wait --json PROGRAM` in the background, its output piped.
     pub(crate) fn exec_in_background(&self, program: impl AsRef<std::ffi::OsStr>) -> Child {
         self.command()
