@@ -358,6 +358,19 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> PubPort<T> for PubOf<T> {
     }
 }
 
+/// How many subscribers service `id` (carrying `T`) has now: for a client that waits until
+/// another one has attached (a test's events follower). Opens the service on `node`.
+pub fn subscribers_of<T: Payload>(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+) -> Result<usize, IpcError> {
+    use iceoryx2::service::port_factory::PortFactory;
+    Ok(open::<T>(node, instance, id)?
+        .dynamic_config()
+        .number_of_subscribers())
+}
+
 /// Opens (or creates) `id` and a publisher on it, for [`Payload::publisher`].
 #[doc(hidden)]
 pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(

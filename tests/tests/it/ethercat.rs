@@ -8,6 +8,7 @@ use integration_tests::{
     assert_clean, bin, examples, exited, instance, ip, json_of, needed, run_with_watchdog, scratch,
     succeeded_within,
 };
+use shm_schema::event::code;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
@@ -259,13 +260,16 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
 fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_back() {
     integration_tests::attributable(|| {
         let (ns, up) = cell_up("ecat-ident");
+        let mut events = up.follow_events();
         // Another product at position 2 (y's drive swapped under power: it leaves OP, and its
         // EEPROM says another identity at the next scan).
         emulator_fault(&ns, &up, &["identity", "2", "0x00000999"]);
         emulator_fault(&ns, &up, &["leave-op", "2"]);
-        until_logged(&up, "position 2 (y) left OP");
-        until_logged(&up, "bus-recovering");
-        // Every attempt to bring the bus up again is refused, saying what is where.
+        let left = events.next(code::SUBDEVICE_LEFT_OP);
+        assert!(left.text.contains("position 2 (y)"), "{left:?}");
+        events.next(code::BUS_RECOVERING);
+        // Every attempt to bring the bus up again is refused, saying what is where (in the
+        // log: the recovery's attempts are no events).
         until_logged(&up, "product 0x00000999");
         let log = up.log();
         assert!(
@@ -275,7 +279,9 @@ fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_ba
         assert!(!log.contains("back in OP"), "{log}");
         // The right drive back: the bus in OP, then reset, start and the triangle.
         emulator_fault(&ns, &up, &["identity", "2", "0x00000402"]);
-        until_logged(&up, "back in OP on rtc-ecat0");
+        let op = events.next(code::BUS_OP);
+        assert!(op.text.contains("back in OP on rtc-ecat0"), "{op:?}");
+        drop(events);
         reset_start_and_run(up);
     });
 }
@@ -331,14 +337,15 @@ fn small_triangle_runs(up: &Up) -> serde_json::Value {
 fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_next_program() {
     integration_tests::attributable(|| {
         let (ns, up) = cell_up("ecat-back");
+        let mut events = up.follow_events();
         let run = up.exec_in_background(examples().join("triangle.prog"));
         // Mid-motion (the triangle takes 19 s), the cable goes.
         std::thread::sleep(Duration::from_secs(3));
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "down"]);
         let out = run.wait_with_output().expect("exec");
         assert_eq!(out.status.code(), Some(1), "the run ended by the lost bus");
-        until_logged(&up, "bus-lost");
-        until_logged(&up, "bus-recovering");
+        events.next(code::BUS_LOST);
+        events.next(code::BUS_RECOVERING);
         // Latched (by the bus, or by servo's own fault on the feedback it lost first).
         up.until("the e-stop latched", |s| {
             s["supervisor"]["estop"]["code"].is_u64()
@@ -349,7 +356,8 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
         assert!(!up.ctl(&["start"]).status.success(), "start on a lost bus");
         // The cable back: the bus process brings the bus up again by itself.
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "up"]);
-        until_logged(&up, "back in OP on rtc-ecat0");
+        events.next(code::BUS_OP);
+        drop(events);
         let log = reset_start_and_run(up);
         assert!(!log.contains("bus-wkc-mismatch"), "{log}");
     });
@@ -359,9 +367,11 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
 fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
     integration_tests::attributable(|| {
         let (ns, up) = cell_up("ecat-safeop");
+        let mut events = up.follow_events();
         // A drive's emergency, read from its mailbox in OP: named, and nothing else happens.
         emulator_fault(&ns, &up, &["emergency", "2", "0x8611"]);
-        until_logged(&up, "subdevice-emergency");
+        let e = events.next(code::SUBDEVICE_EMERGENCY);
+        assert_eq!(e.value, Some(f64::from(0x8611)), "its code: {e:?}");
         let log = up.log();
         assert!(
             log.contains("position 2 (y) sent an emergency"),
@@ -375,14 +385,22 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
         // A drive's own fault (the encoder lost: `supervisor inject` on the emulated drive):
         // its emergency and servo's power cut.
         up.ok(&["inject", "--axis", "x", "encoder-loss"]);
-        until_logged(&up, "position 1 (x) sent an emergency");
+        let e = events.next(code::SUBDEVICE_EMERGENCY);
+        assert!(e.text.contains("position 1 (x)"), "{e:?}");
         up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
         // The x drive's SubDevice drops to SAFE-OP (its own fault, AL status code 0x001A).
         emulator_fault(&ns, &up, &["leave-op", "1", "0x001A"]);
-        until_logged(&up, "position 1 (x) left OP");
+        let left = events.next(code::SUBDEVICE_LEFT_OP);
+        assert_eq!(
+            left.limit,
+            f64::from(0x001A),
+            "its AL status code: {left:?}"
+        );
+        assert!(left.text.contains("position 1 (x)"), "{left:?}");
         // The e-stop latched, the bus is brought up again once the drives have ramped down.
-        until_logged(&up, "bus-recovering");
-        until_logged(&up, "back in OP on rtc-ecat0");
+        events.next(code::BUS_RECOVERING);
+        events.next(code::BUS_OP);
+        drop(events);
         reset_start_and_run(up);
     });
 }
@@ -391,11 +409,17 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
 fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
     integration_tests::attributable(|| {
         let (_ns, up) = cell_up("ecat-kill");
+        let mut events = up.follow_events();
         let bus = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
         assert_eq!(bus.len(), 1, "one bus process: {bus:?}");
         // SIGKILL: no goodbye; the drives' SyncManager watchdogs take their outputs down.
         unsafe { libc::kill(bus[0], libc::SIGKILL) };
-        until_logged(&up, "drives lost (exited: signal: 9 (SIGKILL))");
+        let lost = events.next(code::PROCESS_LOST);
+        assert_eq!(lost.source, "supervisor", "{lost:?}");
+        assert!(
+            lost.text.contains("exited: signal: 9 (SIGKILL)"),
+            "{lost:?}"
+        );
         // Restarted by its policy: it brings the bus up from the scan.
         up.until("the bus process back", |s| {
             let p = process_in(s, "drives");
@@ -403,7 +427,8 @@ fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
         });
         let again = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
         assert!(again.len() == 1 && again[0] != bus[0], "{again:?}");
-        until_logged(&up, "in OP on rtc-ecat0");
+        events.next(code::BUS_OP);
+        drop(events);
         up.until("the new bus process cyclic", |s| {
             s["processes"]["drives"]["cycles"]
                 .as_u64()

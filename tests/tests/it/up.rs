@@ -262,6 +262,44 @@ impl Up {
             .unwrap_or_else(|e| panic!("{args:?}: {e}"))
     }
 
+    /// The cell's events from now on, as `supervisor events --follow --json` gives them
+    /// (typed), once its subscriber is attached (the events service has one more: an event
+    /// published from then on reaches it).
+    pub(crate) fn follow_events(&self) -> Events {
+        use runtime::ipc;
+        let instance = shm_schema::InstanceName::new(&self.inst).expect("instance");
+        let node = ipc::node(&instance, &format!("test-{}", std::process::id())).expect("node");
+        let id = shm_schema::ServiceId::Events;
+        let count = || ipc::subscribers_of::<shm_schema::EventV1>(&node, &instance, id);
+        let before = count().expect("the events service");
+        let mut child = self.spawn(&["events", "--follow", "--json"]);
+        let lines = std::io::BufReader::new(child.stdout.take().expect("piped"));
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let into = seen.clone();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in lines.lines().map_while(Result::ok) {
+                let e: control_plane::event::Event =
+                    serde_json::from_str(&line).unwrap_or_else(|e| panic!("{line}: {e}"));
+                into.lock().expect("events").push(e);
+            }
+        });
+        let start = Instant::now();
+        while count().expect("the events service") <= before {
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "the events follower never attached"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        drop(node);
+        Events {
+            child,
+            seen,
+            from: 0,
+        }
+    }
+
     /// `exec --wait --json PROGRAM` in the background, its output piped.
     pub(crate) fn exec_in_background(&self, program: impl AsRef<std::ffi::OsStr>) -> Child {
         self.command()
@@ -361,4 +399,46 @@ pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
         cell = cell.set(path, value.clone());
     }
     cell.write(test, "cell.toml")
+}
+
+/// The events of a cell as a follower reads them ([`Up::follow_events`]); on drop it is
+/// told to stop (SIGINT: it leaves nothing of itself behind), which must come before the
+/// cell goes down.
+pub(crate) struct Events {
+    child: Child,
+    seen: std::sync::Arc<std::sync::Mutex<Vec<control_plane::event::Event>>>,
+    /// Where the next [`Events::next`] looks from: the events after the last one it found.
+    from: usize,
+}
+
+impl Events {
+    /// The next event of code `code` (`shm_schema::event::code`) after the last one found,
+    /// under the watchdog: decided on its code, never on its words.
+    pub(crate) fn next(&mut self, code: u32) -> control_plane::event::Event {
+        let start = Instant::now();
+        loop {
+            {
+                let seen = self.seen.lock().expect("events");
+                if let Some(k) = (self.from..seen.len()).find(|&k| seen[k].code == code) {
+                    self.from = k + 1;
+                    return seen[k].clone();
+                }
+                assert!(
+                    start.elapsed() < WATCHDOG,
+                    "no event of code {code} after the {} seen: {:?}",
+                    self.from,
+                    &seen[self.from..]
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Events {
+    fn drop(&mut self) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT);
+        let _ = self.child.wait();
+    }
 }
