@@ -358,17 +358,16 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> PubPort<T> for PubOf<T> {
     }
 }
 
-/// How many subscribers service `id` (carrying `T`) has now: for a client that waits until
-/// another one has attached (a test's events follower). Opens the service on `node`.
-pub fn subscribers_of<T: Payload>(
-    node: &Node<Ipc>,
-    instance: &InstanceName,
-    id: ServiceId,
-) -> Result<usize, IpcError> {
+/// How many subscribers `<i>/events` has now: for a client that waits until another one
+/// has attached (a test's events follower). Opens the service on `node` (its ports stay
+/// compiled here, as every payload's).
+pub fn events_subscribers(node: &Node<Ipc>, instance: &InstanceName) -> Result<usize, IpcError> {
     use iceoryx2::service::port_factory::PortFactory;
-    Ok(open::<T>(node, instance, id)?
-        .dynamic_config()
-        .number_of_subscribers())
+    Ok(
+        open::<shm_schema::EventV1>(node, instance, ServiceId::Events)?
+            .dynamic_config()
+            .number_of_subscribers(),
+    )
 }
 
 /// Opens (or creates) `id` and a publisher on it, for [`Payload::publisher`].

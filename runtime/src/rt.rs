@@ -149,19 +149,10 @@ pub fn setup_thread(req: RtRequest) -> RtReport {
         }
     }
     if req.priority > 0 {
-        let param = libc::sched_param {
-            sched_priority: req.priority,
-        };
-        // SAFETY: plain system call with a valid parameter block; 0 is the calling thread.
-        if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
-            report.policy = 1;
-            report.priority = req.priority;
-            report.flags |= rt_flags::SCHED;
-        } else {
+        if let Err(e) = fifo(&mut report, req.priority, 0) {
             tracing::warn!(
-                "SCHED_FIFO priority {} refused ({}): running under SCHED_OTHER, timing will suffer",
-                req.priority,
-                std::io::Error::last_os_error()
+                "SCHED_FIFO priority {} refused ({e}): running under SCHED_OTHER, timing will suffer",
+                req.priority
             );
         }
     } else {
@@ -184,23 +175,13 @@ pub fn setup_watching_thread(priority: i32) -> (RtReport, RtGuard) {
         cpu: -1,
         ..RtReport::default()
     };
-    if priority > 0 {
-        let param = libc::sched_param {
-            sched_priority: priority,
-        };
-        let policy = libc::SCHED_FIFO | libc::SCHED_RESET_ON_FORK;
-        // SAFETY: plain system call with a valid parameter block; 0 is the calling thread.
-        if unsafe { libc::sched_setscheduler(0, policy, &param) } == 0 {
-            report.policy = 1;
-            report.priority = priority;
-            report.flags |= rt_flags::SCHED;
-        } else {
-            tracing::warn!(
-                "SCHED_FIFO priority {priority} refused ({}): the supervisor's loop runs under \
-                 SCHED_OTHER, and a loaded machine can hold its heartbeat back",
-                std::io::Error::last_os_error()
-            );
-        }
+    if priority > 0
+        && let Err(e) = fifo(&mut report, priority, libc::SCHED_RESET_ON_FORK)
+    {
+        tracing::warn!(
+            "SCHED_FIFO priority {priority} refused ({e}): the supervisor's loop runs under \
+             SCHED_OTHER, and a loaded machine can hold its heartbeat back"
+        );
     }
     let guard = RtGuard {
         _dma_latency: None,
@@ -208,6 +189,22 @@ pub fn setup_watching_thread(priority: i32) -> (RtReport, RtGuard) {
         _same_thread: std::marker::PhantomData,
     };
     (report, guard)
+}
+
+/// The calling thread under `SCHED_FIFO` at `priority` (with the policy flags `flags`), said
+/// in `report`; the system's refusal otherwise.
+fn fifo(report: &mut RtReport, priority: i32, flags: libc::c_int) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: plain system call with a valid parameter block; 0 is the calling thread.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO | flags, &param) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    report.policy = 1;
+    report.priority = priority;
+    report.flags |= rt_flags::SCHED;
+    Ok(())
 }
 
 /// Opens `/dev/cpu_dma_latency` and writes a 32-bit 0: the CPUs stay out of deep idle

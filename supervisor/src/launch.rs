@@ -46,6 +46,54 @@ struct Leaving {
     killed: bool,
 }
 
+impl Leaving {
+    /// SIGTERM to `p`'s group: it is to leave within `timeout`.
+    fn tell(p: Running, timeout: Duration) -> Self {
+        let _ = killpg(Pid::from_raw(p.pid() as i32), Signal::SIGTERM);
+        Self {
+            p,
+            deadline: Instant::now() + timeout,
+            killed: false,
+        }
+    }
+
+    /// `Some` once it has left (and whatever it left in its group is killed), with the
+    /// problem if it did not exit cleanly; SIGKILL once it is past its deadline. `timeout`
+    /// is the one it was told with.
+    fn poll(&mut self, timeout: Duration) -> Option<Option<String>> {
+        let group = Pid::from_raw(self.p.pid() as i32);
+        let killed = || {
+            format!(
+                "did not stop within {:.1} s of SIGTERM and was killed",
+                timeout.as_secs_f64()
+            )
+        };
+        match self.p.child.try_wait() {
+            Ok(Some(status)) => {
+                let _ = killpg(group, Signal::SIGKILL);
+                Some(if self.killed {
+                    Some(killed())
+                } else {
+                    (!status.success()).then(|| format!("exited with {status} after SIGTERM"))
+                })
+            }
+            Ok(None) => {
+                if Instant::now() >= self.deadline && !self.killed {
+                    let _ = killpg(group, Signal::SIGKILL);
+                    self.killed = true;
+                }
+                None
+            }
+            // It cannot be waited for: killed, and taken for gone.
+            Err(_) => {
+                let _ = killpg(group, Signal::SIGKILL);
+                let _ = self.p.child.wait();
+                Some(Some(killed()))
+            }
+        }
+    }
+}
+
 /// A process that left after it was told to ([`Children::reap`]).
 #[derive(Debug)]
 pub struct Left {
@@ -167,12 +215,7 @@ impl Children {
             return false;
         };
         let p = self.procs.remove(k);
-        let _ = killpg(Pid::from_raw(pid as i32), Signal::SIGTERM);
-        self.leaving.push(Leaving {
-            p,
-            deadline: Instant::now() + self.stop_timeout,
-            killed: false,
-        });
+        self.leaving.push(Leaving::tell(p, self.stop_timeout));
         true
     }
 
@@ -185,38 +228,19 @@ impl Children {
     /// (they are taken on a later call, once gone).
     pub fn reap(&mut self) -> Vec<Left> {
         let mut left = Vec::new();
-        let now = Instant::now();
         let mut k = 0;
         while k < self.leaving.len() {
-            let l = &mut self.leaving[k];
-            let group = Pid::from_raw(l.p.pid() as i32);
-            match l.p.child.try_wait() {
-                Ok(Some(status)) => {
-                    // Anything it left in its group goes too.
-                    let _ = killpg(group, Signal::SIGKILL);
+            match self.leaving[k].poll(self.stop_timeout) {
+                Some(problem) => {
                     let l = self.leaving.remove(k);
                     left.push(Left {
-                        name: l.p.name.clone(),
-                        pid: l.p.pid(),
-                        problem: if l.killed {
-                            Some(format!(
-                                "did not stop within {:.1} s of SIGTERM and was killed",
-                                self.stop_timeout.as_secs_f64()
-                            ))
-                        } else {
-                            (!status.success())
-                                .then(|| format!("exited with {status} after SIGTERM"))
-                        },
+                        name: l.p.name,
+                        pid: l.p.child.id(),
+                        problem,
                     });
-                    continue;
                 }
-                Ok(None) if now >= l.deadline && !l.killed => {
-                    let _ = killpg(group, Signal::SIGKILL);
-                    l.killed = true;
-                }
-                _ => {}
+                None => k += 1,
             }
-            k += 1;
         }
         left
     }
@@ -257,53 +281,35 @@ impl Children {
         // Stable: of two with one index (a swap under way), the newer stops first.
         self.procs.sort_by_key(|p| p.index);
         while let Some(mut p) = self.procs.pop() {
-            if let Some(problem) = stop_one(&mut p, self.stop_timeout, tick) {
-                problems.push((p.name.clone(), problem));
+            if let Ok(Some(status)) = p.child.try_wait() {
+                let _ = killpg(Pid::from_raw(p.pid() as i32), Signal::SIGKILL);
+                if !status.success() {
+                    problems.push((p.name, format!("had already exited ({status})")));
+                }
+                continue;
             }
+            self.leaving.push(Leaving::tell(p, self.stop_timeout));
+            self.wait_left(&mut problems, tick);
         }
-        // What was dismissed and is still leaving: waited for (and killed) too.
-        while !self.leaving.is_empty() {
+        // What was dismissed before and is still leaving.
+        self.wait_left(&mut problems, tick);
+        problems
+    }
+
+    /// Waits until every process told to stop has left (killing those past their
+    /// deadline), `tick` running every few milliseconds; their problems into `problems`.
+    fn wait_left(&mut self, problems: &mut Vec<(String, String)>, tick: &mut dyn FnMut()) {
+        loop {
             for l in self.reap() {
                 if let Some(problem) = l.problem {
                     problems.push((l.name, problem));
                 }
             }
-            if !self.leaving.is_empty() {
-                tick();
-                std::thread::sleep(Duration::from_millis(5));
+            if self.leaving.is_empty() {
+                return;
             }
-        }
-        problems
-    }
-}
-
-fn stop_one(p: &mut Running, timeout: Duration, tick: &mut dyn FnMut()) -> Option<String> {
-    let group = Pid::from_raw(p.child.id() as i32);
-    if let Ok(Some(status)) = p.child.try_wait() {
-        let _ = killpg(group, Signal::SIGKILL);
-        return (!status.success()).then(|| format!("had already exited ({status})"));
-    }
-    let _ = killpg(group, Signal::SIGTERM);
-    let deadline = Instant::now() + timeout;
-    loop {
-        match p.child.try_wait() {
-            Ok(Some(status)) => {
-                // Anything it left in its group goes too.
-                let _ = killpg(group, Signal::SIGKILL);
-                return (!status.success()).then(|| format!("exited with {status} after SIGTERM"));
-            }
-            Ok(None) if Instant::now() < deadline => {
-                tick();
-                std::thread::sleep(Duration::from_millis(5));
-            }
-            _ => {
-                let _ = killpg(group, Signal::SIGKILL);
-                let _ = p.child.wait();
-                return Some(format!(
-                    "did not stop within {:.1} s of SIGTERM and was killed",
-                    timeout.as_secs_f64()
-                ));
-            }
+            tick();
+            std::thread::sleep(Duration::from_millis(5));
         }
     }
 }

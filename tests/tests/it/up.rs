@@ -269,8 +269,7 @@ impl Up {
         use runtime::ipc;
         let instance = shm_schema::InstanceName::new(&self.inst).expect("instance");
         let node = ipc::node(&instance, &format!("test-{}", std::process::id())).expect("node");
-        let id = shm_schema::ServiceId::Events;
-        let count = || ipc::subscribers_of::<shm_schema::EventV1>(&node, &instance, id);
+        let count = || ipc::events_subscribers(&node, &instance);
         let before = count().expect("the events service");
         let mut child = self.spawn(&["events", "--follow", "--json"]);
         let lines = std::io::BufReader::new(child.stdout.take().expect("piped"));
