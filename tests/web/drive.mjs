@@ -1,7 +1,10 @@
 // Drives `supervisor web`'s page in a real headless Chromium for tests/tests/it/web.rs.
 //   node drive.mjs URL
 // Reads one command per line on stdin and answers one JSON line on stdout each:
-//   sample SECONDS   what the page drew meanwhile: [{t, drawn, tool, joints, line, state}]
+//   sample SECONDS [MOVING]   what the page drew meanwhile: [{t, drawn, tool, joints, line,
+//                    state}], every 100 ms; with MOVING, on past SECONDS (at most 60 s more)
+//                    until MOVING of them saw a program moving (state 1): a browser held off
+//                    the CPU takes fewer samples in the same time
 //   shot FILE        a screenshot
 //   click ID         clicks a button (estop, reset, start)
 //   until EXPR       waits (up to 60 s) until the expression holds in the page, e.g. rtc.estop
@@ -31,8 +34,11 @@ for await (const line of readline.createInterface({ input: process.stdin })) {
   try {
     if (cmd === 'sample') {
       const out = [];
-      const end = Date.now() + Number(arg) * 1000;
-      while (Date.now() < end) {
+      const start = Date.now();
+      const end = start + Number(rest[0]) * 1000;
+      const moving = Number(rest[1] ?? 0);
+      const enough = () => out.filter((s) => s.state === 1).length >= moving;
+      while (Date.now() < end || (!enough() && Date.now() < end + 60000)) {
         out.push(await page.evaluate(() => ({
           t: rtc.last?.t, drawn: rtc.drawn, tool: rtc.last?.tool, joints: rtc.last?.joints,
           line: rtc.last?.program?.line, state: rtc.last?.program?.state,

@@ -139,8 +139,9 @@ fn page(addr: &str) -> Browser {
     page
 }
 
-/// Runs `program` on `up` and, once it moves, asks the page for `sample` (`sample N`: what
-/// the page drew over N seconds): the samples taken while the program moved.
+/// Runs `program` on `up` and, once it moves, asks the page for `sample` (`sample N 5`: what
+/// the page drew over N seconds, and on until 5 samples saw the program moving): the samples
+/// taken while the program moved.
 fn samples_while_moving(up: &Up, page: &mut Browser, program: &Path, sample: &str) -> Vec<Value> {
     up.ok(&["exec", program.to_str().expect("utf-8")]);
     up.until("moving", moving);
@@ -171,7 +172,7 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
             "short.prog",
             "MOVE(140, 40, 0)\nMOVE(40, 40, 0)\nEND\n",
         );
-        let samples = samples_while_moving(&up, &mut page, &short, "sample 3");
+        let samples = samples_while_moving(&up, &mut page, &short, "sample 3 5");
         let xs: Vec<f64> = samples
             .iter()
             .map(|s| s["drawn"][0].as_f64().expect("drawn x"))
@@ -344,7 +345,7 @@ fn the_page_draws_the_five_bar_through_its_kinematics() {
         let hello = page.ask("eval rtc.hello.kinematics")["value"].clone();
         assert_eq!(hello, "five-bar");
         let prog = integration_tests::examples().join("five-bar.prog");
-        let samples = samples_while_moving(&up, &mut page, &prog, "sample 2");
+        let samples = samples_while_moving(&up, &mut page, &prog, "sample 2 5");
         for s in &samples {
             let q: Vec<f64> = s["joints"]
                 .as_array()
