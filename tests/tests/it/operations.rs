@@ -514,11 +514,24 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
     });
 }
 
-/// Stops process `program` of `inst` for `ms` milliseconds (SIGSTOP, then SIGCONT).
+/// Stops process `program` of `inst` for `ms` milliseconds (SIGSTOP, then SIGCONT), timed by
+/// a thread of the test at `SCHED_FIFO` 90 (above every process of a cell) where it may: the
+/// test's ordinary thread, under the suite's load, woke 300 ms late for its SIGCONT, and the
+/// 20 ms stall below the detector's limit became one above it.
 fn stall(program: &str, inst: &str, ms: u64) {
-    signal(program, inst, nix::sys::signal::Signal::SIGSTOP);
-    std::thread::sleep(Duration::from_millis(ms));
-    signal(program, inst, nix::sys::signal::Signal::SIGCONT);
+    use nix::sys::signal::{Signal, kill};
+    let pid = nix::unistd::Pid::from_raw(pid_of(program, inst));
+    std::thread::spawn(move || {
+        let param = libc::sched_param { sched_priority: 90 };
+        // SAFETY: plain system call on this thread with a valid parameter block; refused
+        // (not root), the thread stays ordinary.
+        let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+        kill(pid, Signal::SIGSTOP).expect("SIGSTOP");
+        std::thread::sleep(Duration::from_millis(ms));
+        kill(pid, Signal::SIGCONT).expect("SIGCONT");
+    })
+    .join()
+    .expect("the stall's thread");
 }
 
 #[test]
