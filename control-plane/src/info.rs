@@ -129,6 +129,9 @@ pub struct ProcessInfo {
     pub critical: bool,
     /// The network address it announced it serves on; `null` when none.
     pub listening: Option<String>,
+    /// Why it cannot listen on its address (its last `listen-failed` event's text) while it
+    /// cannot; `null` otherwise.
+    pub listen_failed: Option<String>,
 }
 
 /// Where a process is in its life.
@@ -228,7 +231,7 @@ impl Info {
         }
         for p in &self.processes {
             out += &format!(
-                "  {:<9} {:<10} pid {:<8} restarts {}{}{}{}\n",
+                "  {:<9} {:<10} pid {:<8} restarts {}{}{}{}{}\n",
                 p.name,
                 crate::word(&p.life),
                 p.pid.map_or("-".into(), |p| p.to_string()),
@@ -237,6 +240,9 @@ impl Info {
                 p.listening
                     .as_deref()
                     .map_or(String::new(), |a| format!("  listening on {a}")),
+                p.listen_failed
+                    .as_deref()
+                    .map_or(String::new(), |w| format!("  not listening: {w}")),
                 p.why
                     .as_deref()
                     .map_or(String::new(), |w| format!("  ({w})"))

@@ -246,12 +246,111 @@ impl Master {
 /// Why the bus did not come up.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum BringUpError {
-    /// What is on the wire is not what the configuration says (a SubDevice missing, one
-    /// more, another identity at a position, a drive without the axis' mode): the
-    /// configuration is refused.
+    /// The SubDevices on the wire are not the ones the configuration names, in its order (one
+    /// missing, one more, another identity at a position): the configuration is refused.
+    Line(Box<Mismatch>),
+    /// The SubDevices are the right ones and cannot run as configured (a drive without the
+    /// axis' mode, a SubDevice on SYNC0 without Distributed Clocks): refused.
     Refused(String),
     /// Anything else: no link, no answer, a SubDevice that refused a state or an SDO.
     Failed(String),
+}
+
+/// The first position where the line as scanned differs from the configuration's
+/// `[[ethercat.subdevice]]` list.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Mismatch {
+    /// The bus' interface.
+    pub interface: String,
+    /// The position (0: the SubDevice next to the MainDevice).
+    pub position: usize,
+    /// SubDevices that answered the scan.
+    pub found: usize,
+    /// SubDevices the configuration names.
+    pub named: usize,
+    /// What the configuration names there (`None`: nothing, the line is longer than its list).
+    pub expected: Option<Expected>,
+    /// What is there (`None`: nothing answers, the line is shorter than the list).
+    pub there: Option<Found>,
+}
+
+/// A configured SubDevice, as the scan should find it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Expected {
+    /// Its name in the configuration.
+    pub name: String,
+    /// The axis it drives, if a drive.
+    pub axis: Option<usize>,
+    /// Its vendor id.
+    pub vendor: u32,
+    /// Its product code.
+    pub product: u32,
+    /// Its revision, when the configuration checks it.
+    pub revision: Option<u32>,
+}
+
+/// A SubDevice as the scan found it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Found {
+    /// Its name as its EEPROM gives it.
+    pub name: String,
+    /// Its vendor id.
+    pub vendor: u32,
+    /// Its product code.
+    pub product: u32,
+    /// Its revision.
+    pub revision: u32,
+}
+
+impl std::fmt::Display for Expected {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.revision {
+            Some(r) => write!(
+                f,
+                "{} ({})",
+                self.name,
+                identity(self.vendor, self.product, r)
+            ),
+            None => write!(
+                f,
+                "{} (vendor {:#010x}, product {:#010x}, any revision)",
+                self.name, self.vendor, self.product
+            ),
+        }
+    }
+}
+
+impl std::fmt::Display for Found {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let id = identity(self.vendor, self.product, self.revision);
+        write!(f, "{} ({id})", self.name)
+    }
+}
+
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (bus, k) = (&self.interface, self.position);
+        match (&self.expected, &self.there) {
+            (Some(expected), None) => write!(
+                f,
+                "the bus on {bus} has {} SubDevice(s): position {k} should be {expected}, and nothing answers there",
+                self.found
+            ),
+            (Some(expected), Some(there)) => write!(
+                f,
+                "position {k} of the bus on {bus} should be {expected}, and {there} is there"
+            ),
+            (None, Some(there)) => write!(
+                f,
+                "the bus on {bus} has {} SubDevice(s) where the configuration names {}: position {k} is {there}, which it does not name",
+                self.found, self.named
+            ),
+            (None, None) => write!(
+                f,
+                "position {k} of the bus on {bus}: nothing named, nothing there"
+            ),
+        }
+    }
 }
 
 impl From<String> for BringUpError {
@@ -263,6 +362,7 @@ impl From<String> for BringUpError {
 impl std::fmt::Display for BringUpError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            Self::Line(m) => m.fmt(f),
             Self::Refused(m) | Self::Failed(m) => f.write_str(m),
         }
     }
@@ -582,49 +682,41 @@ fn check_line(
     want: &[EthercatSubDeviceV1],
     found: &[(ethercrab::SubDeviceIdentity, String, u16)],
 ) -> Result<(), BringUpError> {
-    for (k, w) in want.iter().enumerate() {
-        let expected = if w.flags & subdevice_flags::CHECK_REVISION != 0 {
-            format!(
-                "{} ({})",
-                w.name(),
-                identity(w.vendor, w.product, w.revision)
-            )
-        } else {
-            format!(
-                "{} (vendor {:#010x}, product {:#010x}, any revision)",
-                w.name(),
-                w.vendor,
-                w.product
-            )
-        };
-        let Some((id, name, _)) = found.get(k) else {
-            return Err(BringUpError::Refused(format!(
-                "the bus on {} has {} SubDevice(s): position {k} should be {expected}, and nothing answers there",
-                cfg.interface(),
-                found.len()
-            )));
-        };
-        let revision_ok =
-            w.flags & subdevice_flags::CHECK_REVISION == 0 || id.revision == w.revision;
-        if id.vendor_id != w.vendor || id.product_id != w.product || !revision_ok {
-            return Err(BringUpError::Refused(format!(
-                "position {k} of the bus on {} should be {expected}, and {name} ({}) is there",
-                cfg.interface(),
-                identity(id.vendor_id, id.product_id, id.revision)
-            )));
+    let at = |position: usize| Mismatch {
+        interface: cfg.interface().to_string(),
+        position,
+        found: found.len(),
+        named: want.len(),
+        expected: want.get(position).map(|w| Expected {
+            name: w.name().to_string(),
+            axis: w.axis(),
+            vendor: w.vendor,
+            product: w.product,
+            revision: (w.flags & subdevice_flags::CHECK_REVISION != 0).then_some(w.revision),
+        }),
+        there: found.get(position).map(|(id, name, _)| Found {
+            name: name.clone(),
+            vendor: id.vendor_id,
+            product: id.product_id,
+            revision: id.revision,
+        }),
+    };
+    let differs = |k: usize| {
+        let m = at(k);
+        match (&m.expected, &m.there) {
+            (Some(e), Some(t)) => {
+                e.vendor != t.vendor
+                    || e.product != t.product
+                    || e.revision.is_some_and(|r| r != t.revision)
+            }
+            (None, None) => false,
+            _ => true,
         }
+    };
+    match (0..want.len().max(found.len())).find(|&k| differs(k)) {
+        Some(k) => Err(BringUpError::Line(Box::new(at(k)))),
+        None => Ok(()),
     }
-    if let Some((id, name, _)) = found.get(want.len()) {
-        return Err(BringUpError::Refused(format!(
-            "the bus on {} has {} SubDevice(s) where the configuration names {}: position {} is {name} ({}), which it does not name",
-            cfg.interface(),
-            found.len(),
-            want.len(),
-            want.len(),
-            identity(id.vendor_id, id.product_id, id.revision)
-        )));
-    }
-    Ok(())
 }
 
 /// Distributed Clocks for the SubDevices on SYNC0 (the module documentation of `Dc`):

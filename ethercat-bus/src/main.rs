@@ -1,6 +1,6 @@
 //! `ethercat-bus`: the drives' process of a cell on EtherCAT. See the crate documentation.
 
-use ethercat_bus::bringup::{BringUpError, Dc, Master, STATE_TRANSITION, Timing, Up};
+use ethercat_bus::bringup::{BringUpError, Dc, Master, Mismatch, STATE_TRANSITION, Timing, Up};
 use ethercat_bus::frame::{CyclicFrame, Layout, Reply, coe_emergency};
 use ethercat_bus::{BusIo, Drives};
 use ethercat_wire::{Received, Wire};
@@ -17,6 +17,7 @@ use shm_schema::{
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -63,6 +64,8 @@ struct Bus {
     /// Ends the recovery thread.
     quit: Arc<AtomicBool>,
     recovery: Option<JoinHandle<()>>,
+    /// Events of the recovery thread (why the bus is not back), published by the cycle.
+    told: Receiver<EventV1>,
     /// Times the bus was handed to the recovery thread.
     recoveries: u64,
     /// Since when the bus has been degraded (a SubDevice out of OP, or a wrong working
@@ -146,6 +149,7 @@ impl Bus {
             .bring_up(&bus, axes, timing, &wire, &runtime::signals::stop_requested)
             .map_err(|e| -> SetupError {
                 match e {
+                    BringUpError::Line(m) => Box::new(process::Refused(m.to_string())),
                     BringUpError::Refused(m) => Box::new(process::Refused(m)),
                     BringUpError::Failed(m) => m.into(),
                 }
@@ -187,6 +191,7 @@ impl Bus {
         );
         let wire_owner = Arc::new(AtomicU8::new(owner::CYCLE));
         let quit = Arc::new(AtomicBool::new(false));
+        let (tell, told) = sync_channel(4);
         // Spawned before the process takes its real-time priority: the thread keeps the
         // ordinary one.
         let recovery = std::thread::Builder::new()
@@ -203,6 +208,7 @@ impl Bus {
                     dc_again: dc_again.clone(),
                     owner: wire_owner.clone(),
                     quit: quit.clone(),
+                    tell,
                 };
                 move || r.run()
             })?;
@@ -220,6 +226,7 @@ impl Bus {
             wire_owner,
             quit,
             recovery: Some(recovery),
+            told,
             recoveries: 0,
             degraded_since_ns: None,
             degraded_wait_ns: ctx.cell.estop_stop_time_ns,
@@ -312,6 +319,11 @@ impl Bus {
     /// # Real-time
     /// Atomic loads and stores, copies and IPC calls.
     fn recovering(&mut self, now: u64, cx: &mut Cycle<'_>) -> bool {
+        // A bounded channel of `Copy` events: `try_recv` takes one without a lock or an
+        // allocation.
+        while let Ok(e) = self.told.try_recv() {
+            cx.events.push(e);
+        }
         match self.wire_owner.load(Ordering::Acquire) {
             owner::RECOVERING => {
                 if cx.estop.latched {
@@ -806,6 +818,8 @@ struct Recovery {
     dc_again: Arc<[AtomicU64; 2]>,
     owner: Arc<AtomicU8>,
     quit: Arc<AtomicBool>,
+    /// Events for the cycle to publish (`Bus::told`).
+    tell: SyncSender<EventV1>,
 }
 
 impl Recovery {
@@ -851,23 +865,26 @@ impl Recovery {
                     self.owner.store(owner::BACK, Ordering::Release);
                     continue;
                 }
-                Ok(up) if up.layout == self.layout => format!(
+                Ok(up) if up.layout == self.layout => BringUpError::Failed(format!(
                     "the bus on {} came back with other clocks ({:?}, where the cycle has {:?}): `supervisor restart drives`",
                     self.bus.interface(),
                     up.dc,
                     self.dc
-                ),
-                Ok(up) => format!(
+                )),
+                Ok(up) => BringUpError::Failed(format!(
                     "the bus on {} came back with another process image ({:?}, where the cycle has {:?}): `supervisor restart drives`",
                     self.bus.interface(),
                     up.layout,
                     self.layout
-                ),
-                Err(e) => e.to_string(),
+                )),
+                Err(e) => e,
             };
-            if failure != last_failure {
+            if failure.to_string() != last_failure {
                 tracing::warn!("the bus is not back: {failure} (trying again every second)");
-                last_failure = failure;
+                if let BringUpError::Line(m) = &failure {
+                    self.say(mismatch_event(m));
+                }
+                last_failure = failure.to_string();
             }
             let rest = Duration::from_secs(1).saturating_sub(attempt.elapsed());
             let until = Instant::now() + rest;
@@ -876,6 +893,38 @@ impl Recovery {
             }
         }
     }
+}
+
+impl Recovery {
+    /// Gives `e` to the cycle to publish; dropped if the cycle has not taken the last few
+    /// (it takes them every cycle while the thread has the wire).
+    fn say(&self, e: EventV1) {
+        if let Err(TrySendError::Full(_)) = self.tell.try_send(e) {
+            tracing::warn!(
+                "event {} not published: the cycle has not taken the last ones",
+                e.code
+            );
+        }
+    }
+}
+
+/// `subdevice-mismatch` for `m`: value the product found, limit the one configured, the axis
+/// the configured SubDevice drives; the text names the position and the SubDevice configured
+/// there.
+fn mismatch_event(m: &Mismatch) -> EventV1 {
+    let configured = m.expected.as_ref();
+    let text = match configured {
+        Some(e) => format!("position {} should be {}", m.position, e.name),
+        None => format!("position {} is not in the configuration", m.position),
+    };
+    EventV1::new(
+        runtime::time::now_ns(),
+        code::SUBDEVICE_MISMATCH,
+        configured.and_then(|e| e.axis).map_or(-1, |a| a as i32),
+        m.there.as_ref().map_or(0.0, |t| f64::from(t.product)),
+        configured.map_or(0.0, |e| f64::from(e.product)),
+        &[&text],
+    )
 }
 
 /// Logs the emergencies a bring-up read.

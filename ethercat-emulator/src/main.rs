@@ -171,6 +171,9 @@ fn main() -> ExitCode {
         names.len(),
         names.join(", ")
     );
+    if let Err(e) = runtime::notify::ready() {
+        tracing::warn!("cannot say it is ready: {e}");
+    }
     std::thread::scope(|s| {
         let back = ring.as_ref().map(|ring| s.spawn(|| pass_back(ring, &wire)));
         let code = answer(

@@ -515,9 +515,13 @@ fn events(
         .map_err(|e| (1, format!("cannot subscribe: {e}")))?;
     // A round trip to the cell's gateway after the subscription: on the link between them it
     // went out first, so once the cell answers it knows of it, and nothing it publishes from
-    // then on is missed. Said on stderr, where a script waits for it.
+    // then on is missed. Said on stderr and, for a script or a unit that waits for it, as
+    // `READY=1` on `NOTIFY_SOCKET` (not said while the cell does not answer).
     if statuses(session, &cell.status())?.contains_key(cell.as_str()) {
         eprintln!("following {cell}'s events");
+        if let Err(e) = runtime::notify::ready() {
+            eprintln!("warning: cannot say it is ready: {e}");
+        }
     } else {
         eprintln!("following {cell}'s events (it does not answer on the line yet)");
     }

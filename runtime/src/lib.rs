@@ -6,6 +6,7 @@
 //!   the CS9 overrun rule and the cycle statistics every process publishes.
 //! - [`fds`]: the open-files limit raised at start, a shortage said in words.
 //! - [`ipc`]: iceoryx2 nodes and typed ports for the services of `shm-schema`.
+//! - [`notify`]: readiness told on `NOTIFY_SOCKET` (systemd's `READY=1`).
 //! - [`events`]: a process' publisher of events.
 //! - [`estop`]: the cell's e-stop as a process sees it in its cycle (seed 002).
 //! - [`health`]: seed 002's health detectors (leaky buckets).
@@ -23,6 +24,7 @@ pub mod events;
 pub mod fds;
 pub mod health;
 pub mod ipc;
+pub mod notify;
 pub mod process;
 pub mod rt;
 pub mod signals;

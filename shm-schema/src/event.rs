@@ -274,6 +274,11 @@ pub mod code {
     /// A SubDevice did not go from SAFE-OP to OP when the bus process' cycle asked for it;
     /// value: its AL status, limit: its AL status code; the text names it.
     pub const SUBDEVICE_NOT_OP: u32 = 909;
+    /// Bringing the bus up again, the scan found other SubDevices than the configuration
+    /// names (another product at a position, one missing, one more): the bus stays down.
+    /// value: the product code found there (0: nothing answers), limit: the product code the
+    /// configuration names there (0: none); the text names the position.
+    pub const SUBDEVICE_MISMATCH: u32 = 910;
 }
 
 /// The unit of an event's `value` and `limit`: what a reader shows them as. Decisions on how
@@ -724,6 +729,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Error,
         unit: Unit::Number("AL status (limit: AL status code)"),
         meaning: "A SubDevice did not go from SAFE-OP to OP when the bus process' cycle asked for it (at start-up, or when the bus came back): it refused (its AL status has the error bit; the AL status code says why: 0x001D invalid outputs, 0x0030 invalid DC synchronisation, ...) or was not there 10 s after the bus came up in SAFE-OP (AL status code 0). The text names its position and name. Nothing is published to servo meanwhile (no drive can be enabled); the bus process brings the bus up again from the scan (`bus-recovering`), about once a second, until every SubDevice reaches OP (`bus-op`).",
+    },
+    CodeInfo {
+        code: code::SUBDEVICE_MISMATCH,
+        name: "subdevice-mismatch",
+        severity: Severity::Error,
+        unit: Unit::Hex("product code found (limit: the one configured; 0: none)"),
+        meaning: "Bringing the bus up again (`bus-recovering`), the scan found other SubDevices than the configuration's `[[ethercat.subdevice]]` list, in its order: another product at a position (a drive swapped for another model), nothing answering where the list names one, or one more than it names. The text names the position and the SubDevice the configuration names there; the log has the whole sentence, both identities. The bus stays down (nothing is published to servo, no drive can be enabled) and the bus process scans again every second, raising this event again only when what it finds changes, until the right SubDevices are back (`bus-op`). At start-up the same mismatch refuses the configuration.",
     },
 ];
 

@@ -305,6 +305,8 @@ pub(crate) struct Proc {
     flagged: bool,
     /// The network address it announced it serves on (`listening` events).
     pub(crate) listening: Option<String>,
+    /// Why it cannot listen (the last `listen-failed` event's text), until it does.
+    pub(crate) listen_failed: Option<String>,
     /// When it was last started.
     started: Instant,
     status_sub: Sub<ProcessStatusV2>,
@@ -409,6 +411,7 @@ impl Cell {
                 command: None,
                 flagged: false,
                 listening: None,
+                listen_failed: None,
                 started: Instant::now(),
                 exec_sub: Sub::new(&node, i, ServiceId::ExecTime(name), 1).map_err(f)?,
                 status_sub: Sub::new(&node, i, ServiceId::Status(name), 64).map_err(f)?,
@@ -588,14 +591,16 @@ impl Cell {
                     _ => tracing::info!("{line}"),
                 },
             }
-            if let Some(k) = self
-                .procs
-                .get_mut(e.source as usize)
-                .map(|p| &mut p.listening)
-            {
+            if let Some(p) = self.procs.get_mut(e.source as usize) {
                 match e.code {
-                    code::LISTENING => *k = Some(e.text().to_string()),
-                    code::LISTEN_FAILED => *k = None,
+                    code::LISTENING => {
+                        p.listening = Some(e.text().to_string());
+                        p.listen_failed = None;
+                    }
+                    code::LISTEN_FAILED => {
+                        p.listening = None;
+                        p.listen_failed = Some(e.text().to_string());
+                    }
                     _ => {}
                 }
             }
@@ -738,6 +743,7 @@ impl Cell {
     fn lost(&mut self, k: usize, cfg: &Config, why: &str, exit_code: f64) {
         let name = self.procs[k].name.clone();
         self.procs[k].listening = None;
+        self.procs[k].listen_failed = None;
         if !self.procs[k].critical {
             // Its last status must not hold a reset back while it restarts.
             self.procs[k].status = None;
@@ -1210,6 +1216,7 @@ impl Cell {
                     command: self.procs[k].command.clone(),
                     critical: self.procs[k].critical,
                     listening: self.procs[k].listening.clone(),
+                    listen_failed: self.procs[k].listen_failed.clone(),
                 }
             })
             .collect();

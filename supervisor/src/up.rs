@@ -35,6 +35,10 @@ pub fn up(
             .collect::<Vec<_>>()
             .join(", ")
     );
+    // For a unit of `Type=notify` (or a script): the control channel answers from here on.
+    if let Err(e) = runtime::notify::ready() {
+        tracing::warn!("cannot say the cell is up: {e}");
+    }
     let end = serve(&cfg, &mut cell, &mut server, None);
     match recorder
         .as_mut()

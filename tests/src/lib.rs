@@ -674,27 +674,77 @@ pub fn attributable(test: impl FnOnce()) {
     std::panic::resume_unwind(panic);
 }
 
-/// Waits until `child` (spawned with its stderr piped) says `words` on a line of its stderr,
-/// for at most `watchdog` (a panic then); every line of it goes on to the test's stderr, after
-/// `name: `, for as long as it writes.
-pub fn until_it_says(child: &mut std::process::Child, name: &str, words: &str, watchdog: Duration) {
-    let (said, waiting) = std::sync::mpsc::channel();
+/// A Unix datagram socket of the test's own on which a child says `READY=1` once it is ready
+/// (`runtime::notify`: systemd's notification protocol): give the child [`Readiness::path`]
+/// as `NOTIFY_SOCKET` ([`Readiness::tell`]), spawn it with its stderr piped, then
+/// [`Readiness::wait`]. The socket's file goes with it.
+#[derive(Debug)]
+pub struct Readiness {
+    path: PathBuf,
+    socket: std::os::unix::net::UnixDatagram,
+}
+
+impl Readiness {
+    /// A socket in the temporary directory, named after `name`, this process and a counter.
+    pub fn new(name: &str) -> Self {
+        static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let path =
+            std::env::temp_dir().join(format!("rtc-ready-{}-{name}-{k}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let socket = std::os::unix::net::UnixDatagram::bind(&path).expect("a readiness socket");
+        socket
+            .set_read_timeout(Some(Duration::from_millis(100)))
+            .expect("a read timeout");
+        Self { path, socket }
+    }
+
+    /// `cmd` with `NOTIFY_SOCKET` naming this socket.
+    pub fn tell<'a>(&self, cmd: &'a mut Command) -> &'a mut Command {
+        cmd.env("NOTIFY_SOCKET", &self.path)
+    }
+
+    /// Waits until `child` says `READY=1` here, for at most `watchdog`; a panic then, or as
+    /// soon as it ends without having said it.
+    pub fn wait(&self, child: &mut std::process::Child, watchdog: Duration) {
+        let start = Instant::now();
+        let mut buf = [0u8; 64];
+        loop {
+            if let Ok(n) = self.socket.recv(&mut buf)
+                && buf[..n].split(|b| *b == b'\n').any(|l| l == b"READY=1")
+            {
+                return;
+            }
+            if let Ok(Some(status)) = child.try_wait() {
+                panic!("it ended ({status}) before it said READY=1");
+            }
+            assert!(
+                start.elapsed() < watchdog,
+                "it did not say READY=1 in {watchdog:?}"
+            );
+        }
+    }
+}
+
+/// Every line `child` (spawned with its stderr piped) writes on its stderr goes on to the
+/// test's, after `name: `, for as long as it writes.
+pub fn forward_stderr(child: &mut std::process::Child, name: &str) {
     let mut log = std::io::BufReader::new(child.stderr.take().expect("its stderr piped"));
-    let (name, wanted) = (name.to_string(), words.to_string());
+    let name = name.to_string();
     std::thread::spawn(move || {
         use std::io::BufRead;
         let mut text = String::new();
         while log.read_line(&mut text).is_ok_and(|n| n > 0) {
             eprint!("{name}: {text}");
-            if text.contains(&wanted) {
-                let _ = said.send(());
-            }
             text.clear();
         }
     });
-    waiting
-        .recv_timeout(watchdog)
-        .unwrap_or_else(|_| panic!("it never said {words:?} in {watchdog:?}"));
+}
+
+impl Drop for Readiness {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
 }
 
 /// The `ethercat-emulator` process alone on a line of its own: a network namespace
@@ -739,9 +789,13 @@ impl EmulatedLine {
         for end in ["m0", "s0", "m1", "s1"] {
             ip(&["-n", &ns, "link", "set", end, "up"]);
         }
-        let emulator = Command::new("ip")
-            .args(["netns", "exec", &ns])
-            .arg(emulator)
+        let ready = Readiness::new("emulator");
+        let emulator = ready
+            .tell(
+                Command::new("ip")
+                    .args(["netns", "exec", &ns])
+                    .arg(emulator),
+            )
             .args(["--interface", "s0"])
             .args(args)
             .stdout(Stdio::null())
@@ -749,12 +803,8 @@ impl EmulatedLine {
             .spawn()
             .expect("the emulator");
         let emulator = line.emulator.insert(emulator);
-        until_it_says(
-            emulator,
-            "emulator",
-            "answering on",
-            Duration::from_secs(120),
-        );
+        forward_stderr(emulator, "emulator");
+        ready.wait(emulator, Duration::from_secs(120));
         line
     }
 }

@@ -6,6 +6,7 @@
 
 mod cycle;
 mod health;
+mod notify;
 mod rt;
 mod snapshot;
 mod stall;

@@ -471,18 +471,16 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
         .args(["line", "--json", "--line"])
         .arg(&victor)
         .args(["events", "press-1", "--seconds", "8"]);
-    // It says on stderr once the cell's gateway knows of its subscription (a round trip).
-    let mut follower = follow
+    // It says READY=1 once the cell's gateway knows of its subscription (a round trip).
+    let ready = integration_tests::Readiness::new("follower");
+    let mut follower = ready
+        .tell(&mut follow)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("the follower");
-    integration_tests::until_it_says(
-        &mut follower,
-        "follower",
-        "following press-1's events\n",
-        WATCHDOG,
-    );
+    integration_tests::forward_stderr(&mut follower, "follower");
+    ready.wait(&mut follower, WATCHDOG);
     ok(
         &hosts,
         &olga,
@@ -1202,25 +1200,25 @@ fn a_gateway_whose_users_file_others_may_read_stays_off_the_line_and_says_why() 
     // Written as any file is: others may read it.
     let users = scratch(test, "users.toml", USERS);
     let cell = Up::start_in(test, &cell_config(test, 0, &users), Some(&hosts.cells[0]));
-    let start = Instant::now();
-    while !cell.log().contains("listen-failed") {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "no listen-failed event:\n{}",
-            cell.log()
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    // The cell runs on, its gateway off the line: `status` says why (its `listen-failed`).
+    let s = cell.until("the gateway running and off the line", |s| {
+        let gateway = process_in(s, "gateway");
+        gateway["life"] == "running" && gateway["listen_failed"].is_string()
+    });
+    let gateway = process_in(&s, "gateway");
+    assert!(gateway["listening"].is_null(), "{s}");
+    assert!(
+        gateway["listen_failed"]
+            .as_str()
+            .is_some_and(|w| w.starts_with("the line: ")),
+        "{s}"
+    );
+    // The log has the whole sentence.
     let log = cell.log();
     assert!(
         log.contains("the line: ") && log.contains("others than its owner may read it"),
         "{log}"
     );
-    // The cell runs on, its gateway off the line.
-    let s = cell.until("the gateway running", |s| {
-        process_in(s, "gateway")["life"] == "running"
-    });
-    assert!(process_in(&s, "gateway")["listening"].is_null(), "{s}");
     let room = line_file(test, "victor", "victor", "victor-secret-0123456789", 1);
     let out = self::room(&hosts, &room, &["cells"]);
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));

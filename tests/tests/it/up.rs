@@ -57,7 +57,10 @@ impl Up {
         let within: Vec<String> = within.iter().map(|a| a.to_string()).collect();
         let inst = instance(test);
         let log = scratch(test, "up.log", "");
-        let child = supervisor_within(&within)
+        // `up` says READY=1 once its control channel answers (docs/operations.md).
+        let ready = integration_tests::Readiness::new("up");
+        let child = ready
+            .tell(&mut supervisor_within(&within))
             .args(["up", "--instance", &inst, "--config"])
             .arg(cfg)
             .stdout(Stdio::null())
@@ -70,6 +73,9 @@ impl Up {
             log,
             within,
         };
+        if let Some(child) = up.child.as_mut() {
+            ready.wait(child, WATCHDOG);
+        }
         up.wait_enabled();
         up
     }
