@@ -18,6 +18,7 @@ pub mod kinematics;
 pub mod modbus;
 pub mod network;
 mod program;
+mod read;
 pub mod stability;
 
 pub use program::find_program;
@@ -928,9 +929,23 @@ impl Config {
 
     /// Parses and validates `src` (named `file` in messages).
     pub fn parse(src: &str, file: &str) -> Result<Self, ConfigError> {
-        let cfg: Config = toml::from_str(src).map_err(|e| {
-            let (line, col) = e.span().map_or((0, 0), |s| line_col(src, s.start));
-            ConfigError::one(file, line, col, e.message().trim().to_string())
+        let cfg: Config = read::read(src).map_err(|problems| {
+            let mut problems: Vec<Located> = problems
+                .into_iter()
+                .map(|p| {
+                    let (line, col) = p.span.map_or((0, 0), |s| line_col(src, s.start));
+                    Located {
+                        line,
+                        col,
+                        message: p.message,
+                    }
+                })
+                .collect();
+            problems.sort_by_key(|p| (p.line, p.col));
+            ConfigError {
+                file: file.into(),
+                problems,
+            }
         })?;
         let problems = cfg.validate();
         if problems.is_empty() {

@@ -65,6 +65,85 @@ fn every_problem_is_reported_at_once_in_the_files_order() {
 }
 
 /// `[motion]`'s own keys: each problem at once, not the first one only.
+/// The line of the default file's first line that starts with `start`, after `after` such
+/// lines.
+fn line_starting(start: &str, after: usize) -> usize {
+    DEFAULT_TOML
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.starts_with(start))
+        .nth(after)
+        .unwrap_or_else(|| panic!("{start:?} in the default file"))
+        .0
+        + 1
+}
+
+#[test]
+fn every_problem_of_the_files_types_is_reported_at_once_each_at_its_line() {
+    // Values of the wrong type and unknown keys in three sections and two axes, and a key a
+    // process needs taken away: serde alone stops at the first.
+    let (e, text) = refused(&[
+        ("settle_time = 0.1 ", "settle_time = \"long\" "),
+        ("substeps = 4 ", "substepz = 4 "),
+        ("vmax = 16.0                   # mm/s", "vmax = \"fast\""),
+        ("servo = { kp = 78.0,", "servo = { kp = true,"),
+        ("name = \"theta\"", "name = \"theta\"\ncolour = \"red\""),
+        (
+            "period_us = 1000\nphase_us = 100\npriority = 85",
+            "phase_us = 100\npriority = 85",
+        ),
+    ]);
+    let theta = line_starting("name = \"theta\"", 0);
+    let want = [
+        format!(
+            "cell.toml:{}:1: missing field `period_us`",
+            line_starting("[[process]]", 0) + 1 // the line `colour` adds above
+        ),
+        format!(
+            "cell.toml:{}:15: invalid type: string \"long\", expected f64",
+            line_starting("settle_time", 0)
+        ),
+        format!(
+            "cell.toml:{}:1: unknown field `substepz`",
+            line_starting("substeps", 0)
+        ),
+        format!(
+            "cell.toml:{}:8: invalid type: string \"fast\", expected f64",
+            line_starting("vmax", 0)
+        ),
+        format!(
+            "cell.toml:{}:16: invalid type: boolean `true`, expected f64",
+            line_starting("servo", 1)
+        ),
+        format!("cell.toml:{}:1: unknown field `colour`", theta + 1),
+    ];
+    for w in &want {
+        assert!(text.contains(w.as_str()), "{w:?} in\n{text}");
+    }
+    assert_eq!(e.problems.len(), want.len(), "{text}");
+    // In the file's order.
+    let lines: Vec<usize> = e.problems.iter().map(|p| p.line).collect();
+    assert!(lines.is_sorted(), "{text}");
+}
+
+#[test]
+fn every_syntax_error_the_parser_gets_past_is_reported() {
+    let (e, text) = refused(&[
+        ("t_acc = 0.525", "t_acc = 0.525.1"),
+        ("substeps = 4 ", "substeps = = 4 "),
+    ]);
+    let lines: Vec<usize> = e.problems.iter().map(|p| p.line).collect();
+    assert_eq!(lines[0], line_starting("t_acc", 0), "{text}");
+    // `= = 4` is two errors to the parser.
+    assert!(
+        lines[1..]
+            .iter()
+            .all(|l| *l == line_starting("substeps", 0)),
+        "{text}"
+    );
+    assert!(lines.len() >= 2, "{text}");
+}
+
 #[test]
 fn every_problem_of_the_motion_section_is_reported_at_once() {
     let (e, text) = refused(&[
