@@ -306,6 +306,32 @@ fn emulator_fault(ns: &Netns, up: &Up, args: &[&str]) {
     );
 }
 
+/// Whether `file`, a pcapng capture (little-endian, as this host writes it), holds an
+/// Enhanced Packet Block: its blocks walked by their lengths, a block cut short not counted.
+fn pcapng_has_a_packet(file: &[u8]) -> bool {
+    const SECTION_HEADER: u32 = 0x0A0D_0D0A;
+    const ENHANCED_PACKET: u32 = 6;
+    let word = |at: usize| {
+        file.get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    if word(0) != Some(SECTION_HEADER) || word(8) != Some(0x1A2B_3C4D) {
+        return false;
+    }
+    let mut at = 0;
+    while let (Some(kind), Some(len)) = (word(at), word(at + 4)) {
+        let len = len as usize;
+        if len < 12 || at + len > file.len() {
+            return false;
+        }
+        if kind == ENHANCED_PACKET {
+            return true;
+        }
+        at += len;
+    }
+    false
+}
+
 /// The example cell, with room for the host's stalls, up in a network namespace of the
 /// test's own (every command of the test runs there), its drives enabled. (Bound as
 /// `let (ns, up)`, the cell goes down before its namespace goes.)
@@ -449,8 +475,8 @@ fn wiresharks_dissector_decodes_a_programs_bus_traffic_with_no_malformed_frame()
     integration_tests::attributable(|| {
         let (ns, up) = cell_up("ecat-tshark");
         let capture = integration_tests::scratch("ecat-tshark", "bus.pcapng", "");
-        // dumpcap (tshark's capture engine) on the bus' end of the pair, ready once it says
-        // which interface it captures on.
+        // dumpcap (tshark's capture engine) on the bus' end of the pair, ready once its file
+        // holds a frame (a pcapng Enhanced Packet Block: the bus runs, frames pass).
         let mut dumpcap = Command::new("ip")
             .args([
                 "netns",
@@ -464,22 +490,20 @@ fn wiresharks_dissector_decodes_a_programs_bus_traffic_with_no_malformed_frame()
             ])
             .arg(&capture)
             .stdout(Stdio::null())
-            .stderr(Stdio::piped())
+            .stderr(Stdio::null())
             .spawn()
             .unwrap_or_else(|e| panic!("this test needs tshark's dumpcap: {e}"));
-        {
-            use std::io::BufRead;
-            let mut err = std::io::BufReader::new(dumpcap.stderr.take().expect("stderr"));
-            let mut line = String::new();
-            while !line.contains("Capturing on") {
-                line.clear();
-                assert!(
-                    err.read_line(&mut line).expect("dumpcap's stderr") > 0,
-                    "dumpcap ended before capturing"
-                );
-            }
-            // Drained from here on, so dumpcap never blocks on it.
-            std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+        let start = std::time::Instant::now();
+        while !pcapng_has_a_packet(&std::fs::read(&capture).unwrap_or_default()) {
+            assert!(
+                matches!(dumpcap.try_wait(), Ok(None)),
+                "dumpcap ended before capturing"
+            );
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "no frame captured in {WATCHDOG:?}"
+            );
+            std::thread::sleep(Duration::from_millis(50));
         }
         let report = small_triangle_runs(&up);
         nix::sys::signal::kill(
