@@ -6,10 +6,12 @@
 use super::io::Io;
 use super::{Axis, Seg};
 use serde::Deserialize;
+use serde_inline_default::serde_inline_default;
 use shm_schema::ethercat::{INTERFACE_LEN, MAX_SUBDEVICES, subdevice_flags};
 use shm_schema::{EthercatConfigV1, EthercatIoV1, EthercatSubDeviceV1, MAX_IO, fixed_str};
 
 /// `[ethercat]`.
+#[serde_inline_default]
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EthercatSettings {
@@ -18,14 +20,10 @@ pub struct EthercatSettings {
     /// The process data watchdog written into every SubDevice (s, 0 leaves each its own;
     /// 0.0001..=6.5535 in steps of 100 µs). Default 0.1: a dead bus process or a pulled cable
     /// takes every output safe within 100 ms.
-    #[serde(default = "default_pd_watchdog")]
+    #[serde_inline_default(0.1)]
     pub pd_watchdog: f64,
     /// The SubDevices in wire order, the first nearest the MainDevice.
     pub subdevice: Vec<SubDevice>,
-}
-
-fn default_pd_watchdog() -> f64 {
-    0.1
 }
 
 /// `[[ethercat.subdevice]]`.

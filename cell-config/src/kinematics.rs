@@ -9,30 +9,26 @@ use shm_schema::config::MAX_KIN_PARAMS;
 use shm_schema::{KinParamV1, KinematicsConfigV1, MAX_AXES, fixed_str};
 use std::collections::BTreeMap;
 
-/// `[kinematics]`.
+/// `[kinematics]`; a key not given is its [`Default`]'s.
 #[derive(Clone, Debug, Deserialize)]
+#[serde(default)]
 pub struct KinematicsSettings {
     /// Its name in the registry: `"gantry"` (the default), `"scara"`, `"five-bar"`, or a
     /// user's own.
-    #[serde(rename = "type", default = "gantry")]
+    #[serde(rename = "type")]
     pub kind: String,
     /// Largest velocity per Cartesian coordinate (unit/s), for `MOVE`'s segment times.
     /// Required unless the cell is a gantry (whose coordinates have their axes' vmax).
-    #[serde(default)]
     pub vmax: Option<Vec<f64>>,
     /// The kinematics' own parameters (`l1 = 200.0`), numbers.
     #[serde(flatten)]
     pub params: BTreeMap<String, toml::Value>,
 }
 
-fn gantry() -> String {
-    "gantry".into()
-}
-
 impl Default for KinematicsSettings {
     fn default() -> Self {
         Self {
-            kind: gantry(),
+            kind: "gantry".into(),
             vmax: None,
             params: BTreeMap::new(),
         }

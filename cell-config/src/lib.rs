@@ -3,6 +3,7 @@
 //! `docs/config.md` documents every key.
 
 use serde::Deserialize;
+use serde_inline_default::serde_inline_default;
 use shm_schema::config::MAX_CONFIGURED_FAULTS;
 use shm_schema::drive::injected;
 use shm_schema::{
@@ -87,43 +88,30 @@ pub struct CellMeta {
 }
 
 /// `[motion]`.
+#[serde_inline_default]
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Motion {
     /// Acceleration time (s).
     pub t_acc: f64,
     /// Time the axes must stay in position to count as settled (s). Default 0.1.
-    #[serde(default = "default_settle_time")]
+    #[serde_inline_default(0.1)]
     pub settle_time: f64,
     /// Longest wait for settling after the motion (s). Default 5.
-    #[serde(default = "default_settle_timeout")]
+    #[serde_inline_default(5.0)]
     pub settle_timeout: f64,
     /// Servo extrapolates a late setpoint this long, then brings the reference to rest (s).
     /// Default 0.05.
-    #[serde(default = "default_setpoint_timeout")]
+    #[serde_inline_default(0.05)]
     pub setpoint_timeout: f64,
     /// On an e-stop, servo brings every axis from its vmax to rest within this time, then
     /// disables the drives (s). Default 0.5.
-    #[serde(default = "default_estop_stop_time")]
+    #[serde_inline_default(0.5)]
     pub estop_stop_time: f64,
 }
 
-fn default_estop_stop_time() -> f64 {
-    0.5
-}
-
-fn default_setpoint_timeout() -> f64 {
-    0.05
-}
-
-fn default_settle_time() -> f64 {
-    0.1
-}
-fn default_settle_timeout() -> f64 {
-    5.0
-}
-
 /// `[drives]`.
+#[serde_inline_default]
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Drives {
@@ -131,27 +119,17 @@ pub struct Drives {
     /// faults (0xFF01).
     pub command_timeout: f64,
     /// Servo cuts power when the drive feedback is older than this (s). Default 0.1.
-    #[serde(default = "default_feedback_timeout")]
+    #[serde_inline_default(0.1)]
     pub feedback_timeout: f64,
     /// Longest enabling sequence (s). Default 0.5.
-    #[serde(default = "default_enable_timeout")]
+    #[serde_inline_default(0.5)]
     pub enable_timeout: f64,
     /// Integration steps of the simulated machine per cycle. Default 4.
-    #[serde(default = "default_substeps")]
+    #[serde_inline_default(4)]
     pub substeps: u32,
     /// Faults the simulated drives raise at set times (`[[drives.inject]]`).
     #[serde(default)]
     pub inject: Vec<Inject>,
-}
-
-fn default_substeps() -> u32 {
-    4
-}
-fn default_feedback_timeout() -> f64 {
-    0.1
-}
-fn default_enable_timeout() -> f64 {
-    0.5
 }
 
 /// A configured fault: `[[drives.inject]]`.
@@ -423,6 +401,7 @@ pub enum RestartPolicy {
 }
 
 /// One `[[process]]` entry.
+#[serde_inline_default]
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Process {
@@ -441,7 +420,7 @@ pub struct Process {
     #[serde(default)]
     pub cpu: Option<i32>,
     /// `"never"` or `"on-failure"` (default).
-    #[serde(default = "default_restart")]
+    #[serde_inline_default(RestartPolicy::OnFailure)]
     pub restart: RestartPolicy,
     /// Its reaction to an e-stop it did not raise (seed 002): `"stop"` (default), `"hold"`,
     /// `"ignore"`.
@@ -450,17 +429,10 @@ pub struct Process {
     /// Whether the cell's safety depends on it (default true). `false`: its loss, stall or
     /// health detectors are warnings and restarts, never an e-stop (a fieldbus server for an
     /// HMI, a logger). drives, servo and trajgen are always critical.
-    #[serde(default = "default_critical")]
+    #[serde_inline_default(true)]
     pub critical: bool,
 }
 
-fn default_critical() -> bool {
-    true
-}
-
-fn default_restart() -> RestartPolicy {
-    RestartPolicy::OnFailure
-}
 /// A process' reaction to an e-stop it did not raise (seed 002's `network_estop_config`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]

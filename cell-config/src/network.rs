@@ -9,10 +9,12 @@
 
 use super::Seg;
 use serde::{Deserialize, Serialize};
+use serde_inline_default::serde_inline_default;
 use std::fmt;
 use std::path::PathBuf;
 
 /// `[network]`.
+#[serde_inline_default]
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkSettings {
@@ -41,10 +43,10 @@ pub struct NetworkSettings {
     /// only its owner may read): who may see the cell and who may command it.
     pub users: PathBuf,
     /// The status is published at most this often (s), 0.02..=10. Default 0.2.
-    #[serde(default = "default_status_period")]
+    #[serde_inline_default(0.2)]
     pub status_period: f64,
     /// A peer silent this long is gone (s): the lease of Zenoh's links, 1..=60. Default 3.
-    #[serde(default = "default_lease")]
+    #[serde_inline_default(3.0)]
     pub lease: f64,
     /// `[network.tls]`: the certificates for `tls/` endpoints.
     #[serde(default)]
@@ -134,6 +136,7 @@ impl Mode {
 }
 
 /// `[network.tls]`.
+#[serde_inline_default]
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Tls {
@@ -144,7 +147,7 @@ pub struct Tls {
     /// Its private key (PEM; a file only its owner may read).
     pub private_key: PathBuf,
     /// Peers must show a certificate of the same authority too. Default true.
-    #[serde(default = "yes")]
+    #[serde_inline_default(true)]
     pub mutual: bool,
 }
 
@@ -160,16 +163,6 @@ pub struct Login {
     /// line; only its owner may read it). Default: none accepted but its own.
     #[serde(default)]
     pub dictionary_file: Option<PathBuf>,
-}
-
-fn default_status_period() -> f64 {
-    0.2
-}
-fn default_lease() -> f64 {
-    3.0
-}
-fn yes() -> bool {
-    true
 }
 
 impl NetworkSettings {

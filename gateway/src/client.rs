@@ -13,6 +13,7 @@ use gateway::wire::{
 };
 use recorder::{RecordOptions, Recorded, Writer};
 use serde::Deserialize;
+use serde_inline_default::serde_inline_default;
 use std::collections::BTreeMap;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -22,6 +23,7 @@ use zenoh::Wait;
 use zenoh::query::QueryTarget;
 
 /// A control room's line file (TOML): how to join the line, and who this user is.
+#[serde_inline_default]
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct LineFile {
@@ -35,7 +37,7 @@ struct LineFile {
     #[serde(default)]
     plain: bool,
     /// A silent link is gone after this (s).
-    #[serde(default = "default_lease")]
+    #[serde_inline_default(3.0)]
     lease: f64,
     /// The user commands are signed as.
     #[serde(default)]
@@ -54,10 +56,6 @@ struct LineFile {
     /// `rtc/v1/C/`.
     #[serde(default)]
     cells: Vec<String>,
-}
-
-fn default_lease() -> f64 {
-    3.0
 }
 
 #[derive(Parser, Debug)]

@@ -807,3 +807,46 @@ fn the_network_and_its_ros2_table_are_checked_where_they_are_written() {
         assert_eq!(p.line, line, "{needle:?} at line {line}:\n{text}");
     }
 }
+
+#[test]
+fn a_key_left_out_takes_the_default_docs_config_md_gives() {
+    // The default file without every key that has a default (edited as TOML).
+    let mut doc: toml_edit::DocumentMut = DEFAULT_TOML.parse().expect("the default file");
+    for key in ["settle_time", "settle_timeout", "setpoint_timeout"] {
+        doc["motion"].as_table_mut().expect("[motion]").remove(key);
+    }
+    doc["drives"]
+        .as_table_mut()
+        .expect("[drives]")
+        .remove("substeps");
+    for p in doc["process"]
+        .as_array_of_tables_mut()
+        .expect("[[process]]")
+        .iter_mut()
+    {
+        p.remove("critical");
+        p.remove("restart");
+    }
+    let c = Config::parse(&doc.to_string(), "cell.toml").expect("valid");
+    let m = &c.motion;
+    assert_eq!(
+        (
+            m.settle_time,
+            m.settle_timeout,
+            m.setpoint_timeout,
+            m.estop_stop_time
+        ),
+        (0.1, 5.0, 0.05, 0.5)
+    );
+    let d = &c.drives;
+    assert_eq!(
+        (d.feedback_timeout, d.enable_timeout, d.substeps),
+        (0.1, 0.5, 4)
+    );
+    for p in &c.process {
+        assert!(p.critical, "{}", p.name);
+        assert_eq!(p.restart, RestartPolicy::OnFailure, "{}", p.name);
+    }
+    assert_eq!(c.kinematics.kind, "gantry");
+    assert_eq!(c.kinematics.vmax, None);
+}
