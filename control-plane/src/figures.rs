@@ -43,7 +43,7 @@ pub struct ProcessLatency {
 impl ProcessLatency {
     /// The figure of `process`' histogram `h`.
     pub fn of(process: &str, h: &LatencyHistogramV1) -> Self {
-        let m = latency::report::Summary::of(h);
+        let m = crate::status::Percentiles::of(h);
         Self {
             process: process.to_string(),
             bins: latency_bins(h),

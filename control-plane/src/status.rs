@@ -264,8 +264,57 @@ pub struct Detector {
     pub total: u64,
 }
 
-/// Percentiles of a latency histogram (µs, to the nanosecond).
-pub type Percentiles = latency::report::Summary;
+/// The figures of one latency histogram, in µs; as JSON (`status --json`, reports,
+/// `latency --json`) to the nanosecond.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Percentiles {
+    /// Samples.
+    pub samples: u64,
+    /// Smallest.
+    #[serde(serialize_with = "ns")]
+    pub min_us: f64,
+    /// Mean.
+    #[serde(serialize_with = "ns")]
+    pub avg_us: f64,
+    /// Median.
+    #[serde(serialize_with = "ns")]
+    pub p50_us: f64,
+    /// 99th percentile.
+    #[serde(serialize_with = "ns")]
+    pub p99_us: f64,
+    /// 99.9th percentile.
+    #[serde(serialize_with = "ns")]
+    pub p99_9_us: f64,
+    /// 99.99th percentile.
+    #[serde(serialize_with = "ns")]
+    pub p99_99_us: f64,
+    /// Largest.
+    #[serde(serialize_with = "ns")]
+    pub max_us: f64,
+}
+
+/// Microseconds written to the nanosecond.
+fn ns<S: serde::Serializer>(us: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64((*us * 1000.0).round() / 1000.0)
+}
+
+impl Percentiles {
+    /// The figures of `h` (all 0 when it is empty).
+    pub fn of(h: &shm_schema::LatencyHistogramV1) -> Self {
+        let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
+        Self {
+            samples: h.count,
+            min_us: us(Some(h.min_ns)),
+            avg_us: h.mean_ns().unwrap_or(0.0) * 1e-3,
+            p50_us: us(h.percentile(1, 2)),
+            p99_us: us(h.percentile(99, 100)),
+            p99_9_us: us(h.percentile(999, 1000)),
+            p99_99_us: us(h.percentile(9999, 10000)),
+            max_us: us(Some(h.max_ns)),
+        }
+    }
+}
 
 /// Servo's state: the arm and every axis.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -1,69 +1,13 @@
 //! The figures of a latency run as text (cyclictest's lines, plus percentiles) and JSON.
 
 use crate::measure::{Options, Results, Running, Series, Test};
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
-use shm_schema::LatencyHistogramV1;
 use shm_schema::status::rt_flags;
 use std::sync::atomic::Ordering;
 
-/// The figures of one histogram, in µs; as JSON (`status --json`, reports, `latency --json`)
-/// to the nanosecond.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct Summary {
-    /// Samples.
-    pub samples: u64,
-    /// Smallest.
-    #[serde(serialize_with = "ns")]
-    pub min_us: f64,
-    /// Mean.
-    #[serde(serialize_with = "ns")]
-    pub avg_us: f64,
-    /// Median.
-    #[serde(serialize_with = "ns")]
-    pub p50_us: f64,
-    /// 99th percentile.
-    #[serde(serialize_with = "ns")]
-    pub p99_us: f64,
-    /// 99.9th percentile.
-    #[serde(serialize_with = "ns")]
-    pub p99_9_us: f64,
-    /// 99.99th percentile.
-    #[serde(serialize_with = "ns")]
-    pub p99_99_us: f64,
-    /// Largest.
-    #[serde(serialize_with = "ns")]
-    pub max_us: f64,
-}
-
-/// Microseconds written to the nanosecond.
-fn ns<S: serde::Serializer>(us: &f64, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_f64(round3(*us))
-}
-
-impl Summary {
-    /// The figures of `h` (all 0 when it is empty).
-    pub fn of(h: &LatencyHistogramV1) -> Self {
-        let us = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
-        Self {
-            samples: h.count,
-            min_us: us(Some(h.min_ns)),
-            avg_us: h.mean_ns().unwrap_or(0.0) * 1e-3,
-            p50_us: us(h.percentile(1, 2)),
-            p99_us: us(h.percentile(99, 100)),
-            p99_9_us: us(h.percentile(999, 1000)),
-            p99_99_us: us(h.percentile(9999, 10000)),
-            max_us: us(Some(h.max_ns)),
-        }
-    }
-
-    /// As a JSON object (`samples`, `min_us`, `avg_us`, `p50_us`, ... `max_us`).
-    pub fn to_json(&self) -> Value {
-        serde_json::to_value(self).unwrap_or_default()
-    }
-}
+/// The figures of one histogram (the control plane's type, shared with `status` and the
+/// reports).
+pub use control_plane::status::Percentiles as Summary;
 
 fn round3(v: f64) -> f64 {
     (v * 1000.0).round() / 1000.0
@@ -148,7 +92,7 @@ pub fn to_json(r: &Results, opts: &Options) -> Value {
             .iter()
             .filter(|s| s.test == *test)
             .map(|s| {
-                let mut v = Summary::of(&s.hist).to_json();
+                let mut v = serde_json::to_value(Summary::of(&s.hist)).unwrap_or_default();
                 let o = v.as_object_mut().expect("an object");
                 o.insert("index".into(), json!(s.index));
                 o.insert("label".into(), json!(s.label()));

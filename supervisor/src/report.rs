@@ -2,8 +2,8 @@
 
 use control_plane::event::Severity;
 use control_plane::report::{Delay, ProcessReport, RunReport};
+use control_plane::status::Percentiles as Summary;
 use indexmap::IndexMap;
-use latency::report::Summary;
 use runtime::rt::policy_name;
 use shm_schema::{LatencyHistogramV1, MAX_AXES, ProcessStatusV2};
 

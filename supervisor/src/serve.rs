@@ -1279,12 +1279,12 @@ pub(crate) fn process_reports(cell: &Cell) -> Vec<ProcessReport> {
         r.wakeup_latency_us = cell.procs[k]
             .latency
             .as_deref()
-            .map(latency::report::Summary::of);
+            .map(control_plane::status::Percentiles::of);
         r.exec_time_us = cell.procs[k]
             .exec_time
             .as_deref()
             .filter(|h| h.count > 0)
-            .map(latency::report::Summary::of);
+            .map(control_plane::status::Percentiles::of);
         out.push(r);
     }
     out
