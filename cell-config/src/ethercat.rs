@@ -3,8 +3,9 @@
 //! `[[ethercat.subdevice]]` in that order on the wire before anything is enabled, and moves
 //! each axis through the drive that names it.
 
-use super::io::Io;
-use super::{Axis, Seg};
+use crate::axis::Axis;
+use crate::io::Io;
+use crate::problem::Seg;
 use serde::Deserialize;
 use serde_inline_default::serde_inline_default;
 use shm_schema::ethercat::{INTERFACE_LEN, MAX_SUBDEVICES, subdevice_flags};

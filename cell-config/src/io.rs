@@ -1,7 +1,7 @@
 //! `[[io]]`: the cell's named digital IO (docs/io.md). Entry `k` is bit `k` of the IO image
 //! iobridge publishes (`shm_schema::io`).
 
-use super::Seg;
+use crate::problem::Seg;
 use serde::Deserialize;
 use shm_schema::{IoConfigV1, IoDirection, MAX_IO, SafeValue, fixed_str, io::IO_NAME_LEN};
 

@@ -2,7 +2,8 @@
 //! limits of `MOVE` (`docs/kinematics.md`). Without the section the cell is a gantry: its
 //! Cartesian coordinates are its axes.
 
-use super::{Axis, Seg};
+use crate::axis::Axis;
+use crate::problem::Seg;
 use kinematics::{JointKind, Kinematics, MAX_COORDS};
 use serde::Deserialize;
 use shm_schema::config::MAX_KIN_PARAMS;

@@ -2,7 +2,7 @@
 //! is the `modbus` entry of the process table; this section says where it listens, how many
 //! connections it serves at once, when an idle one is closed and whether it takes writes.
 
-use super::Seg;
+use crate::problem::Seg;
 use serde::Deserialize;
 use shm_schema::config::LISTEN_LEN;
 use shm_schema::{ModbusConfigV1, fixed_str};

@@ -7,7 +7,7 @@
 //! its users; a viewer may only read), and an endpoint in the clear (`tcp/`) must be allowed
 //! in so many words (`plain = true`), else only `tls/` endpoints are taken.
 
-use super::Seg;
+use crate::problem::Seg;
 use serde::{Deserialize, Serialize};
 use serde_inline_default::serde_inline_default;
 use std::fmt;

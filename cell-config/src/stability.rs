@@ -11,7 +11,7 @@
 //! spectral radius of 1 or more is refused, with the radius. This is what caught an x inertia
 //! of `1e-300`: accepted before, it made the simulation produce NaN.
 
-use super::Axis;
+use crate::axis::Axis;
 use cia402::Mode;
 use nalgebra::DMatrix;
 

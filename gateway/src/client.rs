@@ -2,25 +2,22 @@
 //! commands' `--remote CELL` run): lists the cells, reads one's status and events, and sends
 //! it a signed command.
 
+use crate::survey::{Failure, PATIENCE, rows, statuses};
 use cell_config::network::{Login, Mode, Tls, endpoint_problem, lease_problem};
 use clap::{Parser, Subcommand};
 use gateway::auth::{Envelope, now_ms};
 use gateway::command::Command;
-use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, ROOT, cell_of};
+use gateway::keys::{CellKeys, CellName, EVERY_CELL_ALIVE, cell_of};
 use gateway::link::{Access, Link, secret_file};
-use gateway::wire::{
-    Answer, EventMessage, Missed, RecordBatch, RecordFlushed, RecordTopics, StatusMessage,
-};
+use gateway::wire::{Answer, EventMessage, Missed, RecordBatch, RecordFlushed, RecordTopics};
 use recorder::{RecordOptions, Recorded, Writer};
 use serde::Deserialize;
 use serde_inline_default::serde_inline_default;
-use std::collections::BTreeMap;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 use zenoh::Wait;
-use zenoh::query::QueryTarget;
 
 /// A control room's line file (TOML): how to join the line, and who this user is.
 #[serde_inline_default]
@@ -172,47 +169,8 @@ impl Remote {
     }
 }
 
-/// A cell as `cells` lists it (`null` where its status did not come).
-#[derive(Debug, serde::Serialize)]
-pub(crate) struct Row {
-    pub(crate) cell: String,
-    host: Option<String>,
-    /// `enabled`, `disabled` or `fault`.
-    state: Option<String>,
-    /// The program running, if one is.
-    program: Option<String>,
-    /// The e-stop latched.
-    estop: Option<bool>,
-}
-
-impl Row {
-    fn of(cell: &str, m: Option<&StatusMessage>) -> Self {
-        let s = m.map(|m| &m.status);
-        let arm = s.and_then(|s| s.supervisor.arm.as_ref());
-        Self {
-            cell: cell.into(),
-            host: m.map(|m| m.host.clone()),
-            state: arm.map(|a| {
-                if a.fault_latched {
-                    "fault"
-                } else if a.enabled {
-                    "enabled"
-                } else {
-                    "disabled"
-                }
-                .into()
-            }),
-            program: s.and_then(|s| s.supervisor.job.as_ref().map(|j| j.program.clone())),
-            estop: s.and_then(|s| s.estop.as_ref().map(|e| e.latched)),
-        }
-    }
-}
-
 /// How long a client waits for a first link to the line.
 const LINK_PATIENCE: Duration = Duration::from_secs(3);
-
-/// How long a `get` waits for the line's answers.
-const PATIENCE: Duration = Duration::from_secs(3);
 
 pub fn main(args: impl Iterator<Item = OsString>) -> ExitCode {
     let cli = Cli::parse_from(std::iter::once(OsString::from("gateway line")).chain(args));
@@ -224,8 +182,6 @@ pub fn main(args: impl Iterator<Item = OsString>) -> ExitCode {
         }
     }
 }
-
-pub(crate) type Failure = (u8, String);
 
 fn input(e: impl std::fmt::Display) -> Failure {
     (2, e.to_string())
@@ -355,30 +311,6 @@ enum Ask {
     Web(std::net::SocketAddr, Option<String>),
 }
 
-/// The statuses of every cell that answers, by name.
-fn statuses(
-    session: &zenoh::Session,
-    key: &str,
-) -> Result<BTreeMap<String, StatusMessage>, Failure> {
-    let replies = session
-        .get(key)
-        .target(QueryTarget::All)
-        .timeout(PATIENCE)
-        .wait()
-        .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
-    let mut out = BTreeMap::new();
-    while let Ok(reply) = replies.recv() {
-        // By the key it came on, not by what it says of itself.
-        if let Ok(sample) = reply.result()
-            && let Some(cell) = cell_of(sample.key_expr().as_str())
-            && let Ok(m) = serde_json::from_slice::<StatusMessage>(&sample.payload().to_bytes())
-        {
-            out.insert(cell.to_string(), m);
-        }
-    }
-    Ok(out)
-}
-
 /// The end of a watch of `seconds`, if it has one.
 fn deadline(seconds: Option<f64>) -> Option<std::time::Instant> {
     seconds.and_then(|s| {
@@ -433,31 +365,6 @@ fn watch(session: &zenoh::Session, seconds: Option<f64>, json: bool) -> Result<u
             println!("{t_s:9.3} s  {} {cell}", if alive { "+" } else { "-" });
         }
     }
-}
-
-/// The cells on the line (their presence tokens), each with what its status says.
-pub(crate) fn rows(session: &zenoh::Session) -> Result<Vec<Row>, Failure> {
-    let tokens = session
-        .liveliness()
-        .get(EVERY_CELL_ALIVE)
-        .timeout(PATIENCE)
-        .wait()
-        .map_err(|e| (1, format!("cannot ask the line: {e}")))?;
-    let mut alive = Vec::new();
-    while let Ok(reply) = tokens.recv() {
-        if let Ok(sample) = reply.result()
-            && let Some(cell) = cell_of(sample.key_expr().as_str())
-        {
-            alive.push(cell.to_string());
-        }
-    }
-    alive.sort();
-    alive.dedup();
-    let statuses = statuses(session, &format!("{ROOT}/*/status"))?;
-    Ok(alive
-        .iter()
-        .map(|name| Row::of(name, statuses.get(name)))
-        .collect())
 }
 
 fn cells(session: &zenoh::Session, json: bool) -> Result<u8, Failure> {

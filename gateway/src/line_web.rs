@@ -5,7 +5,7 @@
 //! gateway publishes them on `rtc/v1/NAME/view`. It only shows: the page's buttons are
 //! refused, with where to command from.
 
-use crate::client::{Failure, rows};
+use crate::survey::{Failure, rows};
 use gateway::keys::{CellKeys, CellName};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

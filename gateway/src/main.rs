@@ -41,6 +41,7 @@ use zenoh::qos::CongestionControl;
 mod client;
 mod line_web;
 mod recording;
+mod survey;
 mod viewing;
 
 /// What a stream of the gateway's own thread serves from: the cell's Zenoh session, its

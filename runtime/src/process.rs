@@ -41,8 +41,7 @@ use std::time::{Duration, Instant};
 /// Instance used when no `--instance` is given.
 pub const DEFAULT_INSTANCE: &str = "gantry";
 
-/// How often a process publishes its latency histogram (at most; once per cycle if slower).
-pub const LATENCY_PUBLISH_INTERVAL_NS: u64 = 100_000_000;
+pub use crate::snapshot::LATENCY_PUBLISH_INTERVAL_NS;
 
 /// Overruns are reported as an event at most this often (ns).
 pub const OVERRUN_EVENT_INTERVAL_NS: u64 = 1_000_000_000;

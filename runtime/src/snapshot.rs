@@ -19,6 +19,9 @@ const _: () = assert!(core::mem::size_of::<LatencyHistogramV1>() == 8 * (6 + BUC
 /// At most this many slices per snapshot (a slice of 232 buckets: 1.9 KB).
 pub const MAX_SLICES: usize = 16;
 
+/// How often a process publishes its latency histogram (at most; once per cycle if slower).
+pub const LATENCY_PUBLISH_INTERVAL_NS: u64 = 100_000_000;
+
 /// A histogram's publisher, one slice per cycle.
 #[derive(Debug)]
 pub struct Snapshot {
@@ -179,7 +182,7 @@ impl SenseToCommand {
         self.histogram.stamp_ns = now_ns;
         self.out.step_every(
             now_ns,
-            crate::process::LATENCY_PUBLISH_INTERVAL_NS,
+            LATENCY_PUBLISH_INTERVAL_NS,
             &self.histogram,
             sample_ns.unwrap_or(0),
         );
