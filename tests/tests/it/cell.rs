@@ -362,7 +362,7 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
             .stderr(Stdio::piped())
             .spawn()
             .expect("spawn supervisor");
-        // Wait until servo runs, let the motion start, then kill servo the hard way.
+        // Wait until servo runs and the motion has started, then kill servo the hard way.
         let mut servo = Vec::new();
         for _ in 0..500 {
             servo = pids_with(&["servo", "--instance", &inst]);
@@ -372,7 +372,7 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
             std::thread::sleep(Duration::from_millis(20));
         }
         assert_eq!(servo.len(), 1, "servo not found");
-        std::thread::sleep(Duration::from_secs(3));
+        crate::up::until_moving(&inst, None);
         // SAFETY: kill(2) on a process this test's supervisor started.
         unsafe { libc::kill(servo[0], libc::SIGKILL) };
         let out =

@@ -208,26 +208,12 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
     integration_tests::attributable(|| {
         let inst = instance("ecat-cable");
         let (ns, cfg) = bus_cell("ecat-cable");
-        // Three seconds after the bus' interface exists (start-up takes well under one on an
-        // idle machine; the tests run side by side), the cable goes.
+        // Once the program has moved the axes for a second (its status), the cable goes.
         let pull = {
-            let ns = ns.0.clone();
+            let (ns, inst) = (ns.0.clone(), inst.clone());
             std::thread::spawn(move || {
-                let start = std::time::Instant::now();
-                while !Command::new("ip")
-                    .args(["-n", &ns, "link", "show", "rtc-ecat0"])
-                    .output()
-                    .is_ok_and(|o| o.status.success())
-                {
-                    if start.elapsed() > WATCHDOG {
-                        return;
-                    }
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                std::thread::sleep(Duration::from_secs(3));
-                let _ = Command::new("ip")
-                    .args(["-n", &ns, "link", "set", "rtc-ecat0", "down"])
-                    .status();
+                crate::up::until_moving(&inst, Some(&ns));
+                ip(&["-n", &ns, "link", "set", "rtc-ecat0", "down"]);
             })
         };
         let out = triangle_in(&ns, &inst, &cfg);
@@ -363,7 +349,7 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
         let mut events = up.follow_events();
         let run = up.exec_in_background(examples().join("triangle.prog"));
         // Mid-motion (the triangle takes 19 s), the cable goes.
-        std::thread::sleep(Duration::from_secs(3));
+        up.until("moving", crate::up::moving);
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "down"]);
         let out = run.wait_with_output().expect("exec");
         assert_eq!(out.status.code(), Some(1), "the run ended by the lost bus");

@@ -204,34 +204,20 @@ impl Up {
 
     /// Polls `status --json` until `pred` holds, under the watchdog.
     pub(crate) fn until(&self, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
-        let start = Instant::now();
-        loop {
-            let mut cmd = self.command();
-            cmd.args(["status", "--json", "--instance", &self.inst]);
-            let out = run_with_watchdog(&mut cmd, WATCHDOG);
-            if out.status.success()
-                && let Ok(v) =
-                    serde_json::from_str::<Value>(String::from_utf8_lossy(&out.stdout).trim())
-                && pred(&v)
-            {
-                return v;
-            }
-            if start.elapsed() >= WATCHDOG {
-                let stuck = match &self.child {
-                    Some(c) => integration_tests::where_stuck(c.id()),
-                    None => String::new(),
-                };
-                panic!(
-                    "{what}: never happened\nlast status ({}):\n{}{}\nlog:\n{}\n{stuck}\nfiles: {:?}",
-                    out.status,
-                    String::from_utf8_lossy(&out.stdout),
-                    String::from_utf8_lossy(&out.stderr),
-                    self.log(),
-                    integration_tests::leftovers(&self.inst)
-                );
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        poll_status(&self.within, &self.inst, pred).unwrap_or_else(|out| {
+            let stuck = match &self.child {
+                Some(c) => integration_tests::where_stuck(c.id()),
+                None => String::new(),
+            };
+            panic!(
+                "{what}: never happened\nlast status ({}):\n{}{}\nlog:\n{}\n{stuck}\nfiles: {:?}",
+                out.status,
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr),
+                self.log(),
+                integration_tests::leftovers(&self.inst)
+            )
+        })
     }
 
     /// Polls the control channel's `Info` (under the watchdog) until a swap of `process`
@@ -369,6 +355,49 @@ impl Drop for Up {
 
 pub(crate) fn wait_child(c: Child) -> std::process::ExitStatus {
     wait_output(c, WATCHDOG, "the supervisor did not exit").status
+}
+
+/// Polls `supervisor status --json --instance inst` (under the command `within`, if any)
+/// until `pred` holds; the last answer when the watchdog ends first.
+fn poll_status(
+    within: &[String],
+    inst: &str,
+    pred: impl Fn(&Value) -> bool,
+) -> Result<Value, Output> {
+    let start = Instant::now();
+    loop {
+        let mut cmd = supervisor_within(within);
+        cmd.args(["status", "--json", "--instance", inst]);
+        let out = run_with_watchdog(&mut cmd, WATCHDOG);
+        if out.status.success()
+            && let Ok(v) =
+                serde_json::from_str::<Value>(String::from_utf8_lossy(&out.stdout).trim())
+            && pred(&v)
+        {
+            return Ok(v);
+        }
+        if start.elapsed() >= WATCHDOG {
+            return Err(out);
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Waits, under the watchdog, until a program of instance `inst` (a `supervisor run` the
+/// test started itself, in network namespace `netns` if any) has moved the axes for more
+/// than a second: for a test that acts mid-motion.
+pub(crate) fn until_moving(inst: &str, netns: Option<&str>) {
+    let within: Vec<String> = netns.map_or(vec![], |ns| {
+        ["ip", "netns", "exec", ns].map(String::from).to_vec()
+    });
+    if let Err(out) = poll_status(&within, inst, moving) {
+        panic!(
+            "{inst}: never moving\nlast status ({}):\n{}{}",
+            out.status,
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
 }
 
 /// A program has moved the axes for more than a second, in `status --json` `s`.
