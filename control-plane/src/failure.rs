@@ -27,10 +27,13 @@ pub enum Failure {
     },
     /// The e-stop was raised by a process of the cell, the host or a user.
     Estop {
-        /// Its origin (`external`, `device`, `host`, `network`).
-        origin: String,
+        /// Its origin (`external`, `device`, `host`).
+        origin: crate::info::Origin,
         /// Who raised it: a process' name, or `supervisor`.
         by: String,
+        /// The event code of its cause (`docs/events.md`: 502 `process-lost` for a process the
+        /// supervisor lost, 604 `health-expired`, 702 `estop-input`, ...).
+        code: u32,
         /// Its reason.
         reason: String,
         /// The event that explains it, as `supervisor events` prints it.
@@ -244,9 +247,11 @@ impl fmt::Display for Failure {
                 by,
                 reason,
                 event,
+                code: _,
             } => write!(
                 f,
-                "e-stop ({origin}) raised by {by}: {reason}{}",
+                "e-stop ({}) raised by {by}: {reason}{}",
+                crate::word(origin),
                 event_line(event)
             ),
             Self::LatchedAfterMotion { estop } => write!(

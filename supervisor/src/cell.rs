@@ -1182,10 +1182,9 @@ impl Cell {
             return Some(self.servo_cut(e.code, axis, cause));
         }
         Some(Failure::Estop {
-            origin: EstopOrigin::from_wire(e.origin)
-                .map_or("?", EstopOrigin::name)
-                .to_string(),
+            origin: e.origin.into(),
             by: self.axes.source_name(e.source).to_string(),
+            code: e.code,
             reason: str_of(&e.reason).to_string(),
             event: cause.map(|ev| events::line(ev, &self.axes, self.t0_ns)),
         })

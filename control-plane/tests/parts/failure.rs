@@ -4,8 +4,9 @@ use control_plane::failure::*;
 fn a_failure_travels_as_json_and_reads_as_before() {
     let f = Failure::LatchedAfterMotion {
         estop: Box::new(Failure::Estop {
-            origin: "external".into(),
+            origin: control_plane::info::Origin::External,
             by: "iobridge".into(),
+            code: shm_schema::event::code::ESTOP_INPUT,
             reason: "estop_ok opened".into(),
             event: None,
         }),
