@@ -26,12 +26,14 @@ fn ip(args: &[&str]) {
     );
 }
 
-/// Whether `link` in namespace `ns` is operationally up (`ip link` says "state UP").
+/// Whether `link` in namespace `ns` is operationally up (its `operstate` in `ip -j`'s JSON).
 fn operational(ns: &str, link: &str) -> bool {
     Command::new("ip")
-        .args(["-n", ns, "-o", "link", "show", "dev", link])
+        .args(["-j", "-n", ns, "link", "show", "dev", link])
         .output()
-        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains(" state UP "))
+        .ok()
+        .and_then(|o| serde_json::from_slice::<serde_json::Value>(&o.stdout).ok())
+        .is_some_and(|v| v[0]["operstate"] == "UP")
 }
 
 /// The namespace, removed when dropped.
