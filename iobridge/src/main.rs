@@ -82,19 +82,39 @@ impl Bridge {
         let i = &ctx.instance;
         let io_seen = Sub::<DigitalIoV1>::new(&ctx.node, i, ServiceId::IoState, 1)?;
         let mut io = DigitalIo::new(&ctx.cell);
-        // A predecessor's image (it still runs during a swap; its publisher keeps the last
-        // one): its IO carries over, so a swap neither drops the gripper's part nor
-        // forgets an open e-stop circuit. Its publisher delivers the image on its next
-        // cycle; a cell starting afresh has none and waits this long for nothing.
-        let until = Instant::now() + ADOPT_WAIT;
+        // A predecessor's image (it still runs during a swap or a requested restart; its
+        // publisher keeps the last one): its IO carries over, so a swap neither drops the
+        // gripper's part nor forgets an open e-stop circuit. Its publisher delivers the image
+        // on its next cycle, which a host stall can hold off: with a predecessor alive (a
+        // publisher on the service) this waits for it, however long the stall, up to the
+        // configuration's timeout, and refuses to start blind past it. Without one (a cell
+        // starting, a crashed iobridge's node already cleaned) there is nothing to wait for
+        // beyond a moment.
+        let predecessor = runtime::ipc::io_state_publishers(&ctx.node, i)? > 0;
+        let wait = if predecessor {
+            process::CONFIG_TIMEOUT
+        } else {
+            ADOPT_WAIT
+        };
+        let until = Instant::now() + wait;
+        let mut adopted = false;
         while Instant::now() < until {
             if let Some(image) = io_seen.latest() {
-                if io.adopt(&image) {
+                adopted = io.adopt(&image);
+                if adopted {
                     tracing::info!("took over the IO of the previous iobridge's image");
                 }
                 break;
             }
             std::thread::sleep(Duration::from_millis(2));
+        }
+        if predecessor && !adopted {
+            return Err(format!(
+                "another iobridge runs and its IO image did not come in {} s (or does not fit \
+                 this cell's IO table): not taking over its outputs blind",
+                wait.as_secs()
+            )
+            .into());
         }
         drop(io_seen);
         Ok(Self {

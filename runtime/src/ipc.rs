@@ -370,6 +370,18 @@ pub fn events_subscribers(node: &Node<Ipc>, instance: &InstanceName) -> Result<u
     )
 }
 
+/// How many publishers `<i>/io/state` has now: a live iobridge (the one a swap replaces, or a
+/// foreign one) whose outputs a new iobridge must take over rather than start from 0.
+/// Opens the service on `node` (its ports stay compiled here, as every payload's).
+pub fn io_state_publishers(node: &Node<Ipc>, instance: &InstanceName) -> Result<usize, IpcError> {
+    use iceoryx2::service::port_factory::PortFactory;
+    Ok(
+        open::<shm_schema::DigitalIoV1>(node, instance, ServiceId::IoState)?
+            .dynamic_config()
+            .number_of_publishers(),
+    )
+}
+
 /// Opens (or creates) `id` and a publisher on it, for [`Payload::publisher`].
 #[doc(hidden)]
 pub fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(

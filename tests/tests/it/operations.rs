@@ -535,6 +535,40 @@ fn stall(program: &str, inst: &str, ms: u64) {
 }
 
 #[test]
+fn a_swap_keeps_the_outputs_while_the_old_iobridge_is_held_off_the_cpu() {
+    integration_tests::attributable(|| {
+        // Found by CI: a host stall of the old iobridge longer than its successor's wait for
+        // its image (50 ms) made the successor start with every output at 0, the gripper's
+        // part dropped. The detectors widened: the stall is not what this test is about.
+        let test = "ops-swap-held";
+        let cfg = integration_tests::default_cell_toml()
+            .set("supervisor.heartbeat_timeout", 30.0)
+            .set(
+                "health_config.pending_sequence_overrun_percent_limit",
+                100.0,
+            )
+            .set(
+                "health_config.thread_offset_variance_overrun_percent_limit",
+                100.0,
+            )
+            .write(test, "cell.toml");
+        let up = Up::start(test, &cfg);
+        up.ok(&["io", "gripper", "1"]);
+        up.until("the gripper closed", |s| io_value(s, "gripper") == Some(1));
+        // The old iobridge held off the CPU for 600 ms from the moment the swap is asked: its
+        // successor starts while it publishes nothing.
+        let inst = up.inst.clone();
+        let held = std::thread::spawn(move || stall("iobridge", &inst, 600));
+        let out = up.ok(&["swap", "iobridge"]);
+        held.join().expect("the stall");
+        let s = up.status();
+        assert_eq!(io_value(&s, "gripper"), Some(1), "{out}\n{s}");
+        assert!(!latched(&s), "{s}");
+        up.down();
+    });
+}
+
+#[test]
 fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit() {
     integration_tests::attributable(|| {
         // The embedded cell's pending-sequence detector, unwidened: iobridge at 4 ms forgives
