@@ -56,6 +56,16 @@ def enable(exchange):
 def with_pysoem(ifname):
     import pysoem
 
+    # SOEM's timeouts are made for a wire: a frame back within 2 ms, an EEPROM word within
+    # 20 ms. The emulator answers on a veth of a noisy 2-vCPU VM running the whole suite,
+    # whose stalls reach hundreds of ms: a late answer made SOEM map the EL1008 without its
+    # inputs (a CI run under load). Generous here; what is checked is unchanged.
+    t = pysoem.settings.timeouts
+    t.ret = 200_000
+    t.safe = 200_000
+    t.eeprom = 500_000
+    t.tx_mailbox = 500_000
+
     m = pysoem.Master()
     m.open(ifname)
     found = m.config_init()
