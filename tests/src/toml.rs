@@ -72,6 +72,13 @@ impl CellToml {
         self
     }
 
+    /// Adds the table `key` at the top (`network`), which must not be there yet.
+    pub fn table(mut self, key: &str, table: Table) -> Self {
+        assert!(!self.0.contains_key(key), "{key:?} is there already");
+        self.0.insert(key, Item::Table(table));
+        self
+    }
+
     /// Removes the element `name` of the array of tables `array` (`process`, `io`, ...).
     pub fn remove(mut self, array: &str, name: &str) -> Self {
         let a = self

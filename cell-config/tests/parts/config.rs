@@ -195,6 +195,24 @@ fn check_has(from: &str, to: &str, line: usize, needle: &str) {
     assert!(e.to_string().contains(needle), "{e}");
 }
 
+/// `src` edited as TOML by `edit` (a valid configuration made from another: edits by the
+/// document's structure, not by its text).
+fn edited(src: &str, edit: impl FnOnce(&mut toml_edit::DocumentMut)) -> String {
+    let mut doc: toml_edit::DocumentMut = src.parse().expect("a TOML document");
+    edit(&mut doc);
+    doc.to_string()
+}
+
+/// The `[[process]]` entry named `name` of `doc`.
+fn process<'a>(doc: &'a mut toml_edit::DocumentMut, name: &str) -> &'a mut toml_edit::Table {
+    doc["process"]
+        .as_array_of_tables_mut()
+        .expect("[[process]]")
+        .iter_mut()
+        .find(|p| p["name"].as_str() == Some(name))
+        .unwrap_or_else(|| panic!("process {name}"))
+}
+
 fn line_of(needle: &str) -> usize {
     DEFAULT_TOML
         .lines()
@@ -206,7 +224,12 @@ fn line_of(needle: &str) -> usize {
 #[test]
 fn the_modbus_settings_and_critical_are_checked_where_they_are_written() {
     // A key left out takes its documented default; an empty section is all defaults.
-    let src = DEFAULT_TOML.replacen("max_connections = 8\n", "", 1);
+    let src = edited(DEFAULT_TOML, |d| {
+        d["modbus"]
+            .as_table_mut()
+            .expect("[modbus]")
+            .remove("max_connections");
+    });
     let c = Config::parse(&src, "cell.toml").expect("max_connections left out");
     assert_eq!(c.modbus.max_connections, 8);
     let d = cell_config::modbus::ModbusSettings::default();
@@ -340,8 +363,11 @@ fn io_on_the_bus_and_the_drives_entry_are_checked_where_they_are_written() {
             (false, 0)
         ]
     );
+    // x's drive, position 1.
     let x = "rated_torque = 100.0       # N: 1000 thousandths";
-    let src = bus.replacen(x, &format!("{x}\nsync0_shift = 0.0002"), 1);
+    let src = edited(bus, |d| {
+        d["ethercat"]["subdevice"][1]["sync0_shift"] = toml_edit::value(0.0002);
+    });
     let c = Config::parse(&src, "cell.toml").expect("a shift of 200 µs");
     let shm = c
         .ethercat
@@ -642,23 +668,18 @@ fn estop_stop_time_and_the_restart_settings_are_checked_as_config_md_says() {
             "s must be 0.01..=60 s",
         );
     }
-    let with = |k: &str, v: &str| {
-        let src = DEFAULT_TOML.replacen(motion, &format!("{motion}\n{k} = {v}"), 1);
-        Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{k} = {v}: {e}"))
-    };
     for v in [0.01, 0.5, 60.0] {
-        assert_eq!(
-            with("estop_stop_time", &v.to_string())
-                .motion
-                .estop_stop_time,
-            v
-        );
+        let src = edited(DEFAULT_TOML, |d| {
+            d["motion"]["estop_stop_time"] = toml_edit::value(v);
+        });
+        let c = Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{v}: {e}"));
+        assert_eq!(c.motion.estop_stop_time, v);
     }
 
     let sup = "supervisor_timeout = 0.5";
     let s = line_of(sup) + 1;
-    let with = |k: &str, v: &str| {
-        let src = DEFAULT_TOML.replacen(sup, &format!("{sup}\n{k} = {v}"), 1);
+    let with = |k: &str, v: toml_edit::Item| {
+        let src = edited(DEFAULT_TOML, |d| d["supervisor"][k] = v.clone());
         Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{k} = {v}: {e}"))
     };
     let d = Config::default_cell().supervisor;
@@ -669,7 +690,7 @@ fn estop_stop_time_and_the_restart_settings_are_checked_as_config_md_says() {
     );
     for v in [0.0, 2.5, 60.0] {
         assert_eq!(
-            with("restart_backoff", &format!("{v:?}"))
+            with("restart_backoff", toml_edit::value(v))
                 .supervisor
                 .restart_backoff,
             v
@@ -677,7 +698,7 @@ fn estop_stop_time_and_the_restart_settings_are_checked_as_config_md_says() {
     }
     for v in [0, 7, 1000] {
         assert_eq!(
-            with("restart_limit", &v.to_string())
+            with("restart_limit", toml_edit::value(i64::from(v)))
                 .supervisor
                 .restart_limit,
             v
@@ -735,14 +756,17 @@ fn the_supervisors_priority_stays_below_every_real_time_process() {
         assert_eq!(e.to_string(), format!("cell.toml:{s}:1: {want}"));
     }
     for v in [0, 1, 59] {
-        let src = DEFAULT_TOML.replacen("priority = 10 ", &format!("priority = {v} "), 1);
+        let src = edited(DEFAULT_TOML, |d| {
+            d["supervisor"]["priority"] = toml_edit::value(i64::from(v));
+        });
         let c = Config::parse(&src, "cell.toml").unwrap_or_else(|e| panic!("{v}: {e}"));
         assert_eq!(c.supervisor.priority, v);
     }
     // iobridge under SCHED_OTHER: the lowest real-time process is servo, at 70.
-    let src = DEFAULT_TOML
-        .replacen("priority = 60", "priority = 0", 1)
-        .replacen("priority = 10 ", "priority = 69 ", 1);
+    let src = edited(DEFAULT_TOML, |d| {
+        process(d, "iobridge")["priority"] = toml_edit::value(0);
+        d["supervisor"]["priority"] = toml_edit::value(69);
+    });
     Config::parse(&src, "cell.toml").expect("below servo's 70");
 }
 

@@ -106,12 +106,18 @@ fn private(test: &str, name: &str, text: &str) -> PathBuf {
 /// Cell `k` of the line, `press-<k>`: the default cell with room for stalls, its gateway
 /// listening on its link in the clear.
 fn cell_config(test: &str, k: usize, users: &Path) -> PathBuf {
-    cell_config_with(test, k, users, "tcp", "")
+    cell_config_with(test, k, users, "tcp", &[])
 }
 
-/// [`cell_config`] listening on a `proto` endpoint, `more` appended to `[network]` (its
+/// [`cell_config`] listening on a `proto` endpoint, `more` added to `[network]` (its
 /// sub-tables).
-fn cell_config_with(test: &str, k: usize, users: &Path, proto: &str, more: &str) -> PathBuf {
+fn cell_config_with(
+    test: &str,
+    k: usize,
+    users: &Path,
+    proto: &str,
+    more: &[(&str, Table)],
+) -> PathBuf {
     let mut gateway = Table::new();
     gateway.insert("name", value("gateway"));
     gateway.insert(
@@ -138,11 +144,22 @@ fn cell_config_with(test: &str, k: usize, users: &Path, proto: &str, more: &str)
     network.insert("plain", value(proto == "tcp"));
     network.insert("users", value(users.display().to_string()));
     network.insert("lease", value(LEASE_S));
-    let src = integration_tests::default_cell_with_room()
+    for (key, table) in more {
+        network.insert(key, toml_edit::Item::Table(table.clone()));
+    }
+    integration_tests::default_cell_with_room()
         .push("process", gateway)
-        .to_string();
-    let src = format!("{src}\n[network]\n{network}\n{more}");
-    scratch(test, &format!("cell-{k}.toml"), &src)
+        .table("network", network)
+        .write(test, &format!("cell-{k}.toml"))
+}
+
+/// A table of `entries`.
+fn table(entries: &[(&str, toml_edit::Item)]) -> Table {
+    let mut t = Table::new();
+    for (k, v) in entries {
+        t.insert(k, v.clone());
+    }
+    t
 }
 
 /// The room's line file `file` for `user` (secret `secret`), connecting to `cells` cells.
@@ -253,7 +270,13 @@ fn a_line_of_two_cells_is_listed_read_and_commanded_from_the_room_by_operators_o
     // press-0 also shows its joint states to ROS 2 (rmw_zenoh), in domain 42.
     let a = Up::start_in(
         &format!("{test}-a"),
-        &cell_config_with(test, 0, &users, "tcp", "[network.ros2]\ndomain = 42\n"),
+        &cell_config_with(
+            test,
+            0,
+            &users,
+            "tcp",
+            &[("ros2", table(&[("domain", value(42))]))],
+        ),
         Some(&hosts.cells[0]),
     );
     let b = Up::start_in(
@@ -1060,15 +1083,24 @@ fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
     private(test, "press-0.password", "press-0-password\n");
     private(test, "passwords", "room:room-password\n");
     let at = |f: &str| dir.join(f).display().to_string();
-    let more = format!(
-        "[network.tls]\nroot_ca = \"{}\"\ncertificate = \"{}\"\nprivate_key = \"{}\"\n\n\
-         [network.login]\nuser = \"press-0\"\npassword_file = \"{}\"\ndictionary_file = \"{}\"\n",
-        at("line-ca.pem"),
-        at("press-0.pem"),
-        at("press-0.key"),
-        at("press-0.password"),
-        at("passwords")
-    );
+    let more = [
+        (
+            "tls",
+            table(&[
+                ("root_ca", value(at("line-ca.pem"))),
+                ("certificate", value(at("press-0.pem"))),
+                ("private_key", value(at("press-0.key"))),
+            ]),
+        ),
+        (
+            "login",
+            table(&[
+                ("user", value("press-0")),
+                ("password_file", value(at("press-0.password"))),
+                ("dictionary_file", value(at("passwords"))),
+            ]),
+        ),
+    ];
     let cfg = cell_config_with(test, 0, &users, "tls", &more);
     let cell = Up::start_in(&format!("{test}-c"), &cfg, Some(&hosts.cells[0]));
     let room_file = |name: &str, cert: &str, password: &str| {

@@ -324,15 +324,14 @@ fn the_page_draws_the_five_bar_through_its_kinematics() {
             .expect("examples/five-bar.toml");
         let cfg = scratch(test, "cell.toml", &integration_tests::with_stall_room(&src));
         // The five-bar's parameters as the file gives them (`[kinematics]`: key = number).
-        let params: Vec<(String, f64)> = src
-            .lines()
-            .skip_while(|l| l.trim() != "[kinematics]")
-            .skip(1)
-            .take_while(|l| !l.starts_with('['))
-            .filter_map(|l| {
-                let (k, v) = l.split_once('=')?;
-                let v = v.split('#').next()?.trim().parse::<f64>().ok()?;
-                Some((k.trim().to_string(), v))
+        let doc: toml_edit::DocumentMut = src.parse().expect("five-bar.toml is TOML");
+        let params: Vec<(String, f64)> = doc["kinematics"]
+            .as_table()
+            .expect("[kinematics]")
+            .iter()
+            .filter_map(|(k, v)| {
+                let v = v.as_float().or_else(|| v.as_integer().map(|i| i as f64))?;
+                Some((k.to_string(), v))
             })
             .collect();
         let params: Vec<(&str, f64)> = params.iter().map(|(k, v)| (k.as_str(), *v)).collect();
