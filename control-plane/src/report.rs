@@ -166,3 +166,22 @@ pub enum RunDocument {
     /// It did not.
     Failed(RunFailure),
 }
+
+/// What `supervisor up --json` prints on its standard output as it ends: how the cell went
+/// down and every event of its life, those of its going down included (the drives' last
+/// reactions come after the processes were told to stop). Its JSON Schema is
+/// `docs/schema/up.schema.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UpEnded {
+    /// The instance.
+    pub instance: String,
+    /// True when it went down as asked (`supervisor down`, SIGTERM, SIGINT) with every
+    /// process stopped cleanly; false when it did not come up, or a critical process was lost
+    /// for good.
+    pub ok: bool,
+    /// What ended it, or what went wrong, in words.
+    pub ended: String,
+    /// Every event since the cell came up, oldest first.
+    pub events: Vec<crate::event::Event>,
+}

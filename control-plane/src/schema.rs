@@ -15,6 +15,10 @@ pub fn all() -> Vec<(&'static str, Schema)> {
             "report.schema.json",
             schemars::schema_for!(crate::report::RunDocument),
         ),
+        (
+            "up.schema.json",
+            schemars::schema_for!(crate::report::UpEnded),
+        ),
     ]
 }
 

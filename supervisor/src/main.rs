@@ -166,6 +166,10 @@ enum Cmd {
         /// Record every service of the cell into this MCAP file until it goes down.
         #[arg(long)]
         record: Option<PathBuf>,
+        /// As it ends, print how it went down and every event of its life as one JSON
+        /// document on stdout (docs/schema/up.schema.json).
+        #[arg(long)]
+        json: bool,
     },
     /// Stop a cell that is up: every process leaves safely, nothing of the instance is left.
     Down {
@@ -841,13 +845,30 @@ fn main() -> ExitCode {
             config,
             instance,
             record,
-        } => match supervisor::up::up(config.as_deref(), &instance, record.as_deref()) {
-            Ok(msg) => {
-                tracing::info!("{msg}");
-                ExitCode::SUCCESS
+            json,
+        } => {
+            let (ended, events) =
+                supervisor::up::up(config.as_deref(), &instance.instance, record.as_deref());
+            if json {
+                let doc = control_plane::report::UpEnded {
+                    instance: instance.instance.clone(),
+                    ok: ended.is_ok(),
+                    ended: match &ended {
+                        Ok(msg) => msg.clone(),
+                        Err(e) => e.to_string(),
+                    },
+                    events,
+                };
+                println!("{}", serde_json::to_string(&doc).unwrap_or_default());
             }
-            Err(e) => run_failed(&e, false),
-        },
+            match ended {
+                Ok(msg) => {
+                    tracing::info!("{msg}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => run_failed(&e, false),
+            }
+        }
         Cmd::Down { instance } => down(&instance),
         Cmd::Exec(args) => exec(&args),
         Cmd::Pause { instance, .. } => ctl_call(&instance, Request::Pause),

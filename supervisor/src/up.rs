@@ -6,16 +6,28 @@ use crate::error::RunError;
 use crate::serve::{End, serve};
 use cell_config::Config;
 use control_plane::Failure;
+use control_plane::event::Event;
 use shm_schema::InstanceName;
 use std::path::Path;
 
 /// Brings the cell of `config` up on `instance` and serves it until it is told to go down;
 /// then stops every process and removes every resource of the instance. Returns how it
-/// ended.
+/// ended, and every event of the cell's life (none when it never came up).
 pub fn up(
     config: Option<&Path>,
     instance: &str,
     record: Option<&Path>,
+) -> (Result<String, RunError>, Vec<Event>) {
+    let mut events = Vec::new();
+    let ended = up_inner(config, instance, record, &mut events);
+    (ended, events)
+}
+
+fn up_inner(
+    config: Option<&Path>,
+    instance: &str,
+    record: Option<&Path>,
+    events: &mut Vec<Event>,
 ) -> Result<String, RunError> {
     let cfg = Config::load(config).map_err(|e| RunError::Input(e.to_string()))?;
     let instance = InstanceName::new(instance)
@@ -54,14 +66,16 @@ pub fn up(
         End::Program(_) | End::Tuned(_) => "the program",
         End::Failed(e) => {
             tracing::info!("instance {instance}: going down (it did not come up)");
-            let _ = cell.close(server);
+            *events = cell.close(server).events;
             return Err(*e);
         }
     };
     // A critical process lost for good: the cell ran without it, which `up` says in its exit.
     let lost = cell.lost_for_good();
     tracing::info!("instance {instance}: going down ({why})");
-    if let Some(e) = cell.close(server).problem {
+    let closed = cell.close(server);
+    *events = closed.events;
+    if let Some(e) = closed.problem {
         return Err(e);
     }
     if let Some((process, why)) = lost {

@@ -4,12 +4,13 @@
 //! under cross-site and foreign requests.
 
 use crate::drives::WATCHDOG;
-use crate::up::{Up, cell, process_in};
+use crate::up::{Up, cell, errors, process_in};
 use crate::web::serve;
 use control_plane::Refusal;
 use integration_tests::{
     examples, exited, instance, pids_with, run_with_watchdog, succeeded_within, success, supervisor,
 };
+use shm_schema::event::code;
 use std::io::{Read, Write};
 use std::os::unix::process::CommandExt;
 use std::path::Path;
@@ -262,7 +263,7 @@ fn a_long_validation_never_blinds_the_control_channel() {
             still["supervisor"]["validating"].is_string(),
             "the validation ended before the test could go down: {still}"
         );
-        let log = up.down();
+        let (log, events) = up.down_events();
         let out = exec.wait_with_output().expect("exec");
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "exec: {err}\n{log}");
@@ -270,7 +271,7 @@ fn a_long_validation_never_blinds_the_control_channel() {
             err.contains("stopped the cell before the validation of") && err.contains("long.prog"),
             "exec: {err}"
         );
-        assert!(error_events(&log).is_empty(), "{log}");
+        assert!(errors(&events).is_empty(), "{events:#?}\n{log}");
     });
 }
 
@@ -449,8 +450,8 @@ fn a_foreign_trapezoid_generator_process_is_never_refused() {
         });
         assert!(done["servo"]["fault"].is_null(), "servo refused: {done}");
         assert!(done["supervisor"]["estop"].is_null(), "e-stop: {done}");
-        let log = up.down();
-        let errors = error_events(&log);
+        let (log, events) = up.down_events();
+        let errors = errors(&events);
         assert!(errors.is_empty(), "{errors:#?}\n{log}");
         // The generator did fall silent (the stalls this test is about).
         let silences = log
@@ -567,15 +568,10 @@ fn a_refused_jump_of_a_foreign_generator_names_its_test_value_and_limit() {
             nix::sys::signal::Signal::SIGTERM,
         );
         let _ = follower.wait();
-        let log = up.down();
-        let errors = error_events(&log);
+        let (log, events) = up.down_events();
+        let errors = errors(&events);
         assert!(errors.is_empty(), "{errors:#?}\n{log}");
     });
-}
-
-/// Event lines of a severity `error` in a supervisor's log (faults, cuts).
-fn error_events(log: &str) -> Vec<&str> {
-    log.lines().filter(|l| l.contains("] error ")).collect()
 }
 
 /// Starts the triangle on `up` and waits until it moves along its second segment.
@@ -605,10 +601,10 @@ fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() 
             let test = &format!("down-moving-{how}");
             let up = Up::default_cell(test);
             moving(&up);
-            let log = if how == "down" {
-                up.down()
+            let (log, events) = if how == "down" {
+                up.down_events()
             } else {
-                up.terminate()
+                up.terminate_events()
             };
             let rest = log
                 .find("going down: the program comes to rest along its path")
@@ -620,7 +616,12 @@ fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() 
                 log[rest + disabled..].contains("going down ("),
                 "{how}: the processes stopped before the drives were disabled:\n{log}"
             );
-            let errors = error_events(&log);
+            // The events of the going down are there: servo's drives disabled.
+            assert!(
+                events.iter().any(|e| e.code == code::DISABLED),
+                "{how}: {events:#?}"
+            );
+            let errors = errors(&events);
             assert!(
                 errors.is_empty(),
                 "{how}: a fault on the way down: {errors:#?}\n{log}"
@@ -643,10 +644,10 @@ fn down_after_the_drives_process_restarted_stops_in_the_graph_order() {
                 s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
             });
         }
-        let log = up.down();
-        let errors = error_events(&log);
+        let (log, events) = up.down_events();
+        let errors = errors(&events);
         assert!(
-            errors.is_empty() && !log.contains("feedback-stale"),
+            errors.is_empty() && !events.iter().any(|e| e.code == code::FEEDBACK_STALE),
             "a fault on the way down: {errors:#?}\n{log}"
         );
     });

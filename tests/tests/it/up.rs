@@ -16,6 +16,9 @@ pub(crate) struct Up {
     pub(crate) inst: String,
     pub(crate) child: Option<Child>,
     log: PathBuf,
+    /// Where `up --json` writes how it ended and the cell's events ([`Up::down_events`]);
+    /// `None` for an `up` the test started itself.
+    ended: Option<PathBuf>,
     /// The command the cell and every command run under (`ip netns exec NS` for an EtherCAT
     /// cell's network namespace, `nsenter` for a mount namespace), if any: program, arguments.
     within: Vec<String>,
@@ -57,13 +60,14 @@ impl Up {
         let within: Vec<String> = within.iter().map(|a| a.to_string()).collect();
         let inst = instance(test);
         let log = scratch(test, "up.log", "");
+        let ended = scratch(test, "up.json", "");
         // `up` says READY=1 once its control channel answers (docs/operations.md).
         let ready = integration_tests::Readiness::new("up");
         let child = ready
             .tell(&mut supervisor_within(&within))
-            .args(["up", "--instance", &inst, "--config"])
+            .args(["up", "--json", "--instance", &inst, "--config"])
             .arg(cfg)
-            .stdout(Stdio::null())
+            .stdout(std::fs::File::create(&ended).expect("up.json"))
             .stderr(std::fs::File::create(&log).expect("log"))
             .spawn()
             .expect("supervisor up");
@@ -71,6 +75,7 @@ impl Up {
             inst,
             child: Some(child),
             log,
+            ended: Some(ended),
             within,
         };
         if let Some(child) = up.child.as_mut() {
@@ -91,6 +96,7 @@ impl Up {
             inst,
             child: Some(child),
             log,
+            ended: None,
             within: vec![],
         };
         up.wait_enabled();
@@ -308,6 +314,27 @@ impl Up {
         self.ended("down")
     }
 
+    /// [`Up::down`], and every event of the cell's life as `up --json` gave them as it ended
+    /// (those of its going down included).
+    pub(crate) fn down_events(mut self) -> (String, Vec<control_plane::event::Event>) {
+        self.ok(&["down"]);
+        let log = self.ended("down");
+        let events = self.events_at_end(&log);
+        (log, events)
+    }
+
+    /// [`Up::terminate`], and every event of the cell's life, as [`Up::down_events`].
+    pub(crate) fn terminate_events(self) -> (String, Vec<control_plane::event::Event>) {
+        let ended = self.ended.clone();
+        let log = self.terminate();
+        let events = read_ended(ended.as_deref(), &log);
+        (log, events)
+    }
+
+    fn events_at_end(&self, log: &str) -> Vec<control_plane::event::Event> {
+        read_ended(self.ended.as_deref(), log)
+    }
+
     /// SIGTERM to the supervisor, then it exits 0 and nothing of the instance is left; its
     /// log.
     pub(crate) fn terminate(mut self) -> String {
@@ -339,6 +366,26 @@ impl Up {
         assert_clean(&self.inst);
         log
     }
+}
+
+/// The events of `up --json`'s document in `file` (`log`: `up`'s, for the message).
+fn read_ended(file: Option<&Path>, log: &str) -> Vec<control_plane::event::Event> {
+    let file = file.expect("an up the test started, with --json");
+    let text = std::fs::read_to_string(file).expect("up --json's document");
+    let doc: control_plane::report::UpEnded = serde_json::from_str(text.trim())
+        .unwrap_or_else(|e| panic!("up --json is not the documented UpEnded ({e}): {text}\n{log}"));
+    assert!(doc.ok, "{doc:?}\n{log}");
+    // A cell that came up has said so (its drives enabled, at the least).
+    assert!(!doc.events.is_empty(), "{doc:?}\n{log}");
+    doc.events
+}
+
+/// The events of `events` that are errors (faults, cuts, refusals).
+pub(crate) fn errors(events: &[control_plane::event::Event]) -> Vec<&control_plane::event::Event> {
+    events
+        .iter()
+        .filter(|e| e.severity == control_plane::event::Severity::Error)
+        .collect()
 }
 
 impl Drop for Up {
