@@ -44,7 +44,8 @@ enum Order {
 struct Emulator {
     stop: Arc<AtomicBool>,
     answered: Arc<AtomicU64>,
-    thread: Option<JoinHandle<()>>,
+    /// The frames' thread; it returns each drive's SYNC0 counts as it ends.
+    thread: Option<JoinHandle<Vec<Sync0Count>>>,
     interface: String,
     faults: Sub<EmulatorFaultV1>,
     injections: Sub<FaultInjectionV1>,
@@ -184,7 +185,7 @@ impl Emulator {
                         priority,
                         cpu: None,
                     });
-                    answer(&wire, bus, wiring, &stop, &answered, &orders_rx);
+                    answer(&wire, bus, wiring, &stop, &answered, &orders_rx)
                 })?
         };
         tracing::info!("answering on {peer} for the bus on {interface}");
@@ -235,10 +236,23 @@ impl Task for Emulator {
         }
     }
 
-    fn stop(&mut self, _now_ns: u64, _events: &mut shm_schema::EventQueue) {
+    fn stop(&mut self, now_ns: u64, events: &mut shm_schema::EventQueue) {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(t) = self.thread.take() {
-            let _ = t.join();
+            // Each drive's SYNC0 counts, as events (the process is leaving: not the cycle).
+            for c in t.join().unwrap_or_default() {
+                let position = c.position.to_string();
+                events.push(EventV1::new(
+                    now_ns,
+                    code::EMULATED_SYNC0,
+                    (self.drive_of_axis.iter())
+                        .position(|d| *d == Some(c.position))
+                        .map_or(-1, |a| a as i32),
+                    c.sync0 as f64,
+                    c.missed as f64,
+                    &["position ", &position, " (", &c.name, "): SYNC0 events"],
+                ));
+            }
         }
         tracing::info!(
             "emulator stopped: {} frames answered; removing {}",
@@ -451,6 +465,17 @@ fn carry_out(bus: &mut Bus, wiring: &mut Wiring, order: Order, cable: &mut bool)
 
 /// Answers frames on `wire` until `stop`; between frames the drives' models run on. With
 /// the cable pulled (told so) frames are taken and not answered.
+/// A drive's SYNC0 events over the emulator's life, as its frames' thread ends.
+#[derive(Debug)]
+struct Sync0Count {
+    position: usize,
+    name: String,
+    /// SYNC0 events it took.
+    sync0: u64,
+    /// Those that found no new outputs (0x1C32:0B).
+    missed: u64,
+}
+
 fn answer(
     wire: &Wire,
     mut bus: Bus,
@@ -458,7 +483,7 @@ fn answer(
     stop: &AtomicBool,
     answered: &AtomicU64,
     orders: &Receiver<Order>,
-) {
+) -> Vec<Sync0Count> {
     let mut buf = vec![0u8; 9216];
     let mut cable = true;
     while !stop.load(Ordering::Relaxed) {
@@ -481,6 +506,7 @@ fn answer(
             }
         }
     }
+    let mut counts = Vec::new();
     for (k, d) in bus.devices.iter().enumerate() {
         if let Terminal::Drive(drive) = &d.terminal {
             tracing::info!(
@@ -489,8 +515,15 @@ fn answer(
                 drive.sync0_events(),
                 drive.sm_events_missed()
             );
+            counts.push(Sync0Count {
+                position: k,
+                name: drive.name().to_string(),
+                sync0: drive.sync0_events(),
+                missed: u64::from(drive.sm_events_missed()),
+            });
         }
     }
+    counts
 }
 
 /// `main` in a cell.

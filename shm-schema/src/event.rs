@@ -279,6 +279,10 @@ pub mod code {
     /// value: the product code found there (0: nothing answers), limit: the product code the
     /// configuration names there (0: none); the text names the position.
     pub const SUBDEVICE_MISMATCH: u32 = 910;
+    /// The EtherCAT emulator, as it stops: how many SYNC0 events an emulated drive took;
+    /// value: SYNC0 events, limit: those of them that found no new outputs (0x1C32:0B); the
+    /// text names its position.
+    pub const EMULATED_SYNC0: u32 = 911;
 }
 
 /// The unit of an event's `value` and `limit`: what a reader shows them as. Decisions on how
@@ -736,6 +740,13 @@ pub const CODES: &[CodeInfo] = &[
         severity: Severity::Error,
         unit: Unit::Hex("product code found (limit: the one configured; 0: none)"),
         meaning: "Bringing the bus up again (`bus-recovering`), the scan found other SubDevices than the configuration's `[[ethercat.subdevice]]` list, in its order: another product at a position (a drive swapped for another model), nothing answering where the list names one, or one more than it names. The text names the position and the SubDevice the configuration names there; the log has the whole sentence, both identities. The bus stays down (nothing is published to servo, no drive can be enabled) and the bus process scans again every second, raising this event again only when what it finds changes, until the right SubDevices are back (`bus-op`). At start-up the same mismatch refuses the configuration.",
+    },
+    CodeInfo {
+        code: code::EMULATED_SYNC0,
+        name: "emulated-sync0",
+        severity: Severity::Info,
+        unit: Unit::Number("SYNC0 events (limit: those without new outputs, 0x1C32:0B)"),
+        meaning: "The EtherCAT emulator (`ethercat-emulator --instance`, a cell's bus without hardware), as it stops: how many SYNC0 events an emulated drive on Distributed Clocks took over its life, and how many of them found no new outputs (its 0x1C32:0B). One per drive; the axis is the drive's, the text names its position. A drive that is not on SYNC0 says 0.",
     },
 ];
 
