@@ -6,7 +6,7 @@ use control_plane::channel as ctl;
 use control_plane::{Reply, Request};
 use latency::command::{LatencyArgs, LatencyError, latency};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supervisor::error::RunError;
 use supervisor::run::{RunOptions, run};
@@ -504,6 +504,31 @@ fn printed(
 
 /// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
 /// status: 2 bad input, 1 failed, 130 interrupted.
+/// `supervisor up`: the cell up until it is told to go down; with `json`, how it ended and
+/// its events as one document on stdout.
+fn up(config: Option<&Path>, instance: &str, record: Option<&Path>, json: bool) -> ExitCode {
+    let (ended, events) = supervisor::up::up(config, instance, record);
+    if json {
+        let doc = control_plane::report::UpEnded {
+            instance: instance.to_string(),
+            ok: ended.is_ok(),
+            ended: match &ended {
+                Ok(msg) => msg.clone(),
+                Err(e) => e.to_string(),
+            },
+            events,
+        };
+        println!("{}", serde_json::to_string(&doc).unwrap_or_default());
+    }
+    match ended {
+        Ok(msg) => {
+            tracing::info!("{msg}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => run_failed(&e, false),
+    }
+}
+
 fn run_failed(e: &RunError, json: bool) -> ExitCode {
     if json {
         println!(
@@ -846,29 +871,7 @@ fn main() -> ExitCode {
             instance,
             record,
             json,
-        } => {
-            let (ended, events) =
-                supervisor::up::up(config.as_deref(), &instance.instance, record.as_deref());
-            if json {
-                let doc = control_plane::report::UpEnded {
-                    instance: instance.instance.clone(),
-                    ok: ended.is_ok(),
-                    ended: match &ended {
-                        Ok(msg) => msg.clone(),
-                        Err(e) => e.to_string(),
-                    },
-                    events,
-                };
-                println!("{}", serde_json::to_string(&doc).unwrap_or_default());
-            }
-            match ended {
-                Ok(msg) => {
-                    tracing::info!("{msg}");
-                    ExitCode::SUCCESS
-                }
-                Err(e) => run_failed(&e, false),
-            }
-        }
+        } => up(config.as_deref(), &instance, record.as_deref(), json),
         Cmd::Down { instance } => down(&instance),
         Cmd::Exec(args) => exec(&args),
         Cmd::Pause { instance, .. } => ctl_call(&instance, Request::Pause),
