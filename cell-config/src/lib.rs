@@ -25,7 +25,7 @@ pub mod stability;
 pub use axis::{Axis, DriveMode, DriveSettings, Limits, ServoGains, SimAxis};
 use axis::{AxisAt, axis_drive, axis_gains, axis_model, axis_range};
 pub use problem::{ConfigError, Located};
-use problem::{Problem, Seg, line_col, located, non_negative, positive};
+use problem::{Problem, Seg, located, non_negative, placed, positive};
 pub use program::find_program;
 
 /// The embedded default cell (the Gantry UBA).
@@ -425,22 +425,7 @@ impl Config {
     /// Parses and validates `src` (named `file` in messages).
     pub fn parse(src: &str, file: &str) -> Result<Self, ConfigError> {
         let cfg: Config = read::read(src).map_err(|problems| {
-            let mut problems: Vec<Located> = problems
-                .into_iter()
-                .map(|p| {
-                    let (line, col) = p.span.map_or((0, 0), |s| line_col(src, s.start));
-                    Located {
-                        line,
-                        col,
-                        message: p.message,
-                    }
-                })
-                .collect();
-            problems.sort_by_key(|p| (p.line, p.col));
-            ConfigError {
-                file: file.into(),
-                problems,
-            }
+            placed(src, file, problems.into_iter().map(|p| (p.span, p.message)))
         })?;
         let problems = cfg.validate();
         if problems.is_empty() {

@@ -102,12 +102,27 @@ pub(crate) fn non_negative(v: f64) -> bool {
     v.is_finite() && v >= 0.0
 }
 
-/// `problems` (at least one) placed in `src`, in the file's order.
+/// `problems` (at least one) placed in `src` by their key paths, in the file's order.
 pub(crate) fn located(src: &str, file: &str, problems: Vec<Problem>) -> ConfigError {
+    placed(
+        src,
+        file,
+        problems
+            .into_iter()
+            .map(|(path, message)| (locate(src, &path), message)),
+    )
+}
+
+/// `problems` (at least one) at their bytes of `src` (none: line 0), in the file's order.
+pub(crate) fn placed(
+    src: &str,
+    file: &str,
+    problems: impl IntoIterator<Item = (Option<Range<usize>>, String)>,
+) -> ConfigError {
     let mut problems: Vec<Located> = problems
         .into_iter()
-        .map(|(path, message)| {
-            let (line, col) = locate(src, &path).map_or((0, 0), |s| line_col(src, s.start));
+        .map(|(span, message)| {
+            let (line, col) = span.map_or((0, 0), |s| line_col(src, s.start));
             Located { line, col, message }
         })
         .collect();
@@ -118,7 +133,7 @@ pub(crate) fn located(src: &str, file: &str, problems: Vec<Problem>) -> ConfigEr
     }
 }
 
-pub(crate) fn line_col(src: &str, offset: usize) -> (usize, usize) {
+fn line_col(src: &str, offset: usize) -> (usize, usize) {
     let before = &src[..offset.min(src.len())];
     let line = before.matches('\n').count() + 1;
     let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;

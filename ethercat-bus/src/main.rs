@@ -879,12 +879,13 @@ impl Recovery {
                 )),
                 Err(e) => e,
             };
-            if failure.to_string() != last_failure {
-                tracing::warn!("the bus is not back: {failure} (trying again every second)");
+            let said = failure.to_string();
+            if said != last_failure {
+                tracing::warn!("the bus is not back: {said} (trying again every second)");
                 if let BringUpError::Line(m) = &failure {
                     self.say(mismatch_event(m));
                 }
-                last_failure = failure.to_string();
+                last_failure = said;
             }
             let rest = Duration::from_secs(1).saturating_sub(attempt.elapsed());
             let until = Instant::now() + rest;
@@ -893,9 +894,7 @@ impl Recovery {
             }
         }
     }
-}
 
-impl Recovery {
     /// Gives `e` to the cycle to publish; dropped if the cycle has not taken the last few
     /// (it takes them every cycle while the thread has the wire).
     fn say(&self, e: EventV1) {

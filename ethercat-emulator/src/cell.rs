@@ -463,8 +463,6 @@ fn carry_out(bus: &mut Bus, wiring: &mut Wiring, order: Order, cable: &mut bool)
     }
 }
 
-/// Answers frames on `wire` until `stop`; between frames the drives' models run on. With
-/// the cable pulled (told so) frames are taken and not answered.
 /// A drive's SYNC0 events over the emulator's life, as its frames' thread ends.
 #[derive(Debug)]
 struct Sync0Count {
@@ -476,6 +474,9 @@ struct Sync0Count {
     missed: u64,
 }
 
+/// Answers frames on `wire` until `stop`; between frames the drives' models run on. With
+/// the cable pulled (told so) frames are taken and not answered. Returns each drive's SYNC0
+/// counts.
 fn answer(
     wire: &Wire,
     mut bus: Bus,

@@ -362,24 +362,29 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> PubPort<T> for PubOf<T> {
 /// has attached (a test's events follower). Opens the service on `node` (its ports stay
 /// compiled here, as every payload's).
 pub fn events_subscribers(node: &Node<Ipc>, instance: &InstanceName) -> Result<usize, IpcError> {
-    use iceoryx2::service::port_factory::PortFactory;
-    Ok(
-        open::<shm_schema::EventV1>(node, instance, ServiceId::Events)?
-            .dynamic_config()
-            .number_of_subscribers(),
-    )
+    Ok(ports::<shm_schema::EventV1>(node, instance, ServiceId::Events)?.1)
 }
 
 /// How many publishers `<i>/io/state` has now: a live iobridge (the one a swap replaces, or a
 /// foreign one) whose outputs a new iobridge must take over rather than start from 0.
 /// Opens the service on `node` (its ports stay compiled here, as every payload's).
 pub fn io_state_publishers(node: &Node<Ipc>, instance: &InstanceName) -> Result<usize, IpcError> {
+    Ok(ports::<shm_schema::DigitalIoV1>(node, instance, ServiceId::IoState)?.0)
+}
+
+/// The publishers and subscribers service `id` has now.
+fn ports<T: Debug + ZeroCopySend + Copy + 'static>(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    id: ServiceId,
+) -> Result<(usize, usize), IpcError> {
     use iceoryx2::service::port_factory::PortFactory;
-    Ok(
-        open::<shm_schema::DigitalIoV1>(node, instance, ServiceId::IoState)?
-            .dynamic_config()
-            .number_of_publishers(),
-    )
+    let service = open::<T>(node, instance, id)?;
+    let config = service.dynamic_config();
+    Ok((
+        config.number_of_publishers(),
+        config.number_of_subscribers(),
+    ))
 }
 
 /// Opens (or creates) `id` and a publisher on it, for [`Payload::publisher`].

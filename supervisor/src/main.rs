@@ -502,8 +502,6 @@ fn printed(
     ExitCode::SUCCESS
 }
 
-/// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
-/// status: 2 bad input, 1 failed, 130 interrupted.
 /// `supervisor up`: the cell up until it is told to go down; with `json`, how it ended and
 /// its events as one document on stdout.
 fn up(config: Option<&Path>, instance: &str, record: Option<&Path>, json: bool) -> ExitCode {
@@ -529,6 +527,8 @@ fn up(config: Option<&Path>, instance: &str, record: Option<&Path>, json: bool) 
     }
 }
 
+/// Reports a failed `run` or `tune` (on stderr, and as JSON with `--json`) and its exit
+/// status: 2 bad input, 1 failed, 130 interrupted.
 fn run_failed(e: &RunError, json: bool) -> ExitCode {
     if json {
         println!(

@@ -316,10 +316,10 @@ impl Up {
 
     /// [`Up::down`], and every event of the cell's life as `up --json` gave them as it ended
     /// (those of its going down included).
-    pub(crate) fn down_events(mut self) -> (String, Vec<control_plane::event::Event>) {
-        self.ok(&["down"]);
-        let log = self.ended("down");
-        let events = self.events_at_end(&log);
+    pub(crate) fn down_events(self) -> (String, Vec<control_plane::event::Event>) {
+        let ended = self.ended.clone();
+        let log = self.down();
+        let events = read_ended(ended.as_deref(), &log);
         (log, events)
     }
 
@@ -329,10 +329,6 @@ impl Up {
         let log = self.terminate();
         let events = read_ended(ended.as_deref(), &log);
         (log, events)
-    }
-
-    fn events_at_end(&self, log: &str) -> Vec<control_plane::event::Event> {
-        read_ended(self.ended.as_deref(), log)
     }
 
     /// SIGTERM to the supervisor, then it exits 0 and nothing of the instance is left; its
