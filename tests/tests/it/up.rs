@@ -510,6 +510,14 @@ impl Events {
             std::thread::sleep(Duration::from_millis(20));
         }
     }
+
+    /// Asserts that no event of code `code` arrived after the last one found: so far (one
+    /// may be on its way).
+    pub(crate) fn none_so_far(&self, code: u32) {
+        let seen = self.seen.lock().expect("events");
+        let found = seen[self.from..].iter().find(|e| e.code == code);
+        assert!(found.is_none(), "an event of code {code}: {found:?}");
+    }
 }
 
 impl Drop for Events {
