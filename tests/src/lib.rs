@@ -338,9 +338,35 @@ pub fn supervisor() -> Command {
     Command::new(bin("supervisor"))
 }
 
-/// Writes `content` to a file `name` in a scratch folder of `test` and returns its path.
+/// Whether a test of this process failed: its folder ([`test_dir`]) then stays for a look.
+static A_TEST_FAILED: AtomicBool = AtomicBool::new(false);
+
+/// This test process' folder for the files its tests make: `rtc-<pid>` in the temporary
+/// directory, emptied as it is first asked for (a folder left by an earlier process with
+/// this pid is stale: pids come round again) and removed as the process exits, unless a
+/// test of [`attributable`] failed (then it stays, for a look, until the pid comes round).
+pub fn test_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("rtc-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("the tests' folder");
+        extern "C" fn remove() {
+            if !A_TEST_FAILED.load(Ordering::Relaxed) {
+                let _ = std::fs::remove_dir_all(test_dir());
+            }
+        }
+        // SAFETY: `remove` is a plain function that touches only this process' own folder;
+        // the test harness exits through `exit`, which runs it.
+        unsafe { libc::atexit(remove) };
+        dir
+    })
+}
+
+/// Writes `content` to a file `name` in a scratch folder of `test` (in [`test_dir`]) and
+/// returns its path.
 pub fn scratch(test: &str, name: &str, content: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rtc-{}-{test}", std::process::id()));
+    let dir = test_dir().join(test);
     std::fs::create_dir_all(&dir).expect("temp dir");
     let p = dir.join(name);
     std::fs::write(&p, content).expect("write");
@@ -640,6 +666,7 @@ pub fn attributable(test: impl FnOnce()) {
     let Err(panic) = result else {
         return;
     };
+    A_TEST_FAILED.store(true, Ordering::Relaxed);
     if stalled_ms >= STALL_BEYOND_ROOM_MS {
         // Straight to stderr, past the test harness' capture, and under nextest into the
         // run's INCONCLUSIVE_LOG too: a test that passes this way is seen in the log of

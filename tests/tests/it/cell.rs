@@ -140,8 +140,8 @@ pub(crate) fn check_figures(path: &Path, processes: usize) {
 fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
     integration_tests::attributable(|| {
         let inst = instance("triangle");
-        let trace = std::env::temp_dir().join(format!("{inst}.csv"));
-        let plot = std::env::temp_dir().join(format!("{inst}.png"));
+        let trace = integration_tests::test_dir().join(format!("{inst}.csv"));
+        let plot = integration_tests::test_dir().join(format!("{inst}.png"));
         let out = succeeded_within(
             supervisor()
                 .args(["run", "--json", "--instance", &inst, "--trace"])
@@ -292,7 +292,7 @@ fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
     integration_tests::attributable(|| {
         let inst = instance("badout");
         let tri = examples().join("triangle.prog");
-        let dir = std::env::temp_dir();
+        let dir = integration_tests::test_dir();
         for (flag, path, why) in [
             (
                 "--plot",

@@ -273,7 +273,7 @@ fn csp_axes_follow_the_small_triangle_on_the_real_processes() {
 fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
     integration_tests::attributable(|| {
         let inst = instance("tune");
-        let png = std::env::temp_dir().join(format!("{inst}.png"));
+        let png = integration_tests::test_dir().join(format!("{inst}.png"));
         let out = succeeded_within(
             supervisor()
                 .args([

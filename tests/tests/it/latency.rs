@@ -56,7 +56,7 @@ fn cpus() -> usize {
 fn a_short_latency_run_gives_sane_figures_and_files_and_leaves_nothing() {
     integration_tests::attributable(|| {
         let inst = instance("latency");
-        let dir = std::env::temp_dir().join(format!("rtc-{inst}"));
+        let dir = integration_tests::test_dir().join(&inst);
         std::fs::create_dir_all(&dir).expect("temp dir");
         let (hist, png) = (dir.join("lat.hist"), dir.join("lat.png"));
         let out = run_with_watchdog(

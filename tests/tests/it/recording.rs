@@ -250,7 +250,7 @@ struct SmallDisk(PathBuf);
 
 impl SmallDisk {
     fn new(test: &str, kib: u32) -> Self {
-        let dir = std::env::temp_dir().join(format!("rtc-{test}-{}-disk", std::process::id()));
+        let dir = integration_tests::test_dir().join(format!("{test}-disk"));
         std::fs::create_dir_all(&dir).expect("mount point");
         needed(
             Command::new("mount")
