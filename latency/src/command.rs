@@ -212,7 +212,19 @@ pub fn latency(args: &LatencyArgs) -> Result<(), LatencyError> {
             opts.priority
         );
     }
+    let mut ready = false;
     let results = crate::run(&opts, |running, elapsed| {
+        // Under systemd or a script: READY=1 once every thread of the first test measured.
+        if !ready
+            && running
+                .iter()
+                .all(|r| r.live.cycles.load(std::sync::atomic::Ordering::Relaxed) > 0)
+        {
+            ready = true;
+            if let Err(e) = runtime::notify::ready() {
+                eprintln!("latency: {e}");
+            }
+        }
         if args.quiet || last.elapsed() < every {
             return;
         }

@@ -116,8 +116,10 @@ struct Stopping {
 enum StopStage {
     /// trajgen was asked to abort: the path speed ramps to 0 within `t_acc`.
     Resting,
-    /// servo was asked to disable: the drives power down at rest.
-    Disabling,
+    /// servo was asked to disable: the drives power down at rest. `said_from`: where, in
+    /// the cell's events, to look for servo's `disabled` (`None`: the drives were not
+    /// powered, nothing was asked).
+    Disabling { said_from: Option<usize> },
 }
 
 /// A client waiting for a program's end (`exec --wait`), and what its report must carry.
@@ -435,8 +437,9 @@ impl Loop<'_> {
             self.cell.motion_control(ControlKind::Abort);
             StopStage::Resting
         } else {
-            self.disable();
-            StopStage::Disabling
+            StopStage::Disabling {
+                said_from: self.disable(),
+            }
         };
         self.stopping = Some(Stopping {
             end,
@@ -454,17 +457,20 @@ impl Loop<'_> {
     }
 
     /// Asks servo to disable the drives if they are powered (it brings its reference to rest
-    /// along its path, then powers down).
-    fn disable(&mut self) {
+    /// along its path, then powers down); where its `disabled` will be among the cell's
+    /// events when it was asked.
+    fn disable(&mut self) -> Option<usize> {
         let powered = self.cell.last_servo.is_some_and(|s| {
             s.status & st::ENABLED != 0 || s.power != shm_schema::Power::Disabled as u8
         });
-        if powered {
-            tracing::info!("going down: disabling the drives");
-            if let Err(e) = self.cell.request(shm_schema::RequestKind::Disable) {
-                tracing::warn!("going down: {e}");
-            }
+        if !powered {
+            return None;
         }
+        tracing::info!("going down: disabling the drives");
+        if let Err(e) = self.cell.request(shm_schema::RequestKind::Disable) {
+            tracing::warn!("going down: {e}");
+        }
+        Some(self.cell.events.len())
     }
 
     /// The next step of going down; `Some` once the processes may be stopped.
@@ -488,19 +494,28 @@ impl Loop<'_> {
                             limit.as_secs_f64()
                         );
                     }
-                    self.disable();
+                    let said_from = self.disable();
                     let s = self.stopping.as_mut()?;
-                    s.stage = StopStage::Disabling;
+                    s.stage = StopStage::Disabling { said_from };
                     s.since = Instant::now();
                 }
                 None
             }
-            StopStage::Disabling => {
+            StopStage::Disabling { said_from } => {
                 let off = self.cell.last_servo.is_none_or(|s| {
                     s.status & st::ENABLED == 0 && s.power == shm_schema::Power::Disabled as u8
                 });
+                // servo's `disabled` follows the state that shows it (published after its
+                // cycle): waited for, so that it is among the cell's events (and its line in
+                // the log) before the processes are told to stop.
+                let said = said_from.is_none_or(|from| {
+                    self.cell
+                        .events
+                        .get(from..)
+                        .is_some_and(|e| e.iter().any(|e| e.code == code::DISABLED))
+                });
                 let limit = Duration::from_secs_f64(m.estop_stop_time + 1.0);
-                if !off && since.elapsed() <= limit {
+                if !(off && said) && since.elapsed() <= limit {
                     return None;
                 }
                 if !off {

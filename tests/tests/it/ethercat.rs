@@ -261,11 +261,16 @@ fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_ba
             mismatch.text.contains("position 2 should be y"),
             "{mismatch:?}"
         );
-        events.none_so_far(code::BUS_OP);
-        // The right drive back: the bus in OP, then reset, start and the triangle.
+        // The right drive back: the bus in OP (not before), then reset, start and the
+        // triangle.
+        let back = runtime::time::now_ns();
         emulator_fault(&ns, &up, &["identity", "2", "0x00000402"]);
         let op = events.next(code::BUS_OP);
         assert!(op.text.contains("back in OP on rtc-ecat0"), "{op:?}");
+        assert!(
+            op.stamp_ns > back,
+            "in OP before the right drive was back: {op:?}"
+        );
         drop(events);
         // The log, whole once the cell is down (a process' lines reach it through the
         // supervisor, beside its events), says the whole sentence.
@@ -381,10 +386,9 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
             e.text.contains("position 2 (y)"),
             "the emergency names its SubDevice: {e:?}"
         );
-        let s = up.status();
-        assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
         // A drive's own fault (the encoder lost: `supervisor inject` on the emulated drive):
         // its emergency and servo's power cut.
+        let faulted = runtime::time::now_ns();
         up.ok(&["inject", "--axis", "x", "encoder-loss"]);
         let e = events.next(code::SUBDEVICE_EMERGENCY);
         assert!(e.text.contains("position 1 (x)"), "{e:?}");
@@ -401,6 +405,12 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
         // The e-stop latched, the bus is brought up again once the drives have ramped down.
         events.next(code::BUS_RECOVERING);
         events.next(code::BUS_OP);
+        // The e-stops came of the drive's own fault and its leaving OP, none of the emergency.
+        let raised = events.all(code::ESTOP_RAISED);
+        assert!(
+            raised.iter().all(|e| e.stamp_ns > faulted),
+            "an e-stop before the drive's fault: {raised:?}"
+        );
         drop(events);
         // The log, whole once the cell is down, names the emergency's SubDevice and code.
         let log = reset_start_and_run(up);

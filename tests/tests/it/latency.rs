@@ -135,14 +135,17 @@ fn a_short_latency_run_gives_sane_figures_and_files_and_leaves_nothing() {
 fn ctrl_c_prints_the_figures_so_far() {
     integration_tests::attributable(|| {
         let inst = instance("latint");
-        let child = supervisor()
+        // Interrupted once it says every timer thread measured (READY=1).
+        let ready = integration_tests::Readiness::new("latint");
+        let mut child = ready
+            .tell(&mut supervisor())
             .args(["latency", "--test", "timer,ipc", "--instance", &inst])
             .args(["--priority", PRIORITY])
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .expect("spawn");
-        std::thread::sleep(Duration::from_millis(1500));
+        ready.wait(&mut child, WATCHDOG);
         // SAFETY: kill(2) on our own child.
         unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
         let out = wait_output(child, WATCHDOG, "latency did not stop on SIGINT");

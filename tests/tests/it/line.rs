@@ -1246,13 +1246,13 @@ fn a_gateway_whose_users_file_others_may_read_stays_off_the_line_and_says_why() 
             .is_some_and(|w| w.starts_with("the line: ")),
         "{s}"
     );
-    // The log has the whole sentence.
-    let log = cell.log();
+    let room = line_file(test, "victor", "victor", "victor-secret-0123456789", 1);
+    let out = self::room(&hosts, &room, &["cells"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    // The log has the whole sentence (the gateway's own line: whole once the cell is down).
+    let log = cell.down();
     assert!(
         log.contains("the line: ") && log.contains("others than its owner may read it"),
         "{log}"
     );
-    let room = line_file(test, "victor", "victor", "victor-secret-0123456789", 1);
-    let out = self::room(&hosts, &room, &["cells"]);
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
 }
