@@ -1038,12 +1038,32 @@ fn mcap_error(path: &Path, e: mcap::McapError) -> String {
 }
 
 /// `supervisor record` in a process of its own, for `run`, `up` and `exec --wait` with
-/// `--record FILE`: an observer, so nothing the cell does waits for it.
+/// `--record FILE`: an observer, so nothing the cell does waits for it. Its start and its
+/// stop are steps ([`Background::started`], [`Background::stopped`]) a caller's loop takes
+/// between its own; [`Background::start`] and [`Background::stop`] wait for them.
 #[derive(Debug)]
 pub struct Background {
     child: Option<std::process::Child>,
+    /// Its stdout: its first line says it is ready (read on a thread until then), the rest
+    /// is its summary.
     out: Option<std::io::BufReader<std::process::ChildStdout>>,
+    first_line: Option<FirstLine>,
+    spawned: Instant,
+    /// When it was asked to end.
+    stopping: Option<Instant>,
 }
+
+/// The thread reading a recorder's first line.
+type FirstLine = (
+    std::sync::mpsc::Receiver<String>,
+    std::thread::JoinHandle<Option<std::io::BufReader<std::process::ChildStdout>>>,
+);
+
+/// How long a recorder may take to subscribe to everything.
+const START_PATIENCE: Duration = Duration::from_secs(20);
+/// How long a recorder may take to finish its file once asked to end; then it is killed (its
+/// file then lacks its index: readers that stream still read it).
+const STOP_PATIENCE: Duration = Duration::from_secs(10);
 
 impl Background {
     /// Starts recording `instance` into `file`; returns once the recorder subscribes to
@@ -1054,6 +1074,16 @@ impl Background {
         file: &Path,
         tick: &mut dyn FnMut(),
     ) -> Result<Self, RecordError> {
+        let mut me = Self::spawn(instance, file)?;
+        while !me.started()? {
+            tick();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Ok(me)
+    }
+
+    /// Starts the recorder's process; [`Background::started`] says when it records.
+    pub fn spawn(instance: &InstanceName, file: &Path) -> Result<Self, RecordError> {
         use std::io::BufRead;
         let exe = std::env::current_exe().map_err(RecordError::Spawn)?;
         let mut child = std::process::Command::new(exe)
@@ -1061,11 +1091,13 @@ impl Background {
             .arg(file)
             .stdin(std::process::Stdio::null())
             .stdout(std::process::Stdio::piped())
+            // The caller's readiness is its own (`READY=1`): not the recorder's to say.
+            .env_remove("NOTIFY_SOCKET")
             .spawn()
             .map_err(RecordError::Spawn)?;
         // Its first line on stdout says it is ready (whatever it says: a recorder that cannot
         // start writes its reasons to stderr and exits, closing stdout with no line); read on
-        // a thread so that `tick` goes on.
+        // a thread so that the caller goes on.
         let (tx, rx) = std::sync::mpsc::channel();
         let out = child.stdout.take().map(std::io::BufReader::new);
         let reader = std::thread::spawn(move || {
@@ -1077,32 +1109,37 @@ impl Background {
             let _ = tx.send(line);
             out
         });
-        let started = Instant::now();
-        let line = loop {
-            match rx.recv_timeout(Duration::from_millis(10)) {
-                Ok(line) => break line,
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout)
-                    if started.elapsed() < Duration::from_secs(20) =>
-                {
-                    tick();
-                }
-                Err(_) => break String::new(),
-            }
-        };
-        let out = if line.is_empty() {
-            None
-        } else {
-            reader.join().ok().flatten()
-        };
-        let mut me = Self {
+        Ok(Self {
             child: Some(child),
-            out,
+            out: None,
+            first_line: Some((rx, reader)),
+            spawned: Instant::now(),
+            stopping: None,
+        })
+    }
+
+    /// Whether the recorder subscribed to everything (true from then on); an error when it
+    /// could not start, or did not within 20 s (it is then stopped).
+    pub fn started(&mut self) -> Result<bool, RecordError> {
+        let Some((rx, _)) = &self.first_line else {
+            return Ok(true);
         };
+        let line = match rx.try_recv() {
+            Ok(line) => line,
+            Err(std::sync::mpsc::TryRecvError::Empty)
+                if self.spawned.elapsed() < START_PATIENCE =>
+            {
+                return Ok(false);
+            }
+            Err(_) => String::new(),
+        };
+        let (_, reader) = self.first_line.take().expect("checked");
         if line.is_empty() {
-            let why = me.stop().unwrap_or_default();
+            let why = self.stop().unwrap_or_default();
             return Err(RecordError::NotStarted(why.trim().to_string()));
         }
-        Ok(me)
+        self.out = reader.join().ok().flatten();
+        Ok(true)
     }
 
     /// Ends the recording (SIGTERM: the recorder finishes its file); its summary, or
@@ -1116,34 +1153,46 @@ impl Background {
     /// (the supervisor's heartbeat: a long recording's index takes a while to write, and the
     /// cell's processes leave after `supervisor_timeout` without a heartbeat).
     pub fn stop_beating(&mut self, tick: &mut dyn FnMut()) -> Result<String, RecordError> {
-        use std::io::Read;
-        let Some(mut child) = self.child.take() else {
-            return Ok(String::new());
-        };
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(child.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
-        // It finishes its file and prints its summary; one that does not within this long is
-        // killed (its file then lacks its index: readers that stream still read it).
-        let until = Instant::now() + Duration::from_secs(10);
-        while child.try_wait().ok().flatten().is_none() && Instant::now() < until {
+        loop {
+            if let Some(ended) = self.stopped() {
+                return ended;
+            }
             tick();
             std::thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    /// Asks the recorder to end, the first time; then its summary once it has ended (see
+    /// [`Background::stop`]), `None` while it finishes its file (killed after 10 s).
+    pub fn stopped(&mut self) -> Option<Result<String, RecordError>> {
+        use std::io::Read;
+        let Some(child) = self.child.as_mut() else {
+            return Some(Ok(String::new()));
+        };
+        let asked = *self.stopping.get_or_insert_with(|| {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(child.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+            Instant::now()
+        });
         if child.try_wait().ok().flatten().is_none() {
+            if asked.elapsed() < STOP_PATIENCE {
+                return None;
+            }
             let _ = child.kill();
         }
         let status = child.wait();
+        self.child = None;
         let mut text = String::new();
         if let Some(o) = self.out.as_mut() {
             let _ = o.read_to_string(&mut text);
         }
-        match status {
+        Some(match status {
             Ok(s) if s.success() => Ok(text),
             Ok(s) => Err(RecordError::Failed(s.to_string())),
             Err(e) => Err(RecordError::Failed(e.to_string())),
-        }
+        })
     }
 }
 

@@ -146,17 +146,20 @@ pub(crate) struct Closed {
     pub(crate) problem: Option<RunError>,
 }
 
-/// [`open_cell`], and a recording of the cell into `record` started in the background when
-/// one is asked for; a recorder that cannot start closes the cell again.
+/// [`open_cell`], and the process of a recording of the cell into `record` when one is asked
+/// for (the serve loop waits for it to record before the drives are enabled); a recorder
+/// that cannot be spawned closes the cell again.
 pub(crate) fn open_recorded(
     cfg: &Config,
     instance: InstanceName,
     mode: Mode,
     record: Option<&std::path::Path>,
 ) -> Result<(Cell, ctl::Server, Option<recorder::Background>), RunError> {
-    let (mut cell, server) = open_cell(cfg, instance, mode)?;
+    let (cell, server) = open_cell(cfg, instance, mode)?;
+    // Its start is a step of the serve loop ([`crate::serve::serve`]): it needs the
+    // configuration's history, which the loop's heartbeat keeps connected.
     let recorder = record
-        .map(|f| recorder::Background::start(&instance, f, &mut || cell.keep_alive()))
+        .map(|f| recorder::Background::spawn(&instance, f))
         .transpose();
     match recorder {
         Ok(r) => Ok((cell, server, r)),

@@ -137,7 +137,7 @@ impl Children {
 
     /// Starts process `index` of the table, `p`, as configured (`command` overrides its
     /// command line). Children inherit stderr; their log level defaults to warnings (`RTC_LOG`
-    /// overrides).
+    /// overrides). `NOTIFY_SOCKET` is the supervisor's own: no child says it is ready there.
     pub fn spawn(
         &mut self,
         p: &Process,
@@ -161,6 +161,7 @@ impl Children {
         cmd.args(&command[1..])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
+            .env_remove("NOTIFY_SOCKET")
             .process_group(0);
         // SAFETY: between fork and exec only async-signal-safe calls: prctl(PR_SET_PDEATHSIG)
         // and close_range(2), both plain system calls.

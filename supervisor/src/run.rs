@@ -70,32 +70,30 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             writable(p, flag).map_err(RunError::Input)?;
         }
     }
-    let (mut cell, mut server, mut recorder) =
+    let (mut cell, mut server, recorder) =
         open_recorded(&cfg, instance, Mode::Run, opts.record.as_deref())?;
     let first = ProgramJob {
         program,
         progress: opts.progress,
         plot: opts.plot.is_some(),
     };
-    let end = serve::serve(
+    let served = serve::serve(
         &cfg,
         &mut cell,
         &mut server,
         Some(serve::First::Program(first)),
+        recorder,
     );
     cell.refresh_latency();
     let processes = serve::process_reports(&cell);
     let latency_figures = serve::latency_figures(&cell);
     let sense_to_command = cell.sense_to_command.take();
-    let recorded = recorder
-        .as_mut()
-        .map(|r| r.stop_beating(&mut || cell.keep_alive()))
-        .transpose();
+    let recorded = served.recorded.transpose();
     if let Ok(Some(summary)) = &recorded {
         crate::out::line(summary.trim_end());
     }
     let closed = cell.close(server);
-    let mut report = match end {
+    let mut report = match served.end {
         End::Program(r) => match *r {
             Ok(r) => r,
             Err(RunError::Failed {

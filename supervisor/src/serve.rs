@@ -3,7 +3,8 @@
 //! Every tick (10 ms, or at once when a child exits or a client connects: the loop waits in
 //! `poll` on the children's pidfds and the control channel), it:
 //! 1. runs [`Cell::tick`]: the heartbeat, lost and stalled processes, restarts, the e-stop;
-//! 2. advances what runs on the cell: enabling the arm, the program job;
+//! 2. advances what runs on the cell: the recorder's start (`--record`), enabling the arm,
+//!    the program job;
 //! 3. takes the control channel's requests and answers those that are complete.
 //!
 //! `run` is this loop with one program queued at the start, ending with it; `tune` the same
@@ -11,7 +12,8 @@
 //!
 //! Going down (`down`, SIGTERM, SIGINT) is a controlled stop, never a stop through a fault: a
 //! program that moves comes to rest along its path first (as `abort` does), then servo disables
-//! the drives at rest, and only then does the loop end and the processes stop ([`Stopping`]).
+//! the drives at rest ([`Stopping`]); then the recorder finishes its file, the heartbeat
+//! beating and the channel answering, and only then does the loop end and the processes stop.
 
 use crate::cell::TICK;
 use crate::cell::{Cell, Incident, Mode};
@@ -54,6 +56,13 @@ pub(crate) enum First {
     Program(ProgramJob),
     /// `tune`'s session.
     Tune(Tuning),
+}
+
+/// How the loop ended, and the recording's summary (`--record`; none when it never
+/// recorded).
+pub(crate) struct Served {
+    pub(crate) end: End,
+    pub(crate) recorded: Option<Result<String, recorder::RecordError>>,
 }
 
 /// Why the loop ended.
@@ -158,6 +167,11 @@ struct Loop<'a> {
     validating: Option<Validating>,
     /// Every critical process has cycled once: the cell came up.
     came_up: bool,
+    /// `--record`'s recorder, and whether it records (the enabling waits for it).
+    recorder: Option<recorder::Background>,
+    recording: bool,
+    /// How the loop ends, once it does: the recorder finishes its file meanwhile.
+    ending: Option<End>,
 }
 
 /// A program being validated before it starts ([`Validation`]).
@@ -188,13 +202,15 @@ struct Swapping {
     was_enabled: bool,
 }
 
-/// Runs the loop; see the module documentation. `first` is `run`'s program.
+/// Runs the loop; see the module documentation. `first` is `run`'s program; `recorder`,
+/// spawned, records the cell (`--record`).
 pub(crate) fn serve(
     cfg: &Config,
     cell: &mut Cell,
     server: &mut Server,
     first: Option<First>,
-) -> End {
+    recorder: Option<recorder::Background>,
+) -> Served {
     let mut l = Loop {
         cfg,
         cell,
@@ -210,8 +226,27 @@ pub(crate) fn serve(
         swapping: None,
         validating: None,
         came_up: false,
+        recorder,
+        recording: false,
+        ending: None,
     };
     loop {
+        if let Some(end) = l.ending.take() {
+            if let Some(recorded) = l.recorder_stopped() {
+                l.server.drain(Duration::from_millis(200));
+                return Served { end, recorded };
+            }
+            // The recorder finishes its file: the heartbeat goes on, the channel answers
+            // (whatever would change the cell is refused: it is going down).
+            l.ending = Some(end);
+            l.wait();
+            l.cell.keep_alive();
+            l.cell.drain_motion();
+            for (conn, req) in l.server.poll() {
+                l.handle(conn, req);
+            }
+            continue;
+        }
         l.wait();
         // Going down waits for a swap in progress to end (its steps are bounded).
         if signals::stop_requested() && l.stopping.is_none() && l.swapping.is_none() {
@@ -222,8 +257,8 @@ pub(crate) fn serve(
         if l.stopping.is_some() {
             l.cell.drain_motion();
         } else if let Some(end) = l.advance(&incidents) {
-            l.server.drain(Duration::from_millis(200));
-            return end;
+            l.ending = Some(end);
+            continue;
         }
         if l.stopping.is_none() {
             l.swap_step(&incidents);
@@ -237,8 +272,7 @@ pub(crate) fn serve(
             l.go_down(End::Down);
         }
         if let Some(end) = l.stop_step() {
-            l.server.drain(Duration::from_millis(200));
-            return end;
+            l.ending = Some(end);
         }
     }
 }
@@ -277,6 +311,11 @@ impl Loop<'_> {
                 return Some(self.failed_to_come_up(i.error()));
             }
         }
+        match self.recorder_started() {
+            Ok(true) => {}
+            Ok(false) => return None,
+            Err(e) => return Some(self.failed_to_come_up(e)),
+        }
         if let Some(end) = self.step_enabling(incidents, run) {
             return Some(end);
         }
@@ -313,6 +352,47 @@ impl Loop<'_> {
             return None;
         }
         self.step_job(incidents, run)
+    }
+
+    /// Whether the recorder (`--record`) records, a step of its start: the enabling waits
+    /// for it (nothing moves unrecorded). An error when it could not start.
+    fn recorder_started(&mut self) -> Result<bool, RunError> {
+        let Some(r) = self.recorder.as_mut() else {
+            return Ok(true);
+        };
+        if self.recording {
+            return Ok(true);
+        }
+        match r.started() {
+            Ok(false) => Ok(false),
+            Ok(true) => {
+                self.recording = true;
+                // The enabling's time counts from here.
+                if let Some((en, _)) = &mut self.enabling {
+                    *en = Enabling::new(self.cfg);
+                }
+                Ok(true)
+            }
+            Err(e) => {
+                self.recorder = None;
+                Err(RunError::from(e))
+            }
+        }
+    }
+
+    /// The recorder's stop, a step (it is asked to end the first time): `Some` once it
+    /// ended, with its summary if it had started recording, or at once without one.
+    fn recorder_stopped(&mut self) -> Option<Option<Result<String, recorder::RecordError>>> {
+        let Some(r) = self.recorder.as_mut() else {
+            return Some(None);
+        };
+        let ended = r.stopped()?;
+        Some(self.recording.then_some(ended))
+    }
+
+    /// Whether the cell is going down: on its way to rest, or the loop ending.
+    fn going_down(&self) -> bool {
+        self.stopping.is_some() || self.ending.is_some()
     }
 
     /// The enabling, a step; once it is over, whoever asked is told and what waited for it
@@ -660,7 +740,7 @@ impl Loop<'_> {
         if let Request::Estop { reason } = req {
             self.cell
                 .raise(EstopOrigin::External, code::ESTOP_RAISED, &[&reason]);
-            if self.stopping.is_some() {
+            if self.going_down() {
                 let done = format!(
                     "e-stop raised on instance {} (going down): {reason}",
                     self.cell.instance
@@ -675,9 +755,7 @@ impl Loop<'_> {
             }
             return;
         }
-        if self.stopping.is_some()
-            && !matches!(req, Request::Info | Request::Status | Request::Network)
-        {
+        if self.going_down() && !matches!(req, Request::Info | Request::Status | Request::Network) {
             let reply = match req {
                 Request::Down => Reply::Done(format!(
                     "instance {}: already going down",
@@ -785,7 +863,7 @@ impl Loop<'_> {
             .tuning
             .as_ref()
             .map(|t| self.cfg.axis[t.axis()].name.clone());
-        info.going_down = self.stopping.is_some();
+        info.going_down = self.going_down();
         info
     }
 

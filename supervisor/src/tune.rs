@@ -108,7 +108,7 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
     let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
     let first = First::Tune(Tuning::new(i, opts.step, opts.ramp));
-    let end = serve(&cfg, &mut cell, &mut server, Some(first));
+    let end = serve(&cfg, &mut cell, &mut server, Some(first), None).end;
     let closed = cell.close(server);
     let measured = match end {
         End::Tuned(m) => *m,

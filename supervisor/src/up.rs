@@ -36,7 +36,7 @@ fn up_inner(
     if let Some(f) = record {
         crate::out::writable(f, "--record").map_err(RunError::Input)?;
     }
-    let (mut cell, mut server, mut recorder) = open_recorded(&cfg, instance, Mode::Up, record)?;
+    let (mut cell, mut server, recorder) = open_recorded(&cfg, instance, Mode::Up, record)?;
     tracing::info!(
         "instance {instance} up: {} ({} processes: {}); control it with `supervisor <command> --instance {instance}`",
         cfg.cell.name,
@@ -51,16 +51,13 @@ fn up_inner(
     if let Err(e) = runtime::notify::ready() {
         tracing::warn!("cannot say the cell is up: {e}");
     }
-    let end = serve(&cfg, &mut cell, &mut server, None);
-    match recorder
-        .as_mut()
-        .map(|r| r.stop_beating(&mut || cell.keep_alive()))
-    {
+    let served = serve(&cfg, &mut cell, &mut server, None, recorder);
+    match served.recorded {
         Some(Ok(summary)) => tracing::info!("{}", summary.trim_end()),
         Some(Err(e)) => tracing::error!("{e}"),
         None => {}
     }
-    let why = match end {
+    let why = match served.end {
         End::Down => "supervisor down",
         End::Interrupted => "a signal",
         End::Program(_) | End::Tuned(_) => "the program",

@@ -1,7 +1,8 @@
 //! The MCAP recorder on the real binaries (docs/recording.md): a run recorded with `--record`
 //! read back by an independent reader (the `mcap` package from PyPI) has every setpoint of
 //! the trace; `supervisor record` attaches to a cell that is up, rotates its files, and an
-//! observer that stays to the end of a run neither fails it nor is left behind.
+//! observer that stays to the end of a run neither fails it nor is left behind; the cell
+//! answers and beats while its recorder finishes its file.
 
 use crate::drives::WATCHDOG;
 use crate::up::{Up, cell};
@@ -301,5 +302,78 @@ fn a_recording_onto_a_full_disk_says_so_and_fails_its_command() {
         assert!(err.contains("No space left on device"), "{err}");
         drop(disk);
         up.down();
+    });
+}
+
+/// Whether process `pid` has SIGTERM pending (it is stopped: it takes it once continued).
+fn sigterm_pending(pid: i32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status.lines().any(|l| {
+        l.strip_prefix("ShdPnd:")
+            .or_else(|| l.strip_prefix("SigPnd:"))
+            .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+            .is_some_and(|m| m & (1 << (libc::SIGTERM - 1)) != 0)
+    })
+}
+
+/// The recorder's stop is a step of the serve loop: while it finishes its file (here held off
+/// the CPU for longer than the processes wait for a heartbeat), the heartbeat beats, the
+/// control channel answers and refuses what would change the cell; once the recorder is
+/// back, it finishes its file and `up` goes down clean.
+#[test]
+fn the_cell_answers_and_beats_while_its_recorder_finishes_its_file() {
+    integration_tests::attributable(|| {
+        let test = "rec-stop";
+        let file = scratch(test, "cell.mcap", "");
+        let patience = 2.0;
+        let cfg = cell(test, &[("supervisor.supervisor_timeout", patience.into())]);
+        let up = Up::start_recording(test, &cfg, &file);
+        let recorder = integration_tests::pids_with(&["record", &up.inst]);
+        assert_eq!(recorder.len(), 1, "one recorder: {recorder:?}");
+        let pid = nix::unistd::Pid::from_raw(recorder[0]);
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).expect("SIGSTOP");
+        let down = up.spawn(&["down"]);
+        // The drives disabled, the supervisor has asked the recorder to end.
+        let start = Instant::now();
+        while !sigterm_pending(recorder[0]) {
+            assert!(
+                start.elapsed() < WATCHDOG,
+                "the recorder was never asked to end"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        // Held past the processes' patience for a heartbeat (`supervisor_timeout`).
+        std::thread::sleep(Duration::from_secs_f64(patience * 1.25));
+        let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
+        match control_plane::channel::call(&instance, &control_plane::Request::Info) {
+            Ok(control_plane::Reply::Info(i)) => assert!(i.going_down, "{i:?}"),
+            other => panic!("info while the recorder finishes: {other:?}"),
+        }
+        match control_plane::channel::call(&instance, &control_plane::Request::Start) {
+            Ok(control_plane::Reply::Refused(control_plane::Refusal::GoingDown { .. })) => {}
+            other => panic!("start while the cell goes down: {other:?}"),
+        }
+        let s = up.status();
+        let processes = s["supervisor"]["processes"].as_array().expect("processes");
+        for p in processes {
+            assert_eq!(p["life"], "running", "a process left: {s}");
+        }
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).expect("SIGCONT");
+        assert!(
+            integration_tests::wait_output(down, WATCHDOG, "down")
+                .status
+                .success()
+        );
+        let (_, events) = up.ended_events();
+        let errors = crate::up::errors(&events);
+        assert!(errors.is_empty(), "{errors:#?}");
+        // The file is whole: its summary (the index), read back.
+        let read = read_back(&[file]);
+        assert!(
+            read["topics"]["/servo/state"]["count"]
+                .as_u64()
+                .is_some_and(|n| n > 0),
+            "{read}"
+        );
     });
 }

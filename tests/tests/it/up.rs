@@ -57,6 +57,17 @@ impl Up {
     /// [`Up::start`] under the command `within` (program and arguments: `nsenter -t PID -m`),
     /// as every command of the test then runs.
     pub(crate) fn start_within(test: &str, cfg: &Path, within: &[&str]) -> Self {
+        Self::launch(test, cfg, within, &[])
+    }
+
+    /// [`Up::start`] with `up --record FILE`.
+    pub(crate) fn start_recording(test: &str, cfg: &Path, file: &Path) -> Self {
+        Self::launch(test, cfg, &[], &["--record".as_ref(), file.as_os_str()])
+    }
+
+    /// `up` of `cfg` under `within` with the arguments `more`, once it said it is ready and
+    /// its drives are enabled.
+    fn launch(test: &str, cfg: &Path, within: &[&str], more: &[&std::ffi::OsStr]) -> Self {
         let within: Vec<String> = within.iter().map(|a| a.to_string()).collect();
         let inst = instance(test);
         let log = scratch(test, "up.log", "");
@@ -67,6 +78,7 @@ impl Up {
             .tell(&mut supervisor_within(&within))
             .args(["up", "--json", "--instance", &inst, "--config"])
             .arg(cfg)
+            .args(more)
             .stdout(std::fs::File::create(&ended).expect("up.json"))
             .stderr(std::fs::File::create(&log).expect("log"))
             .spawn()
@@ -327,6 +339,15 @@ impl Up {
     pub(crate) fn terminate_events(self) -> (String, Vec<control_plane::event::Event>) {
         let ended = self.ended.clone();
         let log = self.terminate();
+        let events = read_ended(ended.as_deref(), &log);
+        (log, events)
+    }
+
+    /// Once `up` ended by itself (a `down` another process asked for): it exits 0 and
+    /// nothing of the instance is left; its log and every event of the cell's life.
+    pub(crate) fn ended_events(mut self) -> (String, Vec<control_plane::event::Event>) {
+        let ended = self.ended.clone();
+        let log = self.ended("its down");
         let events = read_ended(ended.as_deref(), &log);
         (log, events)
     }
