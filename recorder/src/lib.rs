@@ -1053,6 +1053,16 @@ pub struct Background {
     stopping: Option<Instant>,
 }
 
+/// Which process group a recorder is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Group {
+    /// The caller's: a terminal's Ctrl-C reaches both (a client such as `exec --wait`).
+    Callers,
+    /// One of its own: it ends only when asked (the supervisor, which stops the cell the
+    /// controlled way on Ctrl-C and asks the recorder to end after that).
+    Own,
+}
+
 /// The thread reading a recorder's first line.
 type FirstLine = (
     std::sync::mpsc::Receiver<String>,
@@ -1067,14 +1077,14 @@ const STOP_PATIENCE: Duration = Duration::from_secs(10);
 
 impl Background {
     /// Starts recording `instance` into `file`; returns once the recorder subscribes to
-    /// everything. `tick` runs every 10 ms meanwhile (the supervisor's heartbeat, and its
-    /// publishers' connections: the recorder needs the configuration's history).
+    /// everything. `tick` runs every 10 ms meanwhile. The recorder is in the caller's process
+    /// group: a terminal's Ctrl-C ends both (it finishes its file).
     pub fn start(
         instance: &InstanceName,
         file: &Path,
         tick: &mut dyn FnMut(),
     ) -> Result<Self, RecordError> {
-        let mut me = Self::spawn(instance, file)?;
+        let mut me = Self::spawn(instance, file, Group::Callers)?;
         while !me.started()? {
             tick();
             std::thread::sleep(Duration::from_millis(10));
@@ -1082,11 +1092,17 @@ impl Background {
         Ok(me)
     }
 
-    /// Starts the recorder's process; [`Background::started`] says when it records.
-    pub fn spawn(instance: &InstanceName, file: &Path) -> Result<Self, RecordError> {
+    /// Starts the recorder's process in `group`; [`Background::started`] says when it
+    /// records.
+    pub fn spawn(instance: &InstanceName, file: &Path, group: Group) -> Result<Self, RecordError> {
         use std::io::BufRead;
+        use std::os::unix::process::CommandExt;
         let exe = std::env::current_exe().map_err(RecordError::Spawn)?;
-        let mut child = std::process::Command::new(exe)
+        let mut cmd = std::process::Command::new(exe);
+        if group == Group::Own {
+            cmd.process_group(0);
+        }
+        let mut child = cmd
             .args(["record", "--instance", instance.as_str(), "--out"])
             .arg(file)
             .stdin(std::process::Stdio::null())
@@ -1118,25 +1134,32 @@ impl Background {
         })
     }
 
-    /// Whether the recorder subscribed to everything (true from then on); an error when it
-    /// could not start, or did not within 20 s (it is then stopped).
+    /// Whether the recorder subscribed to everything (true from then on); an error, once,
+    /// when it could not start (its reasons on stderr), or did not within 20 s (it is then
+    /// killed: it has no file worth finishing). Never waits.
     pub fn started(&mut self) -> Result<bool, RecordError> {
         let Some((rx, _)) = &self.first_line else {
             return Ok(true);
         };
-        let line = match rx.try_recv() {
-            Ok(line) => line,
+        let (line, why) = match rx.try_recv() {
+            Ok(line) => (line, ""),
             Err(std::sync::mpsc::TryRecvError::Empty)
                 if self.spawned.elapsed() < START_PATIENCE =>
             {
                 return Ok(false);
             }
-            Err(_) => String::new(),
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                (String::new(), "it did not subscribe within 20 s")
+            }
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => (String::new(), ""),
         };
         let (_, reader) = self.first_line.take().expect("checked");
         if line.is_empty() {
-            let why = self.stop().unwrap_or_default();
-            return Err(RecordError::NotStarted(why.trim().to_string()));
+            if let Some(mut child) = self.child.take() {
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+            return Err(RecordError::NotStarted(why.to_string()));
         }
         self.out = reader.join().ok().flatten();
         Ok(true)

@@ -159,7 +159,7 @@ pub(crate) fn open_recorded(
     // Its start is a step of the serve loop ([`crate::serve::serve`]): it needs the
     // configuration's history, which the loop's heartbeat keeps connected.
     let recorder = record
-        .map(|f| recorder::Background::spawn(&instance, f))
+        .map(|f| recorder::Background::spawn(&instance, f, recorder::Group::Own))
         .transpose();
     match recorder {
         Ok(r) => Ok((cell, server, r)),
@@ -328,6 +328,8 @@ pub(crate) struct Cell {
     pub(crate) sense_to_command: Option<Box<LatencyHistogramV1>>,
     /// Every event since the cell came up (run) or since the current job began (up).
     pub(crate) events: Vec<EventV1>,
+    /// How many times servo said `disabled` (every axis without power).
+    pub(crate) disabled_said: u64,
     pub(crate) axes: Axes,
     pub(crate) t0_ns: u64,
     pub(crate) last_sp: Option<SetpointV2>,
@@ -460,6 +462,7 @@ impl Cell {
             host,
             sense_to_command: None,
             events: Vec::new(),
+            disabled_said: 0,
             axes: Axes::of_cell(&cell),
             t0_ns: runtime::time::now_ns(),
             last_sp: None,
@@ -594,6 +597,9 @@ impl Cell {
                     _ => tracing::info!("{line}"),
                 },
             }
+            if e.code == code::DISABLED {
+                self.disabled_said += 1;
+            }
             if let Some(p) = self.procs.get_mut(e.source as usize) {
                 match e.code {
                     code::LISTENING => {
@@ -669,17 +675,6 @@ impl Cell {
             value,
         });
         self.control_seq
-    }
-
-    /// The heartbeat, and the publishers' connections (a new observer gets the configuration
-    /// and the host state's history), for a caller that waits outside the serve loop.
-    pub(crate) fn keep_alive(&mut self) {
-        self.beat();
-        self.config_pub.update_connections();
-        if let Some(p) = &self.ethercat_pub {
-            p.update_connections();
-        }
-        self.host_pub.update_connections();
     }
 
     /// The heartbeat: the host state with the latched e-stop, every tick.

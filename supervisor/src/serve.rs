@@ -125,10 +125,10 @@ struct Stopping {
 enum StopStage {
     /// trajgen was asked to abort: the path speed ramps to 0 within `t_acc`.
     Resting,
-    /// servo was asked to disable: the drives power down at rest. `said_from`: where, in
-    /// the cell's events, to look for servo's `disabled` (`None`: the drives were not
+    /// servo was asked to disable: the drives power down at rest. `said_from`: how many
+    /// times servo had said `disabled` when it was asked (`None`: the drives were not
     /// powered, nothing was asked).
-    Disabling { said_from: Option<usize> },
+    Disabling { said_from: Option<u64> },
 }
 
 /// A client waiting for a program's end (`exec --wait`), and what its report must carry.
@@ -236,11 +236,12 @@ pub(crate) fn serve(
                 l.server.drain(Duration::from_millis(200));
                 return Served { end, recorded };
             }
-            // The recorder finishes its file: the heartbeat goes on, the channel answers
+            // The recorder finishes its file: the tick goes on (the heartbeat, the children
+            // that exit reaped; nothing acts on an incident now), the channel answers
             // (whatever would change the cell is refused: it is going down).
             l.ending = Some(end);
             l.wait();
-            l.cell.keep_alive();
+            let _ = l.cell.tick(cfg);
             l.cell.drain_motion();
             for (conn, req) in l.server.poll() {
                 l.handle(conn, req);
@@ -257,7 +258,7 @@ pub(crate) fn serve(
         if l.stopping.is_some() {
             l.cell.drain_motion();
         } else if let Some(end) = l.advance(&incidents) {
-            l.ending = Some(end);
+            l.end(end);
             continue;
         }
         if l.stopping.is_none() {
@@ -272,7 +273,7 @@ pub(crate) fn serve(
             l.go_down(End::Down);
         }
         if let Some(end) = l.stop_step() {
-            l.ending = Some(end);
+            l.end(end);
         }
     }
 }
@@ -311,12 +312,11 @@ impl Loop<'_> {
                 return Some(self.failed_to_come_up(i.error()));
             }
         }
-        match self.recorder_started() {
-            Ok(true) => {}
-            Ok(false) => return None,
+        let recording = match self.recorder_started() {
+            Ok(recording) => recording,
             Err(e) => return Some(self.failed_to_come_up(e)),
-        }
-        if let Some(end) = self.step_enabling(incidents, run) {
+        };
+        if let Some(end) = self.step_enabling(incidents, run, recording) {
             return Some(end);
         }
         // A process lost, stalled or in fault while a program is validated: it does not
@@ -390,17 +390,34 @@ impl Loop<'_> {
         Some(self.recording.then_some(ended))
     }
 
+    /// The loop ends with `end` once the recorder has finished its file; whoever still waits
+    /// (a request, a swap) is told the cell goes down.
+    fn end(&mut self, end: End) {
+        self.abandon(|job: &str| Failure::Down {
+            job: job.to_string(),
+        });
+        if let Some(s) = self.swapping.take() {
+            let job = format!("the swap of {}", s.swap.process());
+            self.server
+                .reply(s.conn, &Reply::Failed(Failure::Down { job }));
+        }
+        self.ending = Some(end);
+    }
+
     /// Whether the cell is going down: on its way to rest, or the loop ending.
     fn going_down(&self) -> bool {
         self.stopping.is_some() || self.ending.is_some()
     }
 
     /// The enabling, a step; once it is over, whoever asked is told and what waited for it
-    /// (a tuning session, a program) begins. `Some` when `run` or `up` is over.
-    fn step_enabling(&mut self, incidents: &[Incident], run: bool) -> Option<End> {
+    /// (a tuning session, a program) begins. `Some` when `run` or `up` is over. It begins
+    /// once the recorder (`--record`) records; `run` ends on an incident before that too.
+    fn step_enabling(&mut self, incidents: &[Incident], run: bool, recording: bool) -> Option<End> {
         let (en, waiters) = self.enabling.as_mut()?;
         let outcome = if run && let Some(i) = incidents.first() {
             Some(Err(i.error()))
+        } else if !recording {
+            None
         } else {
             en.step(self.cell)
         };
@@ -537,9 +554,9 @@ impl Loop<'_> {
     }
 
     /// Asks servo to disable the drives if they are powered (it brings its reference to rest
-    /// along its path, then powers down); where its `disabled` will be among the cell's
-    /// events when it was asked.
-    fn disable(&mut self) -> Option<usize> {
+    /// along its path, then powers down); how many times it had said `disabled` when it was
+    /// asked.
+    fn disable(&mut self) -> Option<u64> {
         let powered = self.cell.last_servo.is_some_and(|s| {
             s.status & st::ENABLED != 0 || s.power != shm_schema::Power::Disabled as u8
         });
@@ -550,7 +567,7 @@ impl Loop<'_> {
         if let Err(e) = self.cell.request(shm_schema::RequestKind::Disable) {
             tracing::warn!("going down: {e}");
         }
-        Some(self.cell.events.len())
+        Some(self.cell.disabled_said)
     }
 
     /// The next step of going down; `Some` once the processes may be stopped.
@@ -587,13 +604,9 @@ impl Loop<'_> {
                 });
                 // servo's `disabled` follows the state that shows it (published after its
                 // cycle): waited for, so that it is among the cell's events (and its line in
-                // the log) before the processes are told to stop.
-                let said = said_from.is_none_or(|from| {
-                    self.cell
-                        .events
-                        .get(from..)
-                        .is_some_and(|e| e.iter().any(|e| e.code == code::DISABLED))
-                });
+                // the log) before the processes are told to stop. (A servo that never says
+                // it costs `down` the limit below.)
+                let said = said_from.is_none_or(|from| self.cell.disabled_said > from);
                 let limit = Duration::from_secs_f64(m.estop_stop_time + 1.0);
                 if !(off && said) && since.elapsed() <= limit {
                     return None;
