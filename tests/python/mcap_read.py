@@ -4,8 +4,8 @@
 
 Prints one JSON object: per topic its message count, schema name and encoding and message
 encoding, whether every message's log time is in order, and every setpoint of
-`/trajgen/setpoint` as [program_id, motion_time_s, state, position by axis name...]; and
-"channels": each channel as [topic, schema name, schema encoding, message encoding, schema
+`/trajgen/setpoint` as [program_id, motion_time_s, state, position by axis name...]; the
+code of every event of `/events` in order ("event_codes"); and "channels": each channel as [topic, schema name, schema encoding, message encoding, schema
 text], sorted.
 """
 
@@ -18,6 +18,7 @@ from mcap.reader import make_reader
 def main():
     topics = {}
     setpoints = []
+    event_codes = []
     channels = set()
     for path in sys.argv[1:]:
         with open(path, "rb") as f:
@@ -42,9 +43,11 @@ def main():
                     m = json.loads(message.data)
                     setpoints.append([m["program_id"], m["motion_time_s"], m["state"],
                                       m["position"]])
+                if channel.topic == "/events":
+                    event_codes.append(json.loads(message.data)["code"])
     for t in topics.values():
         del t["last"]
-    print(json.dumps({"topics": topics, "setpoints": setpoints,
+    print(json.dumps({"topics": topics, "setpoints": setpoints, "event_codes": event_codes,
                       "channels": sorted(channels)}))
 
 

@@ -377,3 +377,45 @@ fn the_cell_answers_and_beats_while_its_recorder_finishes_its_file() {
         );
     });
 }
+
+/// A terminal's Ctrl-C (SIGINT to the foreground process group: `up`'s, and whatever shares
+/// it) stops the cell the controlled way, and the recording has all of it: the recorder is
+/// in a group of its own and ends when the supervisor asks it, once the drives are disabled.
+#[test]
+fn ctrl_c_on_up_record_records_the_controlled_stop_to_its_end() {
+    integration_tests::attributable(|| {
+        use std::os::unix::process::CommandExt;
+        let test = "rec-ctrlc";
+        let inst = instance(test);
+        let file = scratch(test, "cell.mcap", "");
+        let log = scratch(test, "up.log", "");
+        let child = supervisor()
+            .args(["up", "--instance", &inst, "--record"])
+            .arg(&file)
+            .arg("--config")
+            .arg(cell(test, &[]))
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).expect("log"))
+            .process_group(0)
+            .spawn()
+            .expect("supervisor up");
+        let group = nix::unistd::Pid::from_raw(child.id() as i32);
+        let up = Up::adopt(inst, child, log);
+        nix::sys::signal::killpg(group, nix::sys::signal::Signal::SIGINT).expect("Ctrl-C");
+        up.wait_ended();
+        let read = read_back(&[file]);
+        let codes: Vec<u64> = read["event_codes"]
+            .as_array()
+            .expect("event codes")
+            .iter()
+            .filter_map(Value::as_u64)
+            .collect();
+        let at = |code: u32| codes.iter().position(|&c| c == u64::from(code));
+        let enabled = at(shm_schema::event::code::ENABLED);
+        let disabled = at(shm_schema::event::code::DISABLED);
+        assert!(
+            enabled.is_some() && disabled > enabled,
+            "the enable, then the disable, recorded: {codes:?}"
+        );
+    });
+}

@@ -343,11 +343,16 @@ impl Up {
         (log, events)
     }
 
-    /// Once `up` ended by itself (a `down` another process asked for): it exits 0 and
-    /// nothing of the instance is left; its log and every event of the cell's life.
-    pub(crate) fn ended_events(mut self) -> (String, Vec<control_plane::event::Event>) {
+    /// Once `up` ended by itself (a `down` or a signal another process sent): it exits 0
+    /// and nothing of the instance is left; its log.
+    pub(crate) fn wait_ended(mut self) -> String {
+        self.ended("its end")
+    }
+
+    /// [`Up::wait_ended`], and every event of the cell's life, as [`Up::down_events`].
+    pub(crate) fn ended_events(self) -> (String, Vec<control_plane::event::Event>) {
         let ended = self.ended.clone();
-        let log = self.ended("its down");
+        let log = self.wait_ended();
         let events = read_ended(ended.as_deref(), &log);
         (log, events)
     }
