@@ -295,7 +295,7 @@ fn run(cli: Cli) -> Result<u8, Failure> {
         Ask::Watch(seconds) => watch(&session, seconds, json),
         Ask::Status(cell) => status(&session, &cell, json),
         Ask::Events(cell, seconds) => events(&session, &cell, seconds, json),
-        Ask::Record(cell, opts) => record(&session, &cell, &opts),
+        Ask::Record(cell, opts) => record(&session, &cell, &opts, file.lease),
         Ask::Web(listen, token) => crate::line_web::serve(session, listen, token),
     }
 }
@@ -548,10 +548,6 @@ fn send(
 /// may hold up for seconds.
 const FLUSH_PATIENCE: Duration = Duration::from_secs(30);
 
-/// How long without a batch of the recording stream (its heartbeat is every half second)
-/// before the recording takes the cell for gone.
-const RECORD_GONE: Duration = Duration::from_secs(3);
-
 /// The recording stream's topics, asked of the cell's gateway (which starts its source).
 fn record_topics(session: &zenoh::Session, cell: &CellName) -> Result<RecordTopics, Failure> {
     let mut why = String::from("no answer");
@@ -608,7 +604,17 @@ fn flushed(session: &zenoh::Session, cell: &CellName) -> Option<RecordFlushed> {
 
 /// `record`: the cell's recording stream into MCAP files here, the same channels and
 /// messages as a recording on the cell's host.
-fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Result<u8, Failure> {
+/// Records `cell` as `opts` say. Without a batch of the recording stream (its heartbeat is
+/// every half second) for the line's `lease` (s), the cell is taken for gone (a link as
+/// silent is dropped); once asked to end, the stream is waited for up to `FLUSH_PATIENCE`
+/// (the gateway sends what it read before: a loaded host holds it up).
+fn record(
+    session: &zenoh::Session,
+    cell: &CellName,
+    opts: &RecordOptions,
+    lease: f64,
+) -> Result<u8, Failure> {
+    let gone = Duration::from_secs_f64(lease);
     runtime::signals::install().map_err(|e| (1, format!("cannot install signal handlers: {e}")))?;
     // Subscribed first: the gateway runs its source while anyone does, and every batch from
     // the topics' answer on reaches this subscriber.
@@ -674,7 +680,12 @@ fn record(session: &zenoh::Session, cell: &CellName, opts: &RecordOptions) -> Re
                 break why.clone();
             }
         }
-        if heard.elapsed() > RECORD_GONE {
+        let patience = if ending.is_some() {
+            FLUSH_PATIENCE
+        } else {
+            gone
+        };
+        if heard.elapsed() > patience {
             break format!("cell {cell} left the line");
         }
         out.maybe_rotate().map_err(file)?;
