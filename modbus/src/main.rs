@@ -26,8 +26,9 @@ use std::time::Duration;
 /// Write requests queued between two cycles at most.
 const WRITE_QUEUE: usize = 64;
 
-/// Servo states kept to find the one an image was taken from.
-const RECENT: usize = 16;
+/// Servo states kept to find the one an image was taken from (as many as the subscriber
+/// holds).
+const RECENT: usize = 64;
 
 struct Gateway {
     cell: CellConfigV6,
@@ -93,13 +94,17 @@ impl Gateway {
         }
         if let Some(img) = self.image.latest() {
             // The servo state the image's positions came from, so that command, following
-            // error and position are of one servo cycle (the newest one if it is gone).
+            // error and position are of one servo cycle. When it is gone (a stall held this
+            // process or iobridge past RECENT servo cycles) the image is skipped: the
+            // registers keep the last one whose state they have, until the next image. (No
+            // servo state at all: the positions alone.)
             let same =
                 self.recent[img.source_seq as usize % RECENT].filter(|s| s.seq == img.source_seq);
-            let newest = self.recent.iter().flatten().max_by_key(|s| s.seq).copied();
-            self.samples.servo = same.or(newest);
-            self.samples.image = Some(img);
-            fresh = true;
+            if same.is_some() || self.recent.iter().all(Option::is_none) {
+                self.samples.servo = same;
+                self.samples.image = Some(img);
+                fresh = true;
+            }
         }
         if let Some(sp) = self.setpoint.latest() {
             self.samples.setpoint = Some(sp);
