@@ -2,8 +2,11 @@
 // @foxglove/ws-protocol, with ws), for the integration tests (tests/tests/it/foxglove.rs).
 //
 //   node foxglove_client.mjs URL SECONDS [--origin ORIGIN] [--protocol PROTOCOL]
+//                            [--until advertised | --until TOPIC:N]
 //
-// Connects, subscribes to every channel advertised, and after SECONDS prints one JSON object:
+// Connects, subscribes to every channel advertised, and after SECONDS (or as soon as the
+// channels are advertised, or TOPIC has N messages: a loaded host takes its time, which no
+// fixed window allows for) prints one JSON object:
 // the server's info, the channels as advertised, per topic the messages received, the first
 // message of each topic (decoded from JSON) with its time stamp (ns, as a string), and the
 // status messages. A connection the server refuses prints {"refused": "..."} with its answer.
@@ -19,6 +22,11 @@ const option = (name) => {
 };
 const origin = option("--origin");
 const protocol = option("--protocol") ?? FoxgloveClient.SUPPORTED_SUBPROTOCOL;
+const until = option("--until");
+const [untilTopic, untilCount] =
+  until && until !== "advertised"
+    ? [until.slice(0, until.lastIndexOf(":")), Number(until.slice(until.lastIndexOf(":") + 1))]
+    : [undefined, undefined];
 
 const ws = new WebSocket(url, [protocol], origin ? { headers: { Origin: origin } } : {});
 ws.on("unexpected-response", (_req, res) => {
@@ -45,6 +53,9 @@ client.on("advertise", (channels) => {
     const sub = client.subscribe(c.id);
     topicOf.set(sub, c.topic);
   }
+  if (until === "advertised") {
+    done();
+  }
 });
 const decoder = new TextDecoder();
 client.on("message", ({ subscriptionId, timestamp, data }) => {
@@ -53,9 +64,13 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   if (!(topic in out.first)) {
     out.first[topic] = { timestamp: timestamp.toString(), message: JSON.parse(decoder.decode(data)) };
   }
+  if (topic === untilTopic && out.counts[topic] >= untilCount) {
+    done();
+  }
 });
 client.on("error", (e) => out.statuses.push({ error: String(e) }));
-setTimeout(() => {
+function done() {
   console.log(JSON.stringify(out));
   process.exit(0);
-}, Number(seconds) * 1000);
+}
+setTimeout(done, Number(seconds) * 1000);

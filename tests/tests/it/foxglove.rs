@@ -55,8 +55,9 @@ fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
             .unwrap_or_else(|| panic!("no address in {said:?}"))
             .to_string();
 
-        // The reference client, two seconds: every channel advertised and subscribed.
-        let seen = client(&url, "2", &[]);
+        // The reference client: every channel advertised and subscribed, until servo's state
+        // has come 101 times (60 s at most).
+        let seen = client(&url, "60", &["--until", "/servo/state:101"]);
         assert_eq!(seen["protocol"], "foxglove.websocket.v1", "{seen}");
         assert_eq!(
             seen["serverInfo"]["capabilities"],
@@ -125,24 +126,37 @@ fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
             "{stamp} against {now}"
         );
         println!(
-            "foxglove: {} channels, {n} /servo/state messages in 2 s",
+            "foxglove: {} channels, {n} /servo/state messages",
             advertised.len()
         );
 
         // Foxglove's own page may connect; a page of another site may not, nor a client that
         // does not speak the protocol.
-        let app = client(&url, "0.5", &["--origin", "https://app.foxglove.dev"]);
+        let app = client(
+            &url,
+            "60",
+            &[
+                "--origin",
+                "https://app.foxglove.dev",
+                "--until",
+                "advertised",
+            ],
+        );
         assert!(
             app["refused"].is_null() && !app["channels"].as_array().expect("channels").is_empty(),
             "{app}"
         );
-        let evil = client(&url, "0.5", &["--origin", "https://evil.example"]);
+        let evil = client(
+            &url,
+            "60",
+            &["--origin", "https://evil.example", "--until", "advertised"],
+        );
         let why = evil["refused"].as_str().unwrap_or_default();
         assert!(
             why.starts_with("403") && why.contains("\"https://evil.example\" may not connect"),
             "{evil}"
         );
-        let other = client(&url, "0.5", &["--protocol", "chat"]);
+        let other = client(&url, "60", &["--protocol", "chat", "--until", "advertised"]);
         let why = other["refused"].as_str().unwrap_or_default();
         assert!(
             why.contains("ask for the subprotocol foxglove.websocket.v1"),
