@@ -329,18 +329,12 @@ impl Up {
     /// [`Up::down`], and every event of the cell's life as `up --json` gave them as it ended
     /// (those of its going down included).
     pub(crate) fn down_events(self) -> (String, Vec<control_plane::event::Event>) {
-        let ended = self.ended.clone();
-        let log = self.down();
-        let events = read_ended(ended.as_deref(), &log);
-        (log, events)
+        self.events_after(Self::down)
     }
 
     /// [`Up::terminate`], and every event of the cell's life, as [`Up::down_events`].
     pub(crate) fn terminate_events(self) -> (String, Vec<control_plane::event::Event>) {
-        let ended = self.ended.clone();
-        let log = self.terminate();
-        let events = read_ended(ended.as_deref(), &log);
-        (log, events)
+        self.events_after(Self::terminate)
     }
 
     /// Once `up` ended by itself (a `down` or a signal another process sent): it exits 0
@@ -351,8 +345,16 @@ impl Up {
 
     /// [`Up::wait_ended`], and every event of the cell's life, as [`Up::down_events`].
     pub(crate) fn ended_events(self) -> (String, Vec<control_plane::event::Event>) {
+        self.events_after(Self::wait_ended)
+    }
+
+    /// `end`'s log of `up`, and every event of the cell's life from `up --json`'s document.
+    fn events_after(
+        self,
+        end: impl FnOnce(Self) -> String,
+    ) -> (String, Vec<control_plane::event::Event>) {
         let ended = self.ended.clone();
-        let log = self.wait_ended();
+        let log = end(self);
         let events = read_ended(ended.as_deref(), &log);
         (log, events)
     }
