@@ -138,7 +138,7 @@ pub(crate) fn check_figures(path: &Path, processes: usize) {
 
 #[test]
 fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("triangle");
         let trace = integration_tests::test_dir().join(format!("{inst}.csv"));
         let plot = integration_tests::test_dir().join(format!("{inst}.png"));
@@ -201,7 +201,7 @@ fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
 /// busy threads (both cores) for the whole run must change nothing.
 #[test]
 fn motion_time_holds_with_both_cores_loaded() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("loaded");
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let hogs: Vec<_> = (0..2)
@@ -267,7 +267,7 @@ fn refused(test: &str, program: &str, message: &str) {
 
 #[test]
 fn a_program_error_names_line_and_column_and_starts_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         refused(
             "badprog",
             "MOVE(40,40,0)\nMOVE(140,40)\nEND\n",
@@ -278,7 +278,7 @@ fn a_program_error_names_line_and_column_and_starts_nothing() {
 
 #[test]
 fn a_target_outside_the_limits_is_refused_before_anything_moves() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         refused(
             "limits",
             "MOVE(40,40,0)\nMOVE(40,400,0)\nEND\n",
@@ -289,7 +289,7 @@ fn a_target_outside_the_limits_is_refused_before_anything_moves() {
 
 #[test]
 fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("badout");
         let tri = examples().join("triangle.prog");
         let dir = integration_tests::test_dir();
@@ -320,7 +320,7 @@ fn an_output_that_cannot_be_written_is_refused_before_anything_starts() {
 
 #[test]
 fn a_bad_config_names_file_line_and_reason() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("badcfg");
         let cfg = integration_tests::default_cell_toml()
             .add("motion.t_dec", 1)
@@ -344,7 +344,7 @@ fn a_bad_config_names_file_line_and_reason() {
 /// wrapper, as a process in another language would be started.
 #[test]
 fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("kill");
         let wrapped = format!("exec {} --instance {{instance}}", bin("iobridge").display());
         let cfg = integration_tests::default_cell_with_room()
@@ -388,7 +388,7 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
 
 #[test]
 fn a_process_that_cannot_start_fails_the_run_and_leaves_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("nostart");
         let cfg = integration_tests::default_cell_toml()
             .set(

@@ -82,14 +82,14 @@ fn follows_the_triangle(cfg: &Config) {
 
 #[test]
 fn the_default_gains_follow_the_triangle_and_settle() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         follows_the_triangle(&Config::default_cell());
     });
 }
 
 #[test]
 fn csp_axes_follow_the_triangle_with_the_drives_closing_the_loop() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cfg =
             Config::parse(&integration_tests::cell_in_csp(), "csp").expect("valid csp config");
         follows_the_triangle(&cfg);
@@ -103,7 +103,7 @@ pub fn at_rate(period_us: u64) -> Config {
 
 #[test]
 fn at_4_khz_the_following_error_is_no_worse_than_at_1_khz() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let slow = triangle(&Config::default_cell());
         let fast = triangle(&at_rate(250));
         for i in 0..3 {

@@ -113,7 +113,7 @@ pub(crate) fn events_named<'a>(j: &'a serde_json::Value, name: &str) -> Vec<&'a 
 
 #[test]
 fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("inject-cfg");
         let mut inject = toml_edit::Table::new();
         inject.insert("axis", toml_edit::value("y"));
@@ -177,7 +177,7 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
 
 #[test]
 fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("inject-cmd");
         let run = triangle_in_background_as(&inst, None, true);
         // Wait until the arm is enabled, reading the instance's events from this shell.
@@ -231,7 +231,7 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
 
 #[test]
 fn an_absurd_inertia_is_refused_before_anything_starts() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("inertia");
         let cfg = integration_tests::default_cell_toml()
             .set("axis[x].sim.inertia", 1e-300)
@@ -256,7 +256,7 @@ fn an_absurd_inertia_is_refused_before_anything_starts() {
 
 #[test]
 fn csp_axes_follow_the_small_triangle_on_the_real_processes() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("csp");
         // Room for stalls: the test is about CSP, not the cell's tolerance of them (a
         // supervisor held off a CPU 500 ms by the tests beside it failed it once).
@@ -271,7 +271,7 @@ fn csp_axes_follow_the_small_triangle_on_the_real_processes() {
 
 #[test]
 fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("tune");
         let png = integration_tests::test_dir().join(format!("{inst}.png"));
         let out = succeeded_within(
@@ -350,7 +350,7 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
 /// the session with a controlled stop.
 #[test]
 fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("tune-busy");
         // Room for stalls: no detector may trip on the way down, and this test is about the
         // control channel (the drives' pending-sequence detector tripped once, the machine
@@ -409,7 +409,7 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
 
 #[test]
 fn the_small_triangle_completes_with_servo_and_the_drives_at_4_khz() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("4khz");
         // With room for the host's stalls and the other tests' cells beside it: once in a
         // CI run, iobridge's pending-sequence detector expired at its default limit while
@@ -431,7 +431,7 @@ fn the_small_triangle_completes_with_servo_and_the_drives_at_4_khz() {
 
 #[test]
 fn a_disable_request_from_another_process_stops_the_run_with_that_reason() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         use runtime::ipc::Pub;
         use shm_schema::{RequestKind, ServiceId, ServoRequestV1};
         let inst = instance("disable");
@@ -591,7 +591,7 @@ impl Client {
 
 #[test]
 fn servo_cuts_power_when_the_drives_process_stalls() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("stall-machine");
         let mut run =
             triangle_in_background_as(&inst, Some(&patient_config("stall-machine")), true);
@@ -625,7 +625,7 @@ fn servo_cuts_power_when_the_drives_process_stalls() {
 
 #[test]
 fn servo_holds_the_axes_when_trajgen_stalls_mid_motion() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("stall-trajgen");
         let mut run = triangle_in_background_with(&inst, Some(&patient_config("stall-trajgen")));
         let client = Client::when_moving(&inst, &mut run);

@@ -62,7 +62,7 @@ fn user_estop_mid_motion(
 
 #[test]
 fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_drives() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (_, j) = user_estop_mid_motion("estop-user", true, false);
         // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
         // and the drives disabled, after the e-stop was raised.
@@ -99,7 +99,7 @@ fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_driv
 
 #[test]
 fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("estop-stall");
         // The supervisor's heartbeat watch is made slower than the detector, so the detector is
         // what catches the stall; nor do the processes take a supervisor held off a CPU by
@@ -135,7 +135,7 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
 
 #[test]
 fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("estop-orphan");
         let cfg = scratch(
             "estop-orphan",
@@ -204,14 +204,14 @@ fn a_user_estop_without_propagate_estop(test: &str, external: bool) {
 
 #[test]
 fn without_propagation_a_user_estop_latches_but_the_motion_goes_on() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         a_user_estop_without_propagate_estop("estop-nopropagate", false);
     });
 }
 
 #[test]
 fn propagate_external_estop_stops_the_motion_without_propagate_estop() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         a_user_estop_without_propagate_estop("estop-external", true);
     });
 }

@@ -80,7 +80,7 @@ fn refused_by_the_bus(out: &Output, says: &str, what: &str) -> String {
 
 #[test]
 fn the_small_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("ecat-triangle");
         let (ns, cfg) = bus_cell("ecat-tri");
         let out = run_with_watchdog(
@@ -165,7 +165,7 @@ fn cell_on_m0() -> String {
 
 #[test]
 fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and_identities() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         for (test, line, want) in [
             (
                 "ecat-missing",
@@ -200,7 +200,7 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
 
 #[test]
 fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("ecat-cable");
         let (ns, cfg) = bus_cell("ecat-cable");
         // Once the program has moved the axes for a second (its status), the cable goes.
@@ -239,7 +239,7 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
 
 #[test]
 fn another_device_in_a_drives_place_keeps_the_bus_down_until_the_right_one_is_back() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (ns, up) = cell_up("ecat-ident");
         let mut events = up.follow_events();
         // Another product at position 2 (y's drive swapped under power: it leaves OP, and its
@@ -345,7 +345,7 @@ fn small_triangle_runs(up: &Up) -> serde_json::Value {
 
 #[test]
 fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_next_program() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (ns, up) = cell_up("ecat-back");
         let mut events = up.follow_events();
         let run = up.exec_in_background(examples().join("triangle.prog"));
@@ -375,7 +375,7 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
 
 #[test]
 fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (ns, up) = cell_up("ecat-safeop");
         let mut events = up.follow_events();
         // A drive's emergency, read from its mailbox in OP: named, and nothing else happens.
@@ -421,7 +421,7 @@ fn a_subdevice_leaving_op_and_an_emergency_are_named_and_the_bus_comes_back() {
 
 #[test]
 fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (_ns, up) = cell_up("ecat-kill");
         let mut events = up.follow_events();
         let bus = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
@@ -463,7 +463,7 @@ fn tshark(args: &[&str]) -> String {
 
 #[test]
 fn wiresharks_dissector_decodes_a_programs_bus_traffic_with_no_malformed_frame() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (ns, up) = cell_up("ecat-tshark");
         let capture = integration_tests::scratch("ecat-tshark", "bus.pcapng", "");
         // dumpcap (tshark's capture engine) on the bus' end of the pair, ready once its file
@@ -578,7 +578,7 @@ fn wiresharks_dissector_decodes_a_programs_bus_traffic_with_no_malformed_frame()
 
 #[test]
 fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (ns, up) = cell_up("ecat-io");
         // The inputs as the terminal reads them: the e-stop circuit closed (its sim value).
         let s = up.until("the inputs from the bus", |s| {
@@ -633,10 +633,10 @@ fn a_subdevice_on_sync0_without_distributed_clocks_is_refused_before_anything_is
 /// `says`, before anything is enabled, and leaves nothing behind.
 fn refused_on_the_bus(
     test: &str,
-    edit: impl FnOnce(integration_tests::CellToml) -> integration_tests::CellToml,
+    edit: impl Fn(integration_tests::CellToml) -> integration_tests::CellToml,
     says: &str,
 ) {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance(test);
         let ns = Netns::new(test);
         let cfg =

@@ -67,7 +67,7 @@ fn kill_while_starting(inst: &str, cfg: &Path, when: Kill) {
 /// that every later `down` reported as left behind).
 #[test]
 fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "killed-up";
         let inst = instance(test);
         let cfg = cell(test, &[]);
@@ -98,7 +98,7 @@ fn a_supervisor_killed_at_any_moment_of_up_never_breaks_the_instance() {
 /// resources left behind".
 #[test]
 fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("killed-observer");
         for ms in (0..=40).step_by(2) {
             // `events` attaches to the cell's shared memory (`status` asks the supervisor).
@@ -125,26 +125,29 @@ fn an_observer_killed_while_it_attaches_is_cleaned_not_blamed() {
 /// and the cell goes down clean after all of them.
 #[test]
 fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("many-observers");
         moving(&up);
-        // Twenty supervisor commands `args` at once, their output piped.
-        let twenty = |args: &[&str]| -> Vec<std::process::Child> {
+        // Twenty supervisor commands `args` at once, their output piped; killed if the test
+        // fails before they end.
+        let twenty = |args: &[&str]| -> Vec<integration_tests::Reaped> {
             (0..20)
                 .map(|_| {
-                    supervisor()
-                        .args(args)
-                        .args(["--instance", &up.inst])
-                        .stdout(Stdio::piped())
-                        .stderr(Stdio::piped())
-                        .spawn()
-                        .expect("a supervisor command")
+                    integration_tests::Reaped::spawn(
+                        supervisor()
+                            .args(args)
+                            .args(["--instance", &up.inst])
+                            .stdout(Stdio::piped())
+                            .stderr(Stdio::piped()),
+                        "a supervisor command",
+                    )
                 })
                 .collect()
         };
         let statuses = twenty(&["status", "--json"]);
         for child in statuses {
-            let out = success(child.wait_with_output().expect("status"), "status");
+            let out = child.into_child().wait_with_output().expect("status");
+            let out = success(out, "status");
             let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
             assert!(
                 j["processes"]["servo"]["cycles"]
@@ -167,7 +170,11 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
                 .iter_mut()
                 .position(|c| c.try_wait().ok().flatten().is_some())
             {
-                break followers.swap_remove(k).wait_with_output().expect("events");
+                break followers
+                    .swap_remove(k)
+                    .into_child()
+                    .wait_with_output()
+                    .expect("events");
             }
             assert!(
                 start.elapsed() < Duration::from_secs(60),
@@ -191,7 +198,7 @@ fn twenty_statuses_at_once_all_answer_and_a_full_service_says_so() {
         // Every other one refused was refused so (the rest attached, or were still attaching
         // when stopped).
         for child in followers {
-            let out = child.wait_with_output().expect("events");
+            let out = child.into_child().wait_with_output().expect("events");
             let err = String::from_utf8_lossy(&out.stderr);
             if out.status.code() == Some(2) {
                 assert!(err.contains("all its slots are taken ("), "{err}");
@@ -214,7 +221,7 @@ fn down_leaving_nothing(up: Up) {
 /// 23-hour program).
 #[test]
 fn a_long_validation_never_blinds_the_control_channel() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "long-validation";
         let up = Up::default_cell(test);
         // 23 hours of motion without a loop (a loop's alike iterations are passed over):
@@ -276,7 +283,7 @@ fn a_long_validation_never_blinds_the_control_channel() {
 /// naming it: the cell ran without it.
 #[test]
 fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_down() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "never-up";
         let cfg = integration_tests::default_cell_with_room()
             .set(
@@ -348,7 +355,7 @@ fn node_files(pid: u32) -> Vec<String> {
 /// inherited its node, liveness lock included, and a descriptor per port of it).
 #[test]
 fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "few-files-up";
         let cfg = cell(test, &[]);
         let inst = instance(test);
@@ -419,7 +426,7 @@ fn too_few_open_files_are_said_in_words_and_leave_nothing_behind() {
 /// `velocity-step-over-limit` (1.10 against 0.091 mm/s); without the silences none did.
 #[test]
 fn a_foreign_trapezoid_generator_process_is_never_refused() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         integration_tests::require_python_iceoryx2();
         let test = "foreign-trapezoid";
         let up = Up::default_cell(test);
@@ -470,16 +477,17 @@ fn a_foreign_trapezoid_generator_process_is_never_refused() {
 /// event used to be `setpoint-jump` whichever test refused, with the position's value.
 #[test]
 fn a_refused_jump_of_a_foreign_generator_names_its_test_value_and_limit() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         integration_tests::require_python_iceoryx2();
         let up = Up::default_cell("foreign-jump");
-        let mut follower = up
-            .command()
-            .args(["events", "--follow", "--json", "--instance", &up.inst])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("events --follow");
+        // Killed if the test fails before the cell goes down (it would follow nothing forever).
+        let mut follower = integration_tests::Reaped::spawn(
+            up.command()
+                .args(["events", "--follow", "--json", "--instance", &up.inst])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::null()),
+            "events --follow",
+        );
         let (events, arrived) = std::sync::mpsc::channel::<serde_json::Value>();
         let stdout = follower.stdout.take().expect("piped");
         std::thread::spawn(move || {
@@ -590,7 +598,7 @@ fn moving(up: &Up) {
 /// and quick-stopped the axes in 4 of 4 runs.
 #[test]
 fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         for how in ["down", "sigterm"] {
             let test = &format!("down-moving-{how}");
             let up = Up::default_cell(test);
@@ -629,7 +637,7 @@ fn down_and_sigterm_of_a_moving_cell_come_to_rest_along_the_path_then_disable() 
 /// the new machine was stopped first: servo latched `feedback-stale` and cut power.
 #[test]
 fn down_after_the_drives_process_restarted_stops_in_the_graph_order() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("down-after-restart");
         for how in ["restart", "swap"] {
             let out = up.ok(&[how, "drives"]);
@@ -692,7 +700,7 @@ fn refused_with(
 /// oversized one are refused at once.
 #[test]
 fn control_frames_are_taken_whole_or_not_at_all() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("ctl-frames");
         let down = postcard::to_allocvec(&control_plane::Request::Down).expect("encode");
 
@@ -794,7 +802,7 @@ fn open_fds(pid: u32) -> usize {
 /// and a crashed iobridge stayed down ("Too many open files").
 #[test]
 fn other_users_connections_cost_the_supervisor_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ctl-other-user";
         let inst = instance(test);
         let cfg = cell(test, &[]);
@@ -911,7 +919,7 @@ fn python_as_nobody(script: &str) -> std::process::Output {
 /// every request needs it, the page and its script included, and a blank token is refused.
 #[test]
 fn the_web_view_takes_commands_from_its_own_page_only() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("web-guard");
         let (view, addr) = serve(&up.inst, &[], Stdio::null());
         let host = addr.as_str();
@@ -1068,7 +1076,7 @@ fn overruns(s: &serde_json::Value) -> [u64; 2] {
 /// (the host's stalls make a few either way).
 #[test]
 fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("estop-cost");
         // The first one latches it; the rest find it latched, as in the campaign.
         let said = up.ok(&["estop", "--reason", "cost 0"]);
@@ -1120,7 +1128,7 @@ fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
 /// line and abort with a backtrace.
 #[test]
 fn a_client_whose_reader_stops_early_ends_quietly() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         use std::os::unix::process::ExitStatusExt;
         let up = Up::default_cell("closed-pipe");
         let mut watch = up.spawn(&["status", "--watch"]);
@@ -1267,7 +1275,7 @@ fn a_full_dev_shm_is_said_in_words_and_exits_1_never_by_sigbus() {
 /// and the cell is reset and goes down clean, nothing left in its `/dev/shm`.
 #[test]
 fn a_running_cell_whose_dev_shm_fills_goes_on_and_its_commands_say_so() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "shm-fills";
         // The cell takes about 90 MB of it.
         let shm = PrivateShm::new(256 << 10);

@@ -206,7 +206,7 @@ fn to_segment(p: &[f64], a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_them() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "mb-read";
         let up = Up::default_cell(test);
         let a = address(&up);
@@ -305,7 +305,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
 #[test]
 fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost_server_is_no_estop()
  {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let up = Up::default_cell("mb-write");
         let mut c = Raw::connect(address(&up));
         // Coil 1 is the gripper (an output); the sensor that follows it closes 80 ms later.
@@ -408,7 +408,7 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
 
 #[test]
 fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "mb-hostile";
         let cfg = cell(
             test,
@@ -481,7 +481,7 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
 
 #[test]
 fn the_register_map_document_is_the_codes() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = cell_config::Config::default_cell().to_shm();
         let map = modbus::map::markdown(&cell);
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/fieldbus.md");

@@ -31,21 +31,23 @@ fn client(url: &str, seconds: &str, args: &[&str]) -> Value {
 
 #[test]
 fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "foxglove";
         let up = Up::default_cell(test);
-        let mut server = supervisor()
-            .args([
-                "foxglove",
-                "--instance",
-                &up.inst,
-                "--listen",
-                "127.0.0.1:0",
-            ])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("supervisor foxglove");
+        // Killed if the test fails before it stops the server.
+        let mut server = integration_tests::Reaped::spawn(
+            supervisor()
+                .args([
+                    "foxglove",
+                    "--instance",
+                    &up.inst,
+                    "--listen",
+                    "127.0.0.1:0",
+                ])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::null()),
+            "supervisor foxglove",
+        );
         let said = first_line(&mut server);
         let url = said
             .trim()
@@ -178,7 +180,11 @@ fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
             nix::sys::signal::Signal::SIGTERM,
         )
         .expect("stop the server");
-        let out = integration_tests::wait_output(server, WATCHDOG, "supervisor foxglove stops");
+        let out = integration_tests::wait_output(
+            server.into_child(),
+            WATCHDOG,
+            "supervisor foxglove stops",
+        );
         assert!(out.status.success(), "{out:?}");
         up.down();
     });

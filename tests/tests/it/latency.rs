@@ -54,7 +54,7 @@ fn cpus() -> usize {
 
 #[test]
 fn a_short_latency_run_gives_sane_figures_and_files_and_leaves_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("latency");
         let dir = integration_tests::test_dir().join(&inst);
         std::fs::create_dir_all(&dir).expect("temp dir");
@@ -133,7 +133,7 @@ fn a_short_latency_run_gives_sane_figures_and_files_and_leaves_nothing() {
 
 #[test]
 fn ctrl_c_prints_the_figures_so_far() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("latint");
         // Interrupted once it says every timer thread measured (READY=1).
         let ready = integration_tests::Readiness::new("latint");
@@ -171,7 +171,7 @@ fn ctrl_c_prints_the_figures_so_far() {
 
 #[test]
 fn bad_latency_options_are_refused_by_name() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         for (args, needle) in [
             (vec!["--test", "timer,bogus"], "--test \"bogus\""),
             (vec!["--interval-us", "5"], "--interval-us 5"),
@@ -190,7 +190,7 @@ fn bad_latency_options_are_refused_by_name() {
 
 #[test]
 fn status_reports_the_running_cell_and_its_latency() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let inst = instance("status");
         let none = run_with_watchdog(supervisor().args(["status", "--instance", &inst]), WATCHDOG);
         assert_eq!(none.status.code(), Some(2));

@@ -737,14 +737,14 @@ fn a_remote_recording_equals_a_local_one_of_the_same_run() {
         .arg(&remote_file)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let mut remote = remote.spawn().expect("the remote recorder");
+    let mut remote = integration_tests::Reaped::spawn(&mut remote, "the remote recorder");
     let said = integration_tests::first_line(&mut remote);
     assert!(said.starts_with("recording cell press-0 to"), "{said}");
 
     // A program runs while both record.
     let report = a.report(&integration_tests::small_triangle(test), &[]);
     assert_eq!(report["ok"], true, "{report}");
-    let remote_summary = stop_recorder(remote, "remote recorder");
+    let remote_summary = stop_recorder(remote.into_child(), "remote recorder");
     let local_summary = stop_recorder(local, "local recorder");
     println!("local:\n{local_summary}remote:\n{remote_summary}");
 
@@ -941,7 +941,7 @@ fn the_line_s_web_view_lists_its_cells_and_shows_the_one_chosen() {
         .arg(&victor)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let mut web = web.spawn().expect("supervisor web --line");
+    let mut web = integration_tests::Reaped::spawn(&mut web, "supervisor web --line");
     let said = integration_tests::first_line(&mut web);
     let base = said
         .trim()
@@ -1021,7 +1021,8 @@ fn the_line_s_web_view_lists_its_cells_and_shows_the_one_chosen() {
         nix::sys::signal::Signal::SIGTERM,
     )
     .expect("stop the page");
-    let out = integration_tests::wait_output(web, WATCHDOG, "supervisor web --line stops");
+    let out =
+        integration_tests::wait_output(web.into_child(), WATCHDOG, "supervisor web --line stops");
     assert!(out.status.success(), "{}", text(&out));
     drop(a);
 }
@@ -1185,7 +1186,7 @@ fn a_line_on_mutual_tls_and_passwords_lets_in_only_its_own() {
         .args(["--victim", "press-0", "--own", "press-9"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let mut rogue = rogue.spawn().expect("the rogue");
+    let mut rogue = integration_tests::Reaped::spawn(&mut rogue, "the rogue");
     let said = integration_tests::first_line(&mut rogue);
     assert_eq!(said.trim(), "ready", "the rogue: {said}");
     // The room joined to both, without and with the list of its cells (Zenoh's access

@@ -97,7 +97,7 @@ fn the_drive_answered_and_enabled(name: &str, r: &serde_json::Value) {
 
 #[test]
 fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let r = scan("masters-soem", "pysoem", &[], &["m0"]);
         let expected = [
             ("EK1100", 2, 0x044C_2C52u32),
@@ -146,7 +146,7 @@ fn soem_scans_the_emulated_line_reads_its_identities_and_exchanges_process_data(
 
 #[test]
 fn kickcat_maps_the_emulated_line_with_separate_logical_reads_and_writes() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // As a ring: kickcat sends each frame out of both its ports and adds up the working
         // counters of the two copies it reads back. The line processes what enters from m0
         // and sends it on to m1; what enters from m1 comes back to m0 as it went in (a copy

@@ -16,7 +16,7 @@ use shm_schema::{EventQueue, FaultInjectionV1, RequestKind, ServoRequestV1};
 
 #[test]
 fn the_cycles_of_servo_machine_iobridge_and_the_clock_do_not_allocate() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = Config::default_cell().to_shm();
         let mut machine = Machine::new(&cell, cell.period_of("drives").expect("machine"));
         let mut servo = Controller::new(ServoParams::from_cell(

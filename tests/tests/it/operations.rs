@@ -5,7 +5,7 @@
 use crate::drives::{WATCHDOG, pid_of};
 use crate::up::{Up, cell, io_value, moving, process_in};
 use integration_tests::{
-    assert_clean, exited, instance, run_with_watchdog, scratch, succeeded_within, supervisor, toml,
+    assert_clean, exited, instance, run_with_watchdog, scratch, succeeded_within, supervisor,
     wait_output,
 };
 use serde_json::Value;
@@ -47,7 +47,7 @@ fn brief(up: &Up, test: &str) {
 
 #[test]
 fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-up";
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
@@ -146,7 +146,7 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
 
 #[test]
 fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-reset";
         let up = Up::default_cell(test);
         up.ok(&["estop", "--reason", "ops test"]);
@@ -187,7 +187,7 @@ fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named()
 
 #[test]
 fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_recovers() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-kill";
         let up = Up::default_cell(test);
         let long = program(
@@ -226,7 +226,7 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
 
 #[test]
 fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-stall";
         let up = Up::default_cell(test);
         signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
@@ -250,7 +250,7 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
 
 #[test]
 fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-swap";
         let up = Up::default_cell(test);
         // The gripper holds a part: no swap may open it.
@@ -355,7 +355,7 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
 /// answers meanwhile (it was deaf until the old process had gone, up to `stop_timeout`).
 #[test]
 fn the_control_channel_answers_while_a_swapped_process_takes_its_time_to_leave() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-slow-leave";
         let iobridge = integration_tests::bin("iobridge");
         let slow = format!(
@@ -419,7 +419,7 @@ fn the_control_channel_answers_while_a_swapped_process_takes_its_time_to_leave()
 
 #[test]
 fn another_user_is_refused_by_the_control_channel() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         if !nix::unistd::geteuid().is_root() {
             eprintln!("skipped: needs root to run a command as another user");
             return;
@@ -442,7 +442,7 @@ fn another_user_is_refused_by_the_control_channel() {
 
 #[test]
 fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "ops-sigkill";
         let cfg = cell(test, &[]);
         let mut up = Up::start(test, &cfg);
@@ -477,24 +477,12 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
 
 #[test]
 fn a_python_iobridge_written_from_the_documents_takes_the_role() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         integration_tests::require_python_iceoryx2();
         let test = "ops-python";
-        let script = integration_tests::examples().join("python/iobridge.py");
-        let script = script.to_str().expect("utf-8");
-        let cfg = integration_tests::default_cell_with_room()
-            .set(
-                "process[iobridge].command",
-                toml::strings(&[
-                    "python3",
-                    script,
-                    "--instance",
-                    "{instance}",
-                    "--name",
-                    "{name}",
-                ]),
-            )
-            .write(test, "cell.toml");
+        let cfg =
+            integration_tests::with_python_iobridge(integration_tests::default_cell_with_room())
+                .write(test, "cell.toml");
         let inst = instance(test);
         let out = succeeded_within(
             supervisor()
@@ -536,7 +524,7 @@ fn stall(program: &str, inst: &str, ms: u64) {
 
 #[test]
 fn a_swap_keeps_the_outputs_while_the_old_iobridge_is_held_off_the_cpu() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // Found by CI: a host stall of the old iobridge longer than its successor's wait for
         // its image (50 ms) made the successor start with every output at 0, the gripper's
         // part dropped. The detectors widened: the stall is not what this test is about.
@@ -570,7 +558,7 @@ fn a_swap_keeps_the_outputs_while_the_old_iobridge_is_held_off_the_cpu() {
 
 #[test]
 fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // The embedded cell's pending-sequence detector, unwidened: iobridge at 4 ms forgives
         // 30 % of its rate, 75 missed periods, leaking one every 50 ms. The supervisor's
         // heartbeat watch is made slower than the detector, so the detector is what catches
@@ -630,7 +618,7 @@ fn full_pipe() -> (std::os::fd::OwnedFd, std::os::fd::OwnedFd) {
 
 #[test]
 fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // Found by fault injection: with its stderr blocked, the supervisor blocked in a write and
         // missed a killed servo. Now its lines are dropped, and it still sees everything.
         let test = "ops-stderr";
@@ -741,14 +729,14 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
 
 #[test]
 fn an_estop_input_stops_the_motion_with_propagate_external_estop() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         an_estop_input_mid_motion("ops-input-ext", true);
     });
 }
 
 #[test]
 fn an_estop_input_without_propagate_external_estop_only_sets_the_outputs_safe() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         an_estop_input_mid_motion("ops-input-noext", false);
     });
 }

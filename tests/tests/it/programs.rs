@@ -102,7 +102,7 @@ fn run_as_predicted(test: &str, cell: &str, program: &str) -> serde_json::Value 
 
 #[test]
 fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let j = run_as_predicted("prog-pick", &default_cell(), PICK_AND_PLACE);
         let waited = j["waited_s"].as_f64().expect("waited_s");
         assert!(
@@ -142,7 +142,7 @@ fn a_pick_and_place_with_io_waits_and_a_loop_runs_as_predicted() {
 
 #[test]
 fn the_prediction_is_the_generators_own_timing_exactly() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // A move to where the axes rest, after a move in the other space: its 2 t_acc, no
         // extra stop (the prediction said 15.825 s, a run 14.775 s or, one in a few, 15.825).
         let j = run_as_predicted(
@@ -261,7 +261,7 @@ fn a_long_loop_is_checked_from_its_first_iterations_alike() {
 
 #[test]
 fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "prog-check";
         let cases = [
             (
@@ -342,7 +342,7 @@ END
 
 #[test]
 fn the_five_bar_runs_a_pick_and_place_through_its_kinematics_as_predicted() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let five_bar = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
             .expect("examples/five-bar.toml");
         let j = run_as_predicted("prog-fivebar", &five_bar, FIVE_BAR_PICK);
@@ -372,7 +372,7 @@ fn the_five_bar_runs_a_pick_and_place_through_its_kinematics_as_predicted() {
 
 #[test]
 fn every_example_cell_and_its_program_pass_check() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // The gantry's triangle on the embedded default, and each other cell's own program.
         let examples = integration_tests::examples();
         for (cell, prog) in [

@@ -28,7 +28,7 @@ fn read_back(files: &[PathBuf]) -> Value {
 
 #[test]
 fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_reader_decodes() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "rec-run";
         let inst = instance(test);
         let mcap = scratch(test, "run.mcap", "");
@@ -119,7 +119,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
 
 #[test]
 fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "rec-up";
         let up = Up::default_cell(test);
         let base = scratch(test, "cell.mcap", "");
@@ -193,7 +193,7 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
 
 #[test]
 fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behind() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "rec-observer";
         let inst = instance(test);
         let run = supervisor()
@@ -272,7 +272,7 @@ impl Drop for SmallDisk {
 
 #[test]
 fn a_recording_onto_a_full_disk_says_so_and_fails_its_command() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "rec-full";
         let up = Up::default_cell(test);
         let disk = SmallDisk::new(test, 64);
@@ -322,7 +322,7 @@ fn sigterm_pending(pid: i32) -> bool {
 /// back, it finishes its file and `up` goes down clean.
 #[test]
 fn the_cell_answers_and_beats_while_its_recorder_finishes_its_file() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "rec-stop";
         let file = scratch(test, "cell.mcap", "");
         let patience = 2.0;
@@ -396,7 +396,7 @@ fn the_cell_answers_and_beats_while_its_recorder_finishes_its_file() {
 /// in a group of its own and ends when the supervisor asks it, once the drives are disabled.
 #[test]
 fn ctrl_c_on_up_record_records_the_controlled_stop_to_its_end() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         use std::os::unix::process::CommandExt;
         let test = "rec-ctrlc";
         let inst = instance(test);

@@ -157,7 +157,7 @@ fn check_latched_then_recover(lp: &mut Loop, want: u32) {
 
 #[test]
 fn enable_and_disable_take_effect_in_the_next_cycle_and_a_disable_aborts_an_enable() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = Config::default_cell().to_shm();
         let mut lp = Loop::new(&cell);
         let s = lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
@@ -194,7 +194,7 @@ fn enable_and_disable_take_effect_in_the_next_cycle_and_a_disable_aborts_an_enab
 
 #[test]
 fn servo_does_not_follow_setpoints_unless_enabled() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = Config::default_cell().to_shm();
         let mut lp = Loop::new(&cell);
         lp.until(None, 10, |s| s.status & st::INITIALIZED != 0);
@@ -209,7 +209,7 @@ fn servo_does_not_follow_setpoints_unless_enabled() {
 
 #[test]
 fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // (what, configuration change, setpoint x and x velocity relative to the start, code)
         type Case<'a> = (&'a str, Option<(&'a str, f64)>, f64, f64, u32);
         let cases: [Case; 5] = [
@@ -275,7 +275,7 @@ fn each_validation_rule_cuts_power_and_stays_latched_until_reset() {
 
 #[test]
 fn a_following_error_latches_like_a_device_estop() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (mut lp, s) = an_axis_that_cannot_follow();
         assert_eq!(s.fault_code, code::FOLLOWING_ERROR, "{:?}", lp.codes());
         assert_eq!(s.fault_axis, 0);
@@ -286,7 +286,7 @@ fn a_following_error_latches_like_a_device_estop() {
 
 #[test]
 fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         let inject = |seq, active| FaultInjectionV1 {
             seq,
@@ -336,7 +336,7 @@ fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
 
 #[test]
 fn a_lost_encoder_is_a_fault_at_once_and_never_a_believable_number() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         let f = FaultInjectionV1 {
             seq: 1,
@@ -358,7 +358,7 @@ fn a_lost_encoder_is_a_fault_at_once_and_never_a_believable_number() {
 
 #[test]
 fn no_drive_re_enables_after_a_command_timeout_without_reset() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         // Servo goes silent for longer than the drives' watchdog (0.1 s): the machine runs alone.
         let mut q = shm_schema::EventQueue::default();
@@ -390,7 +390,7 @@ fn no_drive_re_enables_after_a_command_timeout_without_reset() {
 
 #[test]
 fn servo_notices_stale_feedback_and_cuts_power() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = Config::default_cell().to_shm();
         let mut lp = Loop::enabled(&cell);
         // The drives' feedback stops (the machine process stalls or died); servo keeps cycling.
@@ -449,7 +449,7 @@ fn servo_notices_stale_feedback_and_cuts_power() {
 
 #[test]
 fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // 2 s of motion at full speed, then trajgen dies.
         let (mut lp, _) = two_seconds_into_a_move();
         let mut max_fe = [0.0f64; 3];
@@ -488,7 +488,7 @@ fn servo_keeps_the_axes_still_when_trajgen_dies_mid_motion() {
 
 #[test]
 fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // trajgen silent for 30 ms in the middle of an acceleration and for 40 ms later (host
         // stalls of its CPU, below the 50 ms setpoint timeout): the next setpoint differs from
         // servo's extrapolation; the command must not step.
@@ -524,7 +524,7 @@ fn a_late_setpoint_rejoins_without_a_step_at_4_khz() {
 
 #[test]
 fn a_late_servo_cycle_is_not_a_step() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // Servo itself stalls 3 ms (12 periods at 4 kHz) with the axes at full speed: the command
         // moves 48 µm in one cycle, which the real elapsed time explains; nothing is refused.
         let (_, mut lp, mut g, tg) = at_4_khz_with("MOVE(140,90,90)\nEND");
@@ -541,7 +541,7 @@ fn a_late_servo_cycle_is_not_a_step() {
 
 #[test]
 fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let mut lp = Loop::enabled(&Config::default_cell().to_shm());
         let step = |lp: &mut Loop, seq: u64, value: f64| {
             let r = shm_schema::ServoRequestV1 {
@@ -574,7 +574,7 @@ fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit
 
 #[test]
 fn a_reset_never_cancels_a_quick_stop_under_way() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // A following error at speed cuts power; a reset sent at once waits until every drive
         // has stopped (the quick-stop ramp ran its course) and is without power.
         let (mut lp, _) = an_axis_that_cannot_follow();
@@ -599,7 +599,7 @@ fn a_reset_never_cancels_a_quick_stop_under_way() {
 
 #[test]
 fn feedback_that_is_not_the_cells_latches() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // Servo's state after a cycle, enabled, on the feedback as `alter` changes it.
         let cell = Config::default_cell().to_shm();
         let on = |alter: fn(&mut shm_schema::DriveFeedbackV2)| {
@@ -624,7 +624,7 @@ fn feedback_that_is_not_the_cells_latches() {
 
 #[test]
 fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let (mut lp, _g) = two_seconds_into_a_move();
         let v0 = lp.state.cmd_velocity[0];
         let s = lp.step_with(Some(RequestKind::Disable), None, None);
@@ -659,7 +659,7 @@ fn a_disable_at_speed_brings_the_axes_to_rest_before_power_goes_off() {
 
 #[test]
 fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // Servo takes its time when it wakes; a host stall before it reads the setpoint lets
         // trajgen publish one stamped 6 ms later. At 16 mm/s, taking it at its stamp would step
         // the command 0.1 mm in one cycle (found at 4 kHz on this VM); servo evaluates it back at
@@ -677,7 +677,7 @@ fn a_setpoint_stamped_after_servo_woke_is_evaluated_at_servo_time() {
 
 #[test]
 fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = Config::default_cell().to_shm();
         let (mut lp, mut g, tg) = enabled_with(&cell, "MOVE(140,40,0)\nEND");
         // A reader that sees every state finds exactly servo's latched figure.
@@ -721,7 +721,7 @@ fn servo_latches_the_peak_following_error_of_each_program_in_every_cycle() {
 /// limit when the velocity was what refused the setpoint.
 #[test]
 fn a_refused_first_setpoint_names_the_test_that_refused_it() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let cell = Config::default_cell().to_shm();
         let refused = |x: f64, vx: f64| {
             let mut lp = Loop::enabled(&cell);
@@ -872,7 +872,7 @@ fn trapezoids(targets: &[[f64; 3]], silent: impl Fn(u64) -> bool) -> [f64; 3] {
 
 #[test]
 fn a_foreign_generators_trapezoids_within_the_limits_are_never_refused() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         // Issue 21's moves, then distances whose acceleration changes fall at every phase of
         // the 4-ms setpoints (0.1 ms apart), and a move of theta alone.
         let mut targets = vec![[140.0, 40.0, 0.0], [90.0, 126.0, 0.0], [40.0, 40.0, 0.0]];

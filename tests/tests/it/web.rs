@@ -159,7 +159,7 @@ fn samples_while_moving(up: &Up, page: &mut Browser, program: &Path, sample: &st
 
 #[test]
 fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the_cell() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "web";
         let cfg = cell(test, &[]);
         let up = Up::start(test, &cfg);
@@ -318,7 +318,7 @@ fn the_page_draws_the_running_cell_its_estop_button_stops_it_and_it_outlives_the
 /// program's triangle.
 #[test]
 fn the_page_draws_the_five_bar_through_its_kinematics() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let test = "web-fivebar";
         let src = std::fs::read_to_string(integration_tests::examples().join("five-bar.toml"))
             .expect("examples/five-bar.toml");
@@ -385,7 +385,7 @@ fn the_page_draws_the_five_bar_through_its_kinematics() {
 
 #[test]
 fn web_refuses_a_network_address_without_a_token() {
-    integration_tests::attributable(|| {
+    integration_tests::wall_clock(|| {
         let out = supervisor()
             .args(["web", "--instance", "nobody", "--listen", "0.0.0.0:0"])
             .output()
