@@ -40,6 +40,21 @@ pub struct CellMeta {
     /// Display name.
     #[serde(default)]
     pub name: String,
+    /// The clock the cell runs on: `"wall"` (default) or `"virtual"`
+    /// (`docs/virtual-time.md`; `supervisor run --virtual-time` sets it too).
+    #[serde(default)]
+    pub clock: Clock,
+}
+
+/// `[cell] clock`: which clock the cell's processes wait on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Clock {
+    /// Each process sleeps until its absolute deadline of `CLOCK_MONOTONIC`.
+    #[default]
+    Wall,
+    /// The supervisor's virtual clock: the same run every time, as fast as the CPUs allow.
+    Virtual,
 }
 
 /// `[motion]`.
@@ -465,6 +480,7 @@ impl Config {
         found.extend(io::validate(&self.io));
         found.extend(kinematics::validate(&self.kinematics, &self.axis));
         found.extend(modbus::validate(&self.modbus));
+        found.extend(self.clock_problem());
         match &self.ethercat {
             Some(bus) => {
                 let drives_period = self.process_named("drives").map(Process::period_s);
@@ -508,6 +524,19 @@ impl Config {
         }
         found.extend(self.validate_supervisor());
         found
+    }
+
+    /// `[cell] clock = "virtual"` with a bus that cannot be stepped: an EtherCAT bus (real or
+    /// emulated) runs on the wire's time, the cell stays on the wall clock.
+    fn clock_problem(&self) -> Option<Problem> {
+        (self.cell.clock == Clock::Virtual && self.ethercat.is_some()).then(|| {
+            (
+                vec![Seg::Key("cell"), Seg::Key("clock")],
+                "a cell with [ethercat] runs on the wall clock: its bus cannot be stepped by a \
+                 virtual clock (the drives' Distributed Clocks and watchdogs keep the wire's time)"
+                    .into(),
+            )
+        })
     }
 
     /// `[motion]` on its own: each key's problem, all of them.
@@ -923,7 +952,10 @@ impl Config {
             propagate_estop: u32::from(self.behaviour.propagate_estop),
             propagate_external_estop: u32::from(self.behaviour.propagate_external_estop),
             process_count: self.process.len() as u32,
-            reserved: 0,
+            clock: match self.cell.clock {
+                Clock::Wall => shm_schema::CellClock::Wall as u32,
+                Clock::Virtual => shm_schema::CellClock::Virtual as u32,
+            },
             health: self.health_config.to_shm(),
             process: [ProcessConfigV2::default(); MAX_PROCESSES],
             axis: [AxisConfigV2::default(); MAX_AXES],

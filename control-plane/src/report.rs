@@ -73,6 +73,22 @@ pub struct RunReport {
     pub sense_to_command_us: Option<Percentiles>,
     /// Every event of the run.
     pub events: Vec<Event>,
+    /// On the virtual clock (`--virtual-time`), how fast it ran; `null` on the wall clock.
+    pub virtual_time: Option<VirtualTime>,
+}
+
+/// How fast a cell on the virtual clock ran: from the clock's start to the run's report.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VirtualTime {
+    /// Virtual seconds the cell lived.
+    pub virtual_s: f64,
+    /// Wall seconds they took.
+    pub wall_s: f64,
+    /// Virtual seconds per wall second.
+    pub speed_up: f64,
+    /// Cycles the clock granted.
+    pub cycles: u64,
 }
 
 /// Mean and largest of a delay (µs).

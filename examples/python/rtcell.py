@@ -9,6 +9,9 @@ What every process that takes a role in the cell needs, whatever its role:
   publishes, and the cycle they describe (period and phase of its `[[process]]`);
 - the e-stop as a process sees it (`<i>/estop`, `<i>/host/state`, the propagation rules and
   the supervisor's heartbeat of services.md);
+- the cell's virtual clock (docs/virtual-time.md, `clock` = 1 in the cell configuration): the
+  cycle waits for the clock's grants instead of sleeping, and the cell's time (`now_ns`) is
+  the instant granted;
 - the command line and the SIGTERM handling the supervisor expects of a process.
 
 A role's script (iobridge.py, trapezoid.py) subclasses `Process` with its own `setup()` and
@@ -59,7 +62,7 @@ CellConfigV6 = payload("rtc::CellConfigV6", 6904, [
     ("feedback_timeout_ns", u64), ("enable_timeout_ns", u64), ("settle_time_ns", u64),
     ("estop_stop_time_ns", u64), ("supervisor_timeout_ns", u64),
     ("propagate_estop", u32), ("propagate_external_estop", u32), ("process_count", u32),
-    ("reserved", u32), ("health", f64 * 9), ("process", ProcessConfigV2 * 16),
+    ("clock", u32), ("health", f64 * 9), ("process", ProcessConfigV2 * 16),
     ("axis", AxisConfigV2 * 8), ("inject", u8 * (4 * 24)),  # injections: not laid out here
     ("io_count", u32), ("reserved2", u32), ("io", u8 * (64 * 56)),  # IO: not laid out here
     ("kinematics", KinematicsConfigV1), ("modbus", u8 * 80)])  # Modbus: not laid out here
@@ -112,6 +115,12 @@ ProcessStatusV2 = payload("rtc::ProcessStatusV2", 184, [
     ("stats", CycleStatsV1), ("name", C.c_char * 16), ("pending_sequence", DetectorV1),
     ("transport", DetectorV1), ("thread_offset", DetectorV1), ("estop", u32),
     ("reserved", u32)])
+# The virtual clock's (virtual-time.md, the field meanings in shm-schema/src/clock.rs).
+ClockGrantV1 = payload("rtc::ClockGrantV1", 24, [
+    ("now_ns", u64), ("seq", u64), ("pid", u32), ("reserved", u32)])
+ClockReportV1 = payload("rtc::ClockReportV1", 32, [
+    ("next_ns", u64), ("seq", u64), ("pid", u32), ("index", u32), ("kind", u32),
+    ("reserved", u32)])
 HIST_BUCKETS = 3712
 LatencyHistogramV1 = payload("rtc::LatencyHistogramV1", 29744, [
     ("count", u64), ("sum_ns", u64), ("min_ns", u64), ("max_ns", u64), ("overflows", u64),
@@ -131,6 +140,8 @@ ENABLED = 2                                          # ServoStateV3.power
 ST_ENABLED, ST_NO_SETPOINT, ST_STALE, ST_JUMP, ST_FAULT = 1, 2, 4, 8, 16
 EV_ESTOP_RAISED, EV_ESTOP_SAFE, EV_SUPERVISOR_LOST = 601, 603, 605  # EventV1.code
 INFO, WARNING, ERROR = 0, 1, 2                       # EventV1.severity
+WALL, VIRTUAL = 0, 1                                 # CellConfigV6.clock (shm-schema CellClock)
+CLOCK_JOIN, CLOCK_DONE, CLOCK_LEAVE = 1, 2, 3        # ClockReportV1.kind (ClockReport)
 
 # --- the services (services.md) ------------------------------------------------------------
 # (publishers, subscribers, history, subscriber buffer, nodes): the table of services.md, for
@@ -140,9 +151,24 @@ QOS = {"cell/config": (1, 24, 1, 1024, 40), "servo/state": (2, 8, 0, 1024, 40),
        "trajgen/handover": (2, 8, 1, 1024, 40), "iobridge/output": (2, 8, 0, 1024, 40),
        "events": (32, 16, 0, 1024, 40), "estop": (32, 24, 0, 1024, 40),
        "host/state": (1, 24, 1, 1024, 32), "status": (2, 8, 0, 1024, 40),
-       "histogram": (2, 8, 1, 2, 40)}
+       "histogram": (2, 8, 1, 2, 40), "clock/grant": (1, 24, 1, 2, 32),
+       "clock/report": (32, 2, 0, 1024, 40)}
 
-now_ns = time.monotonic_ns  # CLOCK_MONOTONIC
+# --- the cell's time (virtual-time.md: "Everything that reads time reads the clock") --------
+wall_ns = time.monotonic_ns  # CLOCK_MONOTONIC: what is measured on the CPU (execution times)
+_virtual_now = None          # on the virtual clock: the instant it last granted this process
+
+
+def now_ns():
+    """The cell's time (ns): CLOCK_MONOTONIC, or on the virtual clock the instant it granted
+    (the cycle's deadline): stamps of statuses, events, images, the heartbeat's watch."""
+    return wall_ns() if _virtual_now is None else _virtual_now
+
+
+def set_virtual_now(t):
+    """The cell's time is t from now on (the virtual clock's instant)."""
+    global _virtual_now
+    _virtual_now = t
 
 
 def logger(prefix=None):
@@ -200,6 +226,7 @@ class Process:
                      .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
                      .create(iox2.ServiceType.Ipc))
         self.ports = []
+        self.clock = None  # VirtualClock in a cell on the virtual clock (Process.join)
 
     def request_stop(self):
         """SIGTERM (or SIGINT): leave, safely; stop_since is when leaving began."""
@@ -237,6 +264,8 @@ class Process:
         return out
 
     def close(self):
+        if self.clock is not None:  # virtual-time.md 6: a process that leaves says so
+            self.clock.leave()
         for p in reversed(self.ports):
             try:
                 p.delete()
@@ -248,8 +277,10 @@ class Process:
     # --- setup ------------------------------------------------------------------------------
     def join(self):
         """Waits (10 s at most) for the cell configuration (self.cell) and finds this process in
-        it (self.index, self.me): 0, 1 if it has no process of this name, None if no
-        configuration came (or the process was stopped first)."""
+        it (self.index, self.me); in a cell on the virtual clock (`clock` = 1) opens its side of
+        the clock (self.clock) and reads where the clock stands: 0, 1 if it has no process of
+        this name (or the clock is not there), None if no configuration came (or the process
+        was stopped first)."""
         config_sub = self.sub("cell/config", CellConfigV6)
         deadline = now_ns() + 10_000_000_000
         while not (got := self.take(config_sub)):
@@ -264,6 +295,15 @@ class Process:
             return 1
         self.index = self.names.index(self.name)
         self.me = self.cell.process[self.index]
+        if cell.clock == VIRTUAL:
+            self.clock = VirtualClock(self)
+            if not self.clock.stands():
+                self.log(f"{self.name}: the cell runs on the virtual clock but nothing is on "
+                         f"{self.instance}/clock/grant")
+                return None if self.stop else 1
+        elif cell.clock != WALL:
+            self.log(f"{self.name}: unknown clock {cell.clock} in the cell configuration")
+            return 1
         return 0
 
     def open_cell_ports(self, histograms=False):
@@ -355,10 +395,14 @@ class Process:
             if h.estop == 1 and not self.latched:
                 self.trigger(h.cause)
         if self.exit_code == 0 and now - self.beat_changed > self.cell.supervisor_timeout_ns:
-            self.event(EV_SUPERVISOR_LOST, ERROR, "supervisor lost")
-            self.raise_estop(HOST, EV_SUPERVISOR_LOST, f"{self.name}: supervisor lost")
-            self.exit_code = 1
-            self.stop_since = self.stop_since or now
+            self.supervisor_lost(now)
+
+    def supervisor_lost(self, now):
+        """Raises a host e-stop and makes the process leave with status 1 (services.md 6)."""
+        self.event(EV_SUPERVISOR_LOST, ERROR, "supervisor lost")
+        self.raise_estop(HOST, EV_SUPERVISOR_LOST, f"{self.name}: supervisor lost")
+        self.exit_code = 1
+        self.stop_since = self.stop_since or now
 
     def report_safe(self, now):
         """The event of a complete e-stop reaction, once per e-stop (call it when it is)."""
@@ -374,10 +418,98 @@ class Process:
                 (REACTING if reacting else 0) | (SAFE if reacting and safe else 0))
 
 
+class VirtualClock:
+    """A process' side of the cell's virtual clock (virtual-time.md, "How it works" 2, 3 and 6,
+    and "A process in another language"). The clock's wake-up (`<i>/clock/go/<pid>`) and the
+    notification after a report are the cell's semaphore events, which a stock iceoryx2
+    binding cannot wait on (services.md, "The iceoryx2 event service"), so this side polls
+    `<i>/clock/grant` and publishes its reports without notifying (the clock looks for them at
+    least every millisecond): slower, never different."""
+
+    POLL_S = 150e-6  # between two looks at the grants: a grant is seen within about 0.2 ms
+                     # (the clock itself looks for an unnotified report every millisecond)
+
+    def __init__(self, proc):
+        """Opens `<i>/clock/grant` and `<i>/clock/report` (services.md, the table; the
+        subscriber's buffer is the service's 2)."""
+        self.proc, self.pid, self.parent = proc, os.getpid(), os.getppid()
+        self.grants = proc.sub("clock/grant", ClockGrantV1, buffer=2)
+        self.report_pub = proc.pub("clock/report", ClockReportV1)
+        self.newest = None  # the newest grant read so far (reading takes it off the buffer)
+        self.seq = 0        # the grant of the last cycle it ran
+        self.joined = self.owes = self.gone = False
+
+    def poll(self):
+        """The newest grant, from every one that came since the last look."""
+        got = self.proc.take(self.grants)
+        if got:
+            self.newest = got[-1]
+        return self.newest
+
+    def stands(self):
+        """Reads where the clock stands (history 1: a grant with `pid` 0 says it; it comes once
+        the supervisor's publisher sees the new subscriber, so it is waited for, 10 s at most
+        as the clock waits for a join) and turns the process to that instant: the cell's
+        time from now on. False if none came (or the process was stopped first)."""
+        deadline = wall_ns() + 10_000_000_000
+        while self.poll() is None:
+            if self.proc.stop or wall_ns() > deadline:
+                return False
+            time.sleep(0.001)
+        # Grants to this process are numbered after the one it read.
+        self.seq = self.newest.seq
+        set_virtual_now(self.newest.now_ns)
+        return True
+
+    def report(self, kind, next_ns):
+        """A ClockReportV1 on `<i>/clock/report`: its pid, its index in the process table
+        (which orders processes due at the same instant), the grant it ends (0 for a join)."""
+        seq = 0 if kind == CLOCK_JOIN else self.seq
+        self.report_pub.send_copy(ClockReportV1(next_ns, seq, self.pid, self.proc.index, kind))
+
+    def join(self, first_ns):
+        """Takes part from the deadline first_ns on (virtual-time.md 2)."""
+        self.report(CLOCK_JOIN, first_ns)
+        self.joined = True
+
+    def wait(self, next_ns):
+        """Reports the granted cycle done (if one was granted) with the next deadline next_ns,
+        then waits for the clock's next grant of this process (the newest grant has its pid
+        and a `seq` above the last one it ran, virtual-time.md 3): its instant, the cell's time
+        from now on. If the supervisor is gone (its clock with it; SIGTERM is the process'
+        parent-death signal, services.md 1), no grant will ever come: self.gone, and the
+        process runs its last cycles on its own time, one deadline after the other."""
+        if self.owes:
+            self.report(CLOCK_DONE, next_ns)
+            self.owes = False
+        while not self.gone:
+            g = self.poll()
+            if g is not None and g.pid == self.pid and g.seq > self.seq:
+                self.seq, self.owes = g.seq, True
+                set_virtual_now(g.now_ns)
+                return g.now_ns
+            if self.proc.stop and os.getppid() != self.parent:
+                self.gone = True
+                break
+            time.sleep(self.POLL_S)
+        set_virtual_now(next_ns)
+        return next_ns
+
+    def leave(self):
+        """Leaves the clock, ending a granted cycle if one was (virtual-time.md 6): the
+        process exits. Once."""
+        if self.joined:
+            self.report(CLOCK_LEAVE, 0)
+        self.joined = self.owes = False
+
+
 class Cycle:
     """A process' cycle: its deadlines (period and phase of its [[process]]), its status
     (ProcessStatusV2, published every cycle) and, if asked, its latency and execution-time
-    histograms (published when the process says)."""
+    histograms (published when the process says). In a cell on the virtual clock it waits for
+    the clock's grants (VirtualClock) instead of sleeping: every wake-up is at its deadline,
+    the execution time is still measured on the CPU, and no cycle overruns (virtual-time.md).
+    """
 
     def __init__(self, proc, histograms=False):
         self.proc, self.period = proc, proc.me.period_ns
@@ -388,15 +520,28 @@ class Cycle:
         self.latency, self.exec_time = (Histogram(), Histogram()) if histograms else (None, None)
         phase = proc.me.phase_ns
         self.deadline = ((now_ns() - phase) // self.period + 1) * self.period + phase
+        # On the virtual clock: the first deadline as on the wall clock (from where the clock
+        # stands), then the join (virtual-time.md 2).
+        self.clock = proc.clock
+        if self.clock is not None:
+            self.clock.join(self.deadline)
 
     def wait(self):
-        """Sleeps to the deadline, then reads the e-stop (Process.poll_estop): the actual
-        wake-up time, and whether the process leaves (SIGTERM, or the supervisor lost)."""
-        delay = self.deadline - now_ns()
-        if delay > 0:
-            time.sleep(delay / 1e9)
+        """Sleeps to the deadline (on the virtual clock: waits for its grant), then reads the
+        e-stop (Process.poll_estop): the actual wake-up time, and whether the process leaves
+        (SIGTERM, or the supervisor lost)."""
+        if self.clock is not None:
+            self.clock.wait(self.deadline)
+        else:
+            delay = self.deadline - now_ns()
+            if delay > 0:
+                time.sleep(delay / 1e9)
         wake = self.wake = now_ns()
+        # The execution time is measured on the CPU whatever the clock (virtual-time.md).
+        self.wake_wall = wake if self.clock is None else wall_ns()
         self.proc.poll_estop(wake)
+        if self.clock is not None and self.clock.gone and self.proc.exit_code == 0:
+            self.proc.supervisor_lost(wake)
         return wake, self.proc.stop or self.proc.exit_code != 0
 
     def publish_status(self, leaving, safe):
@@ -411,7 +556,7 @@ class Cycle:
         s.max_wakeup_latency_ns = max(s.max_wakeup_latency_ns, s.wakeup_latency_ns)
         if self.latency is not None:
             self.latency.add(s.wakeup_latency_ns)
-        s.exec_ns = now_ns() - wake
+        s.exec_ns = wall_ns() - self.wake_wall
         s.max_exec_ns = max(s.max_exec_ns, s.exec_ns)
         if self.exec_time is not None:
             self.exec_time.add(s.exec_ns)
@@ -427,6 +572,8 @@ class Cycle:
         """On to the next deadline; after an overrun, the next one still in the future."""
         s = self.status.stats
         self.deadline += self.period
+        if self.clock is not None:  # on the virtual clock no cycle is late (virtual-time.md)
+            return
         end = now_ns()
         s.overrun_flag = int(end > self.deadline)
         if end > self.deadline:

@@ -11,11 +11,16 @@
 //! has completed normally, the next period is skipped (as many as were missed), the overrun
 //! flag is set for the next cycle and the overrun is counted.
 //!
+//! In a cell on the virtual clock ([`crate::vclock`]) the wait is the clock's grant instead:
+//! the cycle runs at its deadline's virtual instant, never late, and its execution time is
+//! measured on the CPU (`CLOCK_MONOTONIC`) but never makes it overrun.
+//!
 //! A task may ask for one extra wake-up before the next grid deadline
 //! ([`CycleClock::request_wake_at`]); trajgen uses it to read its next command at exactly
 //! `t = T1 - t_acc` and to end a motion at its exact end time.
 
-use crate::time::now_ns;
+use crate::time::{now_ns, wall_ns};
+use crate::vclock::Participant;
 use shm_schema::{CycleStatsV1, LatencyHistogramV1};
 
 /// One wake-up of the cycle.
@@ -59,6 +64,8 @@ pub struct CycleClock {
     // Boxed: 30 KB each, allocated once by `new`, never resized.
     histogram: Box<LatencyHistogramV1>,
     exec_histogram: Box<LatencyHistogramV1>,
+    /// On the virtual clock: the process' side of it, and the wall time of the last grant.
+    virtual_clock: Option<(Participant, u64)>,
 }
 
 impl CycleClock {
@@ -81,9 +88,24 @@ impl CycleClock {
             },
             histogram: Box::new(LatencyHistogramV1::new()),
             exec_histogram: Box::new(LatencyHistogramV1::new()),
+            virtual_clock: None,
         };
         clock.next_ns = clock.grid_after(now + period_ns);
         clock
+    }
+
+    /// Waits on the virtual clock `participant` from now on: joins it with the first deadline.
+    pub fn on_virtual_clock(&mut self, mut participant: Participant) {
+        participant.join(self.upcoming().0);
+        self.virtual_clock = Some((participant, 0));
+    }
+
+    /// Leaves the virtual clock, if on it (the process exits).
+    pub fn leave(&mut self) {
+        if let Some((p, _)) = self.virtual_clock.as_mut() {
+            p.leave();
+        }
+        self.virtual_clock = None;
     }
 
     /// First grid deadline strictly after `t`.
@@ -137,6 +159,11 @@ impl CycleClock {
     /// The cycle's one blocking wait: one `clock_nanosleep`, one vDSO clock read.
     pub fn wait(&mut self) -> Result<Wake, WaitError> {
         let (deadline, on_grid) = self.upcoming();
+        if let Some((p, woke_wall)) = self.virtual_clock.as_mut() {
+            let now = p.wait(deadline);
+            *woke_wall = wall_ns();
+            return Ok(self.woke(deadline, on_grid, now));
+        }
         let ts = libc::timespec {
             tv_sec: (deadline / 1_000_000_000) as libc::time_t,
             tv_nsec: (deadline % 1_000_000_000) as libc::c_long,
@@ -192,8 +219,14 @@ impl CycleClock {
     /// # Real-time
     /// Arithmetic only.
     pub fn finish(&mut self, wake: &Wake, end: u64) {
+        // On the virtual clock the work's time is measured on the CPU, and the cycle ends at
+        // its own instant: it is late only when the clock granted it late (a scheduled hold).
+        let (exec_ns, end) = match self.virtual_clock {
+            Some((_, woke_wall)) => (wall_ns().saturating_sub(woke_wall), wake.actual_ns),
+            None => (end.saturating_sub(wake.actual_ns), end),
+        };
         let s = &mut self.stats;
-        s.exec_ns = end.saturating_sub(wake.actual_ns);
+        s.exec_ns = exec_ns;
         s.max_exec_ns = s.max_exec_ns.max(s.exec_ns);
         self.exec_histogram.record(s.exec_ns);
         self.exec_histogram.stamp_ns = end;

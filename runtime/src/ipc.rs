@@ -256,6 +256,8 @@ macro_rules! payloads {
 
 payloads!(
     shm_schema::CellConfigV6,
+    shm_schema::ClockGrantV1,
+    shm_schema::ClockReportV1,
     shm_schema::DigitalIoV1,
     shm_schema::DriveCommandV2,
     shm_schema::DriveFeedbackV2,
@@ -667,6 +669,11 @@ impl Listener {
     #[inline]
     pub fn wait(&self) -> bool {
         matches!(self.port.blocking_wait(|_| {}), Ok(n) if n > 0)
+    }
+
+    /// As [`Listener::wait`], for at most `timeout`: false when it passed without one.
+    pub fn timed_wait(&self, timeout: std::time::Duration) -> bool {
+        matches!(self.port.timed_wait(|_| {}, timeout), Ok(n) if n > 0)
     }
 }
 

@@ -10,6 +10,8 @@
 //! - [`events`]: a process' publisher of events.
 //! - [`estop`]: the cell's e-stop as a process sees it in its cycle (seed 002).
 //! - [`health`]: seed 002's health detectors (leaky buckets).
+//! - [`vclock`]: the cell's virtual clock, a barrier each process waits on instead of its
+//!   deadline in a cell on virtual time (the supervisor owns it).
 //! - [`process`]: the skeleton every real-time process runs: arguments, cell configuration,
 //!   set-up, then the cycle until SIGTERM.
 //!
@@ -31,6 +33,7 @@ pub mod signals;
 pub mod snapshot;
 pub mod stall;
 pub mod time;
+pub mod vclock;
 
 /// Makes every panic of this process abort it once the panic's message is written, as
 /// `panic = "abort"` would: called first in every binary of the cell. The release profile

@@ -422,6 +422,8 @@ pub struct Runner<T: Task> {
     transport: u64,
     leaving_since: Option<u64>,
     safe_reported: bool,
+    /// On the virtual clock, its side until [`Runner::start`] hands it to the clock.
+    virtual_clock: Option<crate::vclock::Participant>,
 }
 
 impl<T: Task> std::fmt::Debug for Runner<T> {
@@ -440,6 +442,16 @@ impl<T: Task> Runner<T> {
         build: impl FnOnce(&Context) -> Result<T, SetupError>,
     ) -> Result<Self, SetupError> {
         let (instance, name, own) = (ctx.instance, ctx.name, ctx.own);
+        // On the virtual clock, everything from here on reads it.
+        let virtual_clock = if ctx.cell.clock == shm_schema::CellClock::Virtual as u32 {
+            Some(crate::vclock::Participant::new(
+                &ctx.node,
+                &instance,
+                ctx.index as u32,
+            )?)
+        } else {
+            None
+        };
         let status_pub =
             Pub::<ProcessStatusV2>::new(&ctx.node, &instance, ServiceId::Status(name))?;
         let latency_every = LATENCY_PUBLISH_INTERVAL_NS.div_ceil(own.period_ns).max(1);
@@ -483,6 +495,7 @@ impl<T: Task> Runner<T> {
             transport: ipc::transport_errors(),
             leaving_since: None,
             safe_reported: false,
+            virtual_clock,
         })
     }
 
@@ -510,6 +523,9 @@ impl<T: Task> Runner<T> {
         );
         let start_ns = now_ns();
         self.clock = CycleClock::new(own.period_ns, own.phase_ns, start_ns);
+        if let Some(p) = self.virtual_clock.take() {
+            self.clock.on_virtual_clock(p);
+        }
         self.health = Health::new(&self.ctx.cell.health, own.period_ns, start_ns);
         self.status.state = ProcState::Cyclic as u32;
     }
@@ -705,6 +721,8 @@ impl<T: Task> Runner<T> {
             us(h.percentile(999, 1000)),
             us(Some(h.max_ns)),
         );
+        // Off the virtual clock once everything of the last cycle is out.
+        self.clock.leave();
         if self.estop.supervisor_lost() && !signals::stop_requested() {
             Exit::SupervisorLost
         } else {
@@ -820,6 +838,12 @@ pub fn validate_cell(cell: &CellConfigV6) -> Result<(), String> {
                 shm_schema::str_of(&p.name)
             ));
         }
+    }
+    if shm_schema::CellClock::from_wire(cell.clock).is_none() {
+        return Err(format!(
+            "cell configuration: clock {} is neither 0 (the wall clock) nor 1 (the virtual clock)",
+            cell.clock
+        ));
     }
     if !(cell.t_acc_s.is_finite() && cell.t_acc_s > 0.0) {
         return Err(format!(

@@ -284,8 +284,9 @@ pub struct CellConfigV6 {
     pub propagate_external_estop: u32,
     /// Entries of `process` in use.
     pub process_count: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// The clock the cell runs on: [`crate::CellClock`] as `u32` (0 the wall clock, 1 the
+    /// supervisor's virtual clock, `shm_schema::clock`).
+    pub clock: u32,
     /// The health detectors.
     pub health: HealthConfigV1,
     /// The process table, in start order; the first `process_count` are in use.
@@ -322,7 +323,7 @@ impl Default for CellConfigV6 {
             propagate_estop: 0,
             propagate_external_estop: 0,
             process_count: 0,
-            reserved: 0,
+            clock: 0,
             health: HealthConfigV1::default(),
             process: [ProcessConfigV2::default(); MAX_PROCESSES],
             axis: [AxisConfigV2::default(); MAX_AXES],

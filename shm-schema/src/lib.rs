@@ -120,6 +120,7 @@ const fn same_bytes(a: &[u8], b: &[u8]) -> bool {
     true
 }
 
+pub mod clock;
 pub mod config;
 pub mod drive;
 pub mod estop;
@@ -131,6 +132,7 @@ pub mod motion;
 pub mod names;
 pub mod status;
 
+pub use clock::{CellClock, ClockGrantV1, ClockReport, ClockReportV1};
 pub use config::{
     AxisConfigV2, CellConfigV6, ConfiguredFaultV1, EstopReaction, HealthConfigV1, KinParamV1,
     KinematicsConfigV1, ModbusConfigV1, ProcessConfigV2, process_flags,

@@ -241,6 +241,17 @@ pub enum ServiceId {
     /// `<i>/trajgen/setpoint` (event service): trajgen notifies it after each setpoint
     /// publish, so a consumer may block until a setpoint arrives instead of polling.
     SetpointReady,
+    /// `<i>/clock/grant`: [`crate::ClockGrantV1`], the virtual clock to the process it grants
+    /// a cycle (history 1: where the clock stands, for a process about to join).
+    ClockGrant,
+    /// `<i>/clock/go/<pid>` (event service): the virtual clock wakes process `pid` after its
+    /// grant.
+    ClockGo(u32),
+    /// `<i>/clock/report`: [`crate::ClockReportV1`], every process on the virtual clock to
+    /// the clock: a join, a cycle done with the next deadline, a leave.
+    ClockReport,
+    /// `<i>/clock/report` (event service): notified after each report; the clock waits on it.
+    ClockReportReady,
 }
 
 /// How a service is created. Every process opens a service with these same values, so it does
@@ -268,6 +279,7 @@ impl ServiceId {
             Self::Status(name) => write!(buf, "{name}/status"),
             Self::Latency(name) => write!(buf, "{name}/latency"),
             Self::ExecTime(name) => write!(buf, "{name}/exec_time"),
+            Self::ClockGo(pid) => write!(buf, "clock/go/{pid}"),
             fixed => buf.write_str(fixed.fixed_suffix()),
         };
         buf
@@ -295,8 +307,10 @@ impl ServiceId {
             Self::IoState => "io/state",
             Self::IoRequest => "io/request",
             Self::FieldInputs => "field/inputs",
-            Self::Status(_) | Self::Latency(_) | Self::ExecTime(_) => "",
+            Self::Status(_) | Self::Latency(_) | Self::ExecTime(_) | Self::ClockGo(_) => "",
             Self::SetpointReady => "trajgen/setpoint",
+            Self::ClockGrant => "clock/grant",
+            Self::ClockReport | Self::ClockReportReady => "clock/report",
         }
     }
 
@@ -358,6 +372,21 @@ impl ServiceId {
                 max_publishers: 1,
                 max_subscribers: 24,
                 max_nodes: 32,
+                ..base
+            },
+            // The clock grants one process at a time; a joining process reads where it stands.
+            Self::ClockGrant => Qos {
+                history: 1,
+                max_publishers: 1,
+                max_subscribers: 24,
+                subscriber_max_buffer: 2,
+                max_nodes: 32,
+            },
+            // Every process of the cell (and a swap's successor beside its predecessor).
+            Self::ClockReport | Self::ClockReportReady => Qos {
+                max_publishers: 32,
+                max_subscribers: 2,
+                max_nodes: 40,
                 ..base
             },
             // 30 KB a sample: keep few. A late observer gets the newest at once.

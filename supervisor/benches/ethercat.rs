@@ -18,22 +18,12 @@ mod common;
 
 use integration_tests::median;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 const AXES: [&str; 3] = ["x", "y", "theta"];
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn binary(name: &str) -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"))
-        .join("release")
-        .join(name)
-}
+use common::{binary, root};
 
 /// What one run measured (µs unless said).
 #[derive(Clone, Debug, Default)]

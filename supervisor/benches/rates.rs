@@ -21,15 +21,10 @@ use std::process::Command;
 const PROCESSES: [&str; 4] = ["drives", "servo", "trajgen", "iobridge"];
 const AXES: [&str; 3] = ["x", "y", "theta"];
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+use common::root;
 
 fn supervisor() -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"))
-        .join("release/supervisor")
+    common::binary("supervisor")
 }
 
 /// What one run measured.

@@ -22,6 +22,7 @@ const STALL_REPORTED_S: f64 = 0.1;
 use control_plane::event::Event;
 use runtime::ipc::{self, Pub, Sub};
 use runtime::signals;
+use runtime::time::Moment;
 use shm_schema::drive::servo_status as st;
 use shm_schema::estop::{EstopKind, EstopState, HostStateV1};
 use shm_schema::event::{SOURCE_SUPERVISOR, code};
@@ -31,7 +32,7 @@ use shm_schema::{
     ProcessStatusV2, RequestKind, ServiceId, ServoRequestV1, ServoStateV3, SetpointV2,
     TrajgenHandoverV2, estop_seen, str_of,
 };
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// How the cell is run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -130,7 +131,7 @@ pub enum Life {
     /// Started; cyclic once its status says so.
     Running,
     /// Lost; starts again at the instant (its restart policy).
-    Restarting(Instant),
+    Restarting(Moment),
     /// Lost for good (policy `never`, or the restart limit); the reason.
     Down(String),
 }
@@ -138,6 +139,13 @@ pub enum Life {
 /// The supervisor's tick: its loop runs at least this often (at once when a child exits or
 /// a client connects), and so does its heartbeat.
 pub(crate) const TICK: std::time::Duration = std::time::Duration::from_millis(10);
+
+/// How long (wall time) a process on the virtual clock may take to join it or to finish a
+/// granted cycle before the clock leaves it out (the supervisor then finds it stalled).
+const CLOCK_WATCHDOG: Duration = Duration::from_secs(10);
+
+/// The virtual time that passes per look while the supervisor waits for processes to leave.
+const LEAVE_STEP: Duration = Duration::from_millis(5);
 
 /// What closing a cell left: its events as JSON, and why the close failed (a process that
 /// would not stop, resources left behind), if it did.
@@ -254,7 +262,7 @@ fn await_orphans(cfg: &Config, instance: &InstanceName) -> Result<(), RunError> 
             + cfg.supervisor.stop_timeout
             + 1.0,
     );
-    let start = Instant::now();
+    let start = Moment::now();
     loop {
         let orphans: Vec<(u32, String)> = ipc::live_nodes(instance)
             .unwrap_or_default()
@@ -295,7 +303,7 @@ pub(crate) struct Proc {
     pub(crate) latency: Option<Box<LatencyHistogramV1>>,
     pub(crate) exec_time: Option<Box<LatencyHistogramV1>>,
     /// The cycle count last seen and when it last advanced.
-    beat: (u64, Instant),
+    beat: (u64, Moment),
     pub(crate) life: Life,
     pub(crate) restarts: u32,
     /// Restarts since the operator last reset the e-stop (the limit's count).
@@ -311,7 +319,7 @@ pub(crate) struct Proc {
     /// Why it cannot listen (the last `listen-failed` event's text), until it does.
     pub(crate) listen_failed: Option<String>,
     /// When it was last started.
-    started: Instant,
+    started: Moment,
     status_sub: Sub<ProcessStatusV2>,
     latency_sub: Sub<LatencyHistogramV1>,
     exec_sub: Sub<LatencyHistogramV1>,
@@ -323,7 +331,7 @@ pub(crate) struct Cell {
     pub(crate) mode: Mode,
     pub(crate) children: Children,
     /// The first e-stop trigger since the last reset, and when it was seen.
-    pub(crate) estop: Option<(EstopV1, Instant)>,
+    pub(crate) estop: Option<(EstopV1, Moment)>,
     host: HostStateV1,
     pub(crate) sense_to_command: Option<Box<LatencyHistogramV1>>,
     /// Every event since the cell came up (run) or since the current job began (up).
@@ -369,6 +377,10 @@ pub(crate) struct Cell {
     /// The process table, in its order: what the supervisor keeps of each process, its
     /// ports among it (before the node: field order is drop order).
     pub(crate) procs: Vec<Proc>,
+    /// The cell's virtual clock (`[cell] clock = "virtual"`), stepped by the loop.
+    pub(crate) clock: Option<runtime::vclock::Coordinator>,
+    /// The user's e-stops scheduled on the virtual clock (`--fault AT:estop`): their instants.
+    scheduled_estops: Vec<u64>,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
     /// The loop's scheduling as the kernel granted it (`status`).
     sched: runtime::rt::RtReport,
@@ -383,6 +395,20 @@ impl Cell {
         let f = |e: ipc::IpcError| RunError::system(e.to_string());
         let node = ipc::node(&instance, "supervisor").map_err(f)?;
         let i = &instance;
+        // On the virtual clock from here on: every time the supervisor reads is the clock's.
+        let clock = match cfg.cell.clock {
+            cell_config::Clock::Wall => None,
+            cell_config::Clock::Virtual if cfg.ethercat.is_some() => {
+                return Err(RunError::Input(
+                    "a cell with [ethercat] runs on the wall clock: its bus cannot be stepped \
+                     by a virtual clock"
+                        .into(),
+                ));
+            }
+            cell_config::Clock::Virtual => {
+                Some(runtime::vclock::Coordinator::new(&node, i, CLOCK_WATCHDOG).map_err(f)?)
+            }
+        };
         let config_pub = Pub::new(&node, i, ServiceId::CellConfig).map_err(f)?;
         let command_pub = Pub::new(&node, i, ServiceId::MotionCommand).map_err(f)?;
         let control_pub = Pub::new(&node, i, ServiceId::MotionControl).map_err(f)?;
@@ -408,7 +434,7 @@ impl Cell {
                 status: None,
                 latency: None,
                 exec_time: None,
-                beat: (0, Instant::now()),
+                beat: (0, Moment::now()),
                 life: Life::Running,
                 restarts: 0,
                 streak: 0,
@@ -417,7 +443,7 @@ impl Cell {
                 flagged: false,
                 listening: None,
                 listen_failed: None,
-                started: Instant::now(),
+                started: Moment::now(),
                 exec_sub: Sub::new(&node, i, ServiceId::ExecTime(name), 1).map_err(f)?,
                 status_sub: Sub::new(&node, i, ServiceId::Status(name), 64).map_err(f)?,
                 latency_sub: Sub::new(&node, i, ServiceId::Latency(name), 1).map_err(f)?,
@@ -449,10 +475,14 @@ impl Cell {
             );
         }
         let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
+        let mut clock = clock;
         for (index, p) in cfg.process.iter().enumerate() {
-            children
+            let pid = children
                 .spawn(p, index, None, &instance)
                 .map_err(RunError::system)?;
+            if let Some(c) = clock.as_mut() {
+                c.expect(pid);
+            }
         }
         Ok(Self {
             instance,
@@ -494,6 +524,8 @@ impl Cell {
                 (cfg.supervisor.supervisor_timeout / 4.0).min(STALL_REPORTED_S),
             )),
             procs,
+            clock,
+            scheduled_estops: Vec::new(),
             _node: node,
             sched,
             _fifo: fifo,
@@ -583,7 +615,14 @@ impl Cell {
     /// Takes the events that arrived: printed on stderr as they happen (`run`), or logged
     /// (`up`).
     pub(crate) fn take_events(&mut self) {
+        // In the order they happened, whatever order their publishers' queues are read in
+        // (on the virtual clock: the same order every run).
+        let mut taken = Vec::new();
         while let Some(e) = self.events_sub.next() {
+            taken.push(e);
+        }
+        taken.sort_by_key(|e| (e.stamp_ns, e.source, e.seq));
+        for e in taken {
             let line = events::line(&e, &self.axes, self.t0_ns);
             match self.mode {
                 Mode::Run => crate::out::line(&line),
@@ -684,7 +723,10 @@ impl Cell {
         self.host.beat += 1;
         self.host.stamp_ns = runtime::time::now_ns();
         self.host_pub.send(&self.host);
-        if let Some(s) = self.stalls.beat() {
+        // On the virtual clock the wall time between two beats is the cell's work, not a stall.
+        if self.clock.is_none()
+            && let Some(s) = self.stalls.beat()
+        {
             let cause = s.cause();
             tracing::warn!(
                 "the supervisor's heartbeat paused {:.0} ms: {cause}",
@@ -708,7 +750,7 @@ impl Cell {
     /// Latches `e` (the first trigger since the last reset wins).
     fn latch(&mut self, e: EstopV1) {
         if self.estop.is_none() {
-            self.estop = Some((e, Instant::now()));
+            self.estop = Some((e, Moment::now()));
             self.host.estop = EstopState::Latched as u32;
             self.host.cause = e;
             let origin = EstopOrigin::from_wire(e.origin).map_or("?", EstopOrigin::name);
@@ -767,13 +809,13 @@ impl Cell {
         } else {
             let backoff =
                 cfg.supervisor.restart_backoff * f64::from(1u32 << self.procs[k].streak.min(6));
-            Life::Restarting(Instant::now() + Duration::from_secs_f64(backoff))
+            Life::Restarting(Moment::now() + Duration::from_secs_f64(backoff))
         };
         match &self.procs[k].life {
             Life::Down(why) => tracing::error!("{name} {why}"),
             Life::Restarting(at) => tracing::warn!(
                 "{name} lost ({why}); restarting in {:.2} s",
-                at.saturating_duration_since(Instant::now()).as_secs_f64()
+                at.saturating_duration_since(Moment::now()).as_secs_f64()
             ),
             Life::Running => {}
         }
@@ -785,9 +827,12 @@ impl Cell {
         let pid = self
             .children
             .spawn(&cfg.process[k], k, command.as_deref(), &self.instance)?;
+        if let Some(c) = self.clock.as_mut() {
+            c.expect(pid);
+        }
         self.procs[k].life = Life::Running;
-        self.procs[k].started = Instant::now();
-        self.procs[k].beat = (0, Instant::now());
+        self.procs[k].started = Moment::now();
+        self.procs[k].beat = (0, Moment::now());
         self.procs[k].status = None;
         self.procs[k].flagged = false;
         Ok(pid)
@@ -798,6 +843,15 @@ impl Cell {
     pub(crate) fn tick(&mut self, cfg: &Config) -> Vec<Incident> {
         let mut out = Vec::new();
         self.beat();
+        let now = runtime::time::now_ns();
+        if self.scheduled_estops.iter().any(|&at| at <= now) {
+            self.scheduled_estops.retain(|&at| at > now);
+            self.raise(
+                EstopOrigin::External,
+                code::ESTOP_RAISED,
+                &["scheduled e-stop"],
+            );
+        }
         self.reap(cfg, &mut out);
         self.update_connections();
         self.take_events();
@@ -865,7 +919,7 @@ impl Cell {
                 }
                 let b = &mut self.procs[k].beat;
                 if s.stats.cycles != b.0 {
-                    *b = (s.stats.cycles, Instant::now());
+                    *b = (s.stats.cycles, Moment::now());
                 }
                 self.procs[k].status = Some(s);
             }
@@ -926,7 +980,7 @@ impl Cell {
     fn restart_due(&mut self, cfg: &Config) {
         for k in 0..self.procs.len() {
             if let Life::Restarting(at) = self.procs[k].life
-                && Instant::now() >= at
+                && Moment::now() >= at
             {
                 self.procs[k].restarts += 1;
                 self.procs[k].streak += 1;
@@ -974,14 +1028,90 @@ impl Cell {
         }
     }
 
+    /// Schedules `faults` on the cell's virtual clock (refused on the wall clock, or for a
+    /// process the table does not have).
+    pub(crate) fn schedule(
+        &mut self,
+        cfg: &Config,
+        faults: &[crate::schedule::ScheduledFault],
+    ) -> Result<(), RunError> {
+        use crate::schedule::Fault;
+        if faults.is_empty() {
+            return Ok(());
+        }
+        let Some(clock) = self.clock.as_mut() else {
+            return Err(RunError::Input(
+                "--fault needs the virtual clock (--virtual-time, or [cell] clock = \"virtual\")"
+                    .into(),
+            ));
+        };
+        for f in faults {
+            let index = f.process_index(cfg).map_err(RunError::Input)?;
+            let at = runtime::vclock::EPOCH_NS + (f.at_s * 1e9).round() as u64;
+            match (&f.what, index) {
+                (Fault::Hold { ms, .. }, Some(k)) => {
+                    clock.hold(k as u32, at, at + (ms * 1e6).round() as u64);
+                }
+                (Fault::Kill { .. }, Some(k)) => clock.kill_at(k as u32, at),
+                _ => self.scheduled_estops.push(at),
+            }
+        }
+        Ok(())
+    }
+
+    /// On the virtual clock: runs it to the next multiple of `TICK` (every process' cycles up
+    /// to then granted, in order); on the wall clock nothing (the loop's wait sleeps).
+    pub(crate) fn advance_clock(&mut self) {
+        if self.clock.is_some() {
+            let now = runtime::time::now_ns();
+            let tick = TICK.as_nanos() as u64;
+            self.advance_clock_to((now / tick + 1) * tick);
+        }
+    }
+
+    /// Lets `d` pass: on the virtual clock, its processes run that long; on the wall clock,
+    /// nothing (the caller sleeps).
+    pub(crate) fn pass(&mut self, d: Duration) {
+        if self.clock.is_some() {
+            self.advance_clock_to(runtime::time::now_ns() + d.as_nanos() as u64);
+        }
+    }
+
+    fn advance_clock_to(&mut self, t: u64) {
+        let Some(mut c) = self.clock.take() else {
+            return;
+        };
+        // Processes starting meanwhile need the configuration's history.
+        c.advance_to(&self._node, t, &mut || self.update_connections());
+        let lost = c.take_lost();
+        self.clock = Some(c);
+        for lost in lost {
+            let name = self
+                .children
+                .iter()
+                .find(|r| r.pid() == lost.pid)
+                .map_or_else(|| format!("pid {}", lost.pid), |r| r.name.clone());
+            tracing::error!(
+                "virtual clock: {name} {} within {} s of wall time: left out of the clock",
+                match lost.why {
+                    runtime::vclock::LostWhy::NeverDone => "did not finish its cycle",
+                    runtime::vclock::LostWhy::NeverJoined => "did not join it",
+                },
+                CLOCK_WATCHDOG.as_secs()
+            );
+        }
+    }
+
     /// Runs `f` on the children with a tick that keeps the heartbeat going (every 10 ms), so
     /// that no process takes the supervisor for lost while it waits for one to stop.
     fn beating<R>(&mut self, f: impl FnOnce(&mut Children, &mut dyn FnMut()) -> R) -> R {
         let mut children = std::mem::take(&mut self.children);
-        let mut last = Instant::now();
+        let mut last = Moment::now();
         let r = f(&mut children, &mut || {
+            // On the virtual clock the processes leave on its time: it runs as the loop waits.
+            self.pass(LEAVE_STEP);
             if last.elapsed() >= TICK {
-                last = Instant::now();
+                last = Moment::now();
                 self.beat();
             }
         });

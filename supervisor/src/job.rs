@@ -15,6 +15,7 @@ use control_plane::figures::{AxisEnvelope, Figures};
 use control_plane::report::{Delay, RunReport};
 use indexmap::IndexMap;
 use motion_program::Commands;
+use runtime::time::Moment;
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::code;
 use shm_schema::motion::trajgen_fault;
@@ -23,7 +24,7 @@ use shm_schema::{
 };
 use std::collections::VecDeque;
 use std::io::IsTerminal;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The longest stretch of a program the supervisor records for its trace and figures (s):
 /// a program that runs for hours keeps bounded memory; the report says the trace was cut.
@@ -42,7 +43,7 @@ pub(crate) struct ServoSample {
 /// holds: bumpless).
 #[derive(Debug)]
 pub(crate) struct Enabling {
-    start: Instant,
+    start: Moment,
     timeout: Duration,
     sent_ns: Option<u64>,
     enabled_at: Option<u64>,
@@ -51,7 +52,7 @@ pub(crate) struct Enabling {
 impl Enabling {
     pub(crate) fn new(cfg: &Config) -> Self {
         Self {
-            start: Instant::now(),
+            start: Moment::now(),
             timeout: Duration::from_secs_f64(cfg.supervisor.startup_timeout),
             sent_ns: None,
             enabled_at: None,
@@ -142,12 +143,12 @@ pub(crate) struct Job {
     /// Fieldbus images: count, sum of delays, max delay (ns).
     images: (u64, u64, u64),
     done: Option<SetpointV2>,
-    done_at: Option<Instant>,
+    done_at: Option<Moment>,
     settled_at: Option<(u64, ServoStateV3)>,
     in_pos_since: Option<u64>,
     progress: Progress,
     /// An e-stop stops the motion: the job ends once the reactions complete.
-    ending: Option<Instant>,
+    ending: Option<Moment>,
     /// The newest setpoint of this program.
     pub(crate) last: Option<SetpointV2>,
     /// Build the figures at the end (someone asked for them: `--plot`).
@@ -332,7 +333,7 @@ impl Job {
             let from_servo = cell.is_servo_fault(&e);
             let stops_motion = cell.reacting("trajgen") || (cell.reacting("servo") && !from_servo);
             if stops_motion || (from_servo && at.elapsed() > 20 * TICK) {
-                self.ending = Some(Instant::now());
+                self.ending = Some(Moment::now());
                 return Ok(None);
             }
         }
@@ -391,7 +392,7 @@ impl Job {
         &mut self,
         cell: &mut Cell,
         cfg: &Config,
-        since: Instant,
+        since: Moment,
     ) -> Result<Option<Report>, RunError> {
         let limit = Duration::from_secs_f64(cfg.motion.estop_stop_time + 1.0);
         // The stop itself belongs on the figures: the axes braking to rest.
@@ -441,7 +442,7 @@ impl Job {
                 Some(MotionState::Done) if self.done.is_none() => {
                     self.keep(sp);
                     self.done = Some(sp);
-                    self.done_at = Some(Instant::now());
+                    self.done_at = Some(Moment::now());
                 }
                 _ => {}
             }
@@ -489,7 +490,7 @@ impl Job {
                 // polled it): the job ends as the e-stop's, once the reactions complete.
                 cell.poll_estop();
                 if cell.estop.is_some() {
-                    self.ending = Some(Instant::now());
+                    self.ending = Some(Moment::now());
                     return Ok(());
                 }
                 cell.take_events();
@@ -597,6 +598,7 @@ impl Job {
             }),
             processes: IndexMap::new(),
             sense_to_command_us: None,
+            virtual_time: None,
             events: Vec::new(),
             axes,
         };
@@ -711,7 +713,7 @@ struct Progress {
     tty: bool,
     total: String,
     lines: Vec<String>,
-    last: Option<Instant>,
+    last: Option<Moment>,
 }
 
 /// The most of a program line a progress line shows.
@@ -753,7 +755,7 @@ impl Progress {
         {
             return;
         }
-        self.last = Some(Instant::now());
+        self.last = Some(Moment::now());
         let text = self
             .lines
             .get(sp.line.saturating_sub(1) as usize)

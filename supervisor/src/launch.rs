@@ -13,8 +13,9 @@ use shm_schema::InstanceName;
 use std::os::fd::{AsFd, BorrowedFd, FromRawFd, OwnedFd};
 use std::os::unix::process::CommandExt;
 
+use runtime::time::Moment;
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A running process of the cell.
 #[derive(Debug)]
@@ -41,7 +42,7 @@ impl Running {
 struct Leaving {
     p: Running,
     /// SIGKILL after this.
-    deadline: Instant,
+    deadline: Moment,
     /// It was past its deadline and got SIGKILL.
     killed: bool,
 }
@@ -52,7 +53,7 @@ impl Leaving {
         let _ = killpg(Pid::from_raw(p.pid() as i32), Signal::SIGTERM);
         Self {
             p,
-            deadline: Instant::now() + timeout,
+            deadline: Moment::now() + timeout,
             killed: false,
         }
     }
@@ -78,7 +79,7 @@ impl Leaving {
                 })
             }
             Ok(None) => {
-                if Instant::now() >= self.deadline && !self.killed {
+                if Moment::now() >= self.deadline && !self.killed {
                     let _ = killpg(group, Signal::SIGKILL);
                     self.killed = true;
                 }

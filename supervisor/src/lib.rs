@@ -9,6 +9,7 @@ pub mod out;
 pub mod program;
 pub mod report;
 pub mod run;
+pub mod schedule;
 pub mod serve;
 pub mod swap;
 pub mod tune;

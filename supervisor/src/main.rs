@@ -108,6 +108,15 @@ enum Cmd {
         /// over the run, each process' wake-up latency histogram.
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// Run the cell on its virtual clock (`[cell] clock = "virtual"`, docs/virtual-time.md):
+        /// the same run every time, as fast as the CPUs allow.
+        #[arg(long)]
+        virtual_time: bool,
+        /// A fault at an instant of the virtual clock (repeatable): `AT:hold:PROCESS:MS` (no
+        /// cycle for MS ms from AT), `AT:kill:PROCESS` (SIGKILL at AT), `AT:estop` (the
+        /// user's e-stop); AT in seconds of the cell's clock, as the events' times.
+        #[arg(long = "fault", value_name = "AT:WHAT")]
+        faults: Vec<supervisor::schedule::ScheduledFault>,
     },
     /// Serve the cell in a browser: a 3D view from its kinematics, live, the program line,
     /// plots, the process table, e-stop / reset / start (docs/web.md). It attaches to the
@@ -170,6 +179,9 @@ enum Cmd {
         /// document on stdout (docs/schema/up.schema.json).
         #[arg(long)]
         json: bool,
+        /// Run the cell on its virtual clock (`[cell] clock = "virtual"`, docs/virtual-time.md).
+        #[arg(long)]
+        virtual_time: bool,
     },
     /// Stop a cell that is up: every process leaves safely, nothing of the instance is left.
     Down {
@@ -504,8 +516,14 @@ fn printed(
 
 /// `supervisor up`: the cell up until it is told to go down; with `json`, how it ended and
 /// its events as one document on stdout.
-fn up(config: Option<&Path>, instance: &str, record: Option<&Path>, json: bool) -> ExitCode {
-    let (ended, events) = supervisor::up::up(config, instance, record);
+fn up(
+    config: Option<&Path>,
+    instance: &str,
+    record: Option<&Path>,
+    json: bool,
+    virtual_time: bool,
+) -> ExitCode {
+    let (ended, events) = supervisor::up::up(config, instance, record, virtual_time);
     if json {
         let doc = control_plane::report::UpEnded {
             instance: instance.to_string(),
@@ -871,7 +889,14 @@ fn main() -> ExitCode {
             instance,
             record,
             json,
-        } => up(config.as_deref(), &instance, record.as_deref(), json),
+            virtual_time,
+        } => up(
+            config.as_deref(),
+            &instance,
+            record.as_deref(),
+            json,
+            virtual_time,
+        ),
         Cmd::Down { instance } => down(&instance),
         Cmd::Exec(args) => exec(&args),
         Cmd::Pause { instance, .. } => ctl_call(&instance, Request::Pause),
@@ -965,6 +990,8 @@ fn main() -> ExitCode {
             json,
             record,
             plot,
+            virtual_time,
+            faults,
         } => {
             let opts = RunOptions {
                 program,
@@ -974,6 +1001,8 @@ fn main() -> ExitCode {
                 record,
                 plot,
                 progress: true,
+                virtual_time,
+                faults,
             };
             match run(&opts) {
                 Ok(report) => printed(json, || report.to_json(), || report.human()),

@@ -117,6 +117,12 @@ impl Report {
                 r.waited_s
             );
         }
+        if let Some(v) = &r.virtual_time {
+            s += &format!(
+                "  virtual clock      {:.3} s of the cell in {:.3} s of wall time: {:.1} times real time ({} cycles granted)\n",
+                v.virtual_s, v.wall_s, v.speed_up, v.cycles
+            );
+        }
         s += &format!(
             "  settled            {:.3} s after the last setpoint\n",
             r.settle_s

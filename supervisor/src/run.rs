@@ -38,6 +38,10 @@ pub struct RunOptions {
     pub plot: Option<PathBuf>,
     /// Show progress on stderr.
     pub progress: bool,
+    /// Run on the virtual clock whatever the configuration says (`--virtual-time`).
+    pub virtual_time: bool,
+    /// Faults at instants of the virtual clock (`--fault`).
+    pub faults: Vec<crate::schedule::ScheduledFault>,
 }
 
 /// Reads and checks the program at `path` on `cfg`'s cell from the axes' configured start
@@ -57,7 +61,11 @@ pub fn check_program(
 
 /// Runs a program; see the module documentation.
 pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
-    let cfg = Config::load(opts.config.as_deref()).map_err(|e| RunError::Input(e.to_string()))?;
+    let mut cfg =
+        Config::load(opts.config.as_deref()).map_err(|e| RunError::Input(e.to_string()))?;
+    if opts.virtual_time {
+        cfg.cell.clock = cell_config::Clock::Virtual;
+    }
     let (program, _) = check_program(&cfg, &opts.program)?;
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
@@ -70,8 +78,21 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             writable(p, flag).map_err(RunError::Input)?;
         }
     }
+    if !opts.faults.is_empty() && cfg.cell.clock != cell_config::Clock::Virtual {
+        return Err(RunError::Input(
+            "--fault needs the virtual clock (--virtual-time, or [cell] clock = \"virtual\")"
+                .into(),
+        ));
+    }
+    for f in &opts.faults {
+        f.process_index(&cfg).map_err(RunError::Input)?;
+    }
     let (mut cell, mut server, recorder) =
         open_recorded(&cfg, instance, Mode::Run, opts.record.as_deref())?;
+    if let Err(e) = cell.schedule(&cfg, &opts.faults) {
+        let _ = cell.close(server);
+        return Err(e);
+    }
     let first = ProgramJob {
         program,
         progress: opts.progress,
@@ -92,6 +113,15 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     if let Ok(Some(summary)) = &recorded {
         crate::out::line(summary.trim_end());
     }
+    let virtual_time = cell.clock.as_ref().map(|c| {
+        let (virtual_s, wall_s) = (c.virtual_s(), c.wall_s());
+        control_plane::report::VirtualTime {
+            virtual_s,
+            wall_s,
+            speed_up: virtual_s / wall_s.max(1e-9),
+            cycles: c.grants(),
+        }
+    });
     let closed = cell.close(server);
     let mut report = match served.end {
         End::Program(r) => match *r {
@@ -125,6 +155,7 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
     };
     report.add_cell_figures(processes, latency_figures, sense_to_command.as_deref());
     report.run.events = closed.events;
+    report.run.virtual_time = virtual_time;
     if let Some(e) = closed.problem {
         return Err(e);
     }

@@ -35,10 +35,11 @@ use control_plane::{Failure, Refusal, Reply, Request};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use runtime::rt::sched_of;
 use runtime::signals;
+use runtime::time::Moment;
 use shm_schema::drive::servo_status as st;
 use shm_schema::event::code;
 use shm_schema::{ControlKind, EstopOrigin};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A program to run.
 pub(crate) struct ProgramJob {
@@ -87,19 +88,19 @@ const ESTOP_PATIENCE: Duration = Duration::from_secs(2);
 enum Pending {
     Reset {
         conn: ConnId,
-        since: Instant,
+        since: Moment,
     },
     /// The user's e-stop, until a process reports it latched.
     Estop {
         conn: ConnId,
         reason: String,
-        since: Instant,
+        since: Moment,
     },
     Control {
         conn: ConnId,
         seq: u64,
         kind: ControlKind,
-        since: Instant,
+        since: Moment,
     },
 }
 
@@ -118,7 +119,7 @@ impl Pending {
 struct Stopping {
     end: End,
     stage: StopStage,
-    since: Instant,
+    since: Moment,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -144,7 +145,7 @@ struct Running {
     job: Job,
     waiters: Vec<Waiter>,
     events_from: usize,
-    started: Instant,
+    started: Moment,
 }
 
 struct Loop<'a> {
@@ -279,8 +280,14 @@ pub(crate) fn serve(
 }
 
 impl Loop<'_> {
-    /// Sleeps until the next tick, a child's exit or a client's request.
-    fn wait(&self) {
+    /// Sleeps until the next tick, a child's exit or a client's request; on the virtual
+    /// clock, runs the cell to its next tick instead (a client's request or a child's exit
+    /// is taken at the tick: the same run every time).
+    fn wait(&mut self) {
+        if self.cell.clock.is_some() {
+            self.cell.advance_clock();
+            return;
+        }
         let server_fds = self.server.fds();
         let child_fds = self.cell.children.fds();
         let mut fds: Vec<PollFd> = server_fds
@@ -541,7 +548,7 @@ impl Loop<'_> {
         self.stopping = Some(Stopping {
             end,
             stage,
-            since: Instant::now(),
+            since: Moment::now(),
         });
     }
 
@@ -594,7 +601,7 @@ impl Loop<'_> {
                     let said_from = self.disable();
                     let s = self.stopping.as_mut()?;
                     s.stage = StopStage::Disabling { said_from };
-                    s.since = Instant::now();
+                    s.since = Moment::now();
                 }
                 None
             }
@@ -694,7 +701,7 @@ impl Loop<'_> {
             job,
             waiters,
             events_from: self.cell.events.len(),
-            started: Instant::now(),
+            started: Moment::now(),
         });
     }
 
@@ -763,7 +770,7 @@ impl Loop<'_> {
                 self.pending.push(Pending::Estop {
                     conn,
                     reason,
-                    since: Instant::now(),
+                    since: Moment::now(),
                 });
             }
             return;
@@ -1061,7 +1068,7 @@ impl Loop<'_> {
             conn,
             seq,
             kind: ControlKind::Speed,
-            since: Instant::now(),
+            since: Moment::now(),
         });
         None
     }
@@ -1078,7 +1085,7 @@ impl Loop<'_> {
             conn,
             seq,
             kind,
-            since: Instant::now(),
+            since: Moment::now(),
         });
         None
     }
@@ -1101,7 +1108,7 @@ impl Loop<'_> {
         tracing::info!("e-stop reset");
         self.pending.push(Pending::Reset {
             conn,
-            since: Instant::now(),
+            since: Moment::now(),
         });
         None
     }

@@ -26,8 +26,9 @@ use crate::cell::{Cell, GapMeter, Incident, TICK};
 use crate::job::Job;
 use cell_config::Config;
 use control_plane::Replaced;
+use runtime::time::Moment;
 use shm_schema::{ControlKind, Power, TrajgenHandoverV2};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A replacement in progress; see the module documentation.
 #[derive(Debug)]
@@ -43,29 +44,29 @@ pub(crate) struct Swap {
     /// The program trajgen carries through this swap (its name and id), if any.
     program: Option<(String, u32)>,
     old: Option<u32>,
-    start: Instant,
+    start: Moment,
     stage: Stage,
 }
 
 #[derive(Debug)]
 enum Stage {
     /// Brakes on: servo disables the drives before the process goes.
-    Disabling { since: Instant },
+    Disabling { since: Moment },
     /// Make before break: the new one started beside the old one; until it is cyclic.
-    Beside { new: u32, since: Instant },
+    Beside { new: u32, since: Moment },
     /// The old one told to stop: until it has left, then a few ticks of the image from the
     /// new one alone.
-    Alone { new: u32, since: Instant },
+    Alone { new: u32, since: Moment },
     /// On the motion path: the old one told to stop; until it has left, then the new one
     /// starts.
     Vacating { old: u32 },
     /// The old one gone and the new one started; until it is cyclic.
-    Replacing { new: u32, since: Instant },
+    Replacing { new: u32, since: Moment },
     /// trajgen during a program: until the path speed is 0 on the path.
-    Pausing { seq: u64, since: Instant },
+    Pausing { seq: u64, since: Moment },
     /// Until the old trajgen's handover record of the program (the newest seen).
     Recording {
-        since: Instant,
+        since: Moment,
         seen: Option<TrajgenHandoverV2>,
     },
     /// The old trajgen told to stop, the record taken; until it has left, then the new one
@@ -75,13 +76,13 @@ enum Stage {
     TakingOver {
         record: TrajgenHandoverV2,
         started_ns: u64,
-        since: Instant,
+        since: Moment,
     },
     /// The program's commands after the record's sent again, resumed; until trajgen took it.
     Resuming {
         record: TrajgenHandoverV2,
         seq: u64,
-        since: Instant,
+        since: Moment,
     },
 }
 
@@ -121,15 +122,15 @@ impl Swap {
             motion,
             program: job.map(|j| (j.name.clone(), j.program_id)),
             old: cell.children.get(k).map(|p| p.pid()),
-            start: Instant::now(),
+            start: Moment::now(),
             stage: Stage::Disabling {
-                since: Instant::now(),
+                since: Moment::now(),
             },
         };
         if swap {
             cell.set_command(k, command);
         }
-        let now = Instant::now();
+        let now = Moment::now();
         if s.program.is_some() {
             let seq = cell.motion_control(ControlKind::Pause);
             s.stage = Stage::Pausing { seq, since: now };
@@ -190,7 +191,7 @@ impl Swap {
         let stage = std::mem::replace(
             &mut self.stage,
             Stage::Disabling {
-                since: Instant::now(),
+                since: Moment::now(),
             },
         );
         match stage {
@@ -199,7 +200,7 @@ impl Swap {
             Stage::Alone { new, since } => {
                 // The ticks alone count from the old one's exit.
                 let gone = self.old.is_none_or(|old| !cell.children.is_leaving(old));
-                let since = if gone { since } else { Instant::now() };
+                let since = if gone { since } else { Moment::now() };
                 if !gone || since.elapsed() < 5 * TICK {
                     self.stage = Stage::Alone { new, since };
                     return Step::Going;
@@ -245,7 +246,7 @@ impl Swap {
     }
 
     /// Brakes on: until servo reports the drives disabled, then the process is replaced.
-    fn disabling(&mut self, cell: &mut Cell, cfg: &Config, t: Tick, since: Instant) -> Step {
+    fn disabling(&mut self, cell: &mut Cell, cfg: &Config, t: Tick, since: Moment) -> Step {
         let off = cell
             .last_servo
             .is_some_and(|s| s.power == Power::Disabled as u8);
@@ -271,7 +272,7 @@ impl Swap {
     }
 
     /// Make before break: until the new process is cyclic, then the old one stops.
-    fn beside(&mut self, cell: &mut Cell, t: Tick, new: u32, since: Instant) -> Step {
+    fn beside(&mut self, cell: &mut Cell, t: Tick, new: u32, since: Moment) -> Step {
         let k = self.k;
         let why = t.lost.or_else(|| {
             if cell.cyclic(k) {
@@ -303,19 +304,19 @@ impl Swap {
         }
         self.stage = Stage::Alone {
             new,
-            since: Instant::now(),
+            since: Moment::now(),
         };
         Step::Going
     }
 
     /// trajgen during a program: until the path speed is 0 on the path.
-    fn pausing(&mut self, cell: &mut Cell, t: Tick, seq: u64, since: Instant) -> Step {
+    fn pausing(&mut self, cell: &mut Cell, t: Tick, seq: u64, since: Moment) -> Step {
         let paused = cell
             .last_sp
             .is_some_and(|sp| sp.control_seq >= seq && sp.path_speed == 0.0);
         if t.lost.is_none() && paused {
             self.stage = Stage::Recording {
-                since: Instant::now(),
+                since: Moment::now(),
                 seen: None,
             };
             return Step::Going;
@@ -335,7 +336,7 @@ impl Swap {
         &mut self,
         cell: &mut Cell,
         t: Tick,
-        since: Instant,
+        since: Moment,
         seen: Option<TrajgenHandoverV2>,
     ) -> Step {
         let k = self.k;
@@ -384,7 +385,7 @@ impl Swap {
         self.stage = Stage::TakingOver {
             record,
             started_ns,
-            since: Instant::now(),
+            since: Moment::now(),
         };
         Step::Going
     }
@@ -398,7 +399,7 @@ impl Swap {
         t: Tick,
         record: TrajgenHandoverV2,
         started_ns: u64,
-        since: Instant,
+        since: Moment,
     ) -> Step {
         let k = self.k;
         let program_id = record.program_id;
@@ -431,7 +432,7 @@ impl Swap {
         self.stage = Stage::Resuming {
             record,
             seq,
-            since: Instant::now(),
+            since: Moment::now(),
         };
         Step::Going
     }
@@ -443,7 +444,7 @@ impl Swap {
         t: Tick,
         record: TrajgenHandoverV2,
         seq: u64,
-        since: Instant,
+        since: Moment,
     ) -> Step {
         if t.lost.is_none() && cell.last_sp.is_some_and(|sp| sp.control_seq >= seq) {
             cell.procs[self.k].restarts += 1;
@@ -477,7 +478,7 @@ impl Swap {
     fn replace(&self, cell: &mut Cell, cfg: &Config) -> Result<Stage, String> {
         let k = self.k;
         cell.set_handover(k, true);
-        let since = Instant::now();
+        let since = Moment::now();
         if !self.motion && self.old.is_some() {
             cell.ignore_statuses_of(k, self.old);
             let new = cell
@@ -500,7 +501,7 @@ impl Swap {
             .inspect_err(|_| self.undo(cell))?;
         Ok(Stage::Replacing {
             new,
-            since: Instant::now(),
+            since: Moment::now(),
         })
     }
 
@@ -573,7 +574,7 @@ struct Tick {
 }
 
 /// `Some(why)` once `limit` has passed since `since`.
-fn late(since: Instant, limit: Duration) -> Option<String> {
+fn late(since: Moment, limit: Duration) -> Option<String> {
     (since.elapsed() > limit).then(|| format!("not within {:.1} s", limit.as_secs_f64()))
 }
 

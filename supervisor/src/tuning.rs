@@ -7,10 +7,11 @@ use crate::error::RunError;
 use cell_config::Config;
 use control_plane::Failure;
 use control_plane::failure::TuningStage;
+use runtime::time::Moment;
 use serde::Serialize;
 use shm_schema::drive::servo_status as st;
 use shm_schema::{CommandKind, MAX_AXES, MotionCommandV2, MotionState, RequestKind, ServoStateV3};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// One recorded servo cycle of the axis.
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -120,7 +121,7 @@ pub(crate) struct Tuning {
     ramp: Option<f64>,
     stage: Stage,
     /// When the stage began: its patience counts from there.
-    since: Instant,
+    since: Moment,
     /// The axis' commanded position at rest before the step.
     start: f64,
     /// Servo's states from the step on.
@@ -164,7 +165,7 @@ impl Tuning {
             step,
             ramp,
             stage: Stage::Settling,
-            since: Instant::now(),
+            since: Moment::now(),
             start: 0.0,
             log: Vec::new(),
             samples: Vec::new(),
@@ -185,7 +186,7 @@ impl Tuning {
 
     fn to(&mut self, stage: Stage) {
         self.stage = stage;
-        self.since = Instant::now();
+        self.since = Moment::now();
     }
 
     /// One tick: reads what servo and trajgen published and moves on; `Some` at the end.

@@ -17,9 +17,10 @@ pub fn up(
     config: Option<&Path>,
     instance: &str,
     record: Option<&Path>,
+    virtual_time: bool,
 ) -> (Result<String, RunError>, Vec<Event>) {
     let mut events = Vec::new();
-    let ended = up_inner(config, instance, record, &mut events);
+    let ended = up_inner(config, instance, record, virtual_time, &mut events);
     (ended, events)
 }
 
@@ -27,9 +28,13 @@ fn up_inner(
     config: Option<&Path>,
     instance: &str,
     record: Option<&Path>,
+    virtual_time: bool,
     events: &mut Vec<Event>,
 ) -> Result<String, RunError> {
-    let cfg = Config::load(config).map_err(|e| RunError::Input(e.to_string()))?;
+    let mut cfg = Config::load(config).map_err(|e| RunError::Input(e.to_string()))?;
+    if virtual_time {
+        cfg.cell.clock = cell_config::Clock::Virtual;
+    }
     let instance = InstanceName::new(instance)
         .map_err(|e| RunError::Input(format!("--instance {instance:?}: {e}")))?;
     // An output that cannot be written is refused before anything starts.

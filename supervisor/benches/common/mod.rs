@@ -1,6 +1,22 @@
 //! What the supervisor's benchmarks share: their one option.
 
 use clap::{CommandFactory, FromArgMatches, Parser};
+use std::path::{Path, PathBuf};
+
+/// The repository's root.
+#[allow(dead_code)] // not every benchmark needs it
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A binary of the release build.
+pub fn binary(name: &str) -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"))
+        .join("release")
+        .join(name)
+}
 
 #[derive(Parser)]
 struct Options {

@@ -24,6 +24,7 @@ mod programs;
 mod recording;
 mod servo_layer;
 mod up;
+mod virtual_time;
 mod web;
 
 #[global_allocator]

@@ -1,0 +1,627 @@
+//! The cell's virtual clock: a barrier that no process runs ahead of (`docs/virtual-time.md`,
+//! the protocol in `shm_schema::clock`).
+//!
+//! [`Participant`] is a process' side: in a cell on the virtual clock its [`crate::cycle`]
+//! waits for a grant instead of sleeping until its deadline. [`Coordinator`] is the clock,
+//! owned and stepped by the supervisor's loop ([`Coordinator::advance_to`]): it grants the
+//! earliest deadline of every process that takes part, one process at a time, ties in the
+//! order of the process table, and moves on only once the process granted has reported its
+//! cycle done. Before it moves, every process the supervisor launched has joined (or exited)
+//! and every process that left has exited, so a start, a restart, a swap or a stop happens at
+//! the same virtual instant in every run. A process that does not report within the clock's
+//! wall-time watchdog is left out of the clock and reported ([`Lost`]).
+
+use crate::ipc::{Ipc, IpcError, Listener, Notifier, Pub, Sub};
+use crate::time;
+use iceoryx2::prelude::Node;
+use shm_schema::{ClockGrantV1, ClockReport, ClockReportV1, InstanceName, ServiceId};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Where a cell's virtual clock starts (ns): the same origin in every run, so that two runs
+/// stamp everything alike.
+pub const EPOCH_NS: u64 = 1_000_000_000;
+
+/// How long the clock waits, on the wall clock, between looks at a process that has not
+/// reported yet (whether it still exists).
+const LOOK_EVERY: Duration = Duration::from_millis(1);
+
+/// How often (wall time) the clock looks for a report that came without a notification (a
+/// process on stock iceoryx2 bindings, which cannot notify the cell's semaphore events) and
+/// whether the process it waits for still exists: a thread of the clock notifies its own
+/// wait this often. (iceoryx2's timed wait on a semaphore event would spin: it yields
+/// thousands of times before it sleeps, a CPU lost per cell on the virtual clock.)
+const REPORT_LOOK: Duration = Duration::from_micros(200);
+
+/// How long the clock looks for a granted cycle's report before it blocks (wall time).
+const SPIN_FOR: Duration = Duration::from_micros(50);
+
+/// How long (wall time) a process waits at set-up for where the clock stands.
+const JOIN_PATIENCE: Duration = Duration::from_secs(10);
+
+/// Why a process could not take part in the virtual clock.
+#[derive(Debug)]
+pub enum ClockError {
+    /// A port of the clock could not be opened.
+    Ipc(IpcError),
+    /// Nothing on `<i>/clock/grant`: the cell's supervisor runs no virtual clock.
+    NoClock(String),
+}
+
+impl std::fmt::Display for ClockError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Ipc(e) => write!(f, "the virtual clock: {e}"),
+            Self::NoClock(service) => write!(
+                f,
+                "the cell runs on the virtual clock but nothing is on {service}: is its \
+                 supervisor started with --virtual-time?"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for ClockError {}
+
+impl From<IpcError> for ClockError {
+    fn from(e: IpcError) -> Self {
+        Self::Ipc(e)
+    }
+}
+
+/// A process' side of the virtual clock.
+pub struct Participant {
+    pid: u32,
+    /// The process that launched this one (the supervisor), and whether it is gone: then no
+    /// grant will come, and the process runs its cycles on the wall clock's pace (its own
+    /// heartbeat watch then finds the supervisor lost and brings it to a safe stop).
+    parent: u32,
+    orphaned: bool,
+    index: u32,
+    seq: u64,
+    owes_report: bool,
+    grants: Sub<ClockGrantV1>,
+    report: Pub<ClockReportV1>,
+    ready: Notifier,
+    go: Listener,
+}
+
+impl std::fmt::Debug for Participant {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Participant")
+            .field("pid", &self.pid)
+            .field("index", &self.index)
+            .field("seq", &self.seq)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Participant {
+    /// Opens the clock's ports for the process at `index` of the process table and turns this
+    /// process to virtual time, at the instant where the clock stands. Set-up only.
+    pub fn new(node: &Node<Ipc>, instance: &InstanceName, index: u32) -> Result<Self, ClockError> {
+        let pid = std::process::id();
+        // Listening before joining: the clock's first grant finds the listener.
+        let go = Listener::new(node, instance, ServiceId::ClockGo(pid))?;
+        let grants = Sub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)?;
+        let report = Pub::<ClockReportV1>::new(node, instance, ServiceId::ClockReport)?;
+        let ready = Notifier::new(node, instance, ServiceId::ClockReportReady)?;
+        // Where the clock stands reaches a new subscriber with the clock's next look at its
+        // connections (it looks every millisecond while a launched process has not joined).
+        let start = Instant::now();
+        let at = loop {
+            if let Some(at) = grants.latest() {
+                break at;
+            }
+            if start.elapsed() > JOIN_PATIENCE {
+                return Err(ClockError::NoClock(
+                    instance.service(ServiceId::ClockGrant).to_string(),
+                ));
+            }
+            std::thread::sleep(LOOK_EVERY);
+        };
+        time::set_virtual_now(at.now_ns);
+        Ok(Self {
+            pid,
+            parent: std::os::unix::process::parent_id(),
+            orphaned: false,
+            index,
+            seq: 0,
+            owes_report: false,
+            grants,
+            report,
+            ready,
+            go,
+        })
+    }
+
+    fn send(&self, kind: ClockReport, next_ns: u64) {
+        self.report.send(&ClockReportV1 {
+            next_ns,
+            seq: self.seq,
+            pid: self.pid,
+            index: self.index,
+            kind: kind as u32,
+            reserved: 0,
+        });
+        self.ready.notify();
+    }
+
+    /// Takes part from the deadline `first_ns` on.
+    pub fn join(&mut self, first_ns: u64) {
+        self.send(ClockReport::Join, first_ns);
+    }
+
+    /// Reports the granted cycle done (if one was granted) with the next deadline `next_ns`,
+    /// then blocks until the clock grants the next cycle: its virtual instant. When the
+    /// supervisor is gone (its parent-death SIGTERM interrupted the wait and this process'
+    /// parent changed), no grant comes: the deadline is slept for on the wall clock instead,
+    /// time going on from the last grant (the heartbeat's watch then finds the supervisor
+    /// lost and the process comes to a safe stop).
+    ///
+    /// # Real-time
+    /// The cycle's one blocking wait (a futex) and the IPC calls; no allocation. Only a wait
+    /// a signal interrupted asks the kernel for the parent's pid.
+    pub fn wait(&mut self, next_ns: u64) -> u64 {
+        if self.owes_report {
+            self.send(ClockReport::Done, next_ns);
+            self.owes_report = false;
+        }
+        loop {
+            if self.orphaned {
+                let wait = next_ns.saturating_sub(time::now_ns());
+                std::thread::sleep(Duration::from_nanos(wait));
+                time::set_virtual_now(next_ns.max(time::now_ns()));
+                return time::now_ns();
+            }
+            // iceoryx2's timed wait on this event spins and sleeps by steps (its adaptive
+            // wait); the blocking one is a futex.
+            if !self.go.wait() {
+                self.orphaned = std::os::unix::process::parent_id() != self.parent;
+                continue;
+            }
+            if let Some(g) = self.grants.latest()
+                && g.pid == self.pid
+                && g.seq > self.seq
+            {
+                self.seq = g.seq;
+                self.owes_report = true;
+                time::set_virtual_now(g.now_ns);
+                return g.now_ns;
+            }
+        }
+    }
+
+    /// Leaves the clock (ending a granted cycle): the process exits.
+    pub fn leave(&mut self) {
+        self.send(ClockReport::Leave, 0);
+        self.owes_report = false;
+    }
+}
+
+/// A process the clock lost.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Lost {
+    /// Its pid.
+    pub pid: u32,
+    /// Why.
+    pub why: LostWhy,
+    /// The virtual instant it was lost at (ns).
+    pub at_ns: u64,
+}
+
+/// Why the clock lost a process.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LostWhy {
+    /// Granted a cycle, it did not report it done within the watchdog (wall time).
+    NeverDone,
+    /// Launched, it did not join within the watchdog (wall time).
+    NeverJoined,
+}
+
+/// A process held off its cycles from `from_ns` until `until_ns` (a stall on schedule).
+#[derive(Clone, Copy, Debug)]
+struct Hold {
+    index: u32,
+    from_ns: u64,
+    until_ns: u64,
+}
+
+/// A process killed at `at_ns`.
+#[derive(Clone, Copy, Debug)]
+struct Kill {
+    index: u32,
+    at_ns: u64,
+}
+
+#[derive(Debug)]
+struct Part {
+    pid: u32,
+    index: u32,
+    next_ns: u64,
+    go: Notifier,
+}
+
+/// The clock, stepped by its owner (the supervisor's loop).
+#[derive(Debug)]
+pub struct Coordinator {
+    /// Stops the thread that notifies `ready` every [`REPORT_LOOK`] (on drop).
+    looking: Arc<AtomicBool>,
+    instance: InstanceName,
+    grant: Pub<ClockGrantV1>,
+    reports: Sub<ClockReportV1>,
+    ready: Listener,
+    now: u64,
+    seq: u64,
+    parts: Vec<Part>,
+    expected: Vec<u32>,
+    leaving: Vec<u32>,
+    lost: Vec<Lost>,
+    watchdog: Duration,
+    wall_start: Instant,
+    grants: u64,
+    holds: Vec<Hold>,
+    kills: Vec<Kill>,
+}
+
+impl Coordinator {
+    /// A clock at [`EPOCH_NS`] for `instance`, published before any process starts; this
+    /// process (the supervisor) turns to virtual time. `watchdog`: how long (wall time) a
+    /// process may take to join or to finish a granted cycle before the clock leaves it out.
+    pub fn new(
+        node: &Node<Ipc>,
+        instance: &InstanceName,
+        watchdog: Duration,
+    ) -> Result<Self, IpcError> {
+        let ready = Listener::new(node, instance, ServiceId::ClockReportReady)?;
+        let reports = Sub::<ClockReportV1>::new(node, instance, ServiceId::ClockReport, 64)?;
+        let grant = Pub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant)?;
+        let looking = Arc::new(AtomicBool::new(true));
+        look_every(*instance, looking.clone())?;
+        time::set_virtual_now(EPOCH_NS);
+        let clock = Self {
+            looking,
+            instance: *instance,
+            grant,
+            reports,
+            ready,
+            now: EPOCH_NS,
+            seq: 0,
+            parts: Vec::new(),
+            expected: Vec::new(),
+            leaving: Vec::new(),
+            lost: Vec::new(),
+            watchdog,
+            wall_start: Instant::now(),
+            grants: 0,
+            holds: Vec::new(),
+            kills: Vec::new(),
+        };
+        clock.publish_now();
+        Ok(clock)
+    }
+
+    /// The virtual instant (ns).
+    pub fn now_ns(&self) -> u64 {
+        self.now
+    }
+
+    /// Virtual seconds since the clock started.
+    pub fn virtual_s(&self) -> f64 {
+        time::secs(self.now - EPOCH_NS)
+    }
+
+    /// Wall seconds since the clock started.
+    pub fn wall_s(&self) -> f64 {
+        self.wall_start.elapsed().as_secs_f64()
+    }
+
+    /// Cycles granted so far.
+    pub fn grants(&self) -> u64 {
+        self.grants
+    }
+
+    /// Processes taking part now.
+    pub fn participants(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// The processes lost since the last call.
+    pub fn take_lost(&mut self) -> Vec<Lost> {
+        std::mem::take(&mut self.lost)
+    }
+
+    /// Holds the process at `index` of the table off its cycles from `from_ns` until
+    /// `until_ns`: its deadlines in between are granted at `until_ns`, late, as a stall of
+    /// the host would let them run.
+    pub fn hold(&mut self, index: u32, from_ns: u64, until_ns: u64) {
+        self.holds.push(Hold {
+            index,
+            from_ns,
+            until_ns,
+        });
+    }
+
+    /// Kills (SIGKILL) the process at `index` of the table at `at_ns`, before any cycle of it
+    /// at or after that instant.
+    pub fn kill_at(&mut self, index: u32, at_ns: u64) {
+        self.kills.push(Kill { index, at_ns });
+    }
+
+    /// When `p` is granted its next deadline: later if a hold covers it.
+    fn effective(&self, p: &Part) -> u64 {
+        let mut t = p.next_ns;
+        for h in &self.holds {
+            if h.index == p.index && t >= h.from_ns && t < h.until_ns {
+                t = h.until_ns;
+            }
+        }
+        t
+    }
+
+    /// Kills the processes at `index` and waits (wall time, at most the watchdog) until they
+    /// have exited; they are out of the clock.
+    fn kill(&mut self, index: u32) {
+        let pids: Vec<u32> = (self.parts.iter())
+            .filter(|p| p.index == index)
+            .map(|p| p.pid)
+            .collect();
+        for pid in pids {
+            // SAFETY: plain system call on a pid that took part in the clock.
+            unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+            let start = Instant::now();
+            while !exited(pid) && start.elapsed() < self.watchdog {
+                std::thread::sleep(LOOK_EVERY);
+            }
+            self.parts.retain(|p| p.pid != pid);
+        }
+    }
+
+    /// Process `pid` was launched: the clock holds until it joins or exits.
+    pub fn expect(&mut self, pid: u32) {
+        if !self.expected.contains(&pid) {
+            self.expected.push(pid);
+        }
+    }
+
+    fn publish_now(&self) {
+        self.grant.send(&ClockGrantV1 {
+            now_ns: self.now,
+            seq: self.seq,
+            pid: 0,
+            reserved: 0,
+        });
+    }
+
+    fn set_now(&mut self, t: u64) {
+        self.now = self.now.max(t);
+        time::set_virtual_now(self.now);
+    }
+
+    /// Grants, in order, every deadline up to and including `t`, then stands at `t`.
+    /// Blocks (on the wall clock) until the processes launched have joined and those that
+    /// left have exited; a process that takes longer than the watchdog is left out and
+    /// reported by [`Self::take_lost`]. `waiting` runs every few milliseconds of wall time
+    /// while it waits for a process (the owner keeps its publishers' history delivered to
+    /// processes that are starting).
+    pub fn advance_to(&mut self, node: &Node<Ipc>, t: u64, waiting: &mut dyn FnMut()) {
+        self.settle(node, waiting);
+        loop {
+            self.absorb(node, None);
+            let due = (self.parts.iter().enumerate())
+                .map(|(k, p)| (self.effective(p), p.index, p.pid, k))
+                .filter(|&(at, ..)| at <= t)
+                .min();
+            // A kill due before the next grant comes first.
+            let horizon = due.map_or(t, |(at, ..)| at);
+            if let Some(k) = self.kills.iter().position(|k| k.at_ns <= horizon) {
+                let kill = self.kills.remove(k);
+                self.set_now(kill.at_ns);
+                self.kill(kill.index);
+                continue;
+            }
+            let Some((next, _, _, k)) = due else { break };
+            self.set_now(next);
+            self.seq += 1;
+            self.grants += 1;
+            let pid = self.parts[k].pid;
+            self.grant.send(&ClockGrantV1 {
+                now_ns: self.now,
+                seq: self.seq,
+                pid,
+                reserved: 0,
+            });
+            self.parts[k].go.notify();
+            self.await_report(node, pid, waiting);
+            // A process that left is waited for before the clock moves on.
+            self.settle(node, waiting);
+        }
+        self.set_now(t);
+        self.publish_now();
+    }
+
+    /// Takes every report; `awaiting` is the pid whose granted cycle the clock waits for:
+    /// true once it reported it done (or left).
+    fn absorb(&mut self, node: &Node<Ipc>, awaiting: Option<u32>) -> bool {
+        let mut done = false;
+        while let Some(r) = self.reports.next() {
+            match ClockReport::from_wire(r.kind) {
+                Some(ClockReport::Join) => {
+                    self.expected.retain(|&p| p != r.pid);
+                    if self.parts.iter().any(|p| p.pid == r.pid) {
+                        continue;
+                    }
+                    match Notifier::new(node, &self.instance, ServiceId::ClockGo(r.pid)) {
+                        Ok(go) => self.parts.push(Part {
+                            pid: r.pid,
+                            index: r.index,
+                            next_ns: r.next_ns,
+                            go,
+                        }),
+                        Err(e) => {
+                            tracing::error!("virtual clock: pid {} cannot be woken: {e}", r.pid);
+                        }
+                    }
+                }
+                Some(ClockReport::Done) => {
+                    if let Some(p) = self.parts.iter_mut().find(|p| p.pid == r.pid)
+                        && r.seq == self.seq
+                        && awaiting == Some(r.pid)
+                    {
+                        p.next_ns = r.next_ns;
+                        done = true;
+                    }
+                }
+                Some(ClockReport::Leave) => {
+                    self.parts.retain(|p| p.pid != r.pid);
+                    self.expected.retain(|&p| p != r.pid);
+                    if !self.leaving.contains(&r.pid) {
+                        self.leaving.push(r.pid);
+                    }
+                    if awaiting == Some(r.pid) {
+                        done = true;
+                    }
+                }
+                None => {}
+            }
+        }
+        done
+    }
+
+    /// Waits until process `pid`, granted a cycle, reports it done or leaves; leaves it out
+    /// of the clock if it exits or takes longer than the watchdog.
+    fn await_report(&mut self, node: &Node<Ipc>, pid: u32, waiting: &mut dyn FnMut()) {
+        let start = Instant::now();
+        // A cycle's work takes a few µs: looking for its report for a moment saves the
+        // wake-up of a blocking wait (about 10 µs here) on most grants.
+        while start.elapsed() < SPIN_FOR {
+            if self.absorb(node, Some(pid)) {
+                return;
+            }
+            std::hint::spin_loop();
+        }
+        loop {
+            if self.absorb(node, Some(pid)) {
+                return;
+            }
+            // Woken by a report, or by the look every REPORT_LOOK.
+            self.ready.wait();
+            if self.absorb(node, Some(pid)) {
+                return;
+            }
+            waiting();
+            if exited(pid) {
+                self.parts.retain(|p| p.pid != pid);
+                return;
+            }
+            if start.elapsed() > self.watchdog {
+                self.parts.retain(|p| p.pid != pid);
+                self.lost.push(Lost {
+                    pid,
+                    why: LostWhy::NeverDone,
+                    at_ns: self.now,
+                });
+                return;
+            }
+        }
+    }
+
+    /// Waits until every process launched has joined or exited and every process that left
+    /// has exited (each for at most the watchdog).
+    fn settle(&mut self, node: &Node<Ipc>, waiting: &mut dyn FnMut()) {
+        let start = Instant::now();
+        loop {
+            self.absorb(node, None);
+            if self.expected.is_empty() && self.leaving.is_empty() {
+                return;
+            }
+            self.grant.update_connections();
+            waiting();
+            self.expected.retain(|&p| !exited(p));
+            self.leaving.retain(|&p| !exited(p));
+            if start.elapsed() > self.watchdog {
+                for pid in std::mem::take(&mut self.expected) {
+                    self.lost.push(Lost {
+                        pid,
+                        why: LostWhy::NeverJoined,
+                        at_ns: self.now,
+                    });
+                }
+                self.leaving.clear();
+                return;
+            }
+            // A sleep, not a timed wait on the event (which would spin): processes start.
+            std::thread::sleep(LOOK_EVERY);
+        }
+    }
+}
+
+impl Drop for Coordinator {
+    fn drop(&mut self) {
+        self.looking.store(false, Ordering::Relaxed);
+    }
+}
+
+/// A thread (with a node of its own: iceoryx2's ports are single-threaded) that notifies the
+/// clock's report event every [`REPORT_LOOK`] while `on`.
+fn look_every(instance: InstanceName, on: Arc<AtomicBool>) -> Result<(), IpcError> {
+    let (made, ready) = std::sync::mpsc::channel();
+    let spawned = std::thread::Builder::new()
+        .name("clock-look".into())
+        .spawn(move || {
+            let notifier = crate::ipc::node(&instance, "supervisor-clock").and_then(|node| {
+                Notifier::new(&node, &instance, ServiceId::ClockReportReady).map(|n| (node, n))
+            });
+            let (_node, notifier) = match notifier {
+                Ok(n) => {
+                    let _ = made.send(Ok(()));
+                    n
+                }
+                Err(e) => {
+                    let _ = made.send(Err(e));
+                    return;
+                }
+            };
+            while on.load(Ordering::Relaxed) {
+                std::thread::sleep(REPORT_LOOK);
+                notifier.notify();
+            }
+        });
+    if let Err(e) = spawned {
+        return Err(IpcError {
+            what: "the virtual clock's look".into(),
+            reason: e.to_string(),
+        });
+    }
+    ready.recv().unwrap_or_else(|_| {
+        Err(IpcError {
+            what: "the virtual clock's look".into(),
+            reason: "its thread ended".into(),
+        })
+    })
+}
+
+/// Whether process `pid` has exited: a child of this process that exited and is not reaped
+/// yet counts (`waitid` without reaping it), another process when no process has the pid.
+fn exited(pid: u32) -> bool {
+    // SAFETY: a zeroed siginfo_t is valid; waitid writes it.
+    let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
+    // SAFETY: plain system call; WNOWAIT leaves the child waitable for its owner.
+    let rc = unsafe {
+        libc::waitid(
+            libc::P_PID,
+            pid as libc::id_t,
+            &mut info,
+            libc::WEXITED | libc::WNOHANG | libc::WNOWAIT,
+        )
+    };
+    if rc == 0 {
+        // SAFETY: waitid filled `info`; si_pid is 0 when the child has not exited.
+        return unsafe { info.si_pid() } != 0;
+    }
+    // Not a child of this process (or already reaped): gone when no process has the pid.
+    // SAFETY: signal 0 checks only that the process exists.
+    let rc = unsafe { libc::kill(pid as libc::pid_t, 0) };
+    rc != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH)
+}
