@@ -451,7 +451,9 @@ trait Topic {
     fn name(&self) -> &str;
     fn schema_name(&self) -> &'static str;
     fn schema(&self, axes: &[String]) -> Value;
-    /// Hands what arrived to `sink`.
+    /// Hands what arrived to `sink`: at most as many samples as the subscriber keeps (all
+    /// that can have waited when the call began); what arrives meanwhile waits for the next
+    /// call.
     fn drain(&mut self, sink: &mut Sink<'_>, axes: &[String], clock: Clock) -> Result<(), String>;
     fn counts(&self) -> (u64, u64);
 }
@@ -464,6 +466,8 @@ struct Chan<T: Message + Payload> {
     stamp: Option<u64>,
     /// When the recorder subscribed: no sample it reads was published before.
     since: u64,
+    /// The unread samples its subscriber keeps.
+    buffer: usize,
     written: u64,
     lost: u64,
 }
@@ -482,7 +486,9 @@ impl<T: Message + Payload> Topic for Chan<T> {
     }
 
     fn drain(&mut self, sink: &mut Sink<'_>, axes: &[String], clock: Clock) -> Result<(), String> {
-        while let Some(m) = self.sub.next() {
+        // Bounded: a topic published faster than the recorder reads it (a starved CPU) would
+        // hold it here for good, its stop and its other topics waiting.
+        for m in std::iter::from_fn(|| self.sub.next()).take(self.buffer) {
             // A number lower than the last (a restarted process) starts the count again.
             if let Some((stream, seq)) = m.seq()
                 && let Some(prev) = self.last.insert(stream, seq)
@@ -524,6 +530,7 @@ fn chan<T: Message + Payload>(
         last: HashMap::new(),
         stamp: None,
         since: runtime::time::now_ns(),
+        buffer,
         written: 0,
         lost: 0,
     }))
@@ -960,9 +967,23 @@ impl Source {
             .collect()
     }
 
-    /// Hands every message that arrived to `sink(k, log time, JSON)`, `k` its topic's index.
+    /// Hands every message that arrived to `sink(k, log time, JSON)`, `k` its topic's index;
+    /// per topic at most what its subscriber keeps (a topic published faster than it is read
+    /// leaves the rest for the next call: a call always ends).
     pub fn drain(&mut self, sink: &mut SourceSink<'_>) -> Result<(), String> {
+        self.drain_until(sink, &|| false)
+    }
+
+    /// [`Source::drain`], ending before the next topic once `stop` says so.
+    fn drain_until(
+        &mut self,
+        sink: &mut SourceSink<'_>,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<(), String> {
         for (k, c) in self.chans.iter_mut().enumerate() {
+            if stop() {
+                break;
+            }
             c.drain(&mut |t, data| sink(k, t, data), &self.axes, self.clock)?;
         }
         Ok(())
@@ -1002,8 +1023,9 @@ pub fn record(
     ready(out.path());
     let began = Instant::now();
     let ended = loop {
+        // A stop ends the pass: what is left of it is the last drain's.
         source
-            .drain(&mut |k, t, data| out.write(k, t, data))
+            .drain_until(&mut |k, t, data| out.write(k, t, data), stop)
             .map_err(f)?;
         if stop() {
             break "stopped".to_string();
@@ -1017,7 +1039,8 @@ pub fn record(
         out.maybe_rotate().map_err(f)?;
         std::thread::sleep(Duration::from_millis(5));
     };
-    // What arrived meanwhile, then the index and the footer.
+    // What arrived meanwhile (per topic at most what its subscriber keeps: what arrives
+    // after the stop does not hold it), then the index and the footer.
     source
         .drain(&mut |k, t, data| out.write(k, t, data))
         .map_err(f)?;

@@ -305,6 +305,16 @@ fn a_recording_onto_a_full_disk_says_so_and_fails_its_command() {
     });
 }
 
+/// Whether process `pid` is stopped (a SIGSTOP sent to it takes effect once it runs: a
+/// process waiting for a CPU is not stopped yet, and a SIGTERM sent meanwhile is taken
+/// first, the lower number, by its handler).
+fn is_stopped(pid: i32) -> bool {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    // `PID (COMM) STATE …`: the state follows the last parenthesis.
+    stat.rsplit_once(')')
+        .is_some_and(|(_, rest)| rest.trim_start().starts_with('T'))
+}
+
 /// Whether process `pid` has SIGTERM pending (it is stopped: it takes it once continued).
 fn sigterm_pending(pid: i32) -> bool {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
@@ -332,6 +342,11 @@ fn the_cell_answers_and_beats_while_its_recorder_finishes_its_file() {
         assert_eq!(recorder.len(), 1, "one recorder: {recorder:?}");
         let pid = nix::unistd::Pid::from_raw(recorder[0]);
         nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).expect("SIGSTOP");
+        let start = Instant::now();
+        while !is_stopped(recorder[0]) {
+            assert!(start.elapsed() < WATCHDOG, "the recorder never stopped");
+            std::thread::sleep(Duration::from_millis(5));
+        }
         let down = up.spawn(&["down"]);
         // The drives disabled, the supervisor has asked the recorder to end.
         let start = Instant::now();
@@ -377,9 +392,11 @@ fn the_cell_answers_and_beats_while_its_recorder_finishes_its_file() {
                 .status
                 .success()
         );
-        let (_, events) = up.ended_events();
+        let (log, events) = up.ended_events();
         let errors = crate::up::errors(&events);
         assert!(errors.is_empty(), "{errors:#?}");
+        // The recorder finished its file itself (`up` only logs a recording that failed).
+        assert!(!log.contains("the recording failed"), "{log}");
         // The file is whole: its summary (the index), read back.
         let read = read_back(&[file]);
         assert!(
