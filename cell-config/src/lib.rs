@@ -44,6 +44,10 @@ pub struct CellMeta {
     /// (`docs/virtual-time.md`; `supervisor run --virtual-time` sets it too).
     #[serde(default)]
     pub clock: Clock,
+    /// On the virtual clock, at most this many virtual seconds per wall second; 0 as fast as
+    /// the CPUs allow. Default: 0 for `run`, 1 (real time) for `up`, whose clients watch it.
+    #[serde(default)]
+    pub pace: Option<f64>,
 }
 
 /// `[cell] clock`: which clock the cell's processes wait on.
@@ -481,6 +485,7 @@ impl Config {
         found.extend(kinematics::validate(&self.kinematics, &self.axis));
         found.extend(modbus::validate(&self.modbus));
         found.extend(self.clock_problem());
+        found.extend(self.pace_problem());
         match &self.ethercat {
             Some(bus) => {
                 let drives_period = self.process_named("drives").map(Process::period_s);
@@ -528,6 +533,21 @@ impl Config {
 
     /// `[cell] clock = "virtual"` with a bus that cannot be stepped: an EtherCAT bus (real or
     /// emulated) runs on the wire's time, the cell stays on the wall clock.
+    fn pace_problem(&self) -> Option<Problem> {
+        self.cell
+            .pace
+            .filter(|p| !(p.is_finite() && *p >= 0.0))
+            .map(|p| {
+                (
+                    vec![Seg::Key("cell"), Seg::Key("pace")],
+                    format!(
+                        "pace = {p}: virtual seconds per wall second, 0 (as fast as the CPUs \
+                         allow) or more"
+                    ),
+                )
+            })
+    }
+
     fn clock_problem(&self) -> Option<Problem> {
         (self.cell.clock == Clock::Virtual && self.ethercat.is_some()).then(|| {
             (

@@ -53,7 +53,8 @@ fn bring_up(port: u16) -> Cell {
     )
     .expect("users");
     std::fs::set_permissions(&users, std::fs::Permissions::from_mode(0o600)).expect("chmod");
-    let cell = integration_tests::default_cell()
+    // The wall clock: the benchmark measures the real-time processes' wake-up latency.
+    let cell = integration_tests::wall_cell()
         .replace("listen = \"127.0.0.1:1502\"", "listen = \"127.0.0.1:0\"")
         + &format!(
             "\n[[process]]\nname = \"gateway\"\ncommand = [\"gateway\", \"--instance\", \"{{instance}}\"]\n\

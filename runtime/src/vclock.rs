@@ -263,6 +263,7 @@ pub struct Coordinator {
     grants: u64,
     holds: Vec<Hold>,
     kills: Vec<Kill>,
+    pace: f64,
 }
 
 impl Coordinator {
@@ -297,6 +298,7 @@ impl Coordinator {
             grants: 0,
             holds: Vec::new(),
             kills: Vec::new(),
+            pace: 0.0,
         };
         clock.publish_now();
         Ok(clock)
@@ -330,6 +332,16 @@ impl Coordinator {
     /// The processes lost since the last call.
     pub fn take_lost(&mut self) -> Vec<Lost> {
         std::mem::take(&mut self.lost)
+    }
+
+    /// At most `pace` virtual seconds per wall second from now on (0: as fast as the CPUs
+    /// allow): [`Self::advance_to`] then sleeps until the wall clock has caught up with it.
+    pub fn set_pace(&mut self, pace: f64) {
+        self.pace = if pace.is_finite() && pace > 0.0 {
+            pace
+        } else {
+            0.0
+        };
     }
 
     /// Holds the process at `index` of the table off its cycles from `from_ns` until
@@ -439,6 +451,12 @@ impl Coordinator {
         }
         self.set_now(t);
         self.publish_now();
+        if self.pace > 0.0 {
+            let due = Duration::from_secs_f64(self.virtual_s() / self.pace);
+            if let Some(ahead) = due.checked_sub(self.wall_start.elapsed()) {
+                std::thread::sleep(ahead);
+            }
+        }
     }
 
     /// Takes every report; `awaiting` is the pid whose granted cycle the clock waits for:
@@ -448,7 +466,10 @@ impl Coordinator {
         while let Some(r) = self.reports.next() {
             match ClockReport::from_wire(r.kind) {
                 Some(ClockReport::Join) => {
-                    self.expected.retain(|&p| p != r.pid);
+                    // A process launched through a wrapper (`sh -c`, a launcher that forks)
+                    // joins from a child of the pid launched.
+                    let parent = parent_of(r.pid);
+                    self.expected.retain(|&p| p != r.pid && Some(p) != parent);
                     if self.parts.iter().any(|p| p.pid == r.pid) {
                         continue;
                     }
@@ -600,6 +621,14 @@ fn look_every(instance: InstanceName, on: Arc<AtomicBool>) -> Result<(), IpcErro
             reason: "its thread ended".into(),
         })
     })
+}
+
+/// The parent of process `pid` (`/proc/<pid>/stat`'s fourth field), if it still exists.
+fn parent_of(pid: u32) -> Option<u32> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // After the command's name in parentheses (which may hold anything): state, then ppid.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    rest.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// Whether process `pid` has exited: a child of this process that exited and is not reaped

@@ -90,7 +90,7 @@ fn main() {
     let dir = std::env::temp_dir().join(format!("rtc-virtual-time-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let config = dir.join("cell.toml");
-    std::fs::write(&config, integration_tests::default_cell()).expect("write config");
+    std::fs::write(&config, integration_tests::wall_cell()).expect("write config");
     let axes = 3;
     let (mut wall_runs, mut virtual_runs, mut diffs) = (Vec::new(), Vec::new(), Vec::new());
     for round in 0..rounds {

@@ -406,7 +406,14 @@ impl Cell {
                 ));
             }
             cell_config::Clock::Virtual => {
-                Some(runtime::vclock::Coordinator::new(&node, i, CLOCK_WATCHDOG).map_err(f)?)
+                let mut c =
+                    runtime::vclock::Coordinator::new(&node, i, CLOCK_WATCHDOG).map_err(f)?;
+                // `run` as fast as the CPUs allow, `up` (watched by its clients) in real time.
+                c.set_pace(cfg.cell.pace.unwrap_or(match mode {
+                    Mode::Run => 0.0,
+                    Mode::Up => 1.0,
+                }));
+                Some(c)
             }
         };
         let config_pub = Pub::new(&node, i, ServiceId::CellConfig).map_err(f)?;

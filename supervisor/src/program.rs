@@ -268,10 +268,8 @@ impl Validation {
 
     /// The prediction once it is done. (A panic in it aborts the supervisor, as any panic of
     /// ours does: `runtime::abort_on_panic`.)
-    /// On the virtual clock it is waited for: a validation takes no virtual time, so a
-    /// program starts at the same instant in every run.
     pub(crate) fn done(&mut self) -> Option<Result<Predicted, RunError>> {
-        if !runtime::time::is_virtual() && !self.thread.as_ref()?.is_finished() {
+        if !self.thread.as_ref()?.is_finished() {
             return None;
         }
         let thread = self.thread.take()?;

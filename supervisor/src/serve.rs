@@ -282,9 +282,11 @@ pub(crate) fn serve(
 impl Loop<'_> {
     /// Sleeps until the next tick, a child's exit or a client's request; on the virtual
     /// clock, runs the cell to its next tick instead (a client's request or a child's exit
-    /// is taken at the tick: the same run every time).
+    /// is taken at the tick: the same run every time), except while a program is validated:
+    /// a validation takes no virtual time (the program starts at the same instant in every
+    /// run), the clock stands and the loop waits as on the wall clock, answering its clients.
     fn wait(&mut self) {
-        if self.cell.clock.is_some() {
+        if self.cell.clock.is_some() && self.validating.is_none() {
             self.cell.advance_clock();
             return;
         }

@@ -243,14 +243,40 @@ pub fn same_motion_time(a: f64, b: f64) -> bool {
 
 /// The default cell's configuration (`examples/gantry-uba.toml`) as text, its Modbus server
 /// on any free port (the tests run side by side; only the test of the embedded default itself
-/// listens on its 1502).
+/// listens on its 1502). Still on the wall clock: the tests of the cell's logic move to
+/// [`virtual_cell_toml`] as the tools that stamp on the wall clock (`supervisor io`, the
+/// recorder, Foxglove) learn the cell's clock; a test of timing takes [`wall_cell`].
 pub fn default_cell() -> String {
     default_cell_toml().to_string()
 }
 
 /// [`default_cell`] to edit.
 pub fn default_cell_toml() -> CellToml {
+    wall_cell_toml()
+}
+
+/// The default cell on the virtual clock at real-time pace (`[cell] clock = "virtual"`,
+/// `pace = 1`, docs/virtual-time.md): a stall of the host delays the cell's time instead of
+/// making its processes late.
+pub fn virtual_cell_toml() -> CellToml {
+    wall_cell_toml()
+        .add("cell.clock", "virtual")
+        .add("cell.pace", 1.0)
+}
+
+/// The default cell as [`default_cell`] has it, on the wall clock: for a test of timing.
+pub fn wall_cell() -> String {
+    wall_cell_toml().to_string()
+}
+
+/// [`wall_cell`] to edit.
+pub fn wall_cell_toml() -> CellToml {
     CellToml::example("gantry-uba.toml").set("modbus.listen", "127.0.0.1:0")
+}
+
+/// [`wall_cell`] written into a scratch file of `test`.
+pub fn wall_cell_file(test: &str) -> PathBuf {
+    scratch(test, "wall-cell.toml", &wall_cell())
 }
 
 /// The seed's triangle at a fifth of its size, from and back to its start (40, 40): the same
@@ -336,12 +362,12 @@ pub fn with_stall_room(src: &str) -> String {
         .to_string()
 }
 
-/// The default cell with the machine and servo at `period_us`, their phases scaled (a tenth
+/// The default cell on the wall clock with the machine and servo at `period_us`, their phases scaled (a tenth
 /// and two fifths of the period, as 100 µs and 400 µs are of 1 ms), and the thread offset
 /// detector's share of the period scaled so that it counts the same wake-up latency (the
 /// host's stalls do not shrink with the period).
 pub fn cell_at_rate(period_us: u64) -> String {
-    at_rate(&default_cell(), period_us)
+    at_rate(&wall_cell(), period_us)
 }
 
 /// `src` (a cell of the default's shape) with the drives and servo at `period_us`, as

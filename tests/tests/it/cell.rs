@@ -227,7 +227,7 @@ fn motion_time_holds_with_both_cores_loaded() {
         let out = run_with_watchdog(
             supervisor()
                 .args(["run", "--json", "--instance", &inst, "--config"])
-                .arg(integration_tests::default_cell_file("loaded"))
+                .arg(integration_tests::wall_cell_file("loaded"))
                 .arg(&prog),
             WATCHDOG,
         );

@@ -482,7 +482,7 @@ fn patient_config(test: &str) -> std::path::PathBuf {
     // The stall is for servo's own rules to catch, not for the supervisor's heartbeat (either
     // way: a supervisor held off a CPU by the tests beside it stops no process) or the
     // health detectors (tested on their own in `health`).
-    integration_tests::default_cell_toml()
+    integration_tests::wall_cell_toml()
         .set("supervisor.heartbeat_timeout", 5.0)
         .set("supervisor.supervisor_timeout", 2.0)
         .set(

@@ -104,7 +104,7 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
         // The supervisor's heartbeat watch is made slower than the detector, so the detector is
         // what catches the stall; nor do the processes take a supervisor held off a CPU by
         // the tests beside it for lost.
-        let cfg = integration_tests::default_cell_toml()
+        let cfg = integration_tests::wall_cell_toml()
             .set("supervisor.heartbeat_timeout", 30.0)
             .set("supervisor.supervisor_timeout", 2.0)
             .write("estop-stall", "cell.toml");

@@ -1077,7 +1077,7 @@ fn overruns(s: &serde_json::Value) -> [u64; 2] {
 #[test]
 fn an_estop_from_the_command_line_costs_the_real_time_processes_no_overrun() {
     integration_tests::wall_clock(|| {
-        let up = Up::default_cell("estop-cost");
+        let up = Up::on_the_wall_clock("estop-cost");
         // The first one latches it; the rest find it latched, as in the campaign.
         let said = up.ok(&["estop", "--reason", "cost 0"]);
         assert!(said.contains("e-stop raised"), "{said}");

@@ -228,7 +228,7 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
 fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
     integration_tests::wall_clock(|| {
         let test = "ops-stall";
-        let up = Up::default_cell(test);
+        let up = Up::on_the_wall_clock(test);
         signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
         let s = up.until("stall found, iobridge restarted", |s| {
             latched(s)
@@ -566,7 +566,7 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
         // on a busy host, which is not what this test is about), and the processes' watch of
         // the supervisor too.
         let test = "ops-iostall";
-        let cfg = integration_tests::default_cell_toml()
+        let cfg = integration_tests::wall_cell_toml()
             .set("supervisor.heartbeat_timeout", 30.0)
             .set("supervisor.supervisor_timeout", 2.0)
             .set(

@@ -47,6 +47,15 @@ impl Up {
         Self::start(test, &cell(test, &[]))
     }
 
+    /// [`Up::default_cell`] on the wall clock: for a test of timing (stalls, overruns).
+    pub(crate) fn on_the_wall_clock(test: &str) -> Self {
+        let cfg = integration_tests::with_stall_room(&integration_tests::wall_cell());
+        Self::start(
+            test,
+            &integration_tests::scratch(test, "wall-cell.toml", &cfg),
+        )
+    }
+
     /// [`Up::start`] in network namespace `netns` (every command of the test then runs
     /// there too).
     pub(crate) fn start_in(test: &str, cfg: &Path, netns: Option<&str>) -> Self {

@@ -40,7 +40,7 @@ fn run_virtual(
     let inst = instance(&format!("{test}-{run}"));
     let trace = scratch(test, &format!("{run}.csv"), "");
     let mut cell =
-        integration_tests::default_cell_toml().set("modbus.listen", format!("127.0.0.1:{port}"));
+        integration_tests::wall_cell_toml().set("modbus.listen", format!("127.0.0.1:{port}"));
     let mut cmd = supervisor();
     cmd.args(["run", "--json", "--instance", &inst]);
     match asked {
@@ -138,7 +138,7 @@ fn an_ethercat_cell_on_the_virtual_clock_is_refused_naming_the_key() {
 fn a_python_iobridge_polling_the_virtual_clock_takes_part_in_the_seed_triangle() {
     integration_tests::require_python_iceoryx2();
     let test = "vt-python";
-    let cfg = integration_tests::with_python_iobridge(integration_tests::default_cell_toml())
+    let cfg = integration_tests::with_python_iobridge(integration_tests::wall_cell_toml())
         .write(test, "cell.toml");
     let inst = instance(test);
     let out = run_with_watchdog(
@@ -184,7 +184,7 @@ fn run_failing_with(test: &str, run: &str, fault: &str) -> control_plane::report
         supervisor()
             .args(["run", "--virtual-time", "--json", "--instance", &inst])
             .args(["--fault", fault, "--config"])
-            .arg(integration_tests::default_cell_file(test))
+            .arg(integration_tests::wall_cell_file(test))
             .arg(examples().join("triangle.prog")),
         WATCHDOG,
     );
@@ -274,4 +274,70 @@ fn a_held_trajgen_is_met_by_servo_at_the_same_instants_every_run() {
         seen.push((stale, overrun, jump));
     }
     assert_eq!(seen[0], seen[1]);
+}
+
+/// While a program is validated the virtual clock stands (a validation takes no virtual
+/// time) but the supervisor goes on answering: `status` says what it validates, a second
+/// program is refused, and `down` ends the validation.
+#[test]
+fn the_virtual_clock_stands_while_a_program_is_validated_and_the_cell_answers() {
+    use crate::up::Up;
+    let test = "vt-validation";
+    let up = Up::start(
+        test,
+        &integration_tests::virtual_cell_toml().write(test, "cell.toml"),
+    );
+    // 23 hours of motion without a loop: seconds of validation, ended by `down`.
+    let mut src = String::from("MOVE(40,40,0)\n");
+    for k in 0..23 {
+        src += &format!("MOVE({},40,0,T=3600)\n", if k % 2 == 0 { 140 } else { 40 });
+    }
+    src += "END\n";
+    let prog = scratch(test, "long.prog", &src);
+    let mut exec = integration_tests::Reaped::spawn(
+        supervisor()
+            .args(["exec"])
+            .arg(&prog)
+            .args(["--instance", &up.inst])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null()),
+        "exec",
+    );
+    let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
+    let status = || match control_plane::channel::call(&instance, &control_plane::Request::Status) {
+        Ok(control_plane::Reply::Status(s)) => s,
+        other => panic!("status: {other:?}"),
+    };
+    let servo_cycles = |s: &control_plane::status::Status| s.processes["servo"].cycles;
+    let start = std::time::Instant::now();
+    let first = loop {
+        let s = status();
+        if s.supervisor.validating.is_some() {
+            break s;
+        }
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "the program was never validated"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let busy = up.refused(&[
+        "exec",
+        examples().join("triangle.prog").to_str().expect("path"),
+    ]);
+    assert!(busy.contains("long.prog is being validated"), "{busy}");
+    std::thread::sleep(Duration::from_millis(200));
+    let second = status();
+    assert!(
+        second.supervisor.validating.is_some(),
+        "the validation ended before the test could look"
+    );
+    // A status is read once per supervisor tick; the clock stands, so no cycle ran between.
+    assert_eq!(
+        servo_cycles(&first),
+        servo_cycles(&second),
+        "the cell's clock moved while the program was validated"
+    );
+    up.down();
+    let _ = exec.wait();
 }
