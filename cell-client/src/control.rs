@@ -73,12 +73,17 @@ fn failed(e: ipc::IpcError) -> ControlError {
 }
 
 /// The configuration the running cell published (its axes and processes, not a file's).
+/// On a cell on the virtual clock, this tool's time becomes the cell's (where its clock
+/// stands): what it stamps and the stamps it waits for are then on one clock.
 fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV6, ControlError> {
     let config =
         Sub::<CellConfigV6>::new(node, instance, ServiceId::CellConfig, 1).map_err(failed)?;
     let start = Instant::now();
     loop {
         if let Some(c) = config.latest() {
+            if c.clock == shm_schema::CellClock::Virtual as u32 {
+                on_the_cells_clock(node, instance)?;
+            }
             return Ok(c);
         }
         if start.elapsed() > PATIENCE {
@@ -90,6 +95,28 @@ fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV
             )));
         }
         std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Turns this tool to the virtual clock of `instance`, at the instant where it stands (the
+/// clock's newest grant, which it publishes every tick).
+fn on_the_cells_clock(node: &Node<Ipc>, instance: &InstanceName) -> Result<(), ControlError> {
+    let grants = Sub::<shm_schema::ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)
+        .map_err(failed)?;
+    let start = Instant::now();
+    loop {
+        if let Some(g) = grants.latest() {
+            runtime::time::set_virtual_now(g.now_ns);
+            return Ok(());
+        }
+        if start.elapsed() > PATIENCE {
+            return Err(ControlError::Failed(format!(
+                "instance {instance} runs on the virtual clock, but its clock said nothing \
+                 within {} s",
+                PATIENCE.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(2));
     }
 }
 

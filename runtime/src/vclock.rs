@@ -16,7 +16,7 @@ use crate::time;
 use iceoryx2::prelude::Node;
 use shm_schema::{ClockGrantV1, ClockReport, ClockReportV1, InstanceName, ServiceId};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// Where a cell's virtual clock starts (ns): the same origin in every run, so that two runs
@@ -33,6 +33,9 @@ const LOOK_EVERY: Duration = Duration::from_millis(1);
 /// wait this often. (iceoryx2's timed wait on a semaphore event would spin: it yields
 /// thousands of times before it sleeps, a CPU lost per cell on the virtual clock.)
 const REPORT_LOOK: Duration = Duration::from_micros(200);
+
+/// [`REPORT_LOOK`] for a clock that keeps a pace.
+const PACED_LOOK: Duration = Duration::from_millis(2);
 
 /// How long the clock looks for a granted cycle's report before it blocks (wall time).
 const SPIN_FOR: Duration = Duration::from_micros(50);
@@ -246,8 +249,8 @@ struct Part {
 /// The clock, stepped by its owner (the supervisor's loop).
 #[derive(Debug)]
 pub struct Coordinator {
-    /// Stops the thread that notifies `ready` every [`REPORT_LOOK`] (on drop).
-    looking: Arc<AtomicBool>,
+    /// How often (ns) the thread that notifies `ready` does so; 0 stops it (on drop).
+    looking: Arc<AtomicU64>,
     instance: InstanceName,
     grant: Pub<ClockGrantV1>,
     reports: Sub<ClockReportV1>,
@@ -278,7 +281,7 @@ impl Coordinator {
         let ready = Listener::new(node, instance, ServiceId::ClockReportReady)?;
         let reports = Sub::<ClockReportV1>::new(node, instance, ServiceId::ClockReport, 64)?;
         let grant = Pub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant)?;
-        let looking = Arc::new(AtomicBool::new(true));
+        let looking = Arc::new(AtomicU64::new(REPORT_LOOK.as_nanos() as u64));
         look_every(*instance, looking.clone())?;
         time::set_virtual_now(EPOCH_NS);
         let clock = Self {
@@ -342,6 +345,15 @@ impl Coordinator {
         } else {
             0.0
         };
+        // At a pace, a look every PACED_LOOK is enough (a polling process still runs in
+        // time at its 4 ms period) and saves the wake-ups of the cells beside it.
+        let every = if self.pace > 0.0 {
+            PACED_LOOK
+        } else {
+            REPORT_LOOK
+        };
+        self.looking
+            .store(every.as_nanos() as u64, Ordering::Relaxed);
     }
 
     /// Holds the process at `index` of the table off its cycles from `from_ns` until
@@ -515,8 +527,9 @@ impl Coordinator {
     fn await_report(&mut self, node: &Node<Ipc>, pid: u32, waiting: &mut dyn FnMut()) {
         let start = Instant::now();
         // A cycle's work takes a few µs: looking for its report for a moment saves the
-        // wake-up of a blocking wait (about 10 µs here) on most grants.
-        while start.elapsed() < SPIN_FOR {
+        // wake-up of a blocking wait (about 10 µs here) on most grants. Only when the clock
+        // runs as fast as it can: at a pace, the CPU is worth more (other cells beside it).
+        while self.pace == 0.0 && start.elapsed() < SPIN_FOR {
             if self.absorb(node, Some(pid)) {
                 return;
             }
@@ -580,13 +593,13 @@ impl Coordinator {
 
 impl Drop for Coordinator {
     fn drop(&mut self) {
-        self.looking.store(false, Ordering::Relaxed);
+        self.looking.store(0, Ordering::Relaxed);
     }
 }
 
 /// A thread (with a node of its own: iceoryx2's ports are single-threaded) that notifies the
-/// clock's report event every [`REPORT_LOOK`] while `on`.
-fn look_every(instance: InstanceName, on: Arc<AtomicBool>) -> Result<(), IpcError> {
+/// clock's report event every `on` ns until `on` is 0.
+fn look_every(instance: InstanceName, on: Arc<AtomicU64>) -> Result<(), IpcError> {
     let (made, ready) = std::sync::mpsc::channel();
     let spawned = std::thread::Builder::new()
         .name("clock-look".into())
@@ -604,8 +617,12 @@ fn look_every(instance: InstanceName, on: Arc<AtomicBool>) -> Result<(), IpcErro
                     return;
                 }
             };
-            while on.load(Ordering::Relaxed) {
-                std::thread::sleep(REPORT_LOOK);
+            loop {
+                let every = on.load(Ordering::Relaxed);
+                if every == 0 {
+                    break;
+                }
+                std::thread::sleep(Duration::from_nanos(every));
                 notifier.notify();
             }
         });

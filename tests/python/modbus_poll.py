@@ -4,7 +4,9 @@
 
 Polls the input registers every 5 ms for SECONDS and prints one CSV row per new image:
 image, measured_us, written_us, motion, line, then per axis position, command and following
-error in axis units (docs/fieldbus.md). Exits 1 on any exception response or lost connection.
+error in axis units (docs/fieldbus.md). Says `ready` on stderr once connected (a test starts
+the motion only then: under load, Python's start alone can take seconds). Exits 1 on any
+exception response or lost connection.
 """
 
 import sys
@@ -34,6 +36,7 @@ def main():
         print(f"cannot connect to {host}:{port}", file=sys.stderr)
         return 1
     n = AXIS_BASE + AXIS_WORDS * axes
+    print("ready", file=sys.stderr, flush=True)
     last = None
     end = time.monotonic() + seconds
     while time.monotonic() < end:

@@ -243,16 +243,16 @@ pub fn same_motion_time(a: f64, b: f64) -> bool {
 
 /// The default cell's configuration (`examples/gantry-uba.toml`) as text, its Modbus server
 /// on any free port (the tests run side by side; only the test of the embedded default itself
-/// listens on its 1502). Still on the wall clock: the tests of the cell's logic move to
-/// [`virtual_cell_toml`] as the tools that stamp on the wall clock (`supervisor io`, the
-/// recorder, Foxglove) learn the cell's clock; a test of timing takes [`wall_cell`].
+/// listens on its 1502), on the virtual clock at real-time pace ([`virtual_cell_toml`]): a
+/// test of the cell's logic, which no stall of the host can make late. A test of timing, or
+/// of what still dates on the wall clock (the recorder, Foxglove), takes [`wall_cell`].
 pub fn default_cell() -> String {
     default_cell_toml().to_string()
 }
 
 /// [`default_cell`] to edit.
 pub fn default_cell_toml() -> CellToml {
-    wall_cell_toml()
+    virtual_cell_toml()
 }
 
 /// The default cell on the virtual clock at real-time pace (`[cell] clock = "virtual"`,
@@ -320,6 +320,12 @@ pub fn with_python_iobridge(cell: CellToml) -> CellToml {
             "{name}",
         ]),
     )
+}
+
+/// [`wall_cell`] [`with_stall_room`], to edit: a test on the wall clock of something else than
+/// the cell's tolerance of the host's stalls.
+pub fn wall_cell_with_room() -> CellToml {
+    CellToml::parse(&with_stall_room(&wall_cell()))
 }
 
 /// [`default_cell_with_room`] written into a scratch file of `test`.

@@ -119,7 +119,8 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
         inject.insert("axis", toml_edit::value("y"));
         inject.insert("fault", toml_edit::value("over-current"));
         inject.insert("at", toml_edit::value(2.0));
-        let cfg = integration_tests::default_cell_with_room()
+        let cfg = // The wall clock: its plot shows the wake-up latency histogram (empty on the virtual clock).
+        integration_tests::wall_cell_with_room()
             .push("drives.inject", inject)
             .write("inject-cfg", "cell.toml");
         let plot = scratch("inject-cfg", "failed.png", "");
@@ -233,7 +234,8 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
 fn an_absurd_inertia_is_refused_before_anything_starts() {
     integration_tests::wall_clock(|| {
         let inst = instance("inertia");
-        let cfg = integration_tests::default_cell_toml()
+        let cfg = // The example file as it is (the error names its line).
+        integration_tests::wall_cell_toml()
             .set("axis[x].sim.inertia", 1e-300)
             .write("inertia", "cell.toml");
         let out = run_with_watchdog(

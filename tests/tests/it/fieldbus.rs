@@ -216,20 +216,33 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
         assert_eq!(rest[4], 40_000, "y at 40 mm: {rest:?}");
         assert_eq!(rest[8], 0, "theta at 0 deg: {rest:?}");
         // pymodbus polls while a small triangle runs.
-        let poller = Command::new("python3")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/modbus_poll.py"))
-            .args([&a.ip().to_string(), &a.port().to_string(), "120", "3"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("python3");
+        // Killed if the test fails before it stops the poller (it polls for 120 s).
+        let mut poller = integration_tests::Reaped::spawn(
+            Command::new("python3")
+                .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/modbus_poll.py"))
+                .args([&a.ip().to_string(), &a.port().to_string(), "120", "3"])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped()),
+            "python3",
+        );
+        // The motion starts once the poller reads (under load, Python's start alone took
+        // seconds and the poller missed the motion).
+        let mut said = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(poller.stderr.as_mut().expect("piped")),
+            &mut said,
+        )
+        .expect("the poller's first line");
+        assert_eq!(said.trim(), "ready", "the poller: {said}");
         let tr = scratch(test, "trace.csv", "");
         let triangle = integration_tests::small_triangle(test);
         let report = up.report(&triangle, &["--trace", tr.to_str().expect("utf-8")]);
         assert_eq!(report["ok"], true, "{report}");
-        let mut poller = poller;
         let _ = poller.kill();
-        let polled = poller.wait_with_output().expect("poller output");
+        let polled = poller
+            .into_child()
+            .wait_with_output()
+            .expect("poller output");
         let stdout = String::from_utf8_lossy(&polled.stdout);
         let stderr = String::from_utf8_lossy(&polled.stderr);
         assert!(!stderr.contains("exception"), "{stderr}");

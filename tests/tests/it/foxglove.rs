@@ -33,7 +33,8 @@ fn client(url: &str, seconds: &str, args: &[&str]) -> Value {
 fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
     integration_tests::wall_clock(|| {
         let test = "foxglove";
-        let up = Up::default_cell(test);
+        let up = // The wall clock: the bridge dates a virtual cell's messages with the wall clock's offset.
+        Up::on_the_wall_clock(test);
         // Killed if the test fails before it stops the server.
         let mut server = integration_tests::Reaped::spawn(
             supervisor()

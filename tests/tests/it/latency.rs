@@ -199,7 +199,8 @@ fn status_reports_the_running_cell_and_its_latency() {
         let prog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/triangle.prog");
         let mut run = supervisor()
             .args(["run", "--instance", &inst, "--config"])
-            .arg(integration_tests::default_cell_with_room_file("status"))
+            // The wall clock: the latency it reports is the wall clock's.
+            .arg(integration_tests::wall_cell_with_room().write("status", "cell.toml"))
             .arg(&prog)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())

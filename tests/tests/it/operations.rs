@@ -49,7 +49,8 @@ fn brief(up: &Up, test: &str) {
 fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
     integration_tests::wall_clock(|| {
         let test = "ops-up";
-        let cfg = cell(test, &[]);
+        // The wall clock: its plot shows the wake-up latency histogram (empty on the virtual clock).
+        let cfg = crate::up::wall_cell(test, &[]);
         let up = Up::start(test, &cfg);
         // A second supervisor of the instance is refused, whether `up` or `run`.
         let err = up.refused(&["up", "--config", cfg.to_str().expect("utf-8")]);
@@ -252,7 +253,8 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
 fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
     integration_tests::wall_clock(|| {
         let test = "ops-swap";
-        let up = Up::default_cell(test);
+        let up = // The wall clock: the test catches the swap under way by the wall clock's pace.
+        Up::on_the_wall_clock(test);
         // The gripper holds a part: no swap may open it.
         up.ok(&["io", "gripper", "1"]);
         // Two swaps while it moves: the program lasts 13 s.
@@ -365,7 +367,8 @@ fn the_control_channel_answers_while_a_swapped_process_takes_its_time_to_leave()
         let command = toml_edit::Array::from_iter(["sh", "-c", slow.as_str()]);
         let up = Up::start(
             test,
-            &cell(
+            // The wall clock: the old process takes 6 s of the wall clock to leave.
+            &crate::up::wall_cell(
                 test,
                 &[
                     ("process[iobridge].command", command.into()),
@@ -529,7 +532,9 @@ fn a_swap_keeps_the_outputs_while_the_old_iobridge_is_held_off_the_cpu() {
         // its image (50 ms) made the successor start with every output at 0, the gripper's
         // part dropped. The detectors widened: the stall is not what this test is about.
         let test = "ops-swap-held";
-        let cfg = integration_tests::default_cell_toml()
+        // The wall clock: the old iobridge is held off the CPU (SIGSTOP), a stall of the wall
+        // clock (on the virtual clock the whole cell would wait for it).
+        let cfg = integration_tests::wall_cell_toml()
             .set("supervisor.heartbeat_timeout", 30.0)
             .set(
                 "health_config.pending_sequence_overrun_percent_limit",

@@ -36,7 +36,9 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
         let out = run_with_watchdog(
             supervisor()
                 .args(["run", "--json", "--instance", &inst, "--config"])
-                .arg(cell(test, &[]))
+                // The wall clock: the recorder dates a virtual cell's messages with the wall
+                // clock's offset.
+                .arg(crate::up::wall_cell(test, &[]))
                 .arg("--record")
                 .arg(&mcap)
                 .arg("--trace")
@@ -121,7 +123,9 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
 fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
     integration_tests::wall_clock(|| {
         let test = "rec-up";
-        let up = Up::default_cell(test);
+        // The wall clock: the recorder dates a virtual cell's messages with the wall clock's
+        // offset.
+        let up = Up::on_the_wall_clock(test);
         let base = scratch(test, "cell.mcap", "");
         // Rotated every second: stopped once its third file is there (however long the host's
         // stalls make that).
@@ -182,7 +186,7 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
                     "/nonexistent/dir/c.mcap",
                 ])
                 .arg("--config")
-                .arg(cell(test, &[])),
+                .arg(crate::up::wall_cell(test, &[])),
             WATCHDOG,
         );
         let err = exited(&refused, 2);
@@ -423,7 +427,7 @@ fn ctrl_c_on_up_record_records_the_controlled_stop_to_its_end() {
             .args(["up", "--instance", &inst, "--record"])
             .arg(&file)
             .arg("--config")
-            .arg(cell(test, &[]))
+            .arg(crate::up::wall_cell(test, &[])) // the recorder dates on the wall clock
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(&log).expect("log"))
             .process_group(0)

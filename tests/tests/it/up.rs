@@ -515,6 +515,15 @@ pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
     cell.write(test, "cell.toml")
 }
 
+/// [`cell`] on the wall clock.
+pub(crate) fn wall_cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
+    let mut cell = integration_tests::wall_cell_with_room();
+    for (path, value) in set {
+        cell = cell.set(path, value.clone());
+    }
+    cell.write(test, "cell.toml")
+}
+
 /// The events of a cell as a follower reads them ([`Up::follow_events`]); on drop it is
 /// told to stop (SIGINT: it leaves nothing of itself behind), which must come before the
 /// cell goes down.
