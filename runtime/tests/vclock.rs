@@ -19,6 +19,14 @@ const MS: u64 = 1_000_000;
 fn a_process_is_granted_its_deadlines_in_order_and_its_wait_allocates_at_most_once() {
     let name = format!("vclock{}", std::process::id());
     let instance = InstanceName::new(&name).expect("valid");
+    // The instance's files go whether the test passes or not.
+    struct Removed(InstanceName);
+    impl Drop for Removed {
+        fn drop(&mut self) {
+            ipc::remove_instance(&self.0);
+        }
+    }
+    let _removed = Removed(instance);
     {
         let done = Arc::new(AtomicBool::new(false));
         let stop = done.clone();
@@ -85,5 +93,4 @@ fn a_process_is_granted_its_deadlines_in_order_and_its_wait_allocates_at_most_on
         );
         eprintln!("steady state: {allocations} allocations in {N} waits on the clock");
     }
-    ipc::remove_instance(&instance);
 }
