@@ -101,22 +101,16 @@ fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV
 /// Turns this tool to the virtual clock of `instance`, at the instant where it stands (the
 /// clock's newest grant, which it publishes every tick).
 fn on_the_cells_clock(node: &Node<Ipc>, instance: &InstanceName) -> Result<(), ControlError> {
-    let grants = Sub::<shm_schema::ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)
-        .map_err(failed)?;
-    let start = Instant::now();
-    loop {
-        if let Some(g) = grants.latest() {
-            runtime::time::set_virtual_now(g.now_ns);
-            return Ok(());
+    match runtime::vclock::where_it_stands(node, instance, PATIENCE).map_err(failed)? {
+        Some(now) => {
+            runtime::time::set_virtual_now(now);
+            Ok(())
         }
-        if start.elapsed() > PATIENCE {
-            return Err(ControlError::Failed(format!(
-                "instance {instance} runs on the virtual clock, but its clock said nothing \
-                 within {} s",
-                PATIENCE.as_secs()
-            )));
-        }
-        std::thread::sleep(Duration::from_millis(2));
+        None => Err(ControlError::Failed(format!(
+            "instance {instance} runs on the virtual clock, but its clock said nothing within \
+             {} s",
+            PATIENCE.as_secs()
+        ))),
     }
 }
 

@@ -670,11 +670,6 @@ impl Listener {
     pub fn wait(&self) -> bool {
         matches!(self.port.blocking_wait(|_| {}), Ok(n) if n > 0)
     }
-
-    /// As [`Listener::wait`], for at most `timeout`: false when it passed without one.
-    pub fn timed_wait(&self, timeout: std::time::Duration) -> bool {
-        matches!(self.port.timed_wait(|_| {}, timeout), Ok(n) if n > 0)
-    }
 }
 
 impl Debug for Listener {

@@ -32,12 +32,6 @@ pub fn now_ns() -> u64 {
     }
 }
 
-/// Whether this process runs on the virtual clock.
-#[inline]
-pub fn is_virtual() -> bool {
-    VIRTUAL.load(Ordering::Relaxed)
-}
-
 /// Sets the virtual instant (ns) and, the first time, turns this process to virtual time.
 ///
 /// # Real-time
@@ -87,16 +81,6 @@ impl Moment {
         Self(now_ns())
     }
 
-    /// The instant `ns` of the cell's clock.
-    pub fn from_ns(ns: u64) -> Self {
-        Self(ns)
-    }
-
-    /// Its nanoseconds.
-    pub fn ns(self) -> u64 {
-        self.0
-    }
-
     /// Time since then (zero if it is in the future).
     pub fn elapsed(self) -> Duration {
         Self::now().saturating_duration_since(self)
@@ -106,19 +90,6 @@ impl Moment {
     pub fn saturating_duration_since(self, earlier: Self) -> Duration {
         Duration::from_nanos(self.0.saturating_sub(earlier.0))
     }
-
-    /// Time from `earlier` to this one, zero if `earlier` is later (as `Instant`'s).
-    pub fn duration_since(self, earlier: Self) -> Duration {
-        self.saturating_duration_since(earlier)
-    }
-
-    /// This instant plus `d`, `None` past the clock's range.
-    pub fn checked_add(self, d: Duration) -> Option<Self> {
-        u64::try_from(d.as_nanos())
-            .ok()
-            .and_then(|n| self.0.checked_add(n))
-            .map(Self)
-    }
 }
 
 impl std::ops::Add<Duration> for Moment {
@@ -127,22 +98,6 @@ impl std::ops::Add<Duration> for Moment {
         Self(
             self.0
                 .saturating_add(u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
-        )
-    }
-}
-
-impl std::ops::AddAssign<Duration> for Moment {
-    fn add_assign(&mut self, d: Duration) {
-        *self = *self + d;
-    }
-}
-
-impl std::ops::Sub<Duration> for Moment {
-    type Output = Moment;
-    fn sub(self, d: Duration) -> Moment {
-        Self(
-            self.0
-                .saturating_sub(u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
         )
     }
 }

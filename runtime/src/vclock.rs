@@ -73,6 +73,33 @@ impl From<IpcError> for ClockError {
     }
 }
 
+/// Where the clock of `instance` stands (ns), as a process or a tool attaching to the cell
+/// reads it, waited for at most `patience`; `None` when nothing came.
+pub fn where_it_stands(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+    patience: Duration,
+) -> Result<Option<u64>, IpcError> {
+    let grants = Sub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)?;
+    Ok(stands(&grants, patience))
+}
+
+/// The newest grant's instant on `grants`, waited for at most `patience`: it reaches a new
+/// subscriber with the clock's next look at its connections (every millisecond while a
+/// launched process has not joined, and every tick).
+fn stands(grants: &Sub<ClockGrantV1>, patience: Duration) -> Option<u64> {
+    let start = Instant::now();
+    loop {
+        if let Some(at) = grants.latest() {
+            return Some(at.now_ns);
+        }
+        if start.elapsed() > patience {
+            return None;
+        }
+        std::thread::sleep(LOOK_EVERY);
+    }
+}
+
 /// A process' side of the virtual clock.
 pub struct Participant {
     pid: u32,
@@ -110,21 +137,12 @@ impl Participant {
         let grants = Sub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)?;
         let report = Pub::<ClockReportV1>::new(node, instance, ServiceId::ClockReport)?;
         let ready = Notifier::new(node, instance, ServiceId::ClockReportReady)?;
-        // Where the clock stands reaches a new subscriber with the clock's next look at its
-        // connections (it looks every millisecond while a launched process has not joined).
-        let start = Instant::now();
-        let at = loop {
-            if let Some(at) = grants.latest() {
-                break at;
-            }
-            if start.elapsed() > JOIN_PATIENCE {
-                return Err(ClockError::NoClock(
-                    instance.service(ServiceId::ClockGrant).to_string(),
-                ));
-            }
-            std::thread::sleep(LOOK_EVERY);
+        let Some(now) = stands(&grants, JOIN_PATIENCE) else {
+            return Err(ClockError::NoClock(
+                instance.service(ServiceId::ClockGrant).to_string(),
+            ));
         };
-        time::set_virtual_now(at.now_ns);
+        time::set_virtual_now(now);
         Ok(Self {
             pid,
             parent: std::os::unix::process::parent_id(),
@@ -210,8 +228,6 @@ pub struct Lost {
     pub pid: u32,
     /// Why.
     pub why: LostWhy,
-    /// The virtual instant it was lost at (ns).
-    pub at_ns: u64,
 }
 
 /// Why the clock lost a process.
@@ -307,11 +323,6 @@ impl Coordinator {
         Ok(clock)
     }
 
-    /// The virtual instant (ns).
-    pub fn now_ns(&self) -> u64 {
-        self.now
-    }
-
     /// Virtual seconds since the clock started.
     pub fn virtual_s(&self) -> f64 {
         time::secs(self.now - EPOCH_NS)
@@ -325,11 +336,6 @@ impl Coordinator {
     /// Cycles granted so far.
     pub fn grants(&self) -> u64 {
         self.grants
-    }
-
-    /// Processes taking part now.
-    pub fn participants(&self) -> usize {
-        self.parts.len()
     }
 
     /// The processes lost since the last call.
@@ -541,9 +547,6 @@ impl Coordinator {
             }
             // Woken by a report, or by the look every REPORT_LOOK.
             self.ready.wait();
-            if self.absorb(node, Some(pid)) {
-                return;
-            }
             waiting();
             if exited(pid) {
                 self.parts.retain(|p| p.pid != pid);
@@ -554,7 +557,6 @@ impl Coordinator {
                 self.lost.push(Lost {
                     pid,
                     why: LostWhy::NeverDone,
-                    at_ns: self.now,
                 });
                 return;
             }
@@ -579,7 +581,6 @@ impl Coordinator {
                     self.lost.push(Lost {
                         pid,
                         why: LostWhy::NeverJoined,
-                        at_ns: self.now,
                     });
                 }
                 self.leaving.clear();

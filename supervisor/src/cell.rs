@@ -1035,53 +1035,37 @@ impl Cell {
         }
     }
 
-    /// Schedules `faults` on the cell's virtual clock (refused on the wall clock, or for a
-    /// process the table does not have).
-    pub(crate) fn schedule(
-        &mut self,
-        cfg: &Config,
-        faults: &[crate::schedule::ScheduledFault],
-    ) -> Result<(), RunError> {
-        use crate::schedule::Fault;
-        if faults.is_empty() {
-            return Ok(());
-        }
+    /// Schedules `planned` faults on the cell's virtual clock ([`crate::schedule::plan`]
+    /// checked them: the cell is on it).
+    pub(crate) fn schedule(&mut self, planned: &[crate::schedule::Planned]) {
+        use crate::schedule::Planned;
         let Some(clock) = self.clock.as_mut() else {
-            return Err(RunError::Input(
-                "--fault needs the virtual clock (--virtual-time, or [cell] clock = \"virtual\")"
-                    .into(),
-            ));
+            return;
         };
-        for f in faults {
-            let index = f.process_index(cfg).map_err(RunError::Input)?;
-            let at = runtime::vclock::EPOCH_NS + (f.at_s * 1e9).round() as u64;
-            match (&f.what, index) {
-                (Fault::Hold { ms, .. }, Some(k)) => {
-                    clock.hold(k as u32, at, at + (ms * 1e6).round() as u64);
-                }
-                (Fault::Kill { .. }, Some(k)) => clock.kill_at(k as u32, at),
-                _ => self.scheduled_estops.push(at),
+        for p in planned {
+            match *p {
+                Planned::Hold {
+                    index,
+                    from_ns,
+                    until_ns,
+                } => clock.hold(index, from_ns, until_ns),
+                Planned::Kill { index, at_ns } => clock.kill_at(index, at_ns),
+                Planned::Estop { at_ns } => self.scheduled_estops.push(at_ns),
             }
         }
-        Ok(())
     }
 
     /// On the virtual clock: runs it to the next multiple of `TICK` (every process' cycles up
     /// to then granted, in order); on the wall clock nothing (the loop's wait sleeps).
     pub(crate) fn advance_clock(&mut self) {
-        if self.clock.is_some() {
-            let now = runtime::time::now_ns();
-            let tick = TICK.as_nanos() as u64;
-            self.advance_clock_to((now / tick + 1) * tick);
-        }
+        let tick = TICK.as_nanos() as u64;
+        self.advance_clock_to((runtime::time::now_ns() / tick + 1) * tick);
     }
 
     /// Lets `d` pass: on the virtual clock, its processes run that long; on the wall clock,
     /// nothing (the caller sleeps).
     pub(crate) fn pass(&mut self, d: Duration) {
-        if self.clock.is_some() {
-            self.advance_clock_to(runtime::time::now_ns() + d.as_nanos() as u64);
-        }
+        self.advance_clock_to(runtime::time::now_ns() + d.as_nanos() as u64);
     }
 
     fn advance_clock_to(&mut self, t: u64) {

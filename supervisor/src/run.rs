@@ -78,21 +78,10 @@ pub fn run(opts: &RunOptions) -> Result<Report, RunError> {
             writable(p, flag).map_err(RunError::Input)?;
         }
     }
-    if !opts.faults.is_empty() && cfg.cell.clock != cell_config::Clock::Virtual {
-        return Err(RunError::Input(
-            "--fault needs the virtual clock (--virtual-time, or [cell] clock = \"virtual\")"
-                .into(),
-        ));
-    }
-    for f in &opts.faults {
-        f.process_index(&cfg).map_err(RunError::Input)?;
-    }
+    let faults = crate::schedule::plan(&opts.faults, &cfg).map_err(RunError::Input)?;
     let (mut cell, mut server, recorder) =
         open_recorded(&cfg, instance, Mode::Run, opts.record.as_deref())?;
-    if let Err(e) = cell.schedule(&cfg, &opts.faults) {
-        let _ = cell.close(server);
-        return Err(e);
-    }
+    cell.schedule(&faults);
     let first = ProgramJob {
         program,
         progress: opts.progress,

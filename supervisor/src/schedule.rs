@@ -90,17 +90,47 @@ impl std::str::FromStr for ScheduledFault {
     }
 }
 
-impl ScheduledFault {
-    /// The process it concerns, checked against the cell's table: its index.
-    pub fn process_index(&self, cfg: &Config) -> Result<Option<usize>, String> {
-        let name = match &self.what {
-            Fault::Hold { process, .. } | Fault::Kill { process } => process,
-            Fault::Estop => return Ok(None),
-        };
+/// A fault checked against the cell, on its clock: a process as its index in the table,
+/// instants in ns of the virtual clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Planned {
+    /// [`Fault::Hold`] from `from_ns` until `until_ns`.
+    Hold {
+        /// The process' index in the table.
+        index: u32,
+        /// From.
+        from_ns: u64,
+        /// Until.
+        until_ns: u64,
+    },
+    /// [`Fault::Kill`] at `at_ns`.
+    Kill {
+        /// The process' index in the table.
+        index: u32,
+        /// When.
+        at_ns: u64,
+    },
+    /// [`Fault::Estop`] at `at_ns`.
+    Estop {
+        /// When.
+        at_ns: u64,
+    },
+}
+
+/// `faults` checked against `cfg` before anything starts: they need the cell on the virtual
+/// clock and name processes of its table; the error says what is wrong.
+pub fn plan(faults: &[ScheduledFault], cfg: &Config) -> Result<Vec<Planned>, String> {
+    if !faults.is_empty() && cfg.cell.clock != cell_config::Clock::Virtual {
+        return Err(
+            "--fault needs the virtual clock (--virtual-time, or [cell] clock = \"virtual\")"
+                .into(),
+        );
+    }
+    let index_of = |name: &str| {
         cfg.process
             .iter()
-            .position(|p| &p.name == name)
-            .map(Some)
+            .position(|p| p.name == name)
+            .map(|k| k as u32)
             .ok_or_else(|| {
                 format!(
                     "--fault: the cell has no process {name:?} (its table: {})",
@@ -111,7 +141,25 @@ impl ScheduledFault {
                         .join(", ")
                 )
             })
-    }
+    };
+    faults
+        .iter()
+        .map(|f| {
+            let at_ns = runtime::vclock::EPOCH_NS + (f.at_s * 1e9).round() as u64;
+            Ok(match &f.what {
+                Fault::Hold { process, ms } => Planned::Hold {
+                    index: index_of(process)?,
+                    from_ns: at_ns,
+                    until_ns: at_ns + (ms * 1e6).round() as u64,
+                },
+                Fault::Kill { process } => Planned::Kill {
+                    index: index_of(process)?,
+                    at_ns,
+                },
+                Fault::Estop => Planned::Estop { at_ns },
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -368,8 +368,8 @@ pub fn with_stall_room(src: &str) -> String {
         .to_string()
 }
 
-/// The default cell on the wall clock with the machine and servo at `period_us`, their phases scaled (a tenth
-/// and two fifths of the period, as 100 µs and 400 µs are of 1 ms), and the thread offset
+/// The default cell on the wall clock with the machine and servo at `period_us`, their
+/// phases scaled (a tenth and two fifths of the period, as 100 µs and 400 µs are of 1 ms), and the thread offset
 /// detector's share of the period scaled so that it counts the same wake-up latency (the
 /// host's stalls do not shrink with the period).
 pub fn cell_at_rate(period_us: u64) -> String {

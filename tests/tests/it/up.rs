@@ -49,11 +49,7 @@ impl Up {
 
     /// [`Up::default_cell`] on the wall clock: for a test of timing (stalls, overruns).
     pub(crate) fn on_the_wall_clock(test: &str) -> Self {
-        let cfg = integration_tests::with_stall_room(&integration_tests::wall_cell());
-        Self::start(
-            test,
-            &integration_tests::scratch(test, "wall-cell.toml", &cfg),
-        )
+        Self::start(test, &wall_cell(test, &[]))
     }
 
     /// [`Up::start`] in network namespace `netns` (every command of the test then runs
@@ -508,16 +504,20 @@ pub(crate) fn io_value(s: &Value, name: &str) -> Option<u64> {
 /// tests run side by side), and the keys `set` names set to its values
 /// (`("modbus.max_connections", 2.into())`).
 pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
-    let mut cell = integration_tests::default_cell_with_room();
-    for (path, value) in set {
-        cell = cell.set(path, value.clone());
-    }
-    cell.write(test, "cell.toml")
+    cell_from(integration_tests::default_cell_with_room(), test, set)
 }
 
 /// [`cell`] on the wall clock.
 pub(crate) fn wall_cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
-    let mut cell = integration_tests::wall_cell_with_room();
+    cell_from(integration_tests::wall_cell_with_room(), test, set)
+}
+
+/// `cell` with the keys `set` names set to its values, written into a scratch file of `test`.
+fn cell_from(
+    mut cell: integration_tests::CellToml,
+    test: &str,
+    set: &[(&str, toml_edit::Value)],
+) -> PathBuf {
     for (path, value) in set {
         cell = cell.set(path, value.clone());
     }
