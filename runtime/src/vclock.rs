@@ -40,6 +40,11 @@ const PACED_LOOK: Duration = Duration::from_millis(2);
 /// How long the clock looks for a granted cycle's report before it blocks (wall time).
 const SPIN_FOR: Duration = Duration::from_micros(50);
 
+/// How long (wall time) the clock stands for a process launched to join it: the cell's time
+/// does not pass meanwhile, so a slow start costs only wall time (under the test suite's load
+/// Python's iobridge took more than 10 s to start, and joined late, at a later instant).
+pub const START_PATIENCE: Duration = Duration::from_secs(60);
+
 /// How long (wall time) a process waits at set-up for where the clock stands.
 const JOIN_PATIENCE: Duration = Duration::from_secs(10);
 
@@ -563,8 +568,9 @@ impl Coordinator {
         }
     }
 
-    /// Waits until every process launched has joined or exited and every process that left
-    /// has exited (each for at most the watchdog).
+    /// Waits until every process launched has joined or exited (for at most
+    /// [`START_PATIENCE`], or the watchdog if longer) and every process that left has exited
+    /// (for at most the watchdog).
     fn settle(&mut self, node: &Node<Ipc>, waiting: &mut dyn FnMut()) {
         let start = Instant::now();
         loop {
@@ -577,14 +583,15 @@ impl Coordinator {
             self.expected.retain(|&p| !exited(p));
             self.leaving.retain(|&p| !exited(p));
             if start.elapsed() > self.watchdog {
+                self.leaving.clear();
+            }
+            if start.elapsed() > self.watchdog.max(START_PATIENCE) {
                 for pid in std::mem::take(&mut self.expected) {
                     self.lost.push(Lost {
                         pid,
                         why: LostWhy::NeverJoined,
                     });
                 }
-                self.leaving.clear();
-                return;
             }
             // A sleep, not a timed wait on the event (which would spin): processes start.
             std::thread::sleep(LOOK_EVERY);

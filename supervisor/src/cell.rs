@@ -140,8 +140,9 @@ pub enum Life {
 /// a client connects), and so does its heartbeat.
 pub(crate) const TICK: std::time::Duration = std::time::Duration::from_millis(10);
 
-/// How long (wall time) a process on the virtual clock may take to join it or to finish a
-/// granted cycle before the clock leaves it out (the supervisor then finds it stalled).
+/// How long (wall time) a process on the virtual clock may take to finish a granted cycle
+/// before the clock leaves it out (the supervisor then finds it stalled); to join it, at least
+/// `runtime::vclock::START_PATIENCE`.
 const CLOCK_WATCHDOG: Duration = Duration::from_secs(10);
 
 /// The virtual time that passes per look while the supervisor waits for processes to leave.
@@ -1082,13 +1083,16 @@ impl Cell {
                 .iter()
                 .find(|r| r.pid() == lost.pid)
                 .map_or_else(|| format!("pid {}", lost.pid), |r| r.name.clone());
+            let (what, within) = match lost.why {
+                runtime::vclock::LostWhy::NeverDone => ("did not finish its cycle", CLOCK_WATCHDOG),
+                runtime::vclock::LostWhy::NeverJoined => (
+                    "did not join it",
+                    CLOCK_WATCHDOG.max(runtime::vclock::START_PATIENCE),
+                ),
+            };
             tracing::error!(
-                "virtual clock: {name} {} within {} s of wall time: left out of the clock",
-                match lost.why {
-                    runtime::vclock::LostWhy::NeverDone => "did not finish its cycle",
-                    runtime::vclock::LostWhy::NeverJoined => "did not join it",
-                },
-                CLOCK_WATCHDOG.as_secs()
+                "virtual clock: {name} {what} within {} s of wall time: left out of the clock",
+                within.as_secs()
             );
         }
     }
