@@ -19,6 +19,11 @@ use std::time::{Duration, Instant};
 /// acknowledgement.
 const PATIENCE: Duration = Duration::from_secs(2);
 
+/// How long a tool waits to learn where a virtual clock stands: the clock may stand a while
+/// (a process it waits for, a program validated), and a tool learns it at the clock's next
+/// look at its subscribers.
+const CLOCK_PATIENCE: Duration = Duration::from_secs(10);
+
 /// Why `inject` failed.
 #[derive(Debug)]
 pub enum ControlError {
@@ -28,6 +33,8 @@ pub enum ControlError {
     Failed(String),
     /// The supervisor took it and it failed (why, as the supervisor says). Exit 1.
     Cell(control_plane::Failure),
+    /// The supervisor refused it (why, as the supervisor says): nothing changed. Exit 2.
+    Refused(control_plane::Refusal),
 }
 
 impl std::error::Error for ControlError {}
@@ -37,6 +44,7 @@ impl std::fmt::Display for ControlError {
         match self {
             Self::Input(m) | Self::Failed(m) => f.write_str(m),
             Self::Cell(failure) => write!(f, "{failure}"),
+            Self::Refused(refusal) => write!(f, "{refusal}"),
         }
     }
 }
@@ -101,7 +109,7 @@ fn running_cell(node: &Node<Ipc>, instance: &InstanceName) -> Result<CellConfigV
 /// Turns this tool to the virtual clock of `instance`, at the instant where it stands (the
 /// clock's newest grant, which it publishes every tick).
 fn on_the_cells_clock(node: &Node<Ipc>, instance: &InstanceName) -> Result<(), ControlError> {
-    match runtime::vclock::where_it_stands(node, instance, PATIENCE).map_err(failed)? {
+    match runtime::vclock::where_it_stands(node, instance, CLOCK_PATIENCE).map_err(failed)? {
         Some(now) => {
             runtime::time::set_virtual_now(now);
             Ok(())
@@ -109,7 +117,7 @@ fn on_the_cells_clock(node: &Node<Ipc>, instance: &InstanceName) -> Result<(), C
         None => Err(ControlError::Failed(format!(
             "instance {instance} runs on the virtual clock, but its clock said nothing within \
              {} s",
-            PATIENCE.as_secs()
+            CLOCK_PATIENCE.as_secs()
         ))),
     }
 }
@@ -232,7 +240,7 @@ pub fn estop(instance: &str, reason: &str) -> Result<String, ControlError> {
     };
     match channel::call_within(&name, &req, Some(SUPERVISOR_PATIENCE)) {
         Ok(Reply::Done(m)) => return Ok(m),
-        Ok(Reply::Refused(r)) => return Err(ControlError::Input(r.to_string())),
+        Ok(Reply::Refused(r)) => return Err(ControlError::Refused(r)),
         Ok(Reply::Failed(failure)) => return Err(ControlError::Cell(failure)),
         Ok(other) => tracing::warn!("the supervisor answered the e-stop with {other:?}"),
         Err(CallError::NotUp(_)) => {}
@@ -281,10 +289,12 @@ pub fn estop_on_shared_memory(instance: &str, reason: &str) -> Result<String, Co
                 return Ok(format!("e-stop raised on instance {instance}: {reason}"));
             }
             if start.elapsed() > PATIENCE {
-                return Err(ControlError::Failed(format!(
-                    "no process of instance {instance} reported the e-stop latched within {} s",
-                    PATIENCE.as_secs()
-                )));
+                return Err(ControlError::Cell(
+                    control_plane::Failure::EstopNotLatched {
+                        instance: instance.to_string(),
+                        within_s: PATIENCE.as_secs_f64(),
+                    },
+                ));
             }
             std::thread::sleep(Duration::from_millis(2));
         }

@@ -374,9 +374,14 @@ pub struct ServoFault {
     pub name: String,
     /// The axis it concerns; `null` for the arm.
     pub axis: Option<String>,
-    /// The value that tripped it.
+    /// The value that tripped it; not a number (`null` in JSON) for a value that was not
+    /// one (feedback-not-finite).
+    #[serde(deserialize_with = "nan_as_null")]
+    #[schemars(with = "Option<f64>")]
     pub value: f64,
     /// The limit it passed.
+    #[serde(deserialize_with = "nan_as_null")]
+    #[schemars(with = "Option<f64>")]
     pub limit: f64,
 }
 
@@ -392,10 +397,25 @@ pub struct AxisStatus {
     pub statusword: u16,
     /// Settled (in position).
     pub settled: bool,
-    /// Its measured position.
+    /// Its measured position; not a number (`null` in JSON) while it is not a valid
+    /// measurement (an encoder lost).
+    #[serde(deserialize_with = "nan_as_null")]
+    #[schemars(with = "Option<f64>")]
     pub position: f64,
-    /// Its following error.
+    /// Its following error; not a number (`null` in JSON) likewise.
+    #[serde(deserialize_with = "nan_as_null")]
+    #[schemars(with = "Option<f64>")]
     pub following_error: f64,
+}
+
+/// A number that JSON writes `null` when it is not a number (serde_json's way with NaN):
+/// read back as NaN. Binary formats (the control channel's postcard) carry the number itself.
+fn nan_as_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    if d.is_human_readable() {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    } else {
+        f64::deserialize(d)
+    }
 }
 
 /// The named digital IO.
@@ -488,4 +508,31 @@ two_forms!(SafeValue, "SafeValue", safe_value, [untagged], {
 pub enum HoldWord {
     /// `"hold"`.
     Hold,
+}
+
+#[cfg(test)]
+mod nan {
+    use super::AxisStatus;
+
+    /// A position that is not a number goes out as `null` in JSON and comes back as NaN; over
+    /// postcard as the number itself.
+    #[test]
+    fn a_lost_measurement_round_trips_through_json_and_postcard() {
+        let a = AxisStatus {
+            power: super::Power::Disabled,
+            drive_state: "Fault".into(),
+            statusword: 8,
+            settled: false,
+            position: f64::NAN,
+            following_error: 0.5,
+        };
+        let json = serde_json::to_value(&a).expect("JSON");
+        assert!(json["position"].is_null(), "{json}");
+        let back: AxisStatus = serde_json::from_value(json).expect("read back");
+        assert!(back.position.is_nan());
+        assert_eq!(back.following_error, 0.5);
+        let bytes = postcard::to_allocvec(&a).expect("postcard");
+        let back: AxisStatus = postcard::from_bytes(&bytes).expect("read back");
+        assert!(back.position.is_nan());
+    }
 }

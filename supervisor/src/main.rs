@@ -57,8 +57,11 @@ struct ExecArgs {
     /// Wait until the program ends and print the report `run` prints.
     #[arg(long)]
     wait: bool,
-    /// With --wait: one JSON object on stdout instead of the summary.
-    #[arg(long, requires = "wait")]
+    /// One JSON document on stdout: with --wait, the run's report (or its failure) as `run
+    /// --json` prints it, instead of the summary; without --wait, or when the cell refused the
+    /// program or failed it before it ran, the cell's reply (`control_plane::Reply`, as the
+    /// other commands' --json print it). Exit status as without it.
+    #[arg(long)]
     json: bool,
     /// With --wait: write the CSV trace.
     #[arg(long, requires = "wait")]
@@ -82,6 +85,19 @@ struct Remote {
     /// With --remote: the line file (endpoints, user, secret); default: $RTC_LINE.
     #[arg(long, value_name = "FILE", requires = "remote")]
     line: Option<PathBuf>,
+}
+
+/// `--json` of a command that asks the cell one thing (`pause`, `speed`, `reset`, `swap`, ...):
+/// the cell's answer, for a program to read (docs/operations.md).
+#[derive(clap::Args, Clone, Copy, Debug)]
+struct ReplyJson {
+    /// Print the cell's reply as one JSON document on stdout (`control_plane::Reply` as serde
+    /// writes it: `{"Done": …}`, `{"Refused": …}`, `{"Failed": …}`, …), whether it was done,
+    /// refused or failed; the exit status as without it (0 done, 2 refused, 1 failed). A
+    /// command that got no reply (the cell is not up, the channel broke) prints nothing on
+    /// stdout.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Subcommand)]
@@ -187,6 +203,8 @@ enum Cmd {
     Down {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        json: ReplyJson,
     },
     /// Validate a program and run it on a cell that is up.
     Exec(ExecArgs),
@@ -199,6 +217,8 @@ enum Cmd {
         instance: Instance,
         #[command(flatten)]
         remote: Remote,
+        #[command(flatten)]
+        json: ReplyJson,
     },
     /// Check a program without starting anything: the same validation `run` and `exec` make
     /// (syntax, names, limits, the whole blended path through trajgen's generator) and its
@@ -215,6 +235,8 @@ enum Cmd {
         #[command(flatten)]
         instance: Instance,
         #[command(flatten)]
+        json: ReplyJson,
+        #[command(flatten)]
         remote: Remote,
     },
     /// Go on along the path after a pause.
@@ -222,12 +244,16 @@ enum Cmd {
         #[command(flatten)]
         instance: Instance,
         #[command(flatten)]
+        json: ReplyJson,
+        #[command(flatten)]
         remote: Remote,
     },
     /// Come to rest along the path and drop the rest of the program (not an e-stop).
     Abort {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        json: ReplyJson,
         #[command(flatten)]
         remote: Remote,
     },
@@ -237,12 +263,16 @@ enum Cmd {
         #[command(flatten)]
         instance: Instance,
         #[command(flatten)]
+        json: ReplyJson,
+        #[command(flatten)]
         remote: Remote,
     },
     /// Enable the drives, holding where the axes stand (bumpless).
     Start {
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        json: ReplyJson,
         #[command(flatten)]
         remote: Remote,
     },
@@ -252,6 +282,8 @@ enum Cmd {
         process: String,
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        json: ReplyJson,
     },
     /// Replace one process of the cell by a new one (a new build, another program, another
     /// language) while the others keep running.
@@ -264,6 +296,8 @@ enum Cmd {
         command: Option<String>,
         #[command(flatten)]
         instance: Instance,
+        #[command(flatten)]
+        json: ReplyJson,
     },
     /// Check a configuration file (or the embedded default) and exit.
     CheckConfig {
@@ -367,6 +401,8 @@ enum Cmd {
         /// Why, in a few words (kept in the e-stop and its events).
         #[arg(long, default_value = "operator e-stop")]
         reason: String,
+        #[command(flatten)]
+        json: ReplyJson,
     },
     /// List the named digital IO of a running instance, or set one: an output as a program's
     /// OUT does, an input as a device of the simulated field would (docs/io.md).
@@ -394,6 +430,23 @@ fn remote_of(cmd: &Cmd) -> Option<OnTheLine> {
         v.insert(1, cell.clone());
         Some(Ok((r.line.clone(), v)))
     };
+    // The line's client prints the cell's answer in words only.
+    let json_on_the_line = match cmd {
+        Cmd::Pause { remote, json, .. }
+        | Cmd::Resume { remote, json, .. }
+        | Cmd::Abort { remote, json, .. }
+        | Cmd::Reset { remote, json, .. }
+        | Cmd::Start { remote, json, .. }
+        | Cmd::Speed { remote, json, .. }
+        | Cmd::Estop { remote, json, .. } => json.json && remote.remote.is_some(),
+        Cmd::Exec(ExecArgs { remote, json, .. }) => *json && remote.remote.is_some(),
+        _ => false,
+    };
+    if json_on_the_line {
+        return Some(Err(
+            "--json is for an instance of this host, not --remote".into()
+        ));
+    }
     match cmd {
         Cmd::Pause { remote, .. } => at(remote, &["pause"]),
         Cmd::Resume { remote, .. } => at(remote, &["resume"]),
@@ -495,9 +548,28 @@ fn control_done(r: Result<String, cell_client::control::ControlError>) -> ExitCo
         }
         Err(e) => failed(
             &e,
-            matches!(e, cell_client::control::ControlError::Input(_)),
+            matches!(
+                e,
+                cell_client::control::ControlError::Input(_)
+                    | cell_client::control::ControlError::Refused(_)
+            ),
         ),
     }
+}
+
+/// `supervisor estop --json`: its answer as the cell's [`Reply`] on stdout (the words on
+/// stderr as without it), the same exit status. Bad input or no cell: no reply, nothing on
+/// stdout.
+fn estop_reply(r: Result<String, cell_client::control::ControlError>) -> ExitCode {
+    use cell_client::control::ControlError;
+    let reply = match r {
+        Ok(m) => Reply::Done(m),
+        Err(ControlError::Refused(r)) => Reply::Refused(r),
+        Err(ControlError::Cell(f)) => Reply::Failed(f),
+        Err(ControlError::Failed(what)) => Reply::Failed(control_plane::Failure::System { what }),
+        Err(e @ ControlError::Input(_)) => return failed(&e, true),
+    };
+    ctl_reply(reply, true, None, None)
 }
 
 /// Prints a finished `run`'s or `tune`'s report, as JSON with `--json`, else for people.
@@ -601,15 +673,15 @@ fn instance_of(name: &str) -> Result<shm_schema::InstanceName, ExitCode> {
     })
 }
 
-/// Sends one request to a cell that is up and reports its answer: exit 0 done, 2 refused
-/// (or not up), 1 failed.
-fn ctl_call(instance: &str, req: Request) -> ExitCode {
+/// Sends one request to a cell that is up and reports its answer (with `json`, as one JSON
+/// document on stdout): exit 0 done, 2 refused (or not up), 1 failed.
+fn ctl_call(instance: &str, req: Request, json: bool) -> ExitCode {
     let instance = match instance_of(instance) {
         Ok(i) => i,
         Err(c) => return c,
     };
     match ctl::call(&instance, &req) {
-        Ok(reply) => ctl_reply(reply, false, None, None),
+        Ok(reply) => ctl_reply(reply, json, None, None),
         Err(e) => {
             eprint!("{}", errors(&e));
             ExitCode::from(e.exit_code())
@@ -617,12 +689,23 @@ fn ctl_call(instance: &str, req: Request) -> ExitCode {
     }
 }
 
+/// Reports the cell's answer and its exit status: 0 done, 2 refused, 1 failed. With `json`
+/// one JSON document on stdout: a program's report (`exec --wait`) as `run --json` prints it,
+/// any other answer as the [`Reply`] itself; a refusal or a failure is said on stderr too.
 fn ctl_reply(
     reply: Reply,
     json: bool,
     trace: Option<&std::path::Path>,
     plot: Option<&std::path::Path>,
 ) -> ExitCode {
+    if json && !matches!(reply, Reply::Report { .. }) {
+        println!("{}", serde_json::to_string(&reply).unwrap_or_default());
+        // The words of a refusal or a failure on stderr, and the exit status, as without it.
+        return match reply {
+            Reply::Refused(_) | Reply::Failed(_) => ctl_reply(reply, false, trace, plot),
+            _ => ExitCode::SUCCESS,
+        };
+    }
     match reply {
         Reply::Done(m) => {
             println!("{m}");
@@ -897,28 +980,37 @@ fn main() -> ExitCode {
             json,
             virtual_time,
         ),
-        Cmd::Down { instance } => down(&instance),
+        Cmd::Down { instance, json } => down(&instance, json.json),
         Cmd::Exec(args) => exec(&args),
-        Cmd::Pause { instance, .. } => ctl_call(&instance, Request::Pause),
+        Cmd::Pause { instance, json, .. } => ctl_call(&instance, Request::Pause, json.json),
         Cmd::Speed {
-            percent, instance, ..
-        } => ctl_call(&instance, Request::Speed { percent }),
+            percent,
+            instance,
+            json,
+            ..
+        } => ctl_call(&instance, Request::Speed { percent }, json.json),
         Cmd::Check { program, config } => check(&program, config.as_deref()),
-        Cmd::Resume { instance, .. } => ctl_call(&instance, Request::Resume),
-        Cmd::Abort { instance, .. } => ctl_call(&instance, Request::Abort),
-        Cmd::Reset { instance, .. } => ctl_call(&instance, Request::Reset),
-        Cmd::Start { instance, .. } => ctl_call(&instance, Request::Start),
-        Cmd::Restart { process, instance } => ctl_call(&instance, Request::Restart { process }),
+        Cmd::Resume { instance, json, .. } => ctl_call(&instance, Request::Resume, json.json),
+        Cmd::Abort { instance, json, .. } => ctl_call(&instance, Request::Abort, json.json),
+        Cmd::Reset { instance, json, .. } => ctl_call(&instance, Request::Reset, json.json),
+        Cmd::Start { instance, json, .. } => ctl_call(&instance, Request::Start, json.json),
+        Cmd::Restart {
+            process,
+            instance,
+            json,
+        } => ctl_call(&instance, Request::Restart { process }, json.json),
         Cmd::Swap {
             process,
             command,
             instance,
+            json,
         } => ctl_call(
             &instance,
             Request::Swap {
                 process,
                 command: command.map(|c| c.split_whitespace().map(str::to_string).collect()),
             },
+            json.json,
         ),
         Cmd::Latency(args) => match latency(&args) {
             Ok(()) => ExitCode::SUCCESS,
@@ -966,8 +1058,18 @@ fn main() -> ExitCode {
             &instance, &axis, &fault, clear,
         )),
         Cmd::Estop {
-            instance, reason, ..
-        } => control_done(cell_client::control::estop(&instance, &reason)),
+            instance,
+            reason,
+            json,
+            ..
+        } => {
+            let r = cell_client::control::estop(&instance, &reason);
+            if json.json {
+                estop_reply(r)
+            } else {
+                control_done(r)
+            }
+        }
         Cmd::Io {
             instance,
             name,
@@ -1013,16 +1115,18 @@ fn main() -> ExitCode {
 }
 
 /// `supervisor down`: asked, then waited for until the supervisor has stopped everything and
-/// let go of the instance.
-fn down(instance: &str) -> ExitCode {
-    let code = ctl_call(instance, Request::Down);
+/// let go of the instance; with `json`, the reply is all it prints on stdout.
+fn down(instance: &str, json: bool) -> ExitCode {
+    let code = ctl_call(instance, Request::Down, json);
     if code == ExitCode::SUCCESS
         && let Ok(i) = shm_schema::InstanceName::new(instance)
     {
         while ctl::is_up(&i) {
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
-        println!("instance {i} is down");
+        if !json {
+            println!("instance {i} is down");
+        }
     }
     code
 }

@@ -142,13 +142,14 @@ fn a_configured_drive_fault_cuts_power_and_fails_the_run_with_its_events() {
             (Some("drive-reports-fault"), Some("y")),
             "{j}"
         );
-        // The figures up to the failure: x's first 2 s of motion, the processes' latency.
+        // The figures up to the failure: x's first 2 s of motion, the processes' latency. (The
+        // words are the subject: they name the file written.)
         assert!(
             err.contains(&format!("figures up to the failure: {}", plot.display())),
             "{err}"
         );
         crate::cell::check_figures(&plot, 4);
-        // Printed as they happened, and in the report.
+        // Printed as they happened (the words on stderr are the subject), and in the report.
         assert!(err.contains("fault-injected axis y"), "{err}");
         assert_eq!(j["ok"], false);
         let fault = events_named(&j, "drive-fault");
@@ -196,6 +197,8 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
             std::thread::sleep(Duration::from_millis(100));
         }
         // A bad injection is refused by name (the axes of the running cell) and changes nothing.
+        // `inject` asks no cell (it writes to the drives itself): its words, which name the
+        // flag the user typed and the cell's axes, are the subject.
         let bad = supervisor()
             .args(["inject", "--instance", &inst, "--axis", "w", "over-current"])
             .output()
@@ -224,7 +227,16 @@ fn a_fault_injected_from_another_shell_is_reported_as_it_happens() {
             (Some("feedback-not-finite"), Some("x")),
             "{err}\n{j}"
         );
-        // The drives acknowledged it (the tool waits for their event before it says so).
+        // The drives acknowledged it (the tool waits for their event before it says so): in
+        // the report, and printed as it happened (those words are the subject too).
+        assert!(
+            events_named(&j, "fault-injected")
+                .iter()
+                .any(|e| e["axis"] == "x"
+                    && e["value"].as_f64() == Some(0x7320 as f64)
+                    && e["source"] == "drives"),
+            "{j}"
+        );
         assert!(err.contains("fault-injected axis x: 0x7320"), "{err}");
         assert_clean(&inst);
     });
@@ -246,6 +258,7 @@ fn an_absurd_inertia_is_refused_before_anything_starts() {
             WATCHDOG,
         );
         let err = exited(&out, 2);
+        // The words are the subject: they name the file, the line and the column.
         assert!(
             err.contains(
                 "cell.toml:32:9: axis x: sim inertia 1e-300 makes servo's position loop unstable"
@@ -319,7 +332,8 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
         let _ = std::fs::remove_file(&png);
         assert_clean(&inst);
 
-        // Bad requests are refused by name before anything starts.
+        // Bad requests are refused by name before anything starts (no cell is asked: the
+        // words, which name the flag or the limit, are the subject).
         for (args, want) in [
             (
                 vec!["--axis", "y", "--step", "0.8"],
@@ -358,10 +372,19 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
         // control channel (the drives' pending-sequence detector tripped once, the machine
         // loaded by the tests beside it).
         let mut tune = supervisor()
-            .args(["tune", "--instance", &inst, "--axis", "x", "--step", "0.2"])
+            .args([
+                "tune",
+                "--json",
+                "--instance",
+                &inst,
+                "--axis",
+                "x",
+                "--step",
+                "0.2",
+            ])
             .args(["--ramp", "30", "--config"])
             .arg(integration_tests::default_cell_with_room_file(&inst))
-            .stdout(Stdio::null())
+            .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .expect("tune");
@@ -388,20 +411,42 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
             .output()
             .expect("status");
         if tune.try_wait().expect("tune").is_none() {
-            let j = json_of(&status);
-            assert_eq!(j["supervisor"]["arm"]["enabled"], true, "{j}");
-            assert_eq!(j["supervisor"]["tuning"], "x", "{j}");
-            // The CLI says a refusal with exit status 2.
+            let j: control_plane::status::Status = serde_json::from_slice(&status.stdout)
+                .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&status.stdout)));
+            assert!(
+                j.supervisor.arm.as_ref().is_some_and(|a| a.enabled),
+                "{j:?}"
+            );
+            assert_eq!(j.supervisor.tuning.as_deref(), Some("x"), "{j:?}");
+            // The CLI says a refusal with exit status 2, and with --json which (none when tune
+            // ended meanwhile: the cell is then not up).
             let out = supervisor()
-                .args(["pause", "--instance", &inst])
+                .args(["pause", "--json", "--instance", &inst])
                 .output()
                 .expect("pause");
             assert_eq!(out.status.code(), Some(2), "{out:?}");
+            if !out.stdout.is_empty() {
+                let reply: Reply = serde_json::from_slice(&out.stdout).expect("a Reply");
+                assert_eq!(reply, Reply::Refused(Refusal::Tuning { axis: "x".into() }));
+            }
             // `down` ends the session: a controlled stop, not a fault; tune fails saying so.
             succeeded(supervisor().args(["down", "--instance", &inst]));
-            let err = exited(&tune.wait_with_output().expect("tune"), 1);
-            assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
-            assert!(!err.contains("] error "), "a fault on the way down: {err}");
+            let out = tune.wait_with_output().expect("tune");
+            let err = exited(&out, 1);
+            let failed: control_plane::report::RunFailure = serde_json::from_slice(&out.stdout)
+                .unwrap_or_else(|e| panic!("tune --json: not a RunFailure ({e}): {err}"));
+            assert!(
+                matches!(failed.cause, control_plane::Failure::Down { .. }),
+                "{failed:?}\n{err}"
+            );
+            // No fault on the way down: among the session's events (its closing included),
+            // none is an error.
+            assert!(!failed.events.is_empty(), "no events: {failed:?}");
+            let errors = crate::up::errors(&failed.events);
+            assert!(
+                errors.is_empty(),
+                "a fault on the way down: {errors:#?}\n{err}"
+            );
         } else {
             success(tune.wait_with_output().expect("tune"), "tune");
         }

@@ -6,6 +6,9 @@ use crate::drives::{
     Client, WATCHDOG, events_named, pid_of, program_in_background_as, triangle_in_background_as,
     wait_for,
 };
+use control_plane::Failure;
+use control_plane::info::Origin;
+use control_plane::report::RunFailure;
 use integration_tests::{
     assert_clean, default_cell, exited, instance, json_of, pids_with, scratch, succeeded,
     supervisor, with_stall_room,
@@ -24,12 +27,12 @@ fn cell_with_behaviour(test: &str, propagate: bool, external: bool) -> std::path
 
 /// Runs the small triangle of `test` on its instance, the cell's `[behaviour]` set as given
 /// ([`cell_with_behaviour`]), and raises the user's e-stop (`supervisor estop`) mid-motion;
-/// returns the run's stderr and JSON report.
+/// returns the run's stderr, its JSON report and the same typed.
 fn user_estop_mid_motion(
     test: &str,
     propagate: bool,
     external: bool,
-) -> (String, serde_json::Value) {
+) -> (String, serde_json::Value, RunFailure) {
     let inst = &instance(test);
     let cfg = cell_with_behaviour(test, propagate, external);
     // The e-stop comes as soon as it moves: a small program is enough, and one that is not
@@ -42,28 +45,36 @@ fn user_estop_mid_motion(
     client.leave();
     let err = exited(&out, 1);
     let j = json_of(&out);
+    let failed = run_failure(&j, &err);
     // The e-stop, whether it stopped the motion or stayed latched after it.
-    let cause = match &j["cause"]["latched-after-motion"] {
-        serde_json::Value::Null => &j["cause"]["estop"],
-        after => &after["estop"]["estop"],
+    let cause = match &failed.cause {
+        Failure::LatchedAfterMotion { estop } => estop.as_ref(),
+        cause => cause,
     };
-    assert_eq!(
-        (
-            cause["origin"].as_str(),
-            cause["by"].as_str(),
-            cause["reason"].as_str()
+    match cause {
+        Failure::Estop {
+            origin, by, reason, ..
+        } => assert_eq!(
+            (*origin, by.as_str(), reason.as_str()),
+            (Origin::External, "supervisor", "test e-stop"),
+            "{err}\n{j}"
         ),
-        (Some("external"), Some("supervisor"), Some("test e-stop")),
-        "{err}\n{j}"
-    );
+        other => panic!("not the user's e-stop: {other:?}\n{err}"),
+    }
     assert_clean(inst);
-    (err, j)
+    (err, j, failed)
+}
+
+/// The failed run's document `j`, typed (`err`: its stderr, for the message).
+fn run_failure(j: &serde_json::Value, err: &str) -> RunFailure {
+    serde_json::from_value(j.clone())
+        .unwrap_or_else(|e| panic!("not the documented RunFailure ({e}): {j}\n{err}"))
 }
 
 #[test]
 fn a_user_estop_from_another_shell_brings_the_axes_to_rest_and_disables_the_drives() {
     integration_tests::wall_clock(|| {
-        let (_, j) = user_estop_mid_motion("estop-user", true, false);
+        let (_, j, _) = user_estop_mid_motion("estop-user", true, false);
         // Every process reacted in its own cycle; servo's reaction ended with the axes at rest
         // and the drives disabled, after the e-stop was raised.
         let safe = events_named(&j, "estop-safe");
@@ -119,16 +130,20 @@ fn a_stalled_trajgen_trips_servo_pending_sequence_detector() {
         client.leave();
         let err = exited(&out, 1);
         let j = json_of(&out);
-        let e = &j["cause"]["estop"];
-        assert_eq!(
-            (e["origin"].as_str(), e["by"].as_str(), e["reason"].as_str()),
-            (
-                Some("host"),
-                Some("servo"),
-                Some("pending_sequence_overrun expired in servo")
+        match run_failure(&j, &err).cause {
+            Failure::Estop {
+                origin, by, reason, ..
+            } => assert_eq!(
+                (origin, by.as_str(), reason.as_str()),
+                (
+                    Origin::Host,
+                    "servo",
+                    "pending_sequence_overrun expired in servo"
+                ),
+                "{err}\n{j}"
             ),
-            "{err}\n{j}"
-        );
+            other => panic!("not servo's detector: {other:?}\n{err}"),
+        }
         assert_clean(&inst);
     });
 }
@@ -191,13 +206,16 @@ fn when_the_supervisor_is_killed_the_processes_bring_the_axes_to_rest_and_exit()
 /// stops the motion, servo bringing the axes to rest, only with `propagate_external_estop`;
 /// without, it stays latched after the motion and no process reacts.
 fn a_user_estop_without_propagate_estop(test: &str, external: bool) {
-    let (err, j) = user_estop_mid_motion(test, false, external);
+    let (err, j, failed) = user_estop_mid_motion(test, false, external);
     let safe = events_named(&j, "estop-safe");
     if external {
-        assert!(j["cause"]["estop"].is_object(), "{err}\n{j}");
+        assert!(matches!(failed.cause, Failure::Estop { .. }), "{err}\n{j}");
         assert!(safe.iter().any(|e| e["source"] == "servo"), "{j}");
     } else {
-        assert!(j["cause"]["latched-after-motion"].is_object(), "{err}\n{j}");
+        assert!(
+            matches!(failed.cause, Failure::LatchedAfterMotion { .. }),
+            "{err}\n{j}"
+        );
         assert!(safe.is_empty(), "no process reacts: {safe:?}");
     }
 }

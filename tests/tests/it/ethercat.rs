@@ -3,7 +3,9 @@
 //! its own (root, iproute2), so its veth pair and its Modbus port meet nothing else; the
 //! namespace goes with the test.
 
-use crate::up::{Up, io_value, process_in};
+use crate::up::{Up, io_of, latched};
+use control_plane::Failure;
+use control_plane::info::Life;
 use integration_tests::{
     assert_clean, bin, examples, exited, instance, ip, json_of, needed, run_with_watchdog, scratch,
     succeeded_within,
@@ -71,6 +73,8 @@ fn triangle_in(ns: &Netns, inst: &str, cfg: &Path) -> Output {
 fn refused_by_the_bus(out: &Output, says: &str, what: &str) -> String {
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(2), "{what}: {err}");
+    // `run` refused before it started anything, with no data but its words: they are the
+    // subject (what is where on the bus, in the bus process' own sentence).
     assert!(err.contains(says), "{what}: want {says:?} in\n{err}");
     assert!(err.contains("refused the configuration"), "{what}: {err}");
     // Nothing was enabled: the bus never reached its cycle.
@@ -98,7 +102,8 @@ fn the_small_triangle_runs_over_the_emulated_bus_on_time_and_on_the_path() {
         // clock, SYNC0 every period in each drive through the whole (small) triangle (one
         // event a millisecond of its motion at least), and a command applied at SYNC0, half a period after the frame that brought
         // it: the loop from an encoder sample to its command applied is a period and a half
-        // at the least (a drive taking its data as the frame passes: one period).
+        // at the least (a drive taking its data as the frame passes: one period). (The log's
+        // sentence is the subject: what the bus process says of its clocks.)
         assert!(
             err.contains("Distributed Clocks: reference clock position 0 (EK1100); SYNC0 every 1000 µs on position(s) 1, 2, 3"),
             "{err}"
@@ -190,7 +195,8 @@ fn a_line_that_differs_from_the_configuration_is_refused_naming_the_position_and
             let out = triangle_in(&ns, &inst, &cfg);
             let _ = emulator.kill();
             let _ = emulator.wait();
-            // Refused as a configuration is (exit 2), the bus process' reason in the log.
+            // Refused as a configuration is (exit 2), the bus process' reason in the log (its
+            // words, naming the positions and identities, are the subject).
             let err = refused_by_the_bus(&out, want, line);
             assert!(!err.contains("bus-op"), "{line}: {err}");
             assert_clean(&inst);
@@ -211,28 +217,52 @@ fn a_cable_pulled_mid_motion_is_a_lost_bus_an_estop_and_the_power_cut() {
                 ip(&["-n", &ns, "link", "set", "rtc-ecat0", "down"]);
             })
         };
-        let out = triangle_in(&ns, &inst, &cfg);
+        let out = run_with_watchdog(
+            ns.command("supervisor")
+                .args(["run", "--json", "--instance", &inst, "--config"])
+                .arg(&cfg)
+                .arg(examples().join("triangle.prog")),
+            WATCHDOG,
+        );
         pull.join().expect("the cable pulled");
         let err = exited(&out, 1);
+        let run: control_plane::report::RunFailure = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("run --json: not a RunFailure ({e}): {err}"));
+        // The run's event of `code` from `source` (any source: `None`).
+        let event = |source: Option<&str>, code: u32| {
+            run.events
+                .iter()
+                .find(|e| e.code == code && source.is_none_or(|s| e.source == s))
+                .unwrap_or_else(|| panic!("no event {code} of {source:?}: {run:#?}\n{err}"))
+        };
+        // (value, limit, text) of an event.
+        let reading = |e: &control_plane::event::Event| (e.value, e.limit, e.text.clone());
         // The frames lost, then the bus: 100 of them at 1 kHz (its 100 ms watchdog).
-        assert!(err.contains("bus-frames-lost: 1 (limit 100)"), "{err}");
-        assert!(err.contains("bus-lost: 100 (limit 100)"), "{err}");
+        let lost = event(None, code::BUS_FRAMES_LOST);
+        assert_eq!((lost.value, lost.limit), (Some(1.0), 100.0), "{lost:?}");
+        let lost = event(None, code::BUS_LOST);
+        assert_eq!((lost.value, lost.limit), (Some(100.0), 100.0), "{lost:?}");
         // The e-stop before that, after 50 frames: each lost frame is a transport overrun
         // (seed 002), and the test's transport detector expires at 5 % of 1 kHz (the
-        // example's at 0.5 %: 5 frames).
-        assert!(
-            err.contains("drives    health-expired: 50 (limit 50) — transport_overrun expired"),
-            "{err}"
+        // example's at 0.5 %: 5 frames). Raised by the drives' process (origin host, 3), for
+        // its health detector (604).
+        assert_eq!(
+            reading(event(Some("drives"), code::HEALTH_EXPIRED)),
+            (Some(50.0), 50.0, "transport_overrun expired".to_string())
         );
-        assert!(
-            err.contains(
-                "drives    estop-raised: 3 (limit 604) — transport_overrun expired in drives"
-            ),
-            "{err}"
+        assert_eq!(
+            reading(event(Some("drives"), code::ESTOP_RAISED)),
+            (
+                Some(3.0),
+                f64::from(code::HEALTH_EXPIRED),
+                "transport_overrun expired in drives".to_string()
+            )
         );
         // Servo took the e-stop; the bus' feedback NaN from the next cycle on, it cuts power.
-        assert!(err.contains("servo     disabling — e-stop"), "{err}");
-        assert!(err.contains("servo     power-cut"), "{err}");
+        // Why it disabled, in the event's words (its only record).
+        let disabling = event(Some("servo"), code::DISABLING);
+        assert!(disabling.text.starts_with("e-stop"), "{disabling:?}");
+        event(Some("servo"), code::POWER_CUT);
         assert_clean(&inst);
     });
 }
@@ -350,25 +380,31 @@ fn after_the_cable_comes_back_the_bus_is_back_in_op_and_reset_and_start_run_the_
         let mut events = up.follow_events();
         let run = up.exec_in_background(examples().join("triangle.prog"));
         // Mid-motion (the triangle takes 19 s), the cable goes.
-        up.until("moving", crate::up::moving);
+        up.until_typed("moving", crate::up::moving_typed);
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "down"]);
         let out = run.wait_with_output().expect("exec");
         assert_eq!(out.status.code(), Some(1), "the run ended by the lost bus");
         events.next(code::BUS_LOST);
         events.next(code::BUS_RECOVERING);
         // Latched (by the bus, or by servo's own fault on the feedback it lost first).
-        up.until("the e-stop latched", |s| {
-            s["supervisor"]["estop"]["code"].is_u64()
-        });
-        // A reset before the bus is back: the e-stop comes back at once, nothing enabled.
-        let early = up.fails(&["reset"]);
-        assert!(early.contains("EtherCAT bus not back in OP yet"), "{early}");
+        up.until_typed("the e-stop latched", |s| s.supervisor.estop.is_some());
+        // A reset before the bus is back: the e-stop comes back at once, nothing enabled; what
+        // stays says why (its words are the subject: the bus not back).
+        match up.failure(&["reset"]) {
+            Failure::ResetIncomplete { left } => assert!(
+                left.iter()
+                    .any(|l| l.contains("EtherCAT bus not back in OP yet")),
+                "{left:?}"
+            ),
+            other => panic!("a reset on a lost bus: {other:?}"),
+        }
         assert!(!up.ctl(&["start"]).status.success(), "start on a lost bus");
         // The cable back: the bus process brings the bus up again by itself.
         ip(&["-n", &ns.0, "link", "set", "rtc-ecat0", "up"]);
         events.next(code::BUS_OP);
         drop(events);
         let log = reset_start_and_run(up);
+        // The log's event lines: no working counter mismatched on the way.
         assert!(!log.contains("bus-wkc-mismatch"), "{log}");
     });
 }
@@ -430,23 +466,24 @@ fn the_bus_process_killed_is_restarted_and_reset_and_start_recover() {
         unsafe { libc::kill(bus[0], libc::SIGKILL) };
         let lost = events.next(code::PROCESS_LOST);
         assert_eq!(lost.source, "supervisor", "{lost:?}");
+        // How it ended, in the event's words (its only record): the subject.
         assert!(
             lost.text.contains("exited: signal: 9 (SIGKILL)"),
             "{lost:?}"
         );
         // Restarted by its policy: it brings the bus up from the scan.
-        up.until("the bus process back", |s| {
-            let p = process_in(s, "drives");
-            p["restarts"].as_u64().is_some_and(|r| r >= 1) && p["life"] == "running"
+        up.until_typed("the bus process back", |s| {
+            let i = &s.supervisor;
+            i.processes
+                .iter()
+                .any(|p| p.name == "drives" && p.restarts >= 1 && p.life == Life::Running)
         });
         let again = integration_tests::pids_with(&["ethercat-bus", &up.inst]);
         assert!(again.len() == 1 && again[0] != bus[0], "{again:?}");
         events.next(code::BUS_OP);
         drop(events);
-        up.until("the new bus process cyclic", |s| {
-            s["processes"]["drives"]["cycles"]
-                .as_u64()
-                .is_some_and(|c| c > 100)
+        up.until_typed("the new bus process cyclic", |s| {
+            s.processes.get("drives").is_some_and(|p| p.cycles > 100)
         });
         reset_start_and_run(up);
     });
@@ -581,30 +618,28 @@ fn the_cells_io_rides_the_bus_an_output_its_sensor_back_and_the_estop_circuit() 
     integration_tests::wall_clock(|| {
         let (ns, up) = cell_up("ecat-io");
         // The inputs as the terminal reads them: the e-stop circuit closed (its sim value).
-        let s = up.until("the inputs from the bus", |s| {
-            io_value(s, "estop_ok") == Some(1)
+        let s = up.until_typed("the inputs from the bus", |s| {
+            io_of(s, "estop_ok") == Some(1)
         });
-        assert_eq!(io_value(&s, "gripper_closed"), Some(0), "{s}");
+        assert_eq!(io_of(&s, "gripper_closed"), Some(0), "{s:?}");
         // The gripper's output through the EL2008, the emulated solenoid, its sensor back
         // through the EL1008 80 ms later.
         up.ok(&["io", "gripper", "1"]);
-        up.until("the gripper's sensor closed", |s| {
-            io_value(s, "gripper_closed") == Some(1)
+        up.until_typed("the gripper's sensor closed", |s| {
+            io_of(s, "gripper_closed") == Some(1)
         });
         up.ok(&["io", "gripper", "0"]);
-        up.until("the gripper's sensor open", |s| {
-            io_value(s, "gripper_closed") == Some(0)
+        up.until_typed("the gripper's sensor open", |s| {
+            io_of(s, "gripper_closed") == Some(0)
         });
         // The e-stop button on the bus pressed (the EL1008's bit 0 at position 4 opens):
         // iobridge raises the e-stop from it.
         emulator_fault(&ns, &up, &["input", "4", "0", "--bit", "0"]);
-        let s = up.until("the e-stop latched by its circuit", |s| {
-            s["supervisor"]["estop"]["code"].is_u64()
-        });
-        assert_eq!(io_value(&s, "estop_ok"), Some(0), "{s}");
+        let s = up.until_typed("the e-stop latched by its circuit", latched);
+        assert_eq!(io_of(&s, "estop_ok"), Some(0), "{s:?}");
         // Released: reset and start, and the triangle runs.
         emulator_fault(&ns, &up, &["input", "4", "1", "--bit", "0"]);
-        up.until("the circuit closed", |s| io_value(s, "estop_ok") == Some(1));
+        up.until_typed("the circuit closed", |s| io_of(s, "estop_ok") == Some(1));
         reset_start_and_run(up);
     });
 }

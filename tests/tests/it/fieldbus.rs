@@ -5,9 +5,11 @@
 //! no e-stop; the register map's document is the code's.
 
 use crate::drives::{WATCHDOG, pid_of};
-use crate::up::{Up, cell, process_in};
+use crate::up::{Up, arm_enabled, cell, estop_of, latched, process_of};
+use control_plane::info::{Life, Origin};
+use control_plane::report::RunReport;
 use integration_tests::{run_with_watchdog, scratch, trace_rows};
-use serde_json::Value;
+use shm_schema::event::code;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
@@ -16,11 +18,12 @@ use std::time::{Duration, Instant};
 
 /// The address the modbus process announced (it listens on port 0: any free one).
 fn address(up: &Up) -> SocketAddr {
-    let s = up.until("the modbus server listening", |s| {
-        process_in(s, "modbus")["listening"].is_string()
+    let s = up.until_typed("the modbus server listening", |s| {
+        process_of(s, "modbus").listening.is_some()
     });
-    let a: SocketAddr = process_in(&s, "modbus")["listening"]
-        .as_str()
+    let a: SocketAddr = process_of(&s, "modbus")
+        .listening
+        .as_deref()
         .and_then(|a| a.parse().ok())
         .expect("an address");
     // It may listen before iobridge's first image: until then every request is busy.
@@ -245,6 +248,7 @@ fn pymodbus_and_mbpoll_read_the_positions_of_a_running_program_as_its_trace_has_
             .expect("poller output");
         let stdout = String::from_utf8_lossy(&polled.stdout);
         let stderr = String::from_utf8_lossy(&polled.stderr);
+        // The Python client's words are all it says of a Modbus exception: the subject.
         assert!(!stderr.contains("exception"), "{stderr}");
         let rows: Vec<Vec<f64>> = stdout
             .lines()
@@ -323,8 +327,11 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
         let mut c = Raw::connect(address(&up));
         // Coil 1 is the gripper (an output); the sensor that follows it closes 80 ms later.
         assert_eq!(c.write_coil(1, true), Ok(vec![5, 0, 1, 0xFF, 0]));
-        up.until("gripper closed", |s| {
-            s["io"]["entries"][1]["value"] == 1 && s["io"]["entries"][2]["value"] == 1
+        up.until_typed("gripper closed", |s| {
+            s.io.as_ref().is_some_and(|io| {
+                io.entries.get(1).and_then(|e| e.value()) == Some(1)
+                    && io.entries.get(2).and_then(|e| e.value()) == Some(1)
+            })
         });
         let bits = c.bits(2, 0, 5).expect("discrete inputs");
         assert_eq!(
@@ -370,9 +377,10 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
             assert!(start.elapsed() < WATCHDOG, "the override never read back");
             std::thread::sleep(Duration::from_millis(20));
         }
-        let s = up.status();
-        assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
-        assert!(s["supervisor"]["estop"].is_null(), "{s}");
+        let s = up.status_typed();
+        let program = s.program.as_ref().expect("trajgen's program");
+        assert_eq!(program.speed_override, 0.4, "{s:?}");
+        assert_eq!(s.supervisor.estop, None, "{s:?}");
         // The server is not critical: killed, it restarts without an e-stop.
         let pid = pid_of("modbus", &up.inst);
         nix::sys::signal::kill(
@@ -380,14 +388,15 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
             nix::sys::signal::Signal::SIGKILL,
         )
         .expect("kill");
-        let s = up.until("modbus restarted", |s| {
-            process_in(s, "modbus")["restarts"] == 1 && process_in(s, "modbus")["life"] == "running"
+        let s = up.until_typed("modbus restarted", |s| {
+            let m = process_of(s, "modbus");
+            m.restarts == 1 && m.life == Life::Running
         });
-        assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
+        assert_eq!(s.supervisor.estop, None, "no e-stop: {s:?}");
         for p in ["drives", "servo", "trajgen", "iobridge"] {
-            assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
+            assert_eq!(process_of(&s, p).restarts, 0, "{p}: {s:?}");
         }
-        assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
+        assert!(arm_enabled(&s), "{s:?}");
         let mut c = Raw::connect(address(&up));
         // The outputs kept their values through it.
         assert_eq!(c.bits(1, 1, 1), Ok(vec![true]));
@@ -396,11 +405,22 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
         assert_eq!(c.write_register(0, 2), Err(ILLEGAL_VALUE));
         assert_eq!(c.registers(3, 0, 2), Ok(vec![0, 40]));
         assert!(c.write_register(0, 1).is_ok());
-        let s = up.until("e-stop latched", |s| !s["supervisor"]["estop"].is_null());
-        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-        assert!(reason.contains("Modbus by 127.0.0.1:"), "{s}");
-        assert_eq!(s["supervisor"]["estop"]["origin"], "external", "{s}");
-        up.until("outputs safe", |s| s["io"]["outputs_safe"] == true);
+        let s = up.until_typed("e-stop latched", latched);
+        let e = estop_of(&s);
+        assert_eq!(
+            (e.origin, e.code, e.source.as_str()),
+            (Origin::External, code::FIELDBUS_WRITE, "modbus"),
+            "{s:?}"
+        );
+        // Named after the client: its address.
+        let client = e
+            .reason
+            .strip_prefix("e-stop asked over Modbus by ")
+            .and_then(|a| a.parse::<SocketAddr>().ok());
+        assert!(client.is_some_and(|a| a.ip().is_loopback()), "{s:?}");
+        up.until_typed("outputs safe", |s| {
+            s.io.as_ref().and_then(|io| io.outputs_safe) == Some(true)
+        });
         let start = Instant::now();
         while c.registers(3, 0, 1) != Ok(vec![1]) {
             assert!(start.elapsed() < WATCHDOG, "the e-stop never read back");
@@ -413,8 +433,8 @@ fn writes_over_modbus_drive_outputs_raise_the_estop_and_set_the_speed_and_a_lost
             std::thread::sleep(Duration::from_millis(20));
         }
         assert_eq!(c.write_coil(4, true), Err(BUSY), "outputs held safe");
-        up.ok(&["reset"]);
-        up.until("e-stop clear", |s| s["supervisor"]["estop"].is_null());
+        up.done(&["reset"]);
+        up.until_typed("e-stop clear", |s| !latched(s));
         up.down();
     });
 }
@@ -471,7 +491,7 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
         let mut c3 = served(a);
         // The short coil write would have aborted the server without the frame check.
         assert_eq!(
-            process_in(&up.status(), "modbus")["restarts"],
+            process_of(&up.status_typed(), "modbus").restarts,
             0,
             "the server crashed"
         );
@@ -481,12 +501,17 @@ fn hostile_frames_too_many_clients_and_idle_ones_disturb_nothing() {
         assert!(c3.closed(), "an idle client kept its connection");
         // Nothing else noticed.
         let out = job.wait_with_output().expect("exec");
-        let report: Value = serde_json::from_slice(&out.stdout).expect("report");
-        assert_eq!(report["ok"], true, "{report}");
-        let s = up.status();
-        assert!(s["supervisor"]["estop"].is_null(), "{s}");
+        let report: RunReport = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+            panic!(
+                "not a completed run's report ({e}): {}",
+                String::from_utf8_lossy(&out.stdout)
+            )
+        });
+        assert!(report.ok, "{report:?}");
+        let s = up.status_typed();
+        assert_eq!(s.supervisor.estop, None, "{s:?}");
         for p in ["drives", "servo", "trajgen", "iobridge", "modbus"] {
-            assert_eq!(process_in(&s, p)["restarts"], 0, "{p}: {s}");
+            assert_eq!(process_of(&s, p).restarts, 0, "{p}: {s:?}");
         }
         up.down();
     });

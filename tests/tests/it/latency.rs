@@ -151,6 +151,7 @@ fn ctrl_c_prints_the_figures_so_far() {
         let out = wait_output(child, WATCHDOG, "latency did not stop on SIGINT");
         assert!(out.status.success(), "{}", stderr(&out));
         let text = String::from_utf8_lossy(&out.stdout);
+        // cyclictest's text format is the subject: what it says, line by line.
         assert!(text.contains("# interrupted: figures so far"), "{text}");
         let line = text
             .lines()
@@ -182,6 +183,8 @@ fn bad_latency_options_are_refused_by_name() {
         ] {
             let out = run_with_watchdog(supervisor().arg("latency").args(&args), WATCHDOG);
             assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+            // Refused by name: the words, which name the option the user typed, are the
+            // subject.
             assert!(stderr(&out).contains(needle), "{args:?}: {}", stderr(&out));
             assert!(out.stdout.is_empty(), "{args:?} measured something");
         }
@@ -194,6 +197,7 @@ fn status_reports_the_running_cell_and_its_latency() {
         let inst = instance("status");
         let none = run_with_watchdog(supervisor().args(["status", "--instance", &inst]), WATCHDOG);
         assert_eq!(none.status.code(), Some(2));
+        // No cell answered: the client's words are all there is.
         assert!(stderr(&none).contains("is not up"), "{}", stderr(&none));
 
         let prog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/triangle.prog");
@@ -256,6 +260,8 @@ fn status_reports_the_running_cell_and_its_latency() {
         assert_eq!(runtime::rt::sched_of(modbus), Some((0, 0)), "modbus");
         let table = run_with_watchdog(supervisor().args(["status", "--instance", &inst]), WATCHDOG);
         let text = String::from_utf8_lossy(&table.stdout);
+        // The table for people: its words are the subject (the JSON's figures are checked
+        // above through their type).
         assert!(
             text.contains("p99.99") && text.lines().any(|l| l.starts_with("servo")),
             "{text}"

@@ -3,12 +3,18 @@
 //! their policy, hot swap, another user refused, nothing left after `down`.
 
 use crate::drives::{WATCHDOG, pid_of};
-use crate::up::{Up, cell, io_value, moving, process_in};
+use crate::up::{
+    Up, arm_enabled, cell, enabled, estop_of, io_of, latched, moving_typed as moving, process_of,
+};
+use control_plane::info::{Life, Origin};
+use control_plane::report::{RunDocument, RunFailure, RunReport};
+use control_plane::status::Status;
+use control_plane::{Failure, Refusal};
 use integration_tests::{
     assert_clean, exited, instance, run_with_watchdog, scratch, succeeded_within, supervisor,
     wait_output,
 };
-use serde_json::Value;
+use shm_schema::event::code;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
@@ -25,14 +31,43 @@ fn program(test: &str, src: &str) -> String {
     scratch(test, "p.prog", src).display().to_string()
 }
 
-fn latched(s: &Value) -> bool {
-    !s["supervisor"]["estop"].is_null()
+fn all_running(s: &Status) -> bool {
+    s.supervisor
+        .processes
+        .iter()
+        .all(|p| p.life == Life::Running)
 }
 
-fn all_running(s: &Value) -> bool {
-    s["supervisor"]["processes"]
-        .as_array()
-        .is_some_and(|p| p.iter().all(|p| p["life"] == "running"))
+/// The program's path speed, in the typed status `s` (`None`: no program, or none yet).
+fn path_speed(s: &Status) -> Option<f64> {
+    s.supervisor.job.as_ref().and_then(|j| j.path_speed)
+}
+
+/// A program's document (`exec --wait --json`, `run --json`) in `out`'s stdout, typed.
+fn document(out: &std::process::Output) -> RunDocument {
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.trim()).unwrap_or_else(|e| {
+        panic!(
+            "not the documented report ({e}): {text}{}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+/// A program's document in `out`'s stdout, which must be a failure.
+fn failure_of(out: &std::process::Output) -> RunFailure {
+    match document(out) {
+        RunDocument::Failed(f) => f,
+        RunDocument::Completed(r) => panic!("completed: {r:?}"),
+    }
+}
+
+/// A program's document in `out`'s stdout, which must be a completed run's report.
+fn report_of(out: &std::process::Output) -> RunReport {
+    match document(out) {
+        RunDocument::Completed(r) => *r,
+        RunDocument::Failed(f) => panic!("failed: {f:?}"),
+    }
 }
 
 /// Sends `sig` to the process of `inst` that runs `program`.
@@ -52,19 +87,24 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
         // The wall clock: its plot shows the wake-up latency histogram (empty on the virtual clock).
         let cfg = crate::up::wall_cell(test, &[]);
         let up = Up::start(test, &cfg);
-        // A second supervisor of the instance is refused, whether `up` or `run`.
+        // A second supervisor of the instance is refused, whether `up` or `run`. No cell
+        // answers them (they are refused before they ask one): their words are all they say.
         let err = up.refused(&["up", "--config", cfg.to_str().expect("utf-8")]);
         assert!(err.contains("is in use"), "{err}");
         let triangle = integration_tests::examples().join("triangle.prog");
         let tri = triangle.to_str().expect("utf-8");
         let err = up.refused(&["run", tri]);
         assert!(err.contains("is in use"), "{err}");
-        // A bad program is refused with its line and column; nothing moves.
+        // A bad program is refused with its line and column; nothing moves. (The words are
+        // the subject: they name the file and the line.)
         let bad = program(test, "MOVE(140, 40)\nEND\n");
-        let err = up.refused(&["exec", &bad]);
-        assert!(err.contains("p.prog:1:"), "{err}");
+        match up.refusal(&["exec", &bad]) {
+            Refusal::Program { error } => assert!(error.contains("p.prog:1:"), "{error}"),
+            other => panic!("a bad program: {other:?}"),
+        }
         // exec --wait prints run's report and draws its figures; an output where none can be
-        // written is refused before anything moves.
+        // written is refused before anything moves (by the client, before it asks the cell:
+        // its words, which name the flag the user typed, are the subject).
         let err = up.refused(&["exec", tri, "--wait", "--plot", "/nonexistent/dir/p.png"]);
         assert!(err.contains("--plot /nonexistent/dir/p.png"), "{err}");
         let plot = integration_tests::scratch(test, "exec.png", "");
@@ -80,63 +120,72 @@ fn a_cell_stays_up_runs_programs_pauses_and_aborts_and_goes_down_clean() {
             assert!(r["processes"][p]["cycles"].as_u64().unwrap_or(0) > 0, "{p}");
         }
         // Pause: the axes come to rest on the path and hold; resume goes on; abort drops it.
-        up.ok(&["exec", tri]);
-        up.until("moving", moving);
-        let paused = up.ok(&["pause"]);
-        assert!(paused.contains("paused at rest on the path"), "{paused}");
-        let s = up.status();
-        assert_eq!(s["supervisor"]["job"]["paused"], true, "{s}");
-        assert!(
-            s["supervisor"]["estop"].is_null(),
-            "a pause is no e-stop: {s}"
-        );
-        let line = s["supervisor"]["job"]["line"].clone();
+        up.done(&["exec", tri]);
+        up.until_typed("moving", moving);
+        // Done: trajgen took the pause and the path speed is 0.
+        up.done(&["pause"]);
+        let s = up.status_typed();
+        let job = s.supervisor.job.as_ref().expect("the program runs");
+        assert!(job.paused, "{s:?}");
+        assert_eq!(s.supervisor.estop, None, "a pause is no e-stop: {s:?}");
+        let line = job.line;
         std::thread::sleep(Duration::from_millis(500));
-        let s2 = up.status();
-        assert_eq!(s2["supervisor"]["job"]["line"], line, "held while paused");
-        let err = up.refused(&["exec", tri]);
-        assert!(err.contains("busy"), "{err}");
-        up.ok(&["resume"]);
-        up.until("moving again", |s| {
-            s["supervisor"]["job"]["path_speed"].as_f64() == Some(1.0)
-        });
-        // The live override: the path speed ramps to it and stays, along the same path.
-        let slow = up.ok(&["speed", "40"]);
-        assert!(slow.contains("speed override 40 %"), "{slow}");
-        let s = up.until("at 40 %", |s| {
-            s["supervisor"]["job"]["path_speed"].as_f64() == Some(0.4)
-        });
-        assert_eq!(s["program"]["speed_override"], 0.4, "{s}");
-        assert!(up.refused(&["speed", "0"]).contains("1 to 100 %"));
-        assert!(up.refused(&["speed", "250"]).contains("1 to 100 %"));
-        up.ok(&["speed", "100"]);
-        let aborted = up.ok(&["abort"]);
-        assert!(aborted.contains("aborted"), "{aborted}");
-        let s = up.status();
-        assert!(s["supervisor"]["job"].is_null(), "{s}");
-        assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
-        assert!(
-            s["supervisor"]["estop"].is_null(),
-            "an abort is no e-stop: {s}"
+        let s2 = up.status_typed();
+        assert_eq!(
+            s2.supervisor.job.as_ref().map(|j| j.line),
+            Some(line),
+            "held while paused"
         );
-        assert_eq!(s["supervisor"]["arm"]["enabled"], true, "{s}");
+        assert_eq!(
+            up.refusal(&["exec", tri]),
+            Refusal::ProgramRunning {
+                program: tri.to_string()
+            }
+        );
+        up.done(&["resume"]);
+        up.until_typed("moving again", |s| path_speed(s) == Some(1.0));
+        // The live override: the path speed ramps to it and stays, along the same path.
+        up.done(&["speed", "40"]);
+        let s = up.until_typed("at 40 %", |s| path_speed(s) == Some(0.4));
+        let program_status = s.program.as_ref().expect("trajgen's program");
+        assert_eq!(program_status.speed_override, 0.4, "{s:?}");
+        assert_eq!(up.refusal(&["speed", "0"]), Refusal::Speed { percent: 0.0 });
+        assert_eq!(
+            up.refusal(&["speed", "250"]),
+            Refusal::Speed { percent: 250.0 }
+        );
+        up.done(&["speed", "100"]);
+        // Done: trajgen took the abort and the program is over.
+        up.done(&["abort"]);
+        let s = up.status_typed();
+        assert_eq!(s.supervisor.job, None, "{s:?}");
+        let last = s.supervisor.last_job.as_ref().expect("the last program");
+        assert!(!last.ok, "{s:?}");
+        assert_eq!(s.supervisor.estop, None, "an abort is no e-stop: {s:?}");
+        assert!(arm_enabled(&s), "{s:?}");
         // The next program starts where the abort left the axes.
         brief(&up, test);
         // `down` while a client waits for a program: the client is told, not dropped.
         let waiting = supervisor()
-            .args(["exec", "--wait", "--instance", &up.inst])
+            .args(["exec", "--wait", "--json", "--instance", &up.inst])
             .arg(program(test, SHORT))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .expect("exec");
-        up.until("moving", moving);
+        up.until_typed("moving", moving);
         let inst = up.inst.clone();
         up.down();
-        let err = exited(&waiting.wait_with_output().expect("exec"), 1);
-        assert!(err.contains("`supervisor down` stopped the cell"), "{err}");
+        let out = waiting.wait_with_output().expect("exec");
+        let err = exited(&out, 1);
+        let failed = failure_of(&out);
+        assert!(
+            matches!(failed.cause, Failure::Down { .. }),
+            "{failed:?}\n{err}"
+        );
         assert_clean(&inst);
-        // A command to an instance that is not up says so.
+        // A command to an instance that is not up says so. No cell answered: the client's
+        // words are all there is.
         let out = supervisor()
             .args(["status", "--instance", &instance(test)])
             .output()
@@ -150,35 +199,47 @@ fn estop_then_reset_and_start_recover_and_a_fault_whose_cause_remains_is_named()
     integration_tests::wall_clock(|| {
         let test = "ops-reset";
         let up = Up::default_cell(test);
-        up.ok(&["estop", "--reason", "ops test"]);
-        let s = up.until("latched and safe", |s| {
-            latched(s) && s["supervisor"]["arm"]["enabled"] == false
-        });
-        assert!(
-            s["supervisor"]["estop"]["reason"]
-                .as_str()
-                .is_some_and(|r| r.contains("ops test")),
-            "{s}"
+        up.done(&["estop", "--reason", "ops test"]);
+        let s = up.until_typed("latched and safe", |s| latched(s) && !arm_enabled(s));
+        let e = estop_of(&s);
+        assert_eq!(
+            (e.origin, e.code, e.reason.as_str()),
+            (Origin::External, code::ESTOP_RAISED, "ops test"),
+            "{s:?}"
         );
         // Nothing runs and nothing enables while it is latched.
-        assert!(
-            up.refused(&["exec", &program(test, SHORT)])
-                .contains("e-stop is latched")
-        );
-        assert!(up.refused(&["start"]).contains("reset"));
-        up.ok(&["reset"]);
+        let latched_estop = |r: Refusal| match r {
+            Refusal::EstopLatched { estop } => match *estop {
+                Failure::Estop { origin, reason, .. } => {
+                    assert_eq!((origin, reason.as_str()), (Origin::External, "ops test"))
+                }
+                other => panic!("not the user's e-stop: {other:?}"),
+            },
+            other => panic!("not refused for the e-stop: {other:?}"),
+        };
+        latched_estop(up.refusal(&["exec", &program(test, SHORT)]));
+        latched_estop(up.refusal(&["start"]));
+        up.done(&["reset"]);
         // Drives never re-enable by themselves.
         std::thread::sleep(Duration::from_millis(500));
-        assert_eq!(up.status()["supervisor"]["arm"]["enabled"], false);
-        up.ok(&["start"]);
+        assert!(!arm_enabled(&up.status_typed()));
+        up.done(&["start"]);
         brief(&up, test);
-        // A fault whose cause is still there: reset clears the e-stop and says what stays.
+        // A fault whose cause is still there: reset clears the e-stop and says what stays,
+        // naming it (the words are the subject: they say which fault and why).
         up.ok(&["inject", "--axis", "x", "encoder-loss"]);
-        up.until("servo's fault", |s| {
-            latched(s) && s["supervisor"]["arm"]["fault_latched"] == true
+        up.until_typed("servo's fault", |s| {
+            let i = &s.supervisor;
+            i.estop.is_some() && i.arm.as_ref().is_some_and(|a| a.fault_latched)
         });
-        let err = up.fails(&["reset"]);
-        assert!(err.contains("its cause is still present"), "{err}");
+        match up.failure(&["reset"]) {
+            Failure::ResetIncomplete { left } => assert!(
+                left.iter()
+                    .any(|l| l.contains("its cause is still present")),
+                "{left:?}"
+            ),
+            other => panic!("reset with the fault's cause present: {other:?}"),
+        }
         up.ok(&["inject", "--axis", "x", "encoder-loss", "--clear"]);
         up.reset_and_start();
         brief(&up, test);
@@ -201,23 +262,32 @@ fn each_process_killed_mid_motion_raises_the_estop_and_restarts_and_the_cell_rec
             ("iobridge", "iobridge"),
             ("drives", "machine-sim"),
         ] {
-            up.ok(&["exec", &long]);
-            up.until("moving", moving);
+            up.done(&["exec", &long]);
+            up.until_typed("moving", moving);
             signal(program, &up.inst, nix::sys::signal::Signal::SIGKILL);
             // The host e-stop names the process; the axes come to rest with the drives off; the
             // supervisor stays up and restarts the process (restart = "on-failure").
-            let s = up.until("restarted and at rest", |s| {
+            let s = up.until_typed("restarted and at rest", |s| {
+                let p = process_of(s, victim);
                 latched(s)
-                    && s["supervisor"]["job"].is_null()
-                    && s["supervisor"]["arm"]["enabled"] == false
-                    && process_in(s, victim)["life"] == "running"
-                    && process_in(s, victim)["restarts"] == 1
+                    && s.supervisor.job.is_none()
+                    && !arm_enabled(s)
+                    && p.life == Life::Running
+                    && p.restarts == 1
             });
-            let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-            assert!(reason.contains(victim), "{victim}: {s}");
-            assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
-            assert_eq!(s["supervisor"]["last_job"]["ok"], false, "{s}");
-            up.until("all cyclic", all_running);
+            let e = estop_of(&s);
+            assert_eq!(
+                (e.origin, e.code, e.reason.as_str()),
+                (
+                    Origin::Host,
+                    code::PROCESS_LOST,
+                    format!("{victim} lost").as_str()
+                ),
+                "{s:?}"
+            );
+            let last = s.supervisor.last_job.as_ref().expect("the last program");
+            assert!(!last.ok, "{s:?}");
+            up.until_typed("all cyclic", all_running);
             up.reset_and_start();
         }
         brief(&up, test);
@@ -231,19 +301,18 @@ fn a_stalled_process_is_found_by_its_heartbeat_and_replaced() {
         let test = "ops-stall";
         let up = Up::on_the_wall_clock(test);
         signal("iobridge", &up.inst, nix::sys::signal::Signal::SIGSTOP);
-        let s = up.until("stall found, iobridge restarted", |s| {
-            latched(s)
-                && process_in(s, "iobridge")["restarts"] == 1
-                && process_in(s, "iobridge")["life"] == "running"
+        let s = up.until_typed("stall found, iobridge restarted", |s| {
+            let p = process_of(s, "iobridge");
+            latched(s) && p.restarts == 1 && p.life == Life::Running
         });
-        assert!(
-            s["supervisor"]["estop"]["reason"]
-                .as_str()
-                .is_some_and(|r| r.contains("iobridge")),
-            "{s}"
+        // Found by its heartbeat: the supervisor's host e-stop for a stalled process.
+        let e = estop_of(&s);
+        assert_eq!(
+            (e.origin, e.code, e.reason.as_str()),
+            (Origin::Host, code::PROCESS_LOST, "iobridge stalled"),
+            "{s:?}"
         );
-        assert!(up.log().contains("stalled"), "{}", up.log());
-        up.until("cyclic", all_running);
+        up.until_typed("cyclic", all_running);
         up.reset_and_start();
         up.down();
     });
@@ -259,12 +328,13 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         up.ok(&["io", "gripper", "1"]);
         // Two swaps while it moves: the program lasts 13 s.
         let run = up.exec_in_background(program(test, SHORT));
-        up.until("moving", moving);
-        let out = up.ok(&["swap", "iobridge"]);
-        println!("{}", out.trim());
-        assert!(out.contains("largest gap"), "{out}");
-        let s = up.status();
-        assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
+        up.until_typed("moving", moving);
+        let replaced = up.replaced(&["swap", "iobridge"]);
+        println!("{}", replaced.text());
+        // The fieldbus image during the handover: its images and their largest gap.
+        assert!(replaced.image.is_some(), "{replaced:?}");
+        let s = up.status_typed();
+        assert_eq!(io_of(&s, "gripper"), Some(1), "{s:?}");
         // trajgen carries the motion: swapped during it, the program goes on along the path.
         // (Asked on the control channel itself: the answer's data, not its words.)
         let instance = shm_schema::InstanceName::new(&up.inst).expect("instance");
@@ -283,29 +353,30 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         assert!(replaced.program.is_some(), "{replaced:?}");
         let swap_ms = replaced.took_ms;
         // servo cannot be swapped under a moving arm.
-        let err = up.refused(&["swap", "servo"]);
-        assert!(err.contains("only while no program runs"), "{err}");
+        match up.refusal(&["swap", "servo"]) {
+            Refusal::MotionPath { process, .. } => assert_eq!(process, "servo"),
+            other => panic!("swap servo during a program: {other:?}"),
+        }
         let out = up.succeeded(
             wait_output(run, WATCHDOG, "the program did not end"),
             "exec --wait",
         );
         // No e-stop, the following error within its limit (or servo would have cut power), and
         // the motion time grew by about what the swap took (the pause's ramps included).
-        let r: Value =
-            serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).expect("json");
-        let opened = r["events"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter(|e| e["text"] == "gripper = 0" || e["text"] == "gripper_closed = 0")
+        let r = report_of(&out);
+        let opened = r
+            .events
+            .iter()
+            .filter(|e| e.text == "gripper = 0" || e.text == "gripper_closed = 0")
             .count();
-        assert_eq!(opened, 0, "the new iobridge took over the gripper: {r}");
-        let extra_ms = r["difference_s"].as_f64().expect("difference") * 1e3;
+        assert_eq!(opened, 0, "the new iobridge took over the gripper: {r:?}");
+        let extra_ms = r.difference_s * 1e3;
         println!(
-            "motion time grew by {extra_ms:.0} ms; the trajgen swap took {swap_ms:.0} ms; max following error {}",
-            r["max_following_error"]
+            "motion time grew by {extra_ms:.0} ms; the trajgen swap took {swap_ms:.0} ms; max following error {:?}",
+            r.max_following_error
         );
         // The pause's ramps (t_acc), and any stall trajgen measured besides the swap's own.
+        let r = serde_json::to_value(&r).expect("the report as JSON");
         let late_ms = crate::cell::trajgen_stall_s(&r) * 1e3;
         assert!(
             extra_ms > 0.0 && extra_ms < swap_ms + 525.0 + late_ms,
@@ -338,16 +409,20 @@ fn iobridge_and_trajgen_swap_during_motion_and_at_rest_without_an_estop() {
         let out = up.succeeded(swap.wait_with_output().expect("swap"), "swap trajgen");
         let out = String::from_utf8_lossy(&out.stdout).to_string();
         println!("{}", out.trim());
-        up.until("enabled again", |s| {
-            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
-        });
-        let s = up.status();
-        assert!(s["supervisor"]["estop"].is_null(), "no e-stop: {s}");
+        up.until_typed("enabled again", enabled);
+        let s = up.status_typed();
+        assert_eq!(s.supervisor.estop, None, "no e-stop: {s:?}");
         brief(&up, test);
-        // A bad command changes nothing.
-        let err = up.refused(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
-        assert!(err.contains("nothing was changed"), "{err}");
-        assert!(up.refused(&["swap", "nosuch"]).contains("no process"));
+        // A bad command changes nothing (a refusal: nothing was changed).
+        let refusal = up.refusal(&["swap", "trajgen", "--command", "/nonexistent/trajgen"]);
+        assert!(matches!(refusal, Refusal::Command { .. }), "{refusal:?}");
+        match up.refusal(&["swap", "nosuch"]) {
+            Refusal::NoSuchProcess { process, known } => {
+                assert_eq!(process, "nosuch");
+                assert!(known.iter().any(|k| k == "trajgen"), "{known:?}");
+            }
+            other => panic!("swap nosuch: {other:?}"),
+        }
         up.down();
     });
 }
@@ -432,13 +507,20 @@ fn another_user_is_refused_by_the_control_channel() {
         let out = std::process::Command::new("setpriv")
             .args(["--reuid", "65534", "--regid", "65534", "--clear-groups"])
             .arg(integration_tests::bin("supervisor"))
-            .args(["down", "--instance", &up.inst])
+            .args(["down", "--json", "--instance", &up.inst])
             .output()
             .expect("setpriv");
         let err = exited(&out, 2);
-        assert!(err.contains("uid 65534 may not control it"), "{err}");
+        let reply: control_plane::Reply =
+            serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {err}"));
+        let owner = nix::unistd::geteuid().as_raw();
+        assert_eq!(
+            reply,
+            control_plane::Reply::Refused(Refusal::ForeignUser { owner, uid: 65534 }),
+            "{err}"
+        );
         // Nothing changed: the cell is still up.
-        assert_eq!(up.status()["supervisor"]["arm"]["enabled"], true);
+        assert!(arm_enabled(&up.status_typed()));
         up.down();
     });
 }
@@ -452,11 +534,14 @@ fn after_the_supervisor_of_an_up_cell_is_killed_the_next_up_works() {
         // A client waits for a program's end: told that the supervisor broke off, exit 1 (its
         // request was taken).
         let waiting = up.exec_in_background(program(test, SHORT));
-        up.until("moving", moving);
+        up.until_typed("moving", moving);
         let mut child = up.child.take().expect("running");
         child.kill().expect("SIGKILL");
         let _ = child.wait();
-        let err = exited(&waiting.wait_with_output().expect("exec"), 1);
+        // No answer came (no reply, no report): the client's own words are all it says.
+        let out = waiting.wait_with_output().expect("exec");
+        let err = exited(&out, 1);
+        assert!(out.stdout.is_empty(), "{err}");
         assert!(err.contains("control channel broke"), "{err}");
         let inst = up.inst.clone();
         drop(up);
@@ -494,13 +579,13 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
                 .arg(program(test, BRIEF)),
             WATCHDOG,
         );
-        let r = integration_tests::json_of(&out);
+        let r = report_of(&out);
         // The Python process was cyclic, and its fieldbus images reached the supervisor.
         assert!(
-            r["processes"]["iobridge"]["cycles"].as_u64().unwrap_or(0) > 100,
-            "{r}"
+            r.processes.get("iobridge").is_some_and(|p| p.cycles > 100),
+            "{r:?}"
         );
-        assert!(!r["iobridge_delay_us"].is_null(), "no fieldbus image: {r}");
+        assert!(r.iobridge_delay_us.is_some(), "no fieldbus image: {r:?}");
         assert_clean(&inst);
     });
 }
@@ -547,16 +632,16 @@ fn a_swap_keeps_the_outputs_while_the_old_iobridge_is_held_off_the_cpu() {
             .write(test, "cell.toml");
         let up = Up::start(test, &cfg);
         up.ok(&["io", "gripper", "1"]);
-        up.until("the gripper closed", |s| io_value(s, "gripper") == Some(1));
+        up.until_typed("the gripper closed", |s| io_of(s, "gripper") == Some(1));
         // The old iobridge held off the CPU for 600 ms from the moment the swap is asked: its
         // successor starts while it publishes nothing.
         let inst = up.inst.clone();
         let held = std::thread::spawn(move || stall("iobridge", &inst, 600));
-        let out = up.ok(&["swap", "iobridge"]);
+        let replaced = up.replaced(&["swap", "iobridge"]);
         held.join().expect("the stall");
-        let s = up.status();
-        assert_eq!(io_value(&s, "gripper"), Some(1), "{out}\n{s}");
-        assert!(!latched(&s), "{s}");
+        let s = up.status_typed();
+        assert_eq!(io_of(&s, "gripper"), Some(1), "{replaced:?}\n{s:?}");
+        assert!(!latched(&s), "{s:?}");
         up.down();
     });
 }
@@ -580,30 +665,34 @@ fn an_iobridge_stall_counts_as_pending_sequence_and_trips_only_above_its_limit()
             )
             .write(test, "cell.toml");
         let up = Up::start(test, &cfg);
-        let pending = |s: &Value| {
-            s["processes"]["iobridge"]["health"]["pending_sequence_overrun"]["total"]
-                .as_u64()
-                .unwrap_or(0)
+        let pending = |s: &Status| {
+            s.processes
+                .get("iobridge")
+                .map_or(0, |p| p.health.pending_sequence_overrun.total)
         };
-        let before = pending(&up.status());
+        let before = pending(&up.status_typed());
         // 20 ms: 5 periods missed, below the limit: counted, no trip.
         stall("iobridge", &up.inst, 20);
-        let s = up.until("the gap counted", |s| pending(s) > before);
+        let s = up.until_typed("the gap counted", |s| pending(s) > before);
         std::thread::sleep(Duration::from_millis(500));
-        let s2 = up.status();
-        assert!(!latched(&s2), "a 20 ms gap tripped: {s2}\nbefore: {s}");
-        // 1 s: 250 periods, three times the limit: a host e-stop naming the detector.
+        let s2 = up.status_typed();
+        assert!(!latched(&s2), "a 20 ms gap tripped: {s2:?}\nbefore: {s:?}");
+        // 1 s: 250 periods, three times the limit: a host e-stop naming the detector, raised
+        // by iobridge's own detector.
         stall("iobridge", &up.inst, 1000);
-        let s = up.until("the trip", latched);
-        let reason = s["supervisor"]["estop"]["reason"].as_str().unwrap_or("");
-        assert!(
-            reason.contains("pending_sequence_overrun") && reason.contains("iobridge"),
-            "{s}"
+        let s = up.until_typed("the trip", latched);
+        let e = estop_of(&s);
+        assert_eq!(
+            (e.origin, e.code, e.source.as_str(), e.reason.as_str()),
+            (
+                Origin::Host,
+                code::HEALTH_EXPIRED,
+                "iobridge",
+                "pending_sequence_overrun expired in iobridge"
+            ),
+            "{s:?}"
         );
-        assert_eq!(s["supervisor"]["estop"]["origin"], "host", "{s}");
-        up.until("at rest, drives off", |s| {
-            s["supervisor"]["arm"]["enabled"] == false
-        });
+        up.until_typed("at rest, drives off", |s| !arm_enabled(s));
         up.reset_and_start();
         up.down();
     });
@@ -644,7 +733,7 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
             let mut cmd = supervisor();
             cmd.args(["status", "--json", "--instance", &inst]);
             let out = run_with_watchdog(&mut cmd, WATCHDOG);
-            if serde_json::from_slice::<Value>(&out.stdout).is_ok_and(|s| moving(&s)) {
+            if serde_json::from_slice::<Status>(&out.stdout).is_ok_and(|s| moving(&s)) {
                 break;
             }
             assert!(start.elapsed() < WATCHDOG, "never moved");
@@ -653,15 +742,17 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
         signal("servo", &inst, nix::sys::signal::Signal::SIGKILL);
         let out = wait_output(run, WATCHDOG, "the supervisor is stuck");
         assert_eq!(out.status.code(), Some(1));
-        let j = integration_tests::json_of(&out);
-        assert_eq!(j["ok"], false);
-        // Ended by servo's loss: its exit, or the host e-stop its loss raised.
-        let c = &j["cause"];
-        let servo_lost = c["exited"]["process"] == "servo"
-            || c["estop"]["code"] == shm_schema::event::code::PROCESS_LOST;
-        assert!(servo_lost, "{j}");
-        if let Some(reason) = c["estop"]["reason"].as_str() {
-            assert!(reason.contains("servo"), "the reason names it: {j}");
+        let j = failure_of(&out);
+        assert!(!j.ok);
+        // Ended by servo's loss: its exit, or the host e-stop its loss raised, which names it.
+        match &j.cause {
+            Failure::Exited { process, .. } => assert_eq!(process, "servo", "{j:?}"),
+            Failure::Estop { code, reason, .. } => assert_eq!(
+                (*code, reason.as_str()),
+                (code::PROCESS_LOST, "servo lost"),
+                "{j:?}"
+            ),
+            other => panic!("not ended by servo's loss: {other:?}"),
         }
         assert_clean(&inst);
     });
@@ -679,55 +770,64 @@ fn an_estop_input_mid_motion(test: &str, external: bool) {
     let up = Up::start(test, &cfg);
     up.ok(&["io", "gripper", "1"]);
     up.ok(&["io", "cycle_lamp", "1"]);
-    let s = up.until("the gripper closed", |s| {
-        io_value(s, "gripper_closed") == Some(1)
+    let s = up.until_typed("the gripper closed", |s| {
+        io_of(s, "gripper_closed") == Some(1)
     });
-    assert_eq!(io_value(&s, "cycle_lamp"), Some(1), "{s}");
+    assert_eq!(io_of(&s, "cycle_lamp"), Some(1), "{s:?}");
     let run = up.exec_in_background(program(test, MID));
-    up.until("moving", moving);
+    up.until_typed("moving", moving);
     up.ok(&["io", "estop_ok", "0"]);
-    let s = up.until("latched, outputs safe", |s| {
-        latched(s) && s["io"]["outputs_safe"] == true
+    let s = up.until_typed("latched, outputs safe", |s| {
+        latched(s) && s.io.as_ref().and_then(|io| io.outputs_safe) == Some(true)
     });
-    let e = &s["supervisor"]["estop"];
-    assert_eq!(e["origin"], "external", "{s}");
-    assert_eq!(e["source"], "iobridge", "{s}");
-    assert!(
-        e["reason"]
-            .as_str()
-            .is_some_and(|r| r.contains("estop_ok is open")),
-        "{s}"
+    let e = estop_of(&s);
+    assert_eq!(
+        (e.origin, e.code, e.source.as_str(), e.reason.as_str()),
+        (
+            Origin::External,
+            code::ESTOP_INPUT,
+            "iobridge",
+            "e-stop input estop_ok is open"
+        ),
+        "{s:?}"
     );
     // Each output at its safe value: the lamp off, the gripper holding its part.
-    assert_eq!(io_value(&s, "cycle_lamp"), Some(0), "{s}");
-    assert_eq!(io_value(&s, "gripper"), Some(1), "{s}");
-    let err = String::from_utf8_lossy(&up.ctl(&["io", "cycle_lamp", "1"]).stderr).to_string();
+    assert_eq!(io_of(&s, "cycle_lamp"), Some(0), "{s:?}");
+    assert_eq!(io_of(&s, "gripper"), Some(1), "{s:?}");
+    // `io` is no request to the cell (it writes to iobridge itself): its words are all it
+    // says, and they are the subject (why the output was not set).
+    let err = up.fails(&["io", "cycle_lamp", "1"]);
     assert!(err.contains("safe values"), "{err}");
     let out = run.wait_with_output().expect("exec");
     let err = exited(&out, 1);
-    let report: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim())
-        .unwrap_or_else(|e| panic!("{e}: {err}"));
-    let servo_safe = report["events"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .any(|e| e["name"] == "estop-safe" && e["source"] == "servo");
+    let report = failure_of(&out);
+    let servo_safe = report
+        .events
+        .iter()
+        .any(|e| e.code == code::ESTOP_SAFE && e.source == "servo");
     assert_eq!(
-        report["cause"]["latched-after-motion"].is_object(),
+        matches!(report.cause, Failure::LatchedAfterMotion { .. }),
         !external,
-        "{err}\n{report}"
+        "{err}\n{report:?}"
     );
-    assert_eq!(servo_safe, external, "{report}");
-    // Reset fails at once while the input is open, and says which and why.
-    let err = up.fails(&["reset"]);
-    assert!(err.contains("e-stop input estop_ok is open"), "{err}");
+    assert_eq!(servo_safe, external, "{report:?}");
+    // Reset fails at once while the input is open, and says which and why (the words are the
+    // subject: they name the input).
+    match up.failure(&["reset"]) {
+        Failure::ResetIncomplete { left } => assert!(
+            left.iter()
+                .any(|l| l.contains("e-stop input estop_ok is open")),
+            "{left:?}"
+        ),
+        other => panic!("reset with the input open: {other:?}"),
+    }
     up.ok(&["io", "estop_ok", "1"]);
-    up.ok(&["reset"]);
+    up.done(&["reset"]);
     // The outputs stay where the e-stop put them; requests are taken again.
-    let s = up.status();
-    assert_eq!(io_value(&s, "cycle_lamp"), Some(0), "{s}");
+    let s = up.status_typed();
+    assert_eq!(io_of(&s, "cycle_lamp"), Some(0), "{s:?}");
     up.ok(&["io", "cycle_lamp", "1"]);
-    up.ok(&["start"]);
+    up.done(&["start"]);
     brief(&up, test);
     up.down();
 }

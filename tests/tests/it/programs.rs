@@ -243,6 +243,7 @@ fn a_long_loop_is_checked_from_its_first_iterations_alike() {
         predicted_with_text(&cfg, &prog)
     };
     let ((four, text4), (five, _)) = (at(4), at(5));
+    // `check` prints words only (no cell, no JSON): what it says is the subject.
     assert!(!text4.contains("passed over"), "{text4}");
     let (all, text) = at(5000);
     assert!(
@@ -281,6 +282,8 @@ fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
                 "the program runs longer than 24 h",
             ),
         ];
+        // `check` asks no cell and has no JSON: its words, which name the line and the column,
+        // are the subject.
         for (k, (src, want)) in cases.iter().enumerate() {
             let prog = scratch(test, &format!("p{k}.prog"), src);
             let out = run_with_watchdog(supervisor().arg("check").arg(&prog), WATCHDOG);
@@ -304,6 +307,7 @@ fn check_refuses_a_bad_program_naming_line_and_column_and_starts_nothing() {
         let out = check(&cfg, &prog);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{err}");
+        // `check`'s words again (the axis and its limit named): the subject.
         assert!(
             err.contains("r reaches") && err.contains("above its vmax 16 mm/s"),
             "{err}"

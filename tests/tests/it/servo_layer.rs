@@ -318,10 +318,14 @@ fn an_injected_drive_fault_is_reported_and_recovered_by_reset_once_it_clears() {
         }
         assert_eq!(states(&lp)[1], State::Fault);
         assert_ne!(lp.state.status & st::FAULT_LATCHED, 0);
+        // Refused: the request's kind its value; why, in the event's words (servo's events
+        // carry no other cause), is the subject.
         assert!(
             lp.events[before..]
                 .iter()
-                .any(|e| e.code == code::REQUEST_REFUSED && e.text().contains("still in Fault"))
+                .any(|e| e.code == code::REQUEST_REFUSED
+                    && e.value == f64::from(RequestKind::Reset as u32)
+                    && e.text().contains("still in Fault"))
         );
         // Cleared: the reset works (transition 15), power stays off until enable.
         lp.step_with(None, None, Some(&inject(2, 0)));
@@ -556,7 +560,10 @@ fn a_tuning_step_is_taken_at_rest_only_and_within_half_the_following_error_limit
         // Too large: refused, nothing moves.
         let s = step(&mut lp, 100, 0.6);
         assert_eq!(s.cmd_position[0], 40.0);
+        // Refused (the request's kind its value), saying why in words (servo's events carry no
+        // other cause): the words are the subject.
         assert!(lp.events.iter().any(|e| e.code == code::REQUEST_REFUSED
+            && e.value == f64::from(RequestKind::Step as u32)
             && e.text().contains("half the following-error limit")));
         // Within the limit: the command steps at once, with no fault, and the axis follows.
         let s = step(&mut lp, 101, 0.4);
@@ -737,6 +744,7 @@ fn a_refused_first_setpoint_names_the_test_that_refused_it() {
         let e = refused(40.0, 5.0);
         assert_eq!((e.code, e.axis), (code::SETPOINT_VELOCITY_JUMP, 0));
         assert!(e.value > e.limit && (e.value - 5.0).abs() < 1e-6, "{e:?}");
+        // The event's words name the test too (what a user reads): the subject.
         assert!(e.text().contains("velocity"), "{}", e.text());
         // 2 mm away at rest: the position refuses it.
         let e = refused(42.0, 0.0);

@@ -2,6 +2,9 @@
 //! against it.
 
 use crate::drives::WATCHDOG;
+use control_plane::info::{Info, ProcessInfo};
+use control_plane::status::Status;
+use control_plane::{Failure, Refusal, Replaced, Reply};
 use integration_tests::{
     assert_clean, instance, run_with_watchdog, scratch, supervisor, wait_output,
 };
@@ -122,9 +125,7 @@ impl Up {
 
     /// Up once the drives are enabled and holding.
     fn wait_enabled(&mut self) {
-        self.until("the drives enabled", |s| {
-            s["supervisor"]["arm"]["enabled"] == true && s["supervisor"]["enabling"] == false
-        });
+        self.until_typed("the drives enabled", enabled);
     }
 
     pub(crate) fn log(&self) -> String {
@@ -181,11 +182,73 @@ impl Up {
         self.exits(args, 1)
     }
 
+    /// `supervisor <args> --json --instance <inst>`, under the watchdog: the cell's reply,
+    /// typed, and the command's stderr. Its exit status must be the reply's (0 done, 2
+    /// refused, 1 failed).
+    pub(crate) fn reply(&self, args: &[&str]) -> (Reply, String) {
+        let mut with_json = args.to_vec();
+        with_json.push("--json");
+        let out = self.ctl(&with_json);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        let reply: Reply = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| {
+            panic!(
+                "{args:?} --json: not a Reply ({e}), {}:\n{stdout}{err}\nlog:\n{}",
+                out.status,
+                self.log()
+            )
+        });
+        let code = match reply {
+            Reply::Refused(_) => 2,
+            Reply::Failed(_) => 1,
+            _ => 0,
+        };
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {reply:?}\n{err}");
+        (reply, err)
+    }
+
+    /// [`Up::reply`], which must be a refusal (exit 2): why, as its variant.
+    pub(crate) fn refusal(&self, args: &[&str]) -> Refusal {
+        match self.reply(args) {
+            (Reply::Refused(r), _) => r,
+            (other, err) => panic!("{args:?}: not refused: {other:?}\n{err}"),
+        }
+    }
+
+    /// [`Up::reply`], which must be a failure (exit 1): why, as its variant.
+    pub(crate) fn failure(&self, args: &[&str]) -> Failure {
+        match self.reply(args) {
+            (Reply::Failed(f), _) => f,
+            (other, err) => panic!("{args:?}: not failed: {other:?}\n{err}"),
+        }
+    }
+
+    /// [`Up::reply`], which must be done (exit 0): its line for the user.
+    pub(crate) fn done(&self, args: &[&str]) -> String {
+        match self.reply(args) {
+            (Reply::Done(m), _) => m,
+            (other, err) => panic!("{args:?}: not done: {other:?}\n{err}\nlog:\n{}", self.log()),
+        }
+    }
+
+    /// [`Up::reply`] of a `swap` or a `restart`, which must have replaced the process (exit
+    /// 0): the replacement's data.
+    pub(crate) fn replaced(&self, args: &[&str]) -> Replaced {
+        match self.reply(args) {
+            (Reply::Replaced(r), _) => *r,
+            (other, err) => panic!(
+                "{args:?}: not replaced: {other:?}\n{err}\nlog:\n{}",
+                self.log()
+            ),
+        }
+    }
+
     /// SIGKILLs the cell's process `name` (by the pid `status` gives); its pid.
     pub(crate) fn kill(&self, name: &str) -> i64 {
-        let pid = process_in(&self.status(), name)["pid"]
-            .as_i64()
+        let pid = process_of(&self.status_typed(), name)
+            .pid
             .unwrap_or_else(|| panic!("{name}'s pid"));
+        let pid = i64::from(pid);
         nix::sys::signal::kill(
             nix::unistd::Pid::from_raw(pid as i32),
             nix::sys::signal::Signal::SIGKILL,
@@ -223,6 +286,20 @@ impl Up {
             panic!("status --json is not the documented Status ({e}):\n{out}");
         }
         serde_json::from_str(out.trim()).expect("status JSON")
+    }
+
+    /// `status --json`, typed (every key known, none missing).
+    pub(crate) fn status_typed(&self) -> Status {
+        let out = self.ok(&["status", "--json"]);
+        serde_json::from_str(out.trim())
+            .unwrap_or_else(|e| panic!("status --json is not the documented Status ({e}):\n{out}"))
+    }
+
+    /// [`Up::until`] on the typed status. A document that is not the documented `Status`
+    /// fails at once.
+    pub(crate) fn until_typed(&self, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
+        let v = self.until(what, |v| pred(&typed(v)));
+        typed(&v)
     }
 
     /// Polls `status --json` until `pred` holds, under the watchdog.
@@ -433,6 +510,19 @@ pub(crate) fn wait_child(c: Child) -> std::process::ExitStatus {
     wait_output(c, WATCHDOG, "the supervisor did not exit").status
 }
 
+/// `status --json` `v` as its type, which it must be.
+fn typed(v: &Value) -> Status {
+    serde_json::from_value(v.clone())
+        .unwrap_or_else(|e| panic!("status --json is not the documented Status ({e}):\n{v}"))
+}
+
+/// The supervisor's part of `status --json` `v` as its type, which it must be.
+fn info(v: &Value) -> Info {
+    serde_json::from_value(v["supervisor"].clone()).unwrap_or_else(|e| {
+        panic!("status --json's supervisor is not the documented Info ({e}):\n{v}")
+    })
+}
+
 /// Polls `supervisor status --json --instance inst` (under the command `within`, if any)
 /// until `pred` holds; the last answer when the watchdog ends first.
 fn poll_status(
@@ -466,7 +556,7 @@ pub(crate) fn until_moving(inst: &str, netns: Option<&str>) {
     let within: Vec<String> = netns.map_or(vec![], |ns| {
         ["ip", "netns", "exec", ns].map(String::from).to_vec()
     });
-    if let Err(out) = poll_status(&within, inst, moving) {
+    if let Err(out) = poll_status(&within, inst, |v| moving_info(&info(v))) {
         panic!(
             "{inst}: never moving\nlast status ({}):\n{}{}",
             out.status,
@@ -483,21 +573,66 @@ pub(crate) fn moving(s: &Value) -> bool {
         .is_some_and(|t| t > 1.0)
 }
 
+/// A program has moved the axes for more than a second, in the typed status `s`.
+pub(crate) fn moving_typed(s: &Status) -> bool {
+    moving_info(&s.supervisor)
+}
+
+/// A program has moved the axes for more than a second, in the supervisor's view `i`.
+fn moving_info(i: &Info) -> bool {
+    i.job
+        .as_ref()
+        .and_then(|j| j.motion_time_s)
+        .is_some_and(|t| t > 1.0)
+}
+
+/// The drives enabled and holding, in the typed status `s`.
+pub(crate) fn enabled(s: &Status) -> bool {
+    s.supervisor.arm.as_ref().is_some_and(|a| a.enabled) && !s.supervisor.enabling
+}
+
+/// The supervisor's e-stop is latched, in the typed status `s`.
+pub(crate) fn latched(s: &Status) -> bool {
+    s.supervisor.estop.is_some()
+}
+
+/// The latched e-stop in the typed status `s`, which must be latched.
+pub(crate) fn estop_of(s: &Status) -> &control_plane::info::EstopInfo {
+    s.supervisor
+        .estop
+        .as_ref()
+        .unwrap_or_else(|| panic!("no e-stop latched: {s:?}"))
+}
+
+/// Process `name` in the supervisor's view of the typed status `s`, which must have it.
+pub(crate) fn process_of<'a>(s: &'a Status, name: &str) -> &'a ProcessInfo {
+    s.supervisor
+        .processes
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap_or_else(|| panic!("no process {name} in {s:?}"))
+}
+
+/// The value of IO `name` in the typed status `s`.
+pub(crate) fn io_of(s: &Status, name: &str) -> Option<u8> {
+    s.io.as_ref()?
+        .entries
+        .iter()
+        .find(|e| e.name() == name)?
+        .value()
+}
+
+/// Whether the arm is enabled in the typed status `s` (false before servo's first state).
+pub(crate) fn arm_enabled(s: &Status) -> bool {
+    s.supervisor.arm.as_ref().is_some_and(|a| a.enabled)
+}
+
 /// Process `name` in the supervisor's view of `status --json` `s` (null if it has none).
 pub(crate) fn process_in<'a>(s: &'a Value, name: &str) -> &'a Value {
     s["supervisor"]["processes"]
         .as_array()
         .and_then(|p| p.iter().find(|p| p["name"] == name))
         .unwrap_or(&Value::Null)
-}
-
-/// The value of IO `name` in `status --json` `s`.
-pub(crate) fn io_value(s: &Value, name: &str) -> Option<u64> {
-    s["io"]["entries"]
-        .as_array()?
-        .iter()
-        .find(|e| e["name"] == name)?["value"]
-        .as_u64()
 }
 
 /// The default cell with room for the host's stalls, its Modbus server on any free port (the
