@@ -682,9 +682,15 @@ impl<'a> RosTopics<'a> {
         let joints: Vec<(&str, f64)> = (self.axes.iter())
             .filter_map(|(n, scale)| Some((n.as_str(), servo.axes.get(n)?.position * scale)))
             .collect();
-        let stamp_ns = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as u64);
+        // The cell's time: the Unix epoch's on the wall clock; on the virtual clock its own
+        // instant (from one second after the epoch, the same in every run).
+        let stamp_ns = if runtime::time::is_virtual() {
+            runtime::time::now_ns()
+        } else {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos() as u64)
+        };
         self.seq += 1;
         self.publisher
             .put(ros2::joint_state(stamp_ns, &self.frame, &joints))

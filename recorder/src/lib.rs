@@ -418,24 +418,60 @@ impl Recorded {
     }
 }
 
-/// `CLOCK_MONOTONIC` to the Unix epoch (ns), measured once.
-#[derive(Clone, Copy, Debug)]
-struct Clock {
-    offset_ns: i128,
+/// The clock a recording dates its messages by: the cell's.
+enum Clock {
+    /// A cell on the wall clock: `CLOCK_MONOTONIC`, turned to the Unix epoch by an offset
+    /// measured once.
+    Wall { offset_ns: i128 },
+    /// A cell on the virtual clock: its instants as they are (its time starts at
+    /// `runtime::vclock::EPOCH_NS`, one second after the Unix epoch, in every run), so that
+    /// two runs are dated alike.
+    Virtual(runtime::vclock::Observer),
+}
+
+impl std::fmt::Debug for Clock {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Wall { offset_ns } => write!(f, "Wall({offset_ns})"),
+            Self::Virtual(_) => write!(f, "Virtual"),
+        }
+    }
 }
 
 impl Clock {
-    fn new() -> Self {
+    /// The clock of `cell` (`instance`, read through `node`).
+    fn of_cell(
+        node: &iceoryx2::prelude::Node<ipc::Ipc>,
+        instance: &InstanceName,
+        cell: &CellConfigV6,
+    ) -> Result<Self, String> {
+        if cell.clock == shm_schema::CellClock::Virtual as u32 {
+            return runtime::vclock::Observer::new(node, instance)
+                .map(Self::Virtual)
+                .map_err(|e| e.to_string());
+        }
         let real = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as i128);
-        Self {
-            offset_ns: real - runtime::time::now_ns() as i128,
+        Ok(Self::Wall {
+            offset_ns: real - runtime::time::wall_ns() as i128,
+        })
+    }
+
+    /// Now on the cell's clock (ns).
+    fn now_ns(&mut self) -> u64 {
+        match self {
+            Self::Wall { .. } => runtime::time::wall_ns(),
+            Self::Virtual(o) => o.now_ns(),
         }
     }
 
-    fn epoch(&self, mono_ns: u64) -> u64 {
-        (mono_ns as i128 + self.offset_ns).max(0) as u64
+    /// A time of the cell's clock as a log time (ns since the Unix epoch).
+    fn log_time(&self, ns: u64) -> u64 {
+        match self {
+            Self::Wall { offset_ns } => (ns as i128 + offset_ns).max(0) as u64,
+            Self::Virtual(_) => ns,
+        }
     }
 }
 
@@ -454,15 +490,23 @@ trait Topic {
     /// Hands what arrived to `sink`: at most as many samples as the subscriber keeps (all
     /// that can have waited when the call began); what arrives meanwhile waits for the next
     /// call.
-    fn drain(&mut self, sink: &mut Sink<'_>, axes: &[String], clock: Clock) -> Result<(), String>;
+    fn drain(
+        &mut self,
+        sink: &mut Sink<'_>,
+        axes: &[String],
+        clock: &mut Clock,
+    ) -> Result<(), String>;
     fn counts(&self) -> (u64, u64);
+    /// When (ns, the cell's clock) the recorder subscribed: no sample it reads was published
+    /// before.
+    fn subscribed_at(&mut self, ns: u64);
 }
 
 struct Chan<T: Message + Payload> {
     sub: Sub<T>,
     topic: String,
     last: HashMap<u64, u64>,
-    /// The time of the topic's last message (ns, `CLOCK_MONOTONIC`).
+    /// The time of the topic's last message (ns, the cell's clock).
     stamp: Option<u64>,
     /// When the recorder subscribed: no sample it reads was published before.
     since: u64,
@@ -485,7 +529,16 @@ impl<T: Message + Payload> Topic for Chan<T> {
         T::schema(axes)
     }
 
-    fn drain(&mut self, sink: &mut Sink<'_>, axes: &[String], clock: Clock) -> Result<(), String> {
+    fn drain(
+        &mut self,
+        sink: &mut Sink<'_>,
+        axes: &[String],
+        clock: &mut Clock,
+    ) -> Result<(), String> {
+        // What was read, in the order of its times: a topic of several publishers (the
+        // events) comes from each in turn, in an order that depends on the wall clock; sorted,
+        // samples of one instant by their stream and number, every run writes them alike.
+        let mut batch: Vec<(u64, (u64, u64), Vec<u8>)> = Vec::new();
         // Bounded: a topic published faster than the recorder reads it (a starved CPU) would
         // hold it here for good, its stop and its other topics waiting.
         for m in std::iter::from_fn(|| self.sub.next()).take(self.buffer) {
@@ -500,13 +553,17 @@ impl<T: Message + Payload> Topic for Chan<T> {
             // status (stamped 0, before its first cycle): the topic's previous time, so that
             // the topic stays in time order.
             let stamp = match m.stamp_ns() {
-                None => runtime::time::now_ns(),
+                None => clock.now_ns(),
                 Some(0) => self.stamp.unwrap_or(self.since),
                 Some(t) => t,
             };
             self.stamp = Some(stamp);
             let data = serde_json::to_vec(&m.json(axes)).map_err(|e| e.to_string())?;
-            sink(clock.epoch(stamp), &data)?;
+            batch.push((stamp, m.seq().unwrap_or_default(), data));
+        }
+        batch.sort_by_key(|(stamp, seq, _)| (*stamp, *seq));
+        for (stamp, _, data) in batch {
+            sink(clock.log_time(stamp), &data)?;
             self.written += 1;
         }
         Ok(())
@@ -514,6 +571,10 @@ impl<T: Message + Payload> Topic for Chan<T> {
 
     fn counts(&self) -> (u64, u64) {
         (self.written, self.lost)
+    }
+
+    fn subscribed_at(&mut self, ns: u64) {
+        self.since = ns;
     }
 }
 
@@ -529,7 +590,7 @@ fn chan<T: Message + Payload>(
         topic,
         last: HashMap::new(),
         stamp: None,
-        since: runtime::time::now_ns(),
+        since: 0,
         buffer,
         written: 0,
         lost: 0,
@@ -885,6 +946,10 @@ impl Drop for Leave {
     }
 }
 
+/// How often (the cell's time) a recorder that takes part in a virtual clock reads: its
+/// subscribers keep 1024 samples, 250 ms of a 4 kHz servo.
+const RECORD_EVERY: Duration = Duration::from_millis(10);
+
 /// How long without the supervisor's heartbeat before the recording takes the cell for gone.
 const GONE: Duration = Duration::from_secs(3);
 
@@ -894,10 +959,10 @@ pub struct Source {
     // Dropped in this order: the ports, the node, then what is left of a gone cell.
     chans: Vec<Box<dyn Topic>>,
     host: Sub<HostStateV1>,
+    clock: Clock,
     _node: iceoryx2::prelude::Node<ipc::Ipc>,
     _leave: Leave,
     axes: Vec<String>,
-    clock: Clock,
     heard: Instant,
 }
 
@@ -941,18 +1006,39 @@ impl Source {
         };
         drop(cell_sub);
         let axes: Vec<String> = Axes::of_cell(&cell).axes.into_iter().map(|a| a.0).collect();
-        let chans = topics(&node, instance, &cell).map_err(RecordError::Attach)?;
+        let mut clock = Clock::of_cell(&node, instance, &cell).map_err(RecordError::Attach)?;
+        let mut chans = topics(&node, instance, &cell).map_err(RecordError::Attach)?;
+        let since = clock.now_ns();
+        for c in &mut chans {
+            c.subscribed_at(since);
+        }
         let host =
             Sub::<HostStateV1>::new(&node, instance, ServiceId::HostState, 1).map_err(attach)?;
         Ok(Self {
             chans,
             host,
+            clock,
             _node: node,
             _leave: leave,
             axes,
-            clock: Clock::new(),
             heard: Instant::now(),
         })
+    }
+
+    /// On a cell on the virtual clock, a part in it for this source's reader (`instance`
+    /// its cell): granted every [`RECORD_EVERY`] of the cell's time, after every process due
+    /// at the same instant, so that it reads each topic before its subscriber's buffer can
+    /// fill. `None` on the wall clock.
+    pub fn take_part(
+        &self,
+        instance: &InstanceName,
+    ) -> Result<Option<runtime::vclock::ToolPart>, RecordError> {
+        if !matches!(self.clock, Clock::Virtual(_)) {
+            return Ok(None);
+        }
+        runtime::vclock::ToolPart::join(&self._node, instance, RECORD_EVERY.as_nanos() as u64)
+            .map(Some)
+            .map_err(|e| RecordError::Attach(e.to_string()))
     }
 
     /// The topics, in the order [`Source::drain`] numbers them.
@@ -984,7 +1070,7 @@ impl Source {
             if stop() {
                 break;
             }
-            c.drain(&mut |t, data| sink(k, t, data), &self.axes, self.clock)?;
+            c.drain(&mut |t, data| sink(k, t, data), &self.axes, &mut self.clock)?;
         }
         Ok(())
     }
@@ -1020,8 +1106,17 @@ pub fn record(
     let f = RecordError::File;
     let mut source = Source::open(instance, &format!("recorder-{}", std::process::id()))?;
     let mut out = Writer::create(&opts.out, opts.rotate, source.topics()).map_err(f)?;
+    // On the virtual clock the recorder takes part in it: the cell runs on only once it has
+    // read every sample (none lost, however fast the clock runs), at the same instants in
+    // every run. What came since it subscribed is read first, while the cell runs on (a
+    // recorder attaching to a running cell does not hold its clock for it).
     ready(out.path());
-    let began = Instant::now();
+    source
+        .drain(&mut |k, t, data| out.write(k, t, data))
+        .map_err(f)?;
+    let mut part = source.take_part(instance)?;
+    // The duration on the cell's clock.
+    let began_ns = runtime::time::now_ns();
     let ended = loop {
         // A stop ends the pass: what is left of it is the last drain's.
         source
@@ -1030,20 +1125,30 @@ pub fn record(
         if stop() {
             break "stopped".to_string();
         }
-        if opts.duration.is_some_and(|d| began.elapsed() >= d) {
+        let recorded = Duration::from_nanos(runtime::time::now_ns().saturating_sub(began_ns));
+        if opts.duration.is_some_and(|d| recorded >= d) {
             break "its duration is over".to_string();
         }
         if !source.cell_alive() {
             break format!("instance {instance} went down");
         }
         out.maybe_rotate().map_err(f)?;
-        std::thread::sleep(Duration::from_millis(5));
+        match &mut part {
+            // A stop or the cell gone: the checks above say which.
+            Some(p) => {
+                let _ = p.next(&mut || !stop() && source.cell_alive());
+            }
+            None => std::thread::sleep(Duration::from_millis(5)),
+        }
     };
     // What arrived meanwhile (per topic at most what its subscriber keeps: what arrives
     // after the stop does not hold it), then the index and the footer.
     source
         .drain(&mut |k, t, data| out.write(k, t, data))
         .map_err(f)?;
+    if let Some(p) = &mut part {
+        p.leave();
+    }
     Ok(Recorded {
         files: out.finish().map_err(f)?,
         topics: source.counts(),
@@ -1061,7 +1166,8 @@ fn mcap_error(path: &Path, e: mcap::McapError) -> String {
 }
 
 /// `supervisor record` in a process of its own, for `run`, `up` and `exec --wait` with
-/// `--record FILE`: an observer, so nothing the cell does waits for it. Its start and its
+/// `--record FILE`: an observer, so nothing the cell does waits for it (on the wall clock; on
+/// the virtual clock it takes part in the clock, see [`Source::take_part`]). Its start and its
 /// stop are steps ([`Background::started`], [`Background::stopped`]) a caller's loop takes
 /// between its own; [`Background::start`] and [`Background::stop`] wait for them.
 #[derive(Debug)]
@@ -1155,6 +1261,11 @@ impl Background {
             spawned: Instant::now(),
             stopping: None,
         })
+    }
+
+    /// The recorder's pid, while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.as_ref().map(std::process::Child::id)
     }
 
     /// Whether the recorder subscribed to everything (true from then on); an error, once,

@@ -32,6 +32,12 @@ pub fn now_ns() -> u64 {
     }
 }
 
+/// Whether this process reads the virtual clock ([`set_virtual_now`] was called).
+#[inline]
+pub fn is_virtual() -> bool {
+    VIRTUAL.load(Ordering::Relaxed)
+}
+
 /// Sets the virtual instant (ns) and, the first time, turns this process to virtual time.
 ///
 /// # Real-time

@@ -105,6 +105,123 @@ fn stands(grants: &Sub<ClockGrantV1>, patience: Duration) -> Option<u64> {
     }
 }
 
+/// The grants of the clock of `instance`, and where it stands (waited for at most
+/// [`JOIN_PATIENCE`]).
+fn following(
+    node: &Node<Ipc>,
+    instance: &InstanceName,
+) -> Result<(Sub<ClockGrantV1>, u64), ClockError> {
+    let grants = Sub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)?;
+    let now = stands(&grants, JOIN_PATIENCE)
+        .ok_or_else(|| ClockError::NoClock(instance.service(ServiceId::ClockGrant).to_string()))?;
+    Ok((grants, now))
+}
+
+/// A tool's view of a cell's virtual clock, taking no part in it (a recorder, a web view):
+/// where the clock stands, as its newest grant says, to date what the tool reads.
+pub struct Observer {
+    grants: Sub<ClockGrantV1>,
+    last_ns: u64,
+}
+
+impl std::fmt::Debug for Observer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Observer")
+            .field("last_ns", &self.last_ns)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Observer {
+    /// Follows the clock of `instance`; waits (at most [`JOIN_PATIENCE`]) for where it
+    /// stands.
+    pub fn new(node: &Node<Ipc>, instance: &InstanceName) -> Result<Self, ClockError> {
+        let (grants, last_ns) = following(node, instance)?;
+        Ok(Self { grants, last_ns })
+    }
+
+    /// Where the clock stands now (ns): its newest grant, never earlier than the last seen.
+    pub fn now_ns(&mut self) -> u64 {
+        if let Some(g) = self.grants.latest() {
+            self.last_ns = self.last_ns.max(g.now_ns);
+        }
+        self.last_ns
+    }
+}
+
+/// Where a tool that takes part in the clock (the recorder) stands among the processes at an
+/// instant: after every process of the table.
+pub const AFTER_THE_TABLE: u32 = u32::MAX;
+
+/// A tool's part in the clock, outside the process table (the recorder, which must read every
+/// sample before the cell runs on): granted every `period_ns` after every process due at the
+/// same instant, and woken every [`TOOL_LOOK`] of wall time to ask whether it should go on
+/// (a stop, the cell gone), since no grant comes once the cell is down.
+#[derive(Debug)]
+pub struct ToolPart {
+    part: Participant,
+    period_ns: u64,
+    next_ns: u64,
+    looking: Arc<AtomicU64>,
+    look: Option<std::thread::JoinHandle<()>>,
+}
+
+/// How often (wall time) a tool that takes part looks whether it should go on.
+pub const TOOL_LOOK: Duration = Duration::from_millis(100);
+
+impl ToolPart {
+    /// Joins the clock of `instance` at [`AFTER_THE_TABLE`], from the next multiple of
+    /// `period_ns` on.
+    pub fn join(
+        node: &Node<Ipc>,
+        instance: &InstanceName,
+        period_ns: u64,
+    ) -> Result<Self, ClockError> {
+        let mut part = Participant::new(node, instance, AFTER_THE_TABLE)?;
+        let period_ns = period_ns.max(1);
+        let next_ns = (time::now_ns() / period_ns + 1) * period_ns;
+        let looking = Arc::new(AtomicU64::new(TOOL_LOOK.as_nanos() as u64));
+        let look = look_every(*instance, ServiceId::ClockGo(part.pid), looking.clone())?;
+        part.join(next_ns);
+        Ok(Self {
+            part,
+            period_ns,
+            next_ns,
+            looking,
+            look: Some(look),
+        })
+    }
+
+    /// Stops the thread that wakes the tool, and waits until it has let go of its node.
+    fn stop_looking(&mut self) {
+        self.looking.store(0, Ordering::Relaxed);
+        if let Some(t) = self.look.take() {
+            let _ = t.join();
+        }
+    }
+
+    /// Ends the cycle granted (if any) and waits for the next: its instant, or `None` once
+    /// `go_on` (asked every [`TOOL_LOOK`] meanwhile) says to stop.
+    pub fn next(&mut self, go_on: &mut dyn FnMut() -> bool) -> Option<u64> {
+        let next = self.next_ns;
+        let now = self.part.wait_or(next, go_on)?;
+        self.next_ns = now + self.period_ns;
+        Some(now)
+    }
+
+    /// Leaves the clock: the tool exits.
+    pub fn leave(&mut self) {
+        self.part.leave();
+        self.stop_looking();
+    }
+}
+
+impl Drop for ToolPart {
+    fn drop(&mut self) {
+        self.stop_looking();
+    }
+}
+
 /// A process' side of the virtual clock.
 pub struct Participant {
     pid: u32,
@@ -139,14 +256,9 @@ impl Participant {
         let pid = std::process::id();
         // Listening before joining: the clock's first grant finds the listener.
         let go = Listener::new(node, instance, ServiceId::ClockGo(pid))?;
-        let grants = Sub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant, 2)?;
         let report = Pub::<ClockReportV1>::new(node, instance, ServiceId::ClockReport)?;
         let ready = Notifier::new(node, instance, ServiceId::ClockReportReady)?;
-        let Some(now) = stands(&grants, JOIN_PATIENCE) else {
-            return Err(ClockError::NoClock(
-                instance.service(ServiceId::ClockGrant).to_string(),
-            ));
-        };
+        let (grants, now) = following(node, instance)?;
         time::set_virtual_now(now);
         Ok(Self {
             pid,
@@ -215,6 +327,31 @@ impl Participant {
                 self.owes_report = true;
                 time::set_virtual_now(g.now_ns);
                 return g.now_ns;
+            }
+        }
+    }
+
+    /// [`Self::wait`] for a tool woken now and then by its own thread: `None` once `go_on`,
+    /// asked at every wake-up that is not its grant, says to stop.
+    fn wait_or(&mut self, next_ns: u64, go_on: &mut dyn FnMut() -> bool) -> Option<u64> {
+        if self.owes_report {
+            self.send(ClockReport::Done, next_ns);
+            self.owes_report = false;
+        }
+        loop {
+            // Woken by the grant, by the tool's own thread or by a signal.
+            let _ = self.go.wait();
+            if let Some(g) = self.grants.latest()
+                && g.pid == self.pid
+                && g.seq > self.seq
+            {
+                self.seq = g.seq;
+                self.owes_report = true;
+                time::set_virtual_now(g.now_ns);
+                return Some(g.now_ns);
+            }
+            if !go_on() {
+                return None;
             }
         }
     }
@@ -303,7 +440,8 @@ impl Coordinator {
         let reports = Sub::<ClockReportV1>::new(node, instance, ServiceId::ClockReport, 64)?;
         let grant = Pub::<ClockGrantV1>::new(node, instance, ServiceId::ClockGrant)?;
         let looking = Arc::new(AtomicU64::new(REPORT_LOOK.as_nanos() as u64));
-        look_every(*instance, looking.clone())?;
+        // Ends with the clock (the supervisor's instance is removed after it).
+        let _ = look_every(*instance, ServiceId::ClockReportReady, looking.clone())?;
         time::set_virtual_now(EPOCH_NS);
         let clock = Self {
             looking,
@@ -411,6 +549,12 @@ impl Coordinator {
             }
             self.parts.retain(|p| p.pid != pid);
         }
+    }
+
+    /// Keeps the clock's history delivered to processes that are starting (a grant's
+    /// subscriber gets where the clock stands).
+    pub fn update_connections(&self) {
+        self.grant.update_connections();
     }
 
     /// Process `pid` was launched: the clock holds until it joins or exits.
@@ -552,6 +696,8 @@ impl Coordinator {
             }
             // Woken by a report, or by the look every REPORT_LOOK.
             self.ready.wait();
+            // A tool attaching meanwhile learns where the clock stands.
+            self.grant.update_connections();
             waiting();
             if exited(pid) {
                 self.parts.retain(|p| p.pid != pid);
@@ -605,16 +751,20 @@ impl Drop for Coordinator {
     }
 }
 
-/// A thread (with a node of its own: iceoryx2's ports are single-threaded) that notifies the
-/// clock's report event every `on` ns until `on` is 0.
-fn look_every(instance: InstanceName, on: Arc<AtomicU64>) -> Result<(), IpcError> {
+/// A thread (with a node of its own: iceoryx2's ports are single-threaded) that notifies
+/// `event` every `on` ns until `on` is 0.
+fn look_every(
+    instance: InstanceName,
+    event: ServiceId,
+    on: Arc<AtomicU64>,
+) -> Result<std::thread::JoinHandle<()>, IpcError> {
     let (made, ready) = std::sync::mpsc::channel();
     let spawned = std::thread::Builder::new()
         .name("clock-look".into())
         .spawn(move || {
-            let notifier = crate::ipc::node(&instance, "supervisor-clock").and_then(|node| {
-                Notifier::new(&node, &instance, ServiceId::ClockReportReady).map(|n| (node, n))
-            });
+            let name = format!("clock-look-{}", std::process::id());
+            let notifier = crate::ipc::node(&instance, &name)
+                .and_then(|node| Notifier::new(&node, &instance, event).map(|n| (node, n)));
             let (_node, notifier) = match notifier {
                 Ok(n) => {
                     let _ = made.send(Ok(()));
@@ -634,18 +784,17 @@ fn look_every(instance: InstanceName, on: Arc<AtomicU64>) -> Result<(), IpcError
                 notifier.notify();
             }
         });
-    if let Err(e) = spawned {
-        return Err(IpcError {
-            what: "the virtual clock's look".into(),
-            reason: e.to_string(),
-        });
-    }
+    let thread = spawned.map_err(|e| IpcError {
+        what: "the virtual clock's look".into(),
+        reason: e.to_string(),
+    })?;
     ready.recv().unwrap_or_else(|_| {
         Err(IpcError {
             what: "the virtual clock's look".into(),
             reason: "its thread ended".into(),
         })
-    })
+    })?;
+    Ok(thread)
 }
 
 /// The parent of process `pid` (`/proc/<pid>/stat`'s fourth field), if it still exists.

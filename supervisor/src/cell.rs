@@ -145,6 +145,9 @@ pub(crate) const TICK: std::time::Duration = std::time::Duration::from_millis(10
 /// `runtime::vclock::START_PATIENCE`.
 const CLOCK_WATCHDOG: Duration = Duration::from_secs(10);
 
+/// How often (wall time) the heartbeat goes while the virtual clock stands.
+const STANDING_BEAT: Duration = Duration::from_secs(1);
+
 /// The virtual time that passes per look while the supervisor waits for processes to leave.
 const LEAVE_STEP: Duration = Duration::from_millis(5);
 
@@ -155,28 +158,16 @@ pub(crate) struct Closed {
     pub(crate) problem: Option<RunError>,
 }
 
-/// [`open_cell`], and the process of a recording of the cell into `record` when one is asked
-/// for (the serve loop waits for it to record before the drives are enabled); a recorder
-/// that cannot be spawned closes the cell again.
+/// [`open_cell`] with a recording of the cell into `record` when one is asked for: the
+/// recorder starts before the processes, and a recorder that cannot start closes the cell
+/// again.
 pub(crate) fn open_recorded(
     cfg: &Config,
     instance: InstanceName,
     mode: Mode,
     record: Option<&std::path::Path>,
 ) -> Result<(Cell, ctl::Server, Option<recorder::Background>), RunError> {
-    let (cell, server) = open_cell(cfg, instance, mode)?;
-    // Its start is a step of the serve loop ([`crate::serve::serve`]): it needs the
-    // configuration's history, which the loop's heartbeat keeps connected.
-    let recorder = record
-        .map(|f| recorder::Background::spawn(&instance, f, recorder::Group::Own))
-        .transpose();
-    match recorder {
-        Ok(r) => Ok((cell, server, r)),
-        Err(e) => {
-            let _ = cell.close(server);
-            Err(RunError::from(e))
-        }
-    }
+    open_cell(cfg, instance, mode, record)
 }
 
 /// Starts the cell of `cfg` on `instance`: takes the instance's control channel (refused if
@@ -187,7 +178,8 @@ pub(crate) fn open_cell(
     cfg: &Config,
     instance: InstanceName,
     mode: Mode,
-) -> Result<(Cell, ctl::Server), RunError> {
+    record: Option<&std::path::Path>,
+) -> Result<(Cell, ctl::Server, Option<recorder::Background>), RunError> {
     signals::install()
         .map_err(|e| RunError::system(format!("cannot install signal handlers: {e}")))?;
     ipc::quiet_iceoryx2_log();
@@ -223,10 +215,10 @@ pub(crate) fn open_cell(
         );
         tracing::debug!("removed: {}", removed.join(", "));
     }
-    let cell = Cell::open(cfg, instance, mode).inspect_err(|_| {
+    let (cell, recorder) = Cell::open(cfg, instance, mode, record).inspect_err(|_| {
         ipc::remove_instance(&instance);
     })?;
-    Ok((cell, server))
+    Ok((cell, server, recorder))
 }
 
 /// What is left of `instance` after its processes stopped is a failure, unless a client
@@ -375,6 +367,8 @@ pub(crate) struct Cell {
     io_sub: Sub<DigitalIoV1>,
     /// Gaps between heartbeats, and where they went.
     stalls: StallWatch,
+    /// When (wall time) the last heartbeat was published.
+    beaten: std::time::Instant,
     /// The process table, in its order: what the supervisor keeps of each process, its
     /// ports among it (before the node: field order is drop order).
     pub(crate) procs: Vec<Proc>,
@@ -392,7 +386,12 @@ pub(crate) struct Cell {
 
 impl Cell {
     /// Creates every service, publishes the configuration and starts the processes.
-    fn open(cfg: &Config, instance: InstanceName, mode: Mode) -> Result<Self, RunError> {
+    fn open(
+        cfg: &Config,
+        instance: InstanceName,
+        mode: Mode,
+        record: Option<&std::path::Path>,
+    ) -> Result<(Self, Option<recorder::Background>), RunError> {
         let f = |e: ipc::IpcError| RunError::system(e.to_string());
         let node = ipc::node(&instance, "supervisor").map_err(f)?;
         let i = &instance;
@@ -482,8 +481,29 @@ impl Cell {
                 sched.priority
             );
         }
-        let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
         let mut clock = clock;
+        // The recorder before the processes: it reads each from its first message (and on
+        // the virtual clock it has joined the clock before any process runs).
+        let recorder = match record {
+            None => None,
+            Some(file) => {
+                let mut r = recorder::Background::spawn(&instance, file, recorder::Group::Own)?;
+                if let (Some(c), Some(pid)) = (clock.as_mut(), r.pid()) {
+                    c.expect(pid);
+                }
+                // It needs the configuration's history (and the clock's).
+                while !r.started()? {
+                    config_pub.update_connections();
+                    host_pub.update_connections();
+                    if let Some(c) = &clock {
+                        c.update_connections();
+                    }
+                    std::thread::sleep(Duration::from_millis(5));
+                }
+                Some(r)
+            }
+        };
+        let mut children = Children::new(Duration::from_secs_f64(cfg.supervisor.stop_timeout));
         for (index, p) in cfg.process.iter().enumerate() {
             let pid = children
                 .spawn(p, index, None, &instance)
@@ -492,7 +512,7 @@ impl Cell {
                 c.expect(pid);
             }
         }
-        Ok(Self {
+        let cell = Self {
             instance,
             mode,
             children,
@@ -531,13 +551,15 @@ impl Cell {
             stalls: StallWatch::new(Duration::from_secs_f64(
                 (cfg.supervisor.supervisor_timeout / 4.0).min(STALL_REPORTED_S),
             )),
+            beaten: std::time::Instant::now(),
             procs,
             clock,
             scheduled_estops: Vec::new(),
             _node: node,
             sched,
             _fifo: fifo,
-        })
+        };
+        Ok((cell, recorder))
     }
 
     /// Stops every process, takes the events that came meanwhile (the drives' fault
@@ -728,6 +750,18 @@ impl Cell {
     /// A gap since the last one of over 100 ms (or a quarter of `supervisor_timeout`, if
     /// that is shorter) is an event that says where the time went (see [`runtime::stall`]).
     pub(crate) fn beat(&mut self) {
+        // On the virtual clock a beat per tick of the cell's time; while the clock stands (a
+        // validation, a process joining, the recorder finishing its file), one a second of
+        // wall time, which keeps the cell alive to its observers without a count of beats
+        // that depends on the wall clock.
+        if self.clock.is_some()
+            && self.host.beat > 0
+            && self.host.stamp_ns == runtime::time::now_ns()
+            && self.beaten.elapsed() < STANDING_BEAT
+        {
+            return;
+        }
+        self.beaten = std::time::Instant::now();
         self.host.beat += 1;
         self.host.stamp_ns = runtime::time::now_ns();
         self.host_pub.send(&self.host);

@@ -167,7 +167,15 @@ impl Job {
     ) -> Self {
         let n = cfg.axis.len();
         let start_pos: Vec<f64> = start.position[..n].to_vec();
-        let program_id = (std::process::id() ^ (start.seq as u32).rotate_left(16)) | 1;
+        // Unlike any program's before it: the setpoint's number, and on the wall clock this
+        // supervisor's pid (a trajgen may have seen another supervisor's programs); on the
+        // virtual clock the same in every run.
+        let salt = if runtime::time::is_virtual() {
+            0
+        } else {
+            std::process::id()
+        };
+        let program_id = (salt ^ (start.seq as u32).rotate_left(16)) | 1;
         let per_s = |name: &str| (MAX_RECORD_S / cfg.period_s(name).max(1e-5)) as usize;
         Self {
             name: program.name.clone(),

@@ -286,7 +286,9 @@ impl Loop<'_> {
     /// a validation takes no virtual time (the program starts at the same instant in every
     /// run), the clock stands and the loop waits as on the wall clock, answering its clients.
     fn wait(&mut self) {
-        if self.cell.clock.is_some() && self.validating.is_none() {
+        // The virtual clock stands while a program is validated and while the recorder
+        // finishes its file (the same samples end it in every run).
+        if self.cell.clock.is_some() && self.validating.is_none() && self.ending.is_none() {
             self.cell.advance_clock();
             return;
         }

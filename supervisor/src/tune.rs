@@ -106,7 +106,7 @@ pub fn tune(opts: &TuneOptions) -> Result<TuneReport, RunError> {
     }
     let instance = InstanceName::new(&opts.instance)
         .map_err(|e| RunError::Input(format!("--instance {:?}: {e}", opts.instance)))?;
-    let (mut cell, mut server) = open_cell(&cfg, instance, Mode::Run)?;
+    let (mut cell, mut server, _) = open_cell(&cfg, instance, Mode::Run, None)?;
     let first = First::Tune(Tuning::new(i, opts.step, opts.ramp));
     let end = serve(&cfg, &mut cell, &mut server, Some(first), None).end;
     let closed = cell.close(server);

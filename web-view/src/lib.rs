@@ -653,26 +653,33 @@ async fn action(
 pub fn sample(instance: InstanceName, view: &View, stop: &std::sync::atomic::AtomicBool) {
     ipc::quiet_iceoryx2_log();
     let started = Instant::now();
+    // A cell on the virtual clock: where its clock last stood (it does not pass while the cell
+    // is down).
+    let mut virtual_t = None;
     while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         if !ipc::live_node_pids(&instance)
             .unwrap_or_default()
             .is_empty()
-            && let Err(e) = attached(instance, view, stop, started)
+            && let Err(e) = attached(instance, view, stop, started, &mut virtual_t)
         {
             tracing::debug!("web: {e}");
         }
-        let down = json!({"kind": "frame", "up": false, "t": started.elapsed().as_secs_f64()});
+        let t = virtual_t.unwrap_or_else(|| started.elapsed().as_secs_f64());
+        let down = json!({"kind": "frame", "up": false, "t": t});
         let _ = view.frames.send(Arc::from(down.to_string()));
         std::thread::sleep(Duration::from_millis(500));
     }
 }
 
-/// Samples the cell until it goes down (or the server stops).
+/// Samples the cell until it goes down (or the server stops). Its frames' time `t` (s) is the
+/// cell's: the seconds since `started` on the wall clock, its clock's instant on the virtual
+/// clock (also kept in `virtual_t`).
 fn attached(
     instance: InstanceName,
     view: &View,
     stop: &std::sync::atomic::AtomicBool,
     started: Instant,
+    virtual_t: &mut Option<f64>,
 ) -> Result<(), String> {
     let (frames, hello) = (&view.frames, &view.hello);
     let f = |e: ipc::IpcError| e.to_string();
@@ -689,6 +696,12 @@ fn attached(
                 return Err("no cell configuration".to_string());
             }
             std::thread::sleep(Duration::from_millis(10));
+        };
+        let mut clock = if cell.clock == shm_schema::CellClock::Virtual as u32 {
+            Some(runtime::vclock::Observer::new(&node, &instance).map_err(|e| e.to_string())?)
+        } else {
+            *virtual_t = None;
+            None
         };
         let kin = motion_core::generator::Kin::of_cell(&cell).map_err(|e| e.to_string())?;
         let axes = Axes::of_cell(&cell);
@@ -754,8 +767,12 @@ fn attached(
                     *last = Some(s);
                 }
             }
+            let t = match &mut clock {
+                Some(c) => *virtual_t.insert(runtime::time::secs(c.now_ns())),
+                None => started.elapsed().as_secs_f64(),
+            };
             let frame = frame(
-                started.elapsed().as_secs_f64(),
+                t,
                 n,
                 kin.as_ref(),
                 last_servo.as_ref(),

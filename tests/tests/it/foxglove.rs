@@ -33,8 +33,7 @@ fn client(url: &str, seconds: &str, args: &[&str]) -> Value {
 fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
     integration_tests::wall_clock(|| {
         let test = "foxglove";
-        let up = // The wall clock: the bridge dates a virtual cell's messages with the wall clock's offset.
-        Up::on_the_wall_clock(test);
+        let up = Up::default_cell(test);
         // Killed if the test fails before it stops the server.
         let mut server = integration_tests::Reaped::spawn(
             supervisor()
@@ -110,8 +109,8 @@ fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
             "the recorder's channels, schemas to the byte"
         );
         assert!(advertised.len() >= 20, "{advertised:?}");
-        // Live: servo's state, with its own time stamp (ns since the epoch, now-ish) and the
-        // axes by name.
+        // Live: servo's state, with its own time stamp (the cell's clock: a virtual cell's
+        // starts one second after the epoch) and the axes by name.
         let n = seen["counts"]["/servo/state"].as_u64().unwrap_or(0);
         assert!(n > 100, "{}", seen["counts"]);
         let first = &seen["first"]["/servo/state"];
@@ -120,13 +119,10 @@ fn foxglove_sees_the_recorders_channels_live_and_only_from_where_it_may() {
             .as_str()
             .and_then(|t| t.parse().ok())
             .expect("a stamp");
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .expect("clock")
-            .as_nanos() as u64;
+        let epoch = runtime::vclock::EPOCH_NS;
         assert!(
-            stamp < now && now - stamp < 3_600_000_000_000,
-            "{stamp} against {now}"
+            (epoch..epoch + 3_600_000_000_000).contains(&stamp),
+            "{stamp}: not within the cell's first hour"
         );
         println!(
             "foxglove: {} channels, {n} /servo/state messages",

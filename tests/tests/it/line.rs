@@ -147,9 +147,7 @@ fn cell_config_with(
     for (key, table) in more {
         network.insert(key, toml_edit::Item::Table(table.clone()));
     }
-    // The wall clock: the recorder dates a virtual cell's messages with the wall clock's
-    // offset (a remote recording is compared with a local one).
-    integration_tests::wall_cell_with_room()
+    integration_tests::default_cell_with_room()
         .push("process", gateway)
         .table("network", network)
         .write(test, &format!("cell-{k}.toml"))

@@ -16,7 +16,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// `tests/python/mcap_read.py` over `files`: topics and setpoints.
-fn read_back(files: &[PathBuf]) -> Value {
+pub(crate) fn read_back(files: &[PathBuf]) -> Value {
     let out = succeeded_within(
         Command::new("python3")
             .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python/mcap_read.py"))
@@ -36,9 +36,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
         let out = run_with_watchdog(
             supervisor()
                 .args(["run", "--json", "--instance", &inst, "--config"])
-                // The wall clock: the recorder dates a virtual cell's messages with the wall
-                // clock's offset.
-                .arg(crate::up::wall_cell(test, &[]))
+                .arg(crate::up::cell(test, &[]))
                 .arg("--record")
                 .arg(&mcap)
                 .arg("--trace")
@@ -123,9 +121,7 @@ fn a_recorded_run_has_every_setpoint_of_its_trace_with_schemas_an_independent_re
 fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
     integration_tests::wall_clock(|| {
         let test = "rec-up";
-        // The wall clock: the recorder dates a virtual cell's messages with the wall clock's
-        // offset.
-        let up = Up::on_the_wall_clock(test);
+        let up = Up::default_cell(test);
         let base = scratch(test, "cell.mcap", "");
         // Rotated every second: stopped once its third file is there (however long the host's
         // stalls make that).
@@ -186,7 +182,7 @@ fn record_attaches_to_a_cell_that_is_up_and_rotates_its_files() {
                     "/nonexistent/dir/c.mcap",
                 ])
                 .arg("--config")
-                .arg(crate::up::wall_cell(test, &[])),
+                .arg(crate::up::cell(test, &[])),
             WATCHDOG,
         );
         let err = exited(&refused, 2);
@@ -200,18 +196,20 @@ fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behin
     integration_tests::wall_clock(|| {
         let test = "rec-observer";
         let inst = instance(test);
-        let run = supervisor()
-            .args(["run", "--json", "--instance", &inst, "--config"])
-            .arg(cell(test, &[]))
-            .arg(scratch(
-                test,
-                "p.prog",
-                "WAIT(part_present, 1)\nMOVE(60, 40, 0)\nEND\n",
-            ))
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("run");
+        // Killed if the test fails before they end (the program waits for a part).
+        let run = integration_tests::Reaped::spawn(
+            supervisor()
+                .args(["run", "--json", "--instance", &inst, "--config"])
+                .arg(cell(test, &[]))
+                .arg(scratch(
+                    test,
+                    "p.prog",
+                    "WAIT(part_present, 1)\nMOVE(60, 40, 0)\nEND\n",
+                ))
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped()),
+            "run",
+        );
         // Attach once the cell is up.
         let start = Instant::now();
         while !supervisor()
@@ -223,13 +221,14 @@ fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behin
             std::thread::sleep(Duration::from_millis(50));
         }
         let file = scratch(test, "observer.mcap", "");
-        let mut observer = supervisor()
-            .args(["record", "--instance", &inst, "--out"])
-            .arg(&file)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("record");
+        let mut observer = integration_tests::Reaped::spawn(
+            supervisor()
+                .args(["record", "--instance", &inst, "--out"])
+                .arg(&file)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped()),
+            "record",
+        );
         // The program waits for the part until the observer records.
         let first = first_line(&mut observer);
         assert!(first.starts_with("recording"), "{first}");
@@ -237,12 +236,15 @@ fn an_observer_that_stays_to_the_end_of_a_run_neither_fails_it_nor_is_left_behin
             supervisor().args(["io", "part_present", "1", "--instance", &inst]),
             WATCHDOG,
         );
-        let out = run.wait_with_output().expect("run");
+        let out = run.into_child().wait_with_output().expect("run");
         let report = json_of(&out);
         assert_eq!(out.status.code(), Some(0), "{report}");
         assert_eq!(report["ok"], true, "{report}");
         // The observer ends by itself once the cell is gone, and leaves nothing.
-        let obs = success(observer.wait_with_output().expect("record"), "record");
+        let obs = success(
+            observer.into_child().wait_with_output().expect("record"),
+            "record",
+        );
         let text = String::from_utf8_lossy(&obs.stdout);
         assert!(text.contains("went down"), "{text}");
         assert_clean(&inst);
@@ -427,7 +429,7 @@ fn ctrl_c_on_up_record_records_the_controlled_stop_to_its_end() {
             .args(["up", "--instance", &inst, "--record"])
             .arg(&file)
             .arg("--config")
-            .arg(crate::up::wall_cell(test, &[])) // the recorder dates on the wall clock
+            .arg(crate::up::cell(test, &[]))
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(&log).expect("log"))
             .process_group(0)

@@ -341,3 +341,91 @@ fn the_virtual_clock_stands_while_a_program_is_validated_and_the_cell_answers() 
     up.down();
     let _ = exec.wait();
 }
+
+/// Same in, same out, recorded: the small triangle recorded twice on the virtual clock at full
+/// speed. The recorder takes part in the clock, so none of its samples is lost however fast
+/// the clock runs, and the two files hold the same messages at the same log times on every
+/// topic but those that carry what only the machine knows (the processes' pids and the CPU
+/// time their cycles took: the status, execution-time and heartbeat topics), which still hold
+/// as many messages at the same log times.
+#[test]
+fn two_recordings_of_a_run_on_the_virtual_clock_hold_the_same_messages() {
+    let test = "vt-rec";
+    let port = free_port();
+    let program = integration_tests::small_triangle(test);
+    let record = |run: &str| -> serde_json::Value {
+        let inst = instance(&format!("{test}-{run}"));
+        let mcap = scratch(test, &format!("{run}.mcap"), "");
+        let cell =
+            integration_tests::wall_cell_toml().set("modbus.listen", format!("127.0.0.1:{port}"));
+        let out = run_with_watchdog(
+            supervisor()
+                .args([
+                    "run",
+                    "--json",
+                    "--virtual-time",
+                    "--instance",
+                    &inst,
+                    "--config",
+                ])
+                .arg(cell.write(test, &format!("{run}.toml")))
+                .arg("--record")
+                .arg(&mcap)
+                .arg(&program),
+            WATCHDOG,
+        );
+        let out = success(out, "supervisor run --virtual-time --record");
+        let report: RunReport = serde_json::from_value(json_of(&out))
+            .unwrap_or_else(|e| panic!("the run's JSON is not the documented report: {e}"));
+        assert!(report.virtual_time.is_some(), "{report:?}");
+        assert_clean(&inst);
+        crate::recording::read_back(&[mcap])
+    };
+    let (first, second) = (record("first"), record("second"));
+    let topics = |r: &serde_json::Value| {
+        r["topics"]
+            .as_object()
+            .expect("topics")
+            .iter()
+            .map(|(t, v)| (t.clone(), v.clone()))
+            .collect::<std::collections::BTreeMap<_, _>>()
+    };
+    let (a, b) = (topics(&first), topics(&second));
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "the same topics"
+    );
+    let machine_only =
+        |t: &str| t.ends_with("/status") || t.ends_with("/exec_time") || t == "/host/state";
+    let mut compared = 0;
+    for (t, x) in &a {
+        let y = &b[t];
+        assert_eq!(x["count"], y["count"], "{t}: as many messages");
+        if !machine_only(t) {
+            assert_eq!(
+                x["timed_digest"], y["timed_digest"],
+                "{t}: the same messages at the same log times"
+            );
+            compared += 1;
+        }
+    }
+    for t in [
+        "/trajgen/setpoint",
+        "/servo/state",
+        "/drives/feedback",
+        "/io/state",
+    ] {
+        assert!(a[t]["count"].as_u64().unwrap_or(0) > 100, "{t}: {}", a[t]);
+    }
+    assert!(compared >= 15, "{compared} topics compared");
+    // Log times on the cell's clock: from its epoch, one second after the Unix epoch, and
+    // within the run's few seconds of the cell's time.
+    for t in ["/trajgen/setpoint", "/servo/state", "/host/state"] {
+        let at = a[t]["first_log_time"].as_u64().expect("a log time");
+        assert!(
+            (runtime::vclock::EPOCH_NS..runtime::vclock::EPOCH_NS + 60_000_000_000).contains(&at),
+            "{t}: first logged at {at} ns"
+        );
+    }
+}
