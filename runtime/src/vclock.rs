@@ -617,6 +617,8 @@ impl Coordinator {
             self.settle(node, waiting);
         }
         self.set_now(t);
+        // A tool that subscribed meanwhile gets where the clock stands (its history).
+        self.grant.update_connections();
         self.publish_now();
         if self.pace > 0.0 {
             let due = Duration::from_secs_f64(self.virtual_s() / self.pace);

@@ -138,7 +138,7 @@ pub(crate) fn check_figures(path: &Path, processes: usize) {
 
 #[test]
 fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
-    integration_tests::wall_clock(|| {
+    integration_tests::wall_clock_default_limits(|| {
         let inst = instance("triangle");
         let trace = integration_tests::test_dir().join(format!("{inst}.csv"));
         let plot = integration_tests::test_dir().join(format!("{inst}.png"));
@@ -201,7 +201,7 @@ fn the_seed_triangle_takes_its_theoretical_19_10_s_and_cleans_up() {
 /// busy threads (both cores) for the whole run must change nothing.
 #[test]
 fn motion_time_holds_with_both_cores_loaded() {
-    integration_tests::wall_clock(|| {
+    integration_tests::wall_clock_default_limits(|| {
         let inst = instance("loaded");
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let hogs: Vec<_> = (0..2)
@@ -347,7 +347,7 @@ fn a_process_killed_mid_motion_fails_the_run_and_leaves_nothing() {
     integration_tests::wall_clock(|| {
         let inst = instance("kill");
         let wrapped = format!("exec {} --instance {{instance}}", bin("iobridge").display());
-        let cfg = integration_tests::default_cell_with_room()
+        let cfg = integration_tests::default_cell_toml()
             .set(
                 "process[iobridge].command",
                 integration_tests::toml::strings(&["sh", "-c", &wrapped]),

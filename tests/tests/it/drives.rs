@@ -75,7 +75,7 @@ pub(crate) fn program_in_background_as(
         Some(c) => cmd.arg("--config").arg(c),
         None => cmd
             .arg("--config")
-            .arg(integration_tests::default_cell_with_room_file(inst)),
+            .arg(integration_tests::default_cell_file(inst)),
     };
     cmd.arg(program)
         .stderr(Stdio::piped())
@@ -305,10 +305,10 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
                     "--plot",
                 ])
                 .arg(&png)
-                // Room for stalls: the test is about tune's figures (the axis' response does
-                // not depend on the detectors' limits).
+                // On the virtual clock: the test is about tune's figures, not the host's
+                // stalls.
                 .arg("--config")
-                .arg(integration_tests::default_cell_with_room_file(&inst)),
+                .arg(integration_tests::default_cell_file(&inst)),
             WATCHDOG,
         );
         let j = json_of(&out);
@@ -368,9 +368,9 @@ fn tune_steps_an_axis_of_the_real_cell_and_reports_its_response() {
 fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
     integration_tests::wall_clock(|| {
         let inst = instance("tune-busy");
-        // Room for stalls: no detector may trip on the way down, and this test is about the
-        // control channel (the drives' pending-sequence detector tripped once, the machine
-        // loaded by the tests beside it).
+        // On the virtual clock: no detector may trip on the way down (on the wall clock the
+        // drives' pending-sequence detector tripped once, the machine loaded by the tests
+        // beside it), and this test is about the control channel.
         let mut tune = supervisor()
             .args([
                 "tune",
@@ -383,7 +383,7 @@ fn while_tune_runs_the_control_channel_answers_and_refuses_changes_busy() {
                 "0.2",
             ])
             .args(["--ramp", "30", "--config"])
-            .arg(integration_tests::default_cell_with_room_file(&inst))
+            .arg(integration_tests::default_cell_file(&inst))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 /// The default cell with `[behaviour]` set as given, and room for the host's stalls (these
 /// tests are about the e-stop, not about the cell's tolerance of a stall).
 fn cell_with_behaviour(test: &str, propagate: bool, external: bool) -> std::path::PathBuf {
-    integration_tests::default_cell_with_room()
+    integration_tests::default_cell_toml()
         .set("behaviour.propagate_estop", propagate)
         .set("behaviour.propagate_external_estop", external)
         .write(test, "cell.toml")

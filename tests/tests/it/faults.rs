@@ -286,7 +286,7 @@ fn a_long_validation_never_blinds_the_control_channel() {
 fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_down() {
     integration_tests::wall_clock(|| {
         let test = "never-up";
-        let cfg = integration_tests::default_cell_with_room()
+        let cfg = integration_tests::default_cell_toml()
             .set(
                 "process[iobridge].command",
                 toml_edit::Value::from_iter(["false"]),
@@ -309,7 +309,7 @@ fn a_cell_that_cannot_come_up_ends_up_and_one_that_lost_a_process_says_so_at_dow
         integration_tests::assert_clean(&inst);
 
         let test = "lost-for-good";
-        let cfg = integration_tests::default_cell_with_room()
+        let cfg = integration_tests::default_cell_toml()
             .add("process[iobridge].restart", "never")
             .write(test, "cell.toml");
         let up = Up::start(test, &cfg);

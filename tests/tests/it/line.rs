@@ -103,7 +103,7 @@ fn private(test: &str, name: &str, text: &str) -> PathBuf {
     p
 }
 
-/// Cell `k` of the line, `press-<k>`: the default cell with room for stalls, its gateway
+/// Cell `k` of the line, `press-<k>`: the default cell (on the virtual clock), its gateway
 /// listening on its link in the clear.
 fn cell_config(test: &str, k: usize, users: &Path) -> PathBuf {
     cell_config_with(test, k, users, "tcp", &[])
@@ -147,7 +147,7 @@ fn cell_config_with(
     for (key, table) in more {
         network.insert(key, toml_edit::Item::Table(table.clone()));
     }
-    integration_tests::default_cell_with_room()
+    integration_tests::default_cell_toml()
         .push("process", gateway)
         .table("network", network)
         .write(test, &format!("cell-{k}.toml"))

@@ -568,9 +568,8 @@ fn a_python_iobridge_written_from_the_documents_takes_the_role() {
     integration_tests::wall_clock(|| {
         integration_tests::require_python_iceoryx2();
         let test = "ops-python";
-        let cfg =
-            integration_tests::with_python_iobridge(integration_tests::default_cell_with_room())
-                .write(test, "cell.toml");
+        let cfg = integration_tests::with_python_iobridge(integration_tests::default_cell_toml())
+            .write(test, "cell.toml");
         let inst = instance(test);
         let out = succeeded_within(
             supervisor()
@@ -763,7 +762,7 @@ fn a_blocked_stderr_never_blocks_the_supervisor_nor_its_verdict() {
 /// `propagate_external_estop`; iobridge, which raised it, sets its outputs safe either way;
 /// reset refuses while the input stays open, and the cell recovers once it closes.
 fn an_estop_input_mid_motion(test: &str, external: bool) {
-    let cfg = integration_tests::default_cell_with_room()
+    let cfg = integration_tests::default_cell_toml()
         .set("behaviour.propagate_estop", false)
         .set("behaviour.propagate_external_estop", external)
         .write(test, "cell.toml");

@@ -62,7 +62,7 @@ fn predicted(cfg: &std::path::Path, prog: &std::path::Path) -> f64 {
     predicted_with_text(cfg, prog).0
 }
 
-/// Runs `program` on the cell `cell` (with room for the host's stalls) with `run --json`,
+/// Runs `program` on the cell `cell` with `run --json`,
 /// after `supervisor check` predicted it; the report, checked: done, its prediction check's
 /// own, and its motion time (waits excluded) the prediction within the last cycle's rounding
 /// (the trajectory runs on real time; each wait ends at the trajgen cycle that sees its input).

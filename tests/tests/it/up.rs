@@ -44,8 +44,7 @@ impl Up {
         Self::start_in(test, cfg, None)
     }
 
-    /// [`Up::start`] of the default cell with room for the host's stalls ([`cell`], nothing
-    /// set).
+    /// [`Up::start`] of the default cell on the virtual clock ([`cell`], nothing set).
     pub(crate) fn default_cell(test: &str) -> Self {
         Self::start(test, &cell(test, &[]))
     }
@@ -635,11 +634,12 @@ pub(crate) fn process_in<'a>(s: &'a Value, name: &str) -> &'a Value {
         .unwrap_or(&Value::Null)
 }
 
-/// The default cell with room for the host's stalls, its Modbus server on any free port (the
+/// The default cell on the virtual clock (its default limits: a stall of the host delays the
+/// cell's time, it does not make a process late), its Modbus server on any free port (the
 /// tests run side by side), and the keys `set` names set to its values
 /// (`("modbus.max_connections", 2.into())`).
 pub(crate) fn cell(test: &str, set: &[(&str, toml_edit::Value)]) -> PathBuf {
-    cell_from(integration_tests::default_cell_with_room(), test, set)
+    cell_from(integration_tests::default_cell_toml(), test, set)
 }
 
 /// [`cell`] on the wall clock.
